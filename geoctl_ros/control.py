@@ -1,0 +1,278 @@
+"""Geometric adaptive attitude control on SO(3) with cone constraints (Kulumani, Poole & Lee).
+
+Notation follows the paper and ../shared/design/control-law.md:
+
+    A     = 1/2 tr(G (I - R_d^T R))                        attractive error (eq. 13)
+    e_RA  = 1/2 vee(G R_d^T R - R^T R_d G)                  its gradient (eq. 15)
+    Psi   = A (1 + sum_i (B_i - 1))                         configuration error, several cones
+    e_R   = e_RA (1 + sum_i (B_i - 1)) + A sum_i e_RB,i     its gradient
+    e_Omega = Omega - R^T R_d Omega_d                       (= Omega when stabilising)
+    u     = -k_R e_R - k_Omega e_Omega + Omega x J Omega - W Delta_bar - M_g  [+ tracking feed-forward]
+    Delta_bar' = k_Delta W^T (e_Omega + c e_R)                adaptive law (eq. 39)
+
+J is the inertia about the pivot, M_g the gravity moment of the centre of mass offset rho (both from
+``geoctl_ros.mechanics``). The tracking feed-forward -J (Omega x R^T R_d Omega_d - R^T R_d Omega_d')
+is the standard one of Lee's geometric tracking controller; the paper's stability proof covers
+Omega_d = 0 only.
+
+Discrete time: ``step`` computes u from the estimate Delta_bar_k and then advances the estimate by
+one explicit Euler step of the adaptive law over dt (the control period). The estimate is frozen
+while any cone's barrier is saturated (the sensor within the floor band or inside a cone, where the
+paper's assumptions do not hold) and optionally projected onto a ball so that it cannot wind up.
+"""
+from dataclasses import dataclass, field
+import math
+
+import numpy as np
+
+from geoctl_ros.cones import ConeSet
+from geoctl_ros.mechanics import cog_regressor, gravity_moment, pivot_inertia
+from geoctl_ros.so3 import vee
+
+# Disturbance models: name -> number of estimated parameters (the columns of W).
+#   constant:      W = I,                     Delta = a constant moment (the paper's case)
+#   constant+cog:  W = [I, -hat(R^T g_w)],    Delta = [constant moment; error of m * rho]
+DISTURBANCE_MODELS = {'constant': 3, 'constant+cog': 6}
+
+
+class SetpointRejected(ValueError):
+    """A desired attitude the controller refuses (non-finite, or inside or too close to a cone)."""
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """Everything the control law needs; built and validated by ``geoctl_ros.params``."""
+
+    k_R: float
+    k_Omega: float
+    k_Delta: float
+    c: float
+    G: np.ndarray                    # (3,) diagonal weights g1, g2, g3
+    cones: ConeSet
+    inertia: np.ndarray              # (3, 3) about the centre of mass, kg m^2
+    mass: float                      # kg
+    cog_offset: np.ndarray           # pivot -> centre of mass, body frame, m
+    gravity: np.ndarray              # world frame, m/s^2
+    adaptive: bool = True
+    gravity_compensation: bool = True
+    disturbance_model: str = 'constant'
+    delta_bar_max: float = 0.0       # bound on |constant estimate| (N m); 0 = none
+    cog_estimate_max: float = 0.0    # bound on |m rho estimate| (kg m); 0 = none
+    J: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self):
+        object.__setattr__(self, 'J', pivot_inertia(self.inertia, self.mass, self.cog_offset))
+
+    @property
+    def n_params(self):
+        """Number of estimated disturbance parameters (length of Delta_bar)."""
+        return DISTURBANCE_MODELS[self.disturbance_model]
+
+
+@dataclass
+class ControlOutput:
+    """One control step's results."""
+
+    u: np.ndarray            # control moment about the pivot, body frame, N m
+    e_R: np.ndarray
+    e_Omega: np.ndarray
+    psi: float
+    margins_deg: np.ndarray  # per cone: angle to axis minus half-angle
+    delta_bar: np.ndarray    # estimate used for this u
+    violated: bool           # sensor on or inside a cone
+    saturated: bool          # some barrier in its floor band (repulsion saturated)
+    adapting: bool           # the estimate was advanced this step
+
+
+def attractive_error(R, R_d, G):
+    """A (eq. 13) and e_RA (eq. 15) for the diagonal weights G (3,)."""
+    RdtR = R_d.T @ R
+    A = 0.5 * float(G @ (1.0 - np.diagonal(RdtR)))
+    M = G[:, None] * RdtR            # G R_d^T R; its transpose is R^T R_d G
+    return A, 0.5 * vee(M - M.T)
+
+
+def E_matrix(R, R_d, G):
+    """E(R, R_d) of eq. (27): d/dt e_RA = E e_Omega."""
+    M = (R.T @ R_d) * G[None, :]     # R^T R_d G
+    return 0.5 * (np.trace(M) * np.eye(3) - M)
+
+
+def configuration_error(R, R_d, G, cones):
+    """Psi, e_R, A, e_RA and the cone evaluation at R (Prop. 1 generalised to several cones)."""
+    A, e_RA = attractive_error(R, R_d, G)
+    ev = cones.evaluate(R)
+    scale = 1.0 + float(np.sum(ev.B - 1.0))
+    e_R = e_RA * scale + A * ev.e_RB.sum(axis=0)
+    return A * scale, e_R, A, e_RA, ev
+
+
+class AttitudeController:
+    """The controller's state (estimate, set point) and its pure-math step."""
+
+    def __init__(self, config):
+        self.config = config
+        self.delta_bar = np.zeros(config.n_params)
+        self.R_d = np.eye(3)
+        self.Omega_d = np.zeros(3)
+        self.dOmega_d = np.zeros(3)
+        self._m_rho = config.mass * np.asarray(config.cog_offset, dtype=float)
+
+    # --- configuration-time operations -------------------------------------------------------
+    def setpoint_problem(self, R_d, cones=None):
+        """Why R_d cannot be a set point (a sentence), or None if it can."""
+        cones = self.config.cones if cones is None else cones
+        if not np.all(np.isfinite(R_d)):
+            return 'setpoint is not finite'
+        if not len(cones):
+            return None
+        margins = cones.margins_deg(R_d)
+        floor_deg = math.degrees(cones.floor)
+        i = int(np.argmin(margins))
+        if margins[i] < floor_deg:
+            where = 'inside' if margins[i] < 0 else 'within %.2f deg of' % floor_deg
+            return ('setpoint puts the sensor axis %s cone %r (angle to its axis %.2f deg, '
+                    'half-angle %.2f deg)' % (where, cones.names[i],
+                                              margins[i] + math.degrees(cones.theta[i]),
+                                              math.degrees(cones.theta[i])))
+        return None
+
+    def set_setpoint(self, R_d, Omega_d=None, dOmega_d=None):
+        """Set the desired attitude (and optionally its angular velocity and acceleration, body
+        frame of R_d). Raises SetpointRejected with the reason; the old set point then stays."""
+        R_d = np.asarray(R_d, dtype=float)
+        problem = self.setpoint_problem(R_d)
+        if problem:
+            raise SetpointRejected(problem)
+        self.R_d = R_d.copy()
+        self.Omega_d = np.zeros(3) if Omega_d is None else np.asarray(Omega_d, dtype=float).copy()
+        self.dOmega_d = np.zeros(3) if dOmega_d is None else np.asarray(dOmega_d, dtype=float).copy()
+
+    def reset_adaptation(self):
+        """Zero the disturbance estimate."""
+        self.delta_bar[:] = 0.0
+
+    def reconfigure(self, config):
+        """Switch to a new configuration, keeping the estimate when its size still fits.
+
+        Raises SetpointRejected (and changes nothing) if the current set point violates the new
+        cones.
+        """
+        problem = self.setpoint_problem(self.R_d, config.cones)
+        if problem:
+            raise SetpointRejected('current ' + problem)
+        if config.n_params != len(self.delta_bar):
+            self.delta_bar = np.zeros(config.n_params)
+        self.config = config
+        self._m_rho = config.mass * np.asarray(config.cog_offset, dtype=float)
+        self._project()
+
+    # --- the hot path ----------------------------------------------------------------------------
+    def regressor(self, R):
+        """W(R, Omega): 3 x n_params."""
+        if self.config.disturbance_model == 'constant':
+            return np.eye(3)
+        return np.hstack((np.eye(3), cog_regressor(R, self.config.gravity)))
+
+    def step(self, R, Omega, dt, adapt=True):
+        """One control step at attitude R and body angular velocity Omega.
+
+        dt is the time until the next step (the control period); adapt=False holds the estimate
+        (e.g. while disarmed).
+        """
+        cfg = self.config
+        J = cfg.J
+        psi, e_R, _, _, ev = configuration_error(R, self.R_d, cfg.G, cfg.cones)
+        RtRd = R.T @ self.R_d
+        Omega_d = RtRd @ self.Omega_d
+        e_Omega = Omega - Omega_d
+        W = self.regressor(R)
+        delta_bar = self.delta_bar.copy()
+        u = -cfg.k_R * e_R - cfg.k_Omega * e_Omega + np.cross(Omega, J @ Omega) - W @ delta_bar
+        if self.Omega_d.any() or self.dOmega_d.any():
+            u -= J @ (np.cross(Omega, Omega_d) - RtRd @ self.dOmega_d)
+        if cfg.gravity_compensation:
+            u -= gravity_moment(R, self._m_rho, cfg.gravity)
+        saturated = bool(ev.saturated.any())
+        adapting = bool(adapt and cfg.adaptive and not saturated)
+        if adapting:
+            self.delta_bar += (dt * cfg.k_Delta) * (W.T @ (e_Omega + cfg.c * e_R))
+            self._project()
+        return ControlOutput(u=u, e_R=e_R, e_Omega=e_Omega, psi=psi,
+                             margins_deg=ev.margins_deg(cfg.cones.theta), delta_bar=delta_bar,
+                             violated=bool(ev.violated.any()), saturated=saturated,
+                             adapting=adapting)
+
+    def _project(self):
+        """Project each block of the estimate onto its ball (bounds of 0 mean unbounded)."""
+        cfg = self.config
+        for block, bound in ((slice(0, 3), cfg.delta_bar_max), (slice(3, 6), cfg.cog_estimate_max)):
+            part = self.delta_bar[block]
+            if bound > 0.0 and part.size:
+                n = float(np.linalg.norm(part))
+                if n > bound:
+                    part *= bound / n
+
+
+@dataclass
+class GainCheck:
+    """The upper bounds on c of Prop. 5 on an operating domain, and whether c respects them."""
+
+    c: float
+    c_max_paper: float          # 4 k_R k_Omega / (k_Omega^2 + 4 k_R lambda_M H), eq. (40)
+    c_max_dissertation: float   # sqrt(2 lambda_m k_R n_1 / lambda_M^2)
+    H: float
+    psi_max: float
+    margin_deg: float
+
+    @property
+    def c_max(self):
+        return min(self.c_max_paper, self.c_max_dissertation)
+
+    @property
+    def ok(self):
+        return 0.0 < self.c < self.c_max
+
+    def message(self):
+        verdict = 'satisfies' if self.ok else 'VIOLATES'
+        return ('c = %.4g %s the sufficient condition of Prop. 5: c < min(%.4g (paper eq. 40, '
+                'H = %.4g), %.4g (dissertation)) on the domain Psi < %.3g, every cone at least '
+                '%.1f deg clear' % (self.c, verdict, self.c_max_paper, self.H,
+                                    self.c_max_dissertation, self.psi_max, self.margin_deg))
+
+
+def gain_condition(config, margin_deg=5.0):
+    """Evaluate the bound on c of Prop. 5 (eq. 40 with "4k - R" read as 4 k_R, and the
+    dissertation's second bound) on the domain D of Prop. 4.
+
+    D is taken as Psi < psi with psi = h_1 (the largest the proposition allows) and every cone at
+    least margin_deg clear (beta_i = cos(theta_i + margin)). The bounds of Prop. 4 are summed over
+    the cones. The condition is sufficient, not necessary: a violation is a warning.
+    """
+    g = np.asarray(config.G, dtype=float)
+    pairs = [(0, 1), (1, 2), (2, 0)]
+    h1 = min(g[i] + g[j] for i, j in pairs)
+    h2_min = min((g[i] - g[j]) ** 2 for i, j in pairs)
+    h3_min = min((g[i] + g[j]) ** 2 for i, j in pairs)
+    b1 = h1 / (h2_min + h3_min)                          # paper, Prop. 1 (v)
+    n1 = h1 / (max((g[i] - g[j]) ** 2 for i, j in pairs)
+               + max((g[i] + g[j]) ** 2 for i, j in pairs))   # dissertation, Prop. (iv)
+    psi = h1
+    c_A = c_B = psi
+    E_bound = float(g.sum()) / math.sqrt(2.0)
+    eRA_bound = math.sqrt(psi / b1)
+    cones = config.cones
+    eRB_sum = F_sum = 0.0
+    for theta in cones.theta:
+        beta = math.cos(theta + math.radians(margin_deg))
+        d = beta - math.cos(theta)
+        eRB_sum += math.sin(theta) / (config.cones.alpha * -d)
+        F_sum += (((beta ** 2 + 1.0) * d ** 2 + 1.0 + beta ** 2 * (beta ** 2 - 2.0))
+                  / (cones.alpha ** 2 * d ** 4))
+    H = c_B * E_bound + 2.0 * eRA_bound * eRB_sum + c_A * F_sum
+    eig = np.linalg.eigvalsh(config.J)
+    lam_m, lam_M = float(eig[0]), float(eig[-1])
+    c_paper = 4.0 * config.k_R * config.k_Omega / (config.k_Omega ** 2 + 4.0 * config.k_R * lam_M * H)
+    c_diss = math.sqrt(2.0 * lam_m * config.k_R * n1 / lam_M ** 2)
+    return GainCheck(c=config.c, c_max_paper=c_paper, c_max_dissertation=c_diss, H=H,
+                     psi_max=psi, margin_deg=margin_deg)

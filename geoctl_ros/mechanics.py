@@ -1,0 +1,30 @@
+"""Mechanics of the testbed shared by the controller and the simulator.
+
+The body turns about a spherical joint (the pivot). rho is the vector from the pivot to the centre
+of mass in the body frame; g_w is the gravity vector in the world frame (REP-103, z up:
+[0, 0, -9.81]).
+"""
+import numpy as np
+
+from geoctl_ros.so3 import hat
+
+
+def pivot_inertia(inertia_cm, mass, rho):
+    """Inertia about the pivot (parallel-axis theorem): J_cm + m (|rho|^2 I - rho rho^T)."""
+    rho = np.asarray(rho, dtype=float)
+    return np.asarray(inertia_cm, dtype=float) + mass * (float(rho @ rho) * np.eye(3)
+                                                          - np.outer(rho, rho))
+
+
+def gravity_moment(R, m_rho, g_w):
+    """Moment of gravity about the pivot in the body frame: (m rho) x (R^T g_w).
+
+    With the centre of mass above the pivot this moment tips the body further over (an
+    inverted pendulum). It is linear in m_rho = m * rho: gravity_moment = cog_regressor(R, g_w) @ m_rho.
+    """
+    return np.cross(m_rho, R.T @ g_w)
+
+
+def cog_regressor(R, g_w):
+    """The 3x3 matrix Y with gravity_moment(R, m_rho, g_w) == Y @ m_rho, i.e. -hat(R^T g_w)."""
+    return -hat(R.T @ g_w)

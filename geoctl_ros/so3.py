@@ -1,0 +1,117 @@
+"""Rotations on SO(3): hat/vee, exp/log, projection, quaternions in ROS (x, y, z, w) order.
+
+Conventions (as in the paper): R maps body-frame vectors to the world frame, ``hat(x) @ y ==
+np.cross(x, y)`` and ``vee`` is the inverse of ``hat`` on skew-symmetric matrices. Every function
+takes and returns plain numpy arrays; none of them validates its input (that belongs at the
+boundary, see ``geoctl_ros.params`` and the nodes), but all stay accurate for rotation angles near
+0 and near pi.
+"""
+import math
+
+import numpy as np
+
+_I3 = np.eye(3)
+
+
+def hat(x):
+    """The skew-symmetric matrix of x: ``hat(x) @ y == cross(x, y)``."""
+    return np.array([[0.0, -x[2], x[1]],
+                     [x[2], 0.0, -x[0]],
+                     [-x[1], x[0], 0.0]])
+
+
+def vee(M):
+    """Inverse of :func:`hat`: the vector of a skew-symmetric matrix."""
+    return np.array([M[2, 1], M[0, 2], M[1, 0]])
+
+
+def exp(w):
+    """Rotation matrix exp(hat(w)) (Rodrigues), accurate for small angles."""
+    theta2 = float(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    if theta2 < 1e-8:
+        # Taylor series: sin(t)/t and (1 - cos t)/t^2 to O(t^4); error < 1e-20.
+        a = 1.0 - theta2 / 6.0 + theta2 * theta2 / 120.0
+        b = 0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0
+    else:
+        theta = math.sqrt(theta2)
+        a = math.sin(theta) / theta
+        b = (1.0 - math.cos(theta)) / theta2
+    W = hat(w)
+    return _I3 + a * W + b * (W @ W)
+
+
+def log(R):
+    """Rotation vector w with |w| <= pi and exp(w) == R; accurate near 0 and near pi.
+
+    The angle comes from atan2(sin, cos), so it keeps full precision near pi, where
+    arccos((tr R - 1) / 2) loses half of its digits. Near pi the axis is read from the
+    symmetric part of R; at exactly pi either sign of the axis is a valid answer.
+    """
+    skew = 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])  # sin(t) n
+    sin_t = math.sqrt(float(skew @ skew))
+    cos_t = 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0)
+    theta = math.atan2(sin_t, cos_t)
+    if theta < 1e-4:
+        return skew * (1.0 + theta * theta / 6.0)  # theta / sin(theta) to O(theta^4)
+    if math.pi - theta > 1e-2:
+        return skew * (theta / sin_t)
+    # Near pi: (R + R^T)/2 = cos(t) I + (1 - cos t) n n^T.
+    nn = (0.5 * (R + R.T) - cos_t * _I3) / (1.0 - cos_t)
+    k = int(np.argmax(np.diag(nn)))
+    n = nn[:, k] / math.sqrt(max(nn[k, k], 1e-300))
+    if float(n @ skew) < 0.0:
+        n = -n
+    return theta * n
+
+
+def angle(R):
+    """Geodesic rotation angle of R in [0, pi] (radians)."""
+    skew_norm = 0.5 * math.sqrt((R[2, 1] - R[1, 2]) ** 2 + (R[0, 2] - R[2, 0]) ** 2
+                                + (R[1, 0] - R[0, 1]) ** 2)
+    return math.atan2(skew_norm, 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0))
+
+
+def project(M):
+    """The rotation closest to M in the Frobenius norm (polar decomposition via SVD)."""
+    U, _, Vt = np.linalg.svd(M)
+    d = 1.0 if np.linalg.det(U @ Vt) > 0.0 else -1.0
+    return U @ np.diag([1.0, 1.0, d]) @ Vt
+
+
+def quat_to_rot(q):
+    """Rotation matrix of a quaternion in ROS order (x, y, z, w); q is normalised first."""
+    x, y, z, w = (float(v) for v in q)
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / n, y / n, z / n, w / n
+    return np.array([
+        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
+        [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
+        [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
+    ])
+
+
+def rot_to_quat(R):
+    """Unit quaternion (x, y, z, w) of R with w >= 0 (Shepperd's method, stable for any R)."""
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    i = int(np.argmax([tr, R[0, 0], R[1, 1], R[2, 2]]))
+    if i == 0:
+        s = 2.0 * math.sqrt(1.0 + tr)
+        q = [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s]
+    elif i == 1:
+        s = 2.0 * math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q = [0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s]
+    elif i == 2:
+        s = 2.0 * math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
+        q = [(R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s]
+    else:
+        s = 2.0 * math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
+        q = [(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s, (R[1, 0] - R[0, 1]) / s]
+    q = np.array(q)
+    q /= np.linalg.norm(q)
+    return -q if q[3] < 0.0 else q
+
+
+def axis_angle(axis, angle_rad):
+    """Rotation by angle_rad about a (not necessarily unit) axis."""
+    a = np.asarray(axis, dtype=float)
+    return exp(a * (angle_rad / np.linalg.norm(a)))

@@ -1,0 +1,30 @@
+"""ament_python package definition for geoctl_ros."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'geoctl_ros'
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
+        ('share/' + PACKAGE, ['package.xml']),
+        ('share/' + PACKAGE + '/config', glob('config/*.yaml')),
+        ('share/' + PACKAGE + '/config/scenarios', glob('config/scenarios/*.yaml')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='geoctl_ros developers',
+    maintainer_email='geoctl-ros@example.com',
+    description='Geometric adaptive constrained attitude control on SO(3) for a hexrotor testbed',
+    license='BSD-3-Clause',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'scenario = geoctl_ros.scenario:main',
+        ],
+    },
+)
