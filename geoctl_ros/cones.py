@@ -16,10 +16,14 @@ line in s_i (the classical extended log barrier):
     B_i    = B_i(g0_i) + (g0_i - g_i) / (alpha g0_i)          for g_i < g0_i
     e_RB,i = -(R^T v_i x r) / (alpha g0_i)
 
-B_i stays C^1 and e_RB,i is still exactly its gradient, so every identity of the paper holds
-everywhere; the repulsion saturates at its value on the floor (the strongest it ever is) and never
-becomes inf or NaN, whatever R is. Evaluations report which cones are violated (g_i <= 0) and which
-are in the saturated band, so callers can flag them.
+B_i stays C^1 and e_RB,i is exactly its gradient for every attitude outside the cones, so the
+paper's identities hold there, band included. Inside a cone (g_i <= 0) the gradient of that
+extension would fade towards the cone's axis like sin(angle to axis); instead e_RB,i keeps the
+magnitude it has on the boundary, sin(theta_i) / (alpha g0_i), the strongest repulsion anywhere,
+and points the sensor away from the axis by the shortest way (on the axis itself, where that way
+is undefined, along a fixed direction perpendicular to r). Nothing is ever inf or NaN, whatever R
+is, and evaluations report which cones are violated (g_i <= 0) and which are in the saturated band
+(g_i < g0_i), so callers can flag them.
 """
 from dataclasses import dataclass
 import math
@@ -56,6 +60,7 @@ class ConeSet:
         """
         r = np.asarray(sensor_axis, dtype=float)
         self.r = r / np.linalg.norm(r)
+        self._r_hat = hat(self.r)        # x @ hat(r) == cross(x, r) row-wise
         V = np.asarray(axes, dtype=float).reshape(-1, 3)
         self.V = V / np.linalg.norm(V, axis=1, keepdims=True) if len(V) else V
         self.theta = np.asarray(half_angles_rad, dtype=float).reshape(-1)
@@ -66,25 +71,43 @@ class ConeSet:
         self.log_scale = 1.0 + self.cos_theta
         self.g0 = self.cos_theta - np.cos(self.theta + self.floor)   # floor gap, > 0
         self.B_floor = 1.0 - np.log(self.g0 / self.log_scale) / self.alpha
+        self.e_RB_inside = np.sin(self.theta) / (self.alpha * self.g0)   # |e_RB,i| in cone i
+        least = int(np.argmin(np.abs(self.r)))
+        perp = np.cross(self.r, np.eye(3)[least])
+        self._r_perp = perp / np.linalg.norm(perp)  # fallback direction on a cone's axis
 
     def __len__(self):
         return len(self.theta)
 
     def evaluate(self, R):
         """Barrier values, gradients and flags at attitude R."""
-        RTv = self.V @ R                 # row i: (R^T v_i)^T
-        s = RTv @ self.r
+        s = self.V @ (R @ self.r)              # r^T R^T v_i
+        cross = self.V @ (R @ self._r_hat)     # row i: (R^T v_i) x r
         g = self.cos_theta - s
         saturated = g < self.g0
         g_eff = np.maximum(g, self.g0)
         B = np.where(saturated, self.B_floor + (self.g0 - g) / (self.alpha * self.g0),
                      1.0 - np.log(g_eff / self.log_scale) / self.alpha)
-        e_RB = np.cross(RTv, self.r) / (-self.alpha * g_eff)[:, None]
-        return ConeEval(s=s, B=B, e_RB=e_RB, violated=g <= 0.0, saturated=saturated)
+        e_RB = cross / (-self.alpha * g_eff)[:, None]
+        violated = g <= 0.0
+        if violated.any():
+            e_RB[violated] = self._inside_field(cross[violated], violated)
+        return ConeEval(s=s, B=B, e_RB=e_RB, violated=violated, saturated=saturated)
+
+    def _inside_field(self, cross, violated):
+        """e_RB for cones the sensor is in: boundary magnitude, away from the axis."""
+        n = np.linalg.norm(cross, axis=1)
+        unit = np.where((n > 1e-12)[:, None], cross / np.maximum(n, 1e-12)[:, None],
+                        self._r_perp[None, :])
+        return -unit * self.e_RB_inside[violated][:, None]
+
+    def angles_deg(self, R):
+        """Angle between the sensor's world direction R r and each cone axis, degrees."""
+        return np.degrees(np.arccos(np.clip(self.V @ (R @ self.r), -1.0, 1.0)))
 
     def margins_deg(self, R):
         """Cone margins (angle to axis minus half-angle, degrees) at attitude R."""
-        return self.evaluate(R).margins_deg(self.theta)
+        return self.angles_deg(R) - np.degrees(self.theta)
 
     def F(self, R):
         """The paper's F(R) (eq. 28) for each cone, (n, 3, 3): d/dt e_RB,i = F_i Omega.

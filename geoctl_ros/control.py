@@ -27,7 +27,7 @@ import numpy as np
 
 from geoctl_ros.cones import ConeSet
 from geoctl_ros.mechanics import cog_regressor, gravity_moment, pivot_inertia
-from geoctl_ros.so3 import vee
+from geoctl_ros.so3 import cross, vee
 
 # Disturbance models: name -> number of estimated parameters (the columns of W).
 #   constant:      W = I,                     Delta = a constant moment (the paper's case)
@@ -188,9 +188,9 @@ class AttitudeController:
         e_Omega = Omega - Omega_d
         W = self.regressor(R)
         delta_bar = self.delta_bar.copy()
-        u = -cfg.k_R * e_R - cfg.k_Omega * e_Omega + np.cross(Omega, J @ Omega) - W @ delta_bar
+        u = -cfg.k_R * e_R - cfg.k_Omega * e_Omega + cross(Omega, J @ Omega) - W @ delta_bar
         if self.Omega_d.any() or self.dOmega_d.any():
-            u -= J @ (np.cross(Omega, Omega_d) - RtRd @ self.dOmega_d)
+            u -= J @ (cross(Omega, Omega_d) - RtRd @ self.dOmega_d)
         if cfg.gravity_compensation:
             u -= gravity_moment(R, self._m_rho, cfg.gravity)
         saturated = bool(ev.saturated.any())

@@ -6,7 +6,7 @@ of mass in the body frame; g_w is the gravity vector in the world frame (REP-103
 """
 import numpy as np
 
-from geoctl_ros.so3 import hat
+from geoctl_ros.so3 import cross, hat
 
 
 def pivot_inertia(inertia_cm, mass, rho):
@@ -22,7 +22,7 @@ def gravity_moment(R, m_rho, g_w):
     With the centre of mass above the pivot this moment tips the body further over (an
     inverted pendulum). It is linear in m_rho = m * rho: gravity_moment = cog_regressor(R, g_w) @ m_rho.
     """
-    return np.cross(m_rho, R.T @ g_w)
+    return cross(m_rho, R.T @ g_w)
 
 
 def cog_regressor(R, g_w):

@@ -20,6 +20,12 @@ def hat(x):
                      [-x[1], x[0], 0.0]])
 
 
+def cross(a, b):
+    """Cross product of two 3-vectors (np.cross costs ~10x more for single vectors)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
+
+
 def vee(M):
     """Inverse of :func:`hat`: the vector of a skew-symmetric matrix."""
     return np.array([M[2, 1], M[0, 2], M[1, 0]])

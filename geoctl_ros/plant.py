@@ -1,0 +1,106 @@
+"""The testbed: a rigid body turning about a spherical joint, with gravity and a disturbance.
+
+Equations of motion about the pivot (body frame):
+
+    J_p Omega' + Omega x J_p Omega = tau + M_g(R) + Delta(t),     R' = R hat(Omega)
+
+with J_p the inertia about the pivot, M_g the gravity moment of the centre of mass offset rho
+(``geoctl_ros.mechanics``), tau the actuation moment (held constant over a step) and Delta(t) the
+disturbance: constant + amplitude * [sin wt, cos wt, (sin wt + cos wt) / 2] (elementwise; the
+dissertation's time-varying case).
+
+Integrator: RKMK4, the classical fourth-order Runge-Kutta method applied in the Lie algebra
+(Runge-Kutta-Munthe-Kaas). Over a step R(t) = R_n exp(hat(xi(t))) with
+xi' = dexp^{-1}_xi(Omega) = Omega - 1/2 xi x Omega + 1/12 xi x (xi x Omega) (truncated where it no
+longer affects fourth order), so R_{n+1} = R_n exp(hat(xi_{n+1})) is a rotation to machine
+precision at every step, with no re-orthonormalisation. Global error is O(h^4): at the default
+1 kHz the attitude error over 10 s of a tumbling body is below 1e-9 rad (see test_plant.py).
+"""
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from geoctl_ros import so3
+from geoctl_ros.so3 import cross
+from geoctl_ros.mechanics import gravity_moment, pivot_inertia
+
+
+@dataclass(frozen=True)
+class Disturbance:
+    """Delta(t) = constant + amplitude * [sin wt, cos wt, (sin wt + cos wt)/2], body frame, N m."""
+
+    constant: np.ndarray
+    amplitude: np.ndarray
+    frequency: float  # rad/s
+
+    def __call__(self, t):
+        if not self.amplitude.any():
+            return self.constant
+        s, c = math.sin(self.frequency * t), math.cos(self.frequency * t)
+        return self.constant + self.amplitude * np.array([s, c, 0.5 * (s + c)])
+
+
+@dataclass(frozen=True)
+class PlantConfig:
+    """Physical parameters of the testbed; built and validated by ``geoctl_ros.params``."""
+
+    inertia: np.ndarray      # about the centre of mass, kg m^2
+    mass: float              # kg
+    cog_offset: np.ndarray   # pivot -> centre of mass, body frame, m
+    gravity: np.ndarray      # world frame, m/s^2
+    disturbance: Disturbance
+
+
+class Plant:
+    """State (t, R, Omega) of the testbed and its integrator."""
+
+    def __init__(self, config, R0=None, Omega0=None):
+        self.config = config
+        self.J = pivot_inertia(config.inertia, config.mass, config.cog_offset)
+        self.J_inv = np.linalg.inv(self.J)
+        self._m_rho = config.mass * np.asarray(config.cog_offset, dtype=float)
+        self.t = 0.0
+        self.R = np.eye(3) if R0 is None else np.array(R0, dtype=float)
+        self.Omega = np.zeros(3) if Omega0 is None else np.array(Omega0, dtype=float)
+
+    def external_moment(self, t, R):
+        """Gravity moment plus disturbance about the pivot, body frame."""
+        return gravity_moment(R, self._m_rho, self.config.gravity) + self.config.disturbance(t)
+
+    def _angular_acceleration(self, t, R, Omega, tau):
+        return self.J_inv @ (tau + self.external_moment(t, R) - cross(Omega, self.J @ Omega))
+
+    def step(self, tau, h):
+        """Advance by h seconds with the actuation moment tau held constant (RKMK4)."""
+        t, R0, W0 = self.t, self.R, self.Omega
+        acc = self._angular_acceleration
+        # stage 1 (xi = 0)
+        k1x, k1w = W0, acc(t, R0, W0, tau)
+        # stage 2
+        xi = 0.5 * h * k1x
+        W = W0 + 0.5 * h * k1w
+        k2x, k2w = _dexpinv(xi, W), acc(t + 0.5 * h, R0 @ so3.exp(xi), W, tau)
+        # stage 3
+        xi = 0.5 * h * k2x
+        W = W0 + 0.5 * h * k2w
+        k3x, k3w = _dexpinv(xi, W), acc(t + 0.5 * h, R0 @ so3.exp(xi), W, tau)
+        # stage 4
+        xi = h * k3x
+        W = W0 + h * k3w
+        k4x, k4w = _dexpinv(xi, W), acc(t + h, R0 @ so3.exp(xi), W, tau)
+        self.R = R0 @ so3.exp((h / 6.0) * (k1x + 2.0 * k2x + 2.0 * k3x + k4x))
+        self.Omega = W0 + (h / 6.0) * (k1w + 2.0 * k2w + 2.0 * k3w + k4w)
+        self.t = t + h
+
+    def kinetic_energy(self):
+        return 0.5 * float(self.Omega @ self.J @ self.Omega)
+
+    def angular_momentum_world(self):
+        return self.R @ (self.J @ self.Omega)
+
+
+def _dexpinv(xi, w):
+    """dexp^{-1}_xi(w) to the order RKMK4 needs."""
+    xw = cross(xi, w)
+    return w - 0.5 * xw + cross(xi, xw) / 12.0

@@ -1,0 +1,116 @@
+"""PNG figures of a run, after the paper's Figs. 2, 3 and 5 (matplotlib, Agg backend)."""
+import os
+
+import matplotlib
+
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from geoctl_ros import so3  # noqa: E402
+
+
+def _col(result, name):
+    return result.history[:, result.columns.index(name)]
+
+
+def _cols(result, prefix):
+    return [c for c in result.columns if c.startswith(prefix)]
+
+
+def scenario_figures(result, out_dir):
+    """Write attitude_error.png, psi.png, cone_angles.png, disturbance.png, control_moment.png and
+    sensor_path.png; returns their paths."""
+    title = result.summary.get('title') or result.scenario.name
+    t = _col(result, 't')
+    paths = []
+
+    def save(fig, name):
+        fig.suptitle(title, fontsize=10)
+        fig.tight_layout()
+        path = os.path.join(out_dir, name)
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        paths.append(path)
+
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for i, c in enumerate(('eR_x', 'eR_y', 'eR_z')):
+        ax.plot(t, _col(result, c), label='$e_{R,%d}$' % (i + 1))
+    ax.set(xlabel='t [s]', ylabel='$e_R$', title='attitude error vector')
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    save(fig, 'attitude_error.png')
+
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    ax.plot(t, _col(result, 'psi'))
+    ax.set(xlabel='t [s]', ylabel=r'$\Psi$', title=r'configuration error $\Psi$')
+    ax.grid(True, alpha=0.3)
+    save(fig, 'psi.png')
+
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    theta = result.summary['cone_half_angle_deg']
+    for i, c in enumerate(_cols(result, 'angle_')):
+        name = c[len('angle_'):]
+        line, = ax.plot(t, _col(result, c), label=name)
+        ax.axhline(theta[name], color=line.get_color(), ls='--', lw=1)
+    ax.set(xlabel='t [s]', ylabel='angle [deg]',
+           title=r'angle between $Rr$ and each cone axis (dashed: half-angle)')
+    ax.grid(True, alpha=0.3)
+    if theta:
+        ax.legend()
+    save(fig, 'cone_angles.png')
+
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for i, c in enumerate(_cols(result, 'dbar_')):
+        line, = ax.plot(t, _col(result, c), label=r'$\bar\Delta_{%d}$' % (i + 1))
+        ax.plot(t, _col(result, 'dtrue_%d' % i), color=line.get_color(), ls='--', lw=1)
+    ax.set(xlabel='t [s]', ylabel='estimate', title=r'disturbance estimate $\bar\Delta$ '
+           '(dashed: true unmodelled disturbance)')
+    ax.grid(True, alpha=0.3)
+    ax.legend(ncol=2)
+    save(fig, 'disturbance.png')
+
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for c in ('u_x', 'u_y', 'u_z'):
+        ax.plot(t, _col(result, c), label=c)
+    ax.set(xlabel='t [s]', ylabel='moment [N m]', title='control moment u about the pivot')
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    save(fig, 'control_moment.png')
+
+    fig = plt.figure(figsize=(6, 6))
+    ax = fig.add_subplot(projection='3d')
+    sphere_path(ax, result)
+    save(fig, 'sensor_path.png')
+    return paths
+
+
+def sphere_path(ax, result):
+    """The sensor axis R r on the unit sphere, with the cones drawn in red."""
+    from geoctl_ros.params import cone_set
+    cones = cone_set(result.scenario.controller)
+    q = result.history[:, [result.columns.index(c) for c in ('qx', 'qy', 'qz', 'qw')]]
+    path = np.array([so3.quat_to_rot(qi) @ cones.r for qi in q])
+    u, v = np.mgrid[0:2 * np.pi:40j, 0:np.pi:20j]
+    ax.plot_wireframe(np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v), color='0.85',
+                      lw=0.4)
+    for axis, theta in zip(cones.V, cones.theta):
+        # cone surface from the centre to the sphere
+        a = axis / np.linalg.norm(axis)
+        p = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+        p /= np.linalg.norm(p)
+        q2 = np.cross(a, p)
+        phi = np.linspace(0, 2 * np.pi, 60)
+        rim = (np.cos(theta) * a[None, :] + np.sin(theta) * (np.cos(phi)[:, None] * p
+                                                              + np.sin(phi)[:, None] * q2))
+        s = np.linspace(0, 1, 2)
+        X = s[:, None, None] * rim[None, :, :]
+        ax.plot_surface(X[..., 0], X[..., 1], X[..., 2], color='red', alpha=0.35, lw=0)
+        ax.plot(rim[:, 0], rim[:, 1], rim[:, 2], color='darkred', lw=1)
+    ax.plot(path[:, 0], path[:, 1], path[:, 2], color='blue', lw=1.5, label='$Rr$')
+    ax.scatter(*path[0], color='green', marker='o', s=40, label='start')
+    ax.scatter(*path[-1], color='green', marker='x', s=60, label='end')
+    ax.set(xlabel='x', ylabel='y', zlabel='z', xlim=(-1, 1), ylim=(-1, 1), zlim=(-1, 1),
+           title='sensor axis on the unit sphere (world frame)')
+    ax.set_box_aspect((1, 1, 1))
+    ax.legend(loc='upper left')

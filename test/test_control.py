@@ -1,0 +1,293 @@
+"""The control law against the paper: gradients by finite differences, error dynamics along the
+flow, Lyapunov decrease in closed loop, and the safety behaviour the paper does not give."""
+import math
+
+import numpy as np
+import pytest
+
+from geoctl_ros import so3
+from geoctl_ros.cones import ConeSet
+from geoctl_ros.control import (AttitudeController, ControllerConfig, E_matrix, SetpointRejected,
+                                attractive_error, configuration_error, gain_condition)
+from geoctl_ros.plant import Disturbance, PlantConfig, Plant
+
+rng = np.random.default_rng(7)
+G = np.array([0.9, 1.1, 1.0])
+J_PAPER = np.array([[5.57e-3, 6.17e-5, -2.50e-5], [6.17e-5, 5.57e-3, 1.00e-5],
+                    [-2.50e-5, 1.00e-5, 1.05e-2]])
+TABLE_I = ([[0.174, -0.934, -0.034], [0.0, 0.7071, 0.7071], [-0.853, 0.436, -0.286],
+            [-0.122, -0.140, -0.983]], np.radians([40.0, 40.0, 40.0, 20.0]))
+
+
+def four_cones(alpha=15.0, floor_deg=0.25):
+    return ConeSet([1, 0, 0], TABLE_I[0], TABLE_I[1], alpha, math.radians(floor_deg),
+                   ['a', 'b', 'c', 'd'])
+
+
+def one_cone(theta_deg=12.0, alpha=8.0):
+    return ConeSet([1, 0, 0], [[1.0, 1.0, 0.0]], [math.radians(theta_deg)], alpha,
+                   math.radians(0.25), ['obstacle'])
+
+
+def config(cones, **kw):
+    base = dict(k_R=0.4, k_Omega=0.296, k_Delta=0.5, c=1.0, G=G, cones=cones, inertia=J_PAPER,
+                mass=1.0, cog_offset=np.zeros(3), gravity=np.array([0.0, 0.0, -9.81]))
+    base.update(kw)
+    return ControllerConfig(**base)
+
+
+def directional_fd(f, R, eta, h=1e-6):
+    """d/de f(R exp(e eta)) at e = 0, central difference."""
+    return (f(R @ so3.exp(h * eta)) - f(R @ so3.exp(-h * eta))) / (2 * h)
+
+
+def random_attitudes(n):
+    return [so3.exp(rng.normal(size=3) * 2.0) for _ in range(n)]
+
+
+# --- Prop. 1: gradients ------------------------------------------------------------------------
+def test_e_RA_is_the_gradient_of_A():
+    for R in random_attitudes(50):
+        R_d = so3.exp(rng.normal(size=3))
+        eta = rng.normal(size=3)
+        fd = directional_fd(lambda X: attractive_error(X, R_d, G)[0], R, eta)
+        assert fd == pytest.approx(eta @ attractive_error(R, R_d, G)[1], rel=1e-6, abs=1e-9)
+
+
+def test_e_RB_is_the_gradient_of_B_outside_the_cones_including_the_saturated_band():
+    cones = four_cones(floor_deg=5.0)      # a wide band, so that random attitudes land in it
+    in_band = 0
+    for R in random_attitudes(300):
+        eta = rng.normal(size=3)
+        ev = cones.evaluate(R)
+        for i in range(len(cones)):
+            if ev.violated[i]:
+                continue
+            in_band += int(ev.saturated[i])
+            fd = directional_fd(lambda X: cones.evaluate(X).B[i], R, eta, h=1e-7)
+            assert fd == pytest.approx(eta @ ev.e_RB[i], rel=1e-5, abs=1e-6)
+    assert in_band > 5   # the extended barrier was exercised too
+
+
+def test_e_R_is_the_gradient_of_Psi_with_several_cones():
+    cones = four_cones()
+    n = 0
+    for R in random_attitudes(100):
+        if cones.evaluate(R).saturated.any():
+            continue
+        R_d = np.eye(3)
+        eta = rng.normal(size=3)
+        fd = directional_fd(lambda X: configuration_error(X, R_d, G, cones)[0], R, eta)
+        assert fd == pytest.approx(eta @ configuration_error(R, R_d, G, cones)[1], rel=1e-5)
+        n += 1
+    assert n > 30
+
+
+def test_barrier_matches_the_paper_formula_outside_the_floor():
+    cones = one_cone()
+    R = so3.axis_angle([0, 0, 1], math.radians(80.0))     # sensor 35 deg from the cone axis
+    s = float(cones.V[0] @ R @ cones.r)
+    c = math.cos(math.radians(12.0))
+    B = 1.0 - math.log((c - s) / (1.0 + c)) / 8.0
+    ev = cones.evaluate(R)
+    assert ev.B[0] == pytest.approx(B)
+    e_RB = so3.hat(R.T @ cones.V[0]) @ cones.r / (8.0 * (s - c))
+    assert np.allclose(ev.e_RB[0], e_RB)
+    assert cones.margins_deg(R)[0] == pytest.approx(35.0 - 12.0)
+
+
+# --- Prop. 2: error dynamics along the flow --------------------------------------------------------
+def test_E_and_F_match_finite_differences_along_the_flow():
+    cones = one_cone()
+    n = 0
+    for R in random_attitudes(60):
+        if cones.evaluate(R).saturated.any():
+            continue
+        R_d = so3.exp(rng.normal(size=3) * 0.5)
+        Omega = rng.normal(size=3)
+        fd_A = directional_fd(lambda X: attractive_error(X, R_d, G)[1], R, Omega)
+        assert np.allclose(fd_A, E_matrix(R, R_d, G) @ Omega, rtol=1e-6, atol=1e-8)
+        fd_B = directional_fd(lambda X: cones.evaluate(X).e_RB[0], R, Omega, h=1e-7)
+        assert np.allclose(fd_B, cones.F(R)[0] @ Omega, rtol=1e-5, atol=1e-6)
+        n += 1
+    assert n > 20
+
+
+# --- Prop. 3: closed loop without disturbance --------------------------------------------------------
+def closed_loop(cfg, R0, rate_hz, seconds, disturbance=None, sub=1, setpoint=None):
+    """Run controller (ZOH at rate_hz) and plant; yields (controller output, plant) per step."""
+    plant = Plant(PlantConfig(cfg.inertia, cfg.mass, cfg.cog_offset, cfg.gravity,
+                                disturbance or Disturbance(np.zeros(3), np.zeros(3), 0.0)), R0)
+    ctrl = AttitudeController(cfg)
+    if setpoint is not None:
+        ctrl.set_setpoint(setpoint)
+    dt = 1.0 / rate_hz
+    for _ in range(int(seconds * rate_hz)):
+        out = ctrl.step(plant.R, plant.Omega, dt)
+        yield out, plant, ctrl
+        for _ in range(sub):
+            plant.step(out.u, dt / sub)
+
+
+def test_lyapunov_function_never_increases_without_disturbance():
+    cfg = config(four_cones(), adaptive=False)
+    V = []
+    min_margin = np.inf
+    for out, plant, _ in closed_loop(cfg, so3.axis_angle([0, 0, 1], math.radians(225.0)),
+                                     rate_hz=1000.0, seconds=8.0):
+        V.append(plant.kinetic_energy() + cfg.k_R * out.psi)
+        min_margin = min(min_margin, out.margins_deg.min())
+    V = np.array(V)
+    # Continuous time: V' = -k_Omega |Omega|^2. The 1 kHz zero-order hold may add O(dt^2) per step.
+    assert np.all(np.diff(V) <= 1e-9 * V[0])
+    assert V[-1] < 0.05 * V[0]
+    assert min_margin > 0.0
+
+
+def test_stabilises_to_the_desired_attitude_and_keeps_the_cone():
+    cfg = config(one_cone(), k_Omega=0.7)
+    outs = list(closed_loop(cfg, so3.axis_angle([0, 0, 1], math.pi / 2), 200.0, 25.0))
+    out, plant, ctrl = outs[-1]
+    assert so3.angle(plant.R) < math.radians(0.1)
+    assert min(o.margins_deg[0] for o, _, _ in outs) > 1.0
+
+
+def test_tracking_a_rotating_setpoint_converges():
+    cfg = config(ConeSet([1, 0, 0], np.zeros((0, 3)), [], 8.0, 0.01), adaptive=False,
+                 k_Omega=0.7)
+    w = np.array([0.0, 0.3, 0.5])
+    plant = Plant(PlantConfig(J_PAPER, 1.0, np.zeros(3), np.zeros(3),
+                                Disturbance(np.zeros(3), np.zeros(3), 0.0)),
+                    so3.axis_angle([1, 0, 0], 1.0))
+    ctrl = AttitudeController(cfg)
+    dt = 0.002
+    for k in range(int(15.0 / dt)):
+        R_d = so3.exp(w * (k * dt))
+        ctrl.set_setpoint(R_d, Omega_d=w)
+        out = ctrl.step(plant.R, plant.Omega, dt)
+        plant.step(out.u, dt)
+    R_d = so3.exp(w * (plant.t))          # the set point at the plant's time
+    assert so3.angle(R_d.T @ plant.R) < math.radians(0.01)
+    assert np.linalg.norm(out.e_Omega) < 1e-3
+
+
+# --- Prop. 5: adaptation ------------------------------------------------------------------------------
+def test_adaptive_estimate_converges_to_constant_disturbance():
+    cfg = config(four_cones())
+    dist = Disturbance(np.array([0.2, 0.2, 0.2]), np.zeros(3), 0.0)
+    outs = list(closed_loop(cfg, so3.axis_angle([0, 0, 1], math.radians(225.0)), 500.0, 20.0,
+                            disturbance=dist, sub=2))
+    out, plant, ctrl = outs[-1]
+    assert np.allclose(ctrl.delta_bar, 0.2, atol=1e-3)
+    assert so3.angle(plant.R) < math.radians(0.01)
+
+
+def test_without_adaptation_a_disturbance_leaves_a_steady_error():
+    cfg = config(four_cones(), adaptive=False)
+    dist = Disturbance(np.array([0.2, 0.2, 0.2]), np.zeros(3), 0.0)
+    outs = list(closed_loop(cfg, so3.axis_angle([0, 0, 1], math.radians(225.0)), 500.0, 20.0,
+                            disturbance=dist, sub=2))
+    out, plant, ctrl = outs[-1]
+    assert np.all(ctrl.delta_bar == 0.0)
+    assert so3.angle(plant.R) > math.radians(10.0)
+    # at rest the feedback balances the disturbance: k_R e_R = Delta
+    assert np.allclose(cfg.k_R * out.e_R, 0.2, atol=2e-3)
+
+
+def test_estimate_projection_bounds_the_estimate():
+    cfg = config(one_cone(), delta_bar_max=0.05, k_Delta=50.0)
+    ctrl = AttitudeController(cfg)
+    R = so3.axis_angle([0, 0, 1], math.pi / 2)
+    for _ in range(100):
+        ctrl.step(R, np.array([0.5, -0.5, 2.0]), 0.01)
+    assert np.linalg.norm(ctrl.delta_bar) == pytest.approx(0.05)
+
+
+def test_adapt_false_holds_the_estimate_and_reset_zeroes_it():
+    ctrl = AttitudeController(config(one_cone()))
+    R = so3.axis_angle([0, 0, 1], math.pi / 2)
+    ctrl.step(R, np.ones(3), 0.01)
+    held = ctrl.delta_bar.copy()
+    assert np.linalg.norm(held) > 0
+    ctrl.step(R, np.ones(3), 0.01, adapt=False)
+    assert np.array_equal(ctrl.delta_bar, held)
+    ctrl.reset_adaptation()
+    assert not ctrl.delta_bar.any()
+
+
+def test_gain_check_reports_numbers():
+    check = gain_condition(config(four_cones(), c=1e-4))
+    assert check.ok and check.c_max > 1e-4 and check.H > 0
+    bad = gain_condition(config(four_cones(), c=100.0))
+    assert not bad.ok
+    assert 'VIOLATES' in bad.message() and '%.4g' % bad.c_max_paper in bad.message()
+
+
+# --- safety: cones crossed between samples, bad set points -----------------------------------------
+def test_on_or_inside_a_cone_the_output_is_finite_flagged_and_repulsive():
+    cones = one_cone()
+    ctrl = AttitudeController(config(cones))
+    axis = cones.V[0]
+    yaw_axis = math.atan2(axis[1], axis[0])
+    for off_deg in [12.0, 11.9, 6.0, 0.01, 0.0]:     # on the boundary ... on the axis
+        R = so3.axis_angle([0, 0, 1], yaw_axis + math.radians(off_deg))
+        out = ctrl.step(R, np.zeros(3), 0.01)
+        assert np.all(np.isfinite(out.u)) and math.isfinite(out.psi)
+        assert out.saturated and not out.adapting
+        assert out.violated == (off_deg < 12.0)
+        assert out.margins_deg[0] == pytest.approx(off_deg - 12.0, abs=1e-6)
+        # the barrier's share of the moment, -k_R A e_RB, is as strong as anywhere and turns
+        # the sensor out of the cone (positive yaw here; on the axis: some fixed direction)
+        e_RB = cones.evaluate(R).e_RB[0]
+        assert np.linalg.norm(e_RB) == pytest.approx(cones.e_RB_inside[0], rel=1e-6)
+        if off_deg > 0.0:
+            assert -e_RB[2] / np.linalg.norm(e_RB) == pytest.approx(1.0)
+    # outside, the repulsion grows up to the floor and then saturates, continuously into the cone
+    norms = [np.linalg.norm(cones.evaluate(so3.axis_angle([0, 0, 1], yaw_axis + math.radians(d)))
+                            .e_RB) for d in (20.0, 14.0, 12.5, 12.25, 12.1, 12.0 + 1e-9)]
+    assert np.all(np.diff(norms[:4]) > 0.0)
+    # in the band it is flat up to the factor sin(angle)/sin(theta) (about 2 % here)
+    assert np.allclose(norms[3:], cones.e_RB_inside[0], rtol=0.03)
+    assert norms[-1] == pytest.approx(cones.e_RB_inside[0], rel=1e-6)
+
+
+def test_setpoint_inside_a_cone_is_rejected_with_the_reason():
+    ctrl = AttitudeController(config(one_cone()))
+    bad = so3.axis_angle([0, 0, 1], math.radians(40.0))
+    with pytest.raises(SetpointRejected, match=r"inside cone 'obstacle'.*half-angle 12\.00"):
+        ctrl.set_setpoint(bad)
+    assert np.array_equal(ctrl.R_d, np.eye(3))      # the old set point stays
+    with pytest.raises(SetpointRejected, match='within 0.25 deg'):
+        ctrl.set_setpoint(so3.axis_angle([0, 0, 1], math.radians(45.0 - 12.1)))
+    with pytest.raises(SetpointRejected, match='not finite'):
+        ctrl.set_setpoint(np.full((3, 3), np.nan))
+    ok = so3.axis_angle([0, 0, 1], math.radians(45.0 - 13.0))
+    ctrl.set_setpoint(ok)
+    assert np.array_equal(ctrl.R_d, ok)
+
+
+def test_reconfigure_refuses_cones_that_contain_the_current_setpoint():
+    ctrl = AttitudeController(config(one_cone()))
+    around_identity = ConeSet([1, 0, 0], [[1.0, 0.0, 0.0]], [math.radians(10.0)], 8.0, 0.01)
+    with pytest.raises(SetpointRejected, match='current setpoint'):
+        ctrl.reconfigure(config(around_identity))
+    assert ctrl.config.cones.names == ['obstacle']
+
+
+def test_gravity_moment_is_cancelled_and_cog_model_estimates_the_offset():
+    """A wrong mass leaves an uncompensated gravity moment; the constant+cog model learns it."""
+    true_rho = np.array([0.0, 0.0, 0.1])
+    cones = ConeSet([1, 0, 0], np.zeros((0, 3)), [], 8.0, 0.01)
+    cfg = config(cones, k_R=0.4, k_Omega=0.7, k_Delta=0.5, c=0.5, mass=1.26 * 0.8,
+                 cog_offset=true_rho, disturbance_model='constant+cog', inertia=J_PAPER)
+    plant = Plant(PlantConfig(J_PAPER, 1.26, true_rho, np.array([0, 0, -9.81]),
+                                Disturbance(np.zeros(3), np.zeros(3), 0.0)),
+                    so3.axis_angle([1, 0, 0], 0.3))
+    ctrl = AttitudeController(cfg)
+    dt = 0.01
+    for _ in range(int(60 / dt)):
+        out = ctrl.step(plant.R, plant.Omega, dt)
+        for _ in range(5):
+            plant.step(out.u, dt / 5)
+    assert so3.angle(plant.R) < math.radians(0.2)
+    assert np.all(np.isfinite(ctrl.delta_bar)) and len(ctrl.delta_bar) == 6

@@ -1,0 +1,69 @@
+"""SO(3) tools: identities, round trips, and accuracy near 0 and pi."""
+import math
+
+import numpy as np
+import pytest
+
+from geoctl_ros import so3
+
+rng = np.random.default_rng(42)
+
+
+def random_rotations(n, scale=3.0):
+    return [so3.exp(rng.normal(size=3) * scale) for _ in range(n)]
+
+
+def test_hat_vee_cross():
+    for _ in range(20):
+        x, y = rng.normal(size=3), rng.normal(size=3)
+        assert np.allclose(so3.hat(x) @ y, np.cross(x, y))
+        assert np.allclose(so3.cross(x, y), np.cross(x, y))
+        assert np.allclose(so3.vee(so3.hat(x)), x)
+        assert np.allclose(so3.hat(x), -so3.hat(x).T)
+
+
+@pytest.mark.parametrize('angle', [0.0, 1e-12, 1e-7, 1e-4, 0.3, 2.0, math.pi - 1e-2,
+                                   math.pi - 1e-6, math.pi - 1e-12, math.pi])
+def test_exp_log_round_trip_at_angle(angle):
+    for _ in range(20):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        R = so3.exp(axis * angle)
+        assert np.allclose(R.T @ R, np.eye(3), atol=1e-14)
+        assert np.linalg.det(R) == pytest.approx(1.0, abs=1e-14)
+        w = so3.log(R)
+        assert np.linalg.norm(w) == pytest.approx(angle, abs=1e-12)
+        assert np.allclose(so3.exp(w), R, atol=1e-13)
+        assert so3.angle(R) == pytest.approx(angle, abs=1e-12)
+        if 0.0 < angle < math.pi - 1e-6:   # axis is unique away from pi
+            assert np.allclose(w, axis * angle, atol=1e-10)
+
+
+def test_exp_matches_series_for_small_angles():
+    w = np.array([3e-5, -2e-5, 1e-5])
+    W = so3.hat(w)
+    series = np.eye(3) + W + W @ W / 2 + W @ W @ W / 6
+    assert np.allclose(so3.exp(w), series, atol=1e-18)
+
+
+def test_quaternion_round_trip_and_ros_order():
+    # 90 deg about z in ROS order (x, y, z, w)
+    q = [0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5)]
+    assert np.allclose(so3.quat_to_rot(q) @ [1, 0, 0], [0, 1, 0])
+    for R in random_rotations(200) + [so3.exp([math.pi, 0, 0]), so3.exp([0, 0, math.pi])]:
+        q = so3.rot_to_quat(R)
+        assert q[3] >= 0.0
+        assert np.linalg.norm(q) == pytest.approx(1.0)
+        assert np.allclose(so3.quat_to_rot(q), R, atol=1e-14)
+        assert np.allclose(so3.quat_to_rot(-q), R, atol=1e-14)   # double cover
+
+
+def test_project_returns_nearest_rotation():
+    R = random_rotations(1)[0]
+    noisy = R + 1e-3 * rng.normal(size=(3, 3))
+    P = so3.project(noisy)
+    assert np.allclose(P.T @ P, np.eye(3), atol=1e-14)
+    assert np.linalg.det(P) == pytest.approx(1.0)
+    assert np.linalg.norm(P - R) < 2e-3
+    reflected = np.diag([1.0, 1.0, -1.0])
+    assert np.linalg.det(so3.project(reflected)) == pytest.approx(1.0)
