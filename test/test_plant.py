@@ -1,0 +1,84 @@
+"""The testbed simulator: conservation laws, order of accuracy, the pendulum about the pivot."""
+import math
+
+import numpy as np
+import pytest
+
+from geoctl_ros import so3
+from geoctl_ros.mechanics import gravity_moment, pivot_inertia
+from geoctl_ros.params import LAB_INERTIA
+from geoctl_ros.plant import Disturbance, Plant, PlantConfig
+
+J_LAB = np.array(LAB_INERTIA).reshape(3, 3)
+NO_DIST = Disturbance(np.zeros(3), np.zeros(3), 0.0)
+G_W = np.array([0.0, 0.0, -9.81])
+
+
+def tumbling(h, seconds):
+    plant = Plant(PlantConfig(J_LAB, 1.26, np.zeros(3), G_W, NO_DIST),
+                  so3.exp([0.3, -0.2, 0.1]), [3.0, -1.0, 2.0])
+    for _ in range(int(round(seconds / h))):
+        plant.step(np.zeros(3), h)
+    return plant
+
+
+def test_torque_free_motion_conserves_energy_and_momentum_and_stays_on_SO3():
+    start = tumbling(1e-3, 0.0)
+    end = tumbling(1e-3, 10.0)
+    assert end.kinetic_energy() == pytest.approx(start.kinetic_energy(), rel=1e-9)
+    assert np.allclose(end.angular_momentum_world(), start.angular_momentum_world(), rtol=1e-9,
+                       atol=1e-12)
+    assert np.abs(end.R.T @ end.R - np.eye(3)).max() < 1e-13
+
+
+def test_rkmk4_is_fourth_order():
+    reference = tumbling(1.25e-4, 2.0).R
+    errors = [so3.angle(reference.T @ tumbling(h, 2.0).R) for h in (8e-3, 4e-3, 2e-3)]
+    ratios = [errors[0] / errors[1], errors[1] / errors[2]]
+    assert all(12.0 < r < 20.0 for r in ratios), (errors, ratios)   # 2^4 = 16
+    assert errors[2] < 1e-8
+
+
+def test_pivot_inertia_and_gravity_moment():
+    rho = np.array([0.0, 0.0, 0.1])
+    Jp = pivot_inertia(J_LAB, 1.26, rho)
+    assert Jp[0, 0] == pytest.approx(J_LAB[0, 0] + 1.26 * 0.01)
+    assert Jp[2, 2] == pytest.approx(J_LAB[2, 2])
+    # tilted 30 deg about x with the centre of mass above the pivot: gravity tips it further
+    R = so3.axis_angle([1, 0, 0], math.radians(30.0))
+    M = gravity_moment(R, 1.26 * rho, G_W)
+    assert M[0] == pytest.approx(1.26 * 9.81 * 0.1 * math.sin(math.radians(30.0)))
+    assert M[1] == pytest.approx(0.0) and M[2] == pytest.approx(0.0)
+
+
+def test_centre_of_mass_above_the_pivot_falls_over():
+    plant = Plant(PlantConfig(J_LAB, 1.26, np.array([0.0, 0.0, 0.1]), G_W, NO_DIST),
+                  so3.axis_angle([1, 0, 0], math.radians(1.0)))
+    for _ in range(1500):
+        plant.step(np.zeros(3), 1e-3)
+    tilt = math.degrees(math.acos(np.clip(plant.R[2, 2], -1, 1)))
+    assert tilt > 60.0
+
+
+def test_centre_of_mass_below_the_pivot_swings_with_the_pendulum_period():
+    l, m = 0.1, 1.26
+    plant = Plant(PlantConfig(J_LAB, m, np.array([0.0, 0.0, -l]), G_W, NO_DIST),
+                  so3.axis_angle([1, 0, 0], math.radians(2.0)))
+    roll, t = [], []
+    for _ in range(4000):
+        plant.step(np.zeros(3), 1e-3)
+        roll.append(so3.log(plant.R)[0])
+        t.append(plant.t)
+    roll, t = np.array(roll), np.array(t)
+    up = np.nonzero((roll[:-1] < 0) & (roll[1:] >= 0))[0]
+    period = np.mean(np.diff(t[up]))
+    expected = 2 * math.pi * math.sqrt(pivot_inertia(J_LAB, m, [0, 0, -l])[0, 0] / (m * 9.81 * l))
+    assert period == pytest.approx(expected, rel=2e-3)
+
+
+def test_disturbance_follows_the_dissertation_pattern():
+    d = Disturbance(np.array([0.2, 0.2, 0.2]), np.array([0.02, 0.02, 0.02]), 9.0)
+    t = 0.37
+    s, c = math.sin(9 * t), math.cos(9 * t)
+    assert np.allclose(d(t), [0.2 + 0.02 * s, 0.2 + 0.02 * c, 0.2 + 0.01 * (s + c)])
+    assert np.allclose(Disturbance(np.ones(3), np.zeros(3), 0.0)(5.0), 1.0)
