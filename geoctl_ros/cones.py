@@ -60,7 +60,8 @@ class ConeSet:
         """
         r = np.asarray(sensor_axis, dtype=float)
         self.r = r / np.linalg.norm(r)
-        self._r_hat = hat(self.r)        # x @ hat(r) == cross(x, r) row-wise
+        # V @ (R @ self._r_cols): column 0 is s_i = r^T R^T v_i, columns 1-3 (R^T v_i) x r
+        self._r_cols = np.column_stack((self.r, hat(self.r)))
         V = np.asarray(axes, dtype=float).reshape(-1, 3)
         self.V = V / np.linalg.norm(V, axis=1, keepdims=True) if len(V) else V
         self.theta = np.asarray(half_angles_rad, dtype=float).reshape(-1)
@@ -71,6 +72,8 @@ class ConeSet:
         self.log_scale = 1.0 + self.cos_theta
         self.g0 = self.cos_theta - np.cos(self.theta + self.floor)   # floor gap, > 0
         self.B_floor = 1.0 - np.log(self.g0 / self.log_scale) / self.alpha
+        self._B_offset = 1.0 + np.log(self.log_scale) / self.alpha
+        self._inv_alpha_g0 = 1.0 / (self.alpha * self.g0)
         self.e_RB_inside = np.sin(self.theta) / (self.alpha * self.g0)   # |e_RB,i| in cone i
         least = int(np.argmin(np.abs(self.r)))
         perp = np.cross(self.r, np.eye(3)[least])
@@ -81,14 +84,15 @@ class ConeSet:
 
     def evaluate(self, R):
         """Barrier values, gradients and flags at attitude R."""
-        s = self.V @ (R @ self.r)              # r^T R^T v_i
-        cross = self.V @ (R @ self._r_hat)     # row i: (R^T v_i) x r
+        sc = self.V @ (R @ self._r_cols)
+        s, cross = sc[:, 0], sc[:, 1:]
         g = self.cos_theta - s
-        saturated = g < self.g0
         g_eff = np.maximum(g, self.g0)
-        B = np.where(saturated, self.B_floor + (self.g0 - g) / (self.alpha * self.g0),
-                     1.0 - np.log(g_eff / self.log_scale) / self.alpha)
-        e_RB = cross / (-self.alpha * g_eff)[:, None]
+        saturated = g < self.g0
+        # log barrier at g_eff, plus the tangent-line extension below the floor (zero above it)
+        B = (self._B_offset - np.log(g_eff) / self.alpha
+             + np.maximum(self.g0 - g, 0.0) * self._inv_alpha_g0)
+        e_RB = cross * (-1.0 / (self.alpha * g_eff))[:, None]
         violated = g <= 0.0
         if violated.any():
             e_RB[violated] = self._inside_field(cross[violated], violated)

@@ -406,5 +406,24 @@ def _fmt_default(value):
     return '`%s`' % (value,)
 
 
+README_MARKERS = ('<!-- params:begin -->', '<!-- params:end -->')
+
+
+def update_readme(path):
+    """Replace the table between README_MARKERS in the file at path; True if it changed."""
+    with open(path) as f:
+        text = f.read()
+    begin, end = README_MARKERS
+    i, j = text.index(begin) + len(begin), text.index(end)
+    new = text[:i] + '\n' + markdown_table() + '\n' + text[j:]
+    if new != text:
+        with open(path, 'w') as f:
+            f.write(new)
+    return new != text
+
+
 if __name__ == '__main__':
-    sys.stdout.write(markdown_table() + '\n')
+    if sys.argv[1:2] == ['--write-readme']:
+        print('updated' if update_readme(sys.argv[2]) else 'up to date')
+    else:
+        sys.stdout.write(markdown_table() + '\n')

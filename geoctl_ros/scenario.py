@@ -91,7 +91,7 @@ def run(scenario, duration=None):
                + ['dtrue_%d' % i for i in range(n_dbar)]
                + ['angle_%s' % n for n in names])
     hist = np.empty((steps, len(columns)))
-    min_angle = np.full(len(cones), np.inf)
+    min_angle = cones.angles_deg(plant.R)          # then after every integration step
     t0 = time.perf_counter()
     for k in range(steps):
         R, Omega, t = plant.R, plant.Omega, plant.t

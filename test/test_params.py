@@ -1,0 +1,145 @@
+"""The parameter schema: defaults, ROS-strict types, one clear error per bad parameter, YAML files,
+and the README table generated from the schema."""
+import os
+import re
+
+import numpy as np
+import pytest
+
+from geoctl_ros import params
+from geoctl_ros.params import CONTROLLER, SIM, ConfigError, resolve
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+ONE_CONE = {'cones.names': ['sun'], 'cones.sun.axis': [1.0, 1.0, 0.0],
+            'cones.sun.half_angle_deg': 12.0}
+
+
+def errors_of(node, overrides):
+    with pytest.raises(ConfigError) as info:
+        resolve(node, overrides)
+    return dict(info.value.errors), str(info.value)
+
+
+def test_defaults_build_a_controller_and_a_plant():
+    c = resolve(CONTROLLER, {})
+    cfg = params.controller_config(c)
+    assert cfg.k_R == 0.4 and len(cfg.cones) == 0
+    assert np.allclose(cfg.J[0, 0], 5.5710e-3 + 1.26 * 0.1 ** 2)   # pivot inertia
+    plant = params.plant_config(resolve(SIM, {}))
+    assert plant.mass == 1.26
+
+
+def test_cones_from_parameters():
+    cfg = params.controller_config(resolve(CONTROLLER, ONE_CONE))
+    assert cfg.cones.names == ['sun']
+    assert np.allclose(cfg.cones.V[0], [2 ** -0.5, 2 ** -0.5, 0.0])
+    assert np.degrees(cfg.cones.theta[0]) == pytest.approx(12.0)
+
+
+@pytest.mark.parametrize('name, value, reason', [
+    ('k_R', -0.4, 'must be > 0'),
+    ('k_Omega', 0.0, 'must be > 0'),
+    ('k_R', 1, 'expected a double, got int 1 (write 1.0)'),
+    ('G', [1.0, 1.0, 0.5], 'must be distinct'),
+    ('G', [1, 2, 3], 'write every element as a float'),
+    ('G', [1.0, 2.0], 'expected 3 values, got 2'),
+    ('sensor_axis', [0.0, 0.0, 0.0], 'zero vector'),
+    ('inertia', [1.0, 0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0], 'symmetric'),
+    ('inertia', [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0], 'positive definite'),
+    ('inertia', [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 3.0], 'triangle inequality'),
+    ('setpoint', [0.0, 0.0, 0.0, 2.0], 'unit quaternion'),
+    ('disturbance_model', 'linear', 'must be one of constant, constant+cog'),
+    ('adaptive', 'yes', 'expected true or false'),
+    ('rate_hz', float('nan'), 'must be finite'),
+    ('barrier_floor_deg', 0.0, 'in (0, 10)'),
+])
+def test_bad_values_name_the_parameter_and_the_reason(name, value, reason):
+    errs, text = errors_of(CONTROLLER, {name: value})
+    assert list(errs) == [name]
+    assert reason in errs[name]
+    assert name in text
+
+
+@pytest.mark.parametrize('half_angle', [0.0, 90.0, 120.0, -5.0])
+def test_half_angle_outside_0_90_is_refused(half_angle):
+    errs, _ = errors_of(CONTROLLER, dict(ONE_CONE, **{'cones.sun.half_angle_deg': half_angle}))
+    assert 'in (0, 90) degrees' in errs['cones.sun.half_angle_deg']
+
+
+def test_cone_problems():
+    errs, _ = errors_of(CONTROLLER, {'cones.names': ['sun']})
+    assert 'missing' in errs['cones.sun.axis'] and 'missing' in errs['cones.sun.half_angle_deg']
+    errs, _ = errors_of(CONTROLLER, dict(ONE_CONE, **{'cones.moon.axis': [0.0, 0.0, 1.0]}))
+    assert "cone 'moon' is not in cones.names" in errs['cones.moon.axis']
+    errs, _ = errors_of(CONTROLLER, dict(ONE_CONE, **{'cones.sun.axis': [0.0, 0.0, 0.0]}))
+    assert 'zero vector' in errs['cones.sun.axis']
+    errs, _ = errors_of(CONTROLLER, {'cones.names': ['a', 'a'], 'cones.a.axis': [1.0, 0.0, 0.0],
+                                     'cones.a.half_angle_deg': 10.0})
+    assert 'unique' in errs['cones.names']
+
+
+def test_unknown_parameter_suggests_the_right_name():
+    errs, _ = errors_of(CONTROLLER, {'k_r': 0.4})
+    assert errs['k_r'] == "unknown parameter (did you mean 'k_R'?)"
+
+
+def test_every_problem_is_reported_at_once():
+    errs, _ = errors_of(CONTROLLER, {'k_R': -1.0, 'alpha': 0.0, 'G': [1.0, 1.0, 1.0]})
+    assert set(errs) == {'k_R', 'alpha', 'G'}
+
+
+def test_parameter_file_sections_and_nesting(tmp_path):
+    path = tmp_path / 'p.yaml'
+    path.write_text('''
+/**:
+  ros__parameters:
+    mass: 2.0
+    k_R: 0.9            # a controller parameter in the shared section
+controller:
+  ros__parameters:
+    mass: 1.5           # the node's own section wins
+    cones:
+      names: [sun]
+      sun: {axis: [0.0, 1.0, 0.0], half_angle_deg: 30.0}
+sim:
+  ros__parameters:
+    disturbance:
+      constant: [0.1, 0.0, 0.0]
+''')
+    sections = params.load_parameter_file(path)
+    ctrl = resolve(CONTROLLER, params.node_overrides(sections, CONTROLLER))
+    sim = resolve(SIM, params.node_overrides(sections, SIM))
+    assert ctrl['mass'] == 1.5 and ctrl['k_R'] == 0.9
+    assert ctrl['cones.sun.half_angle_deg'] == 30.0
+    assert sim['mass'] == 2.0 and 'k_R' not in sim
+    assert np.allclose(sim['disturbance.constant'], [0.1, 0.0, 0.0])
+
+
+def test_malformed_parameter_files_are_refused(tmp_path):
+    path = tmp_path / 'p.yaml'
+    path.write_text('controller:\n  k_R: 0.4\n')
+    with pytest.raises(ConfigError, match='ros__parameters'):
+        params.load_parameter_file(path)
+    path.write_text('- 1\n- 2\n')
+    with pytest.raises(ConfigError, match='top level must be a mapping'):
+        params.load_parameter_file(path)
+
+
+def test_shipped_configs_are_valid():
+    from geoctl_ros import scenario
+    folder = os.path.join(ROOT, 'config', 'scenarios')
+    files = sorted(f for f in os.listdir(folder) if f.endswith('.yaml'))
+    assert len(files) >= 5
+    for f in files:
+        scenario.load(os.path.join(folder, f))
+
+
+def test_readme_parameter_table_is_generated_from_the_schema():
+    with open(os.path.join(ROOT, 'README.md')) as f:
+        readme = f.read()
+    m = re.search(r'<!-- params:begin -->\n(.*?)\n<!-- params:end -->', readme, re.S)
+    assert m, 'README.md lacks the generated parameter table markers'
+    assert m.group(1).strip() == params.markdown_table().strip(), (
+        'README parameter table is stale: regenerate it with '
+        '`./run shell -m geoctl_ros.params --write-readme README.md`')
