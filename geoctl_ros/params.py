@@ -110,6 +110,16 @@ class Param:
     choices: tuple = ()
 
 
+def _ring_defaults():
+    from geoctl_ros.airframe import tilted_ring
+    g = tilted_ring()
+    return ([round(float(v), 6) for v in g.positions.ravel()],
+            [round(float(v), 6) for v in g.axes.ravel()], [int(v) for v in g.spins])
+
+
+_RING_POSITIONS, _RING_AXES, _RING_SPINS = _ring_defaults()
+
+
 def _p(name, type_, default, unit, doc, nodes, length=0, check=None, choices=()):
     return Param(name, type_, default, unit, doc, nodes if isinstance(nodes, tuple) else (nodes,),
                  length, check, choices)
@@ -160,7 +170,62 @@ SCHEMA = [
        'pivot -> centre of mass, body frame (z up: above the pivot)', BOTH, length=3),
     _p('gravity', 'double_array', [0.0, 0.0, -9.81], 'm/s^2', 'gravity vector, world frame',
        BOTH, length=3),
+    # Airframe: rotor geometry (controller: allocation; sim: the true rotors).
+    _p('rotors.layout', 'string', 'tilted_ring', '-',
+       'tilted_ring (from the five parameters below) or custom (rotors.positions/axes/spins)',
+       BOTH, choices=('tilted_ring', 'custom')),
+    _p('rotors.count', 'integer', 6, '-', 'tilted_ring: number of rotors, numbered clockwise '
+       'from above', BOTH, check=lambda v: None if 3 <= v <= 12 else 'must be 3 to 12'),
+    _p('rotors.arm_length', 'double', 0.31, 'm', 'tilted_ring: centre of mass to rotor', BOTH,
+       check=_positive),
+    _p('rotors.tilt_deg', 'double', 15.0, 'deg', 'tilted_ring: tangential tilt of each thrust '
+       'axis, alternating with the spin', BOTH,
+       check=lambda v: None if 0.0 <= v < 60.0 else 'must be in [0, 60) degrees'),
+    _p('rotors.first_azimuth_deg', 'double', 0.0, 'deg', 'tilted_ring: azimuth of rotor 1 from '
+       'the nose, counter-clockwise from above', BOTH),
+    _p('rotors.height', 'double', 0.0, 'm', 'tilted_ring: rotor plane above the centre of mass',
+       BOTH),
+    _p('rotors.positions', 'double_array', _RING_POSITIONS, 'm',
+       'custom: rotor positions from the centre of mass, 3 per rotor', BOTH),
+    _p('rotors.axes', 'double_array', _RING_AXES, '-',
+       'custom: rotor thrust axes (normalised), 3 per rotor', BOTH),
+    _p('rotors.spins', 'integer_array', _RING_SPINS, '-',
+       'custom: +1 counter-clockwise (seen along the thrust axis), -1 clockwise', BOTH,
+       check=lambda v: None if v and all(x in (-1, 1) for x in v) else 'each must be 1 or -1'),
+    _p('rotors.yaw_coefficient', 'double', 0.1, 'm',
+       'reaction moment per newton of thrust', BOTH, check=_nonnegative),
+    _p('rotors.failed', 'integer_array', [], '-', 'rotor numbers (1-based) to treat as dead',
+       BOTH),
+    # Motors: thrust curve f = a x^2 + b x + c, x = voltage_scale * command.
+    _p('motor.a', 'double_array', [6.0252e-5], 'N', 'thrust curve a (1 value, or 1 per rotor)',
+       BOTH),
+    _p('motor.b', 'double_array', [8.4086e-3], 'N', 'thrust curve b (1 value, or 1 per rotor)',
+       BOTH),
+    _p('motor.c', 'double_array', [-2.5194e-2], 'N', 'thrust curve c (1 value, or 1 per rotor)',
+       BOTH),
+    _p('motor.voltage_scale', 'double', 1.1261, '-',
+       'battery-voltage scale of the command (12.5 V / 11.1 V)', BOTH, check=_positive),
+    _p('motor.command_max', 'integer', 240, '-', 'largest ESC command', BOTH,
+       check=lambda v: None if 1 <= v <= 65535 else 'must be in 1..65535'),
+    _p('thrust_min', 'double', 0.2, 'N', 'least thrust per rotor while armed', CONTROLLER,
+       check=_nonnegative),
+    _p('thrust_max', 'double', 6.5, 'N', 'most thrust per rotor (<= the curve at command_max)',
+       CONTROLLER, check=_positive),
+    _p('collective_thrust', 'double', 0.0, 'N',
+       'thrust along body z to hold while armed; 0 = m * |gravity|', CONTROLLER,
+       check=_nonnegative),
     # Simulator.
+    _p('actuation', 'string', 'rotors', '-', 'rotors (commands through the motors) or torque '
+       '(the controller\'s moment, ideal)', SIM, choices=('rotors', 'torque')),
+    _p('motor_time_constant', 'double', 0.04, 's', 'first-order lag of each rotor\'s thrust',
+       SIM, check=_positive),
+    _p('noise.attitude_deg', 'double', 0.0, 'deg',
+       'std dev of measured-attitude noise per axis (motion capture)', SIM, check=_nonnegative),
+    _p('noise.angular_velocity', 'double', 0.0, 'rad/s',
+       'std dev of gyro noise per axis', SIM, check=_nonnegative),
+    _p('noise.gyro_bias', 'double_array', [0.0, 0.0, 0.0], 'rad/s', 'constant gyro bias', SIM,
+       length=3),
+    _p('noise.seed', 'integer', 0, '-', 'random seed of the noise', SIM),
     _p('integration_rate_hz', 'double', 1000.0, 'Hz', 'simulator integration rate (RKMK4)', SIM,
        check=_rate),
     _p('initial_attitude', 'double_array', [0.0, 0.0, 0.0, 1.0], '-',
@@ -229,6 +294,17 @@ def check_value(p, value):
             return None, 'expected %d values, got %d' % (p.length, out.size)
         if not np.all(np.isfinite(out)):
             return None, 'must be finite'
+    elif t == 'integer':
+        if isinstance(value, bool) or not isinstance(value, int):
+            return None, 'expected an integer, got %s' % _describe(value)
+        out = value
+    elif t == 'integer_array':
+        if not isinstance(value, (list, tuple)) or not all(
+                isinstance(v, int) and not isinstance(v, bool) for v in value):
+            return None, 'expected an array of integers, got %s' % _describe(value)
+        out = list(value)
+        if p.length and len(out) != p.length:
+            return None, 'expected %d values, got %d' % (p.length, len(out))
     elif t == 'bool':
         if not isinstance(value, bool):
             return None, 'expected true or false, got %s' % _describe(value)
@@ -331,6 +407,87 @@ def controller_config(values):
 def setpoint_rotation(values):
     """R_d of the resolved controller parameters."""
     return so3.quat_to_rot(values['setpoint'])
+
+
+def airframe(values):
+    """(RotorGeometry, ThrustCurve, failed rotor numbers) of resolved parameters; raises
+    ConfigError naming the parameter for a layout or curve that does not fit together."""
+    from geoctl_ros.airframe import RotorGeometry, ThrustCurve, tilted_ring
+    errors = []
+    if values['rotors.layout'] == 'tilted_ring':
+        geometry = tilted_ring(values['rotors.count'], values['rotors.arm_length'],
+                               values['rotors.tilt_deg'], values['rotors.first_azimuth_deg'],
+                               values['rotors.height'], values['rotors.yaw_coefficient'])
+    else:
+        spins = np.array(values['rotors.spins'], dtype=float)
+        n = len(spins)
+        pos, axes = values['rotors.positions'], values['rotors.axes']
+        for name, arr in (('rotors.positions', pos), ('rotors.axes', axes)):
+            if arr.size != 3 * n:
+                errors.append((name, 'expected 3 values per rotor (%d rotors in rotors.spins), '
+                               'got %d' % (n, arr.size)))
+        if errors:
+            raise ConfigError(errors)
+        axes = axes.reshape(n, 3)
+        norms = np.linalg.norm(axes, axis=1)
+        if np.any(norms < 1e-9):
+            raise ConfigError([('rotors.axes', 'rotor %d has a zero thrust axis'
+                                % (int(np.argmin(norms)) + 1))])
+        geometry = RotorGeometry(pos.reshape(n, 3), axes / norms[:, None], spins,
+                                 values['rotors.yaw_coefficient'])
+    n = geometry.count
+    for v in values['rotors.failed']:
+        if not 1 <= v <= n:
+            errors.append(('rotors.failed', 'rotor %d does not exist (1..%d)' % (v, n)))
+    coeffs = {}
+    for k in 'abc':
+        arr = values['motor.' + k]
+        if arr.size not in (1, n):
+            errors.append(('motor.' + k, 'expected 1 value or %d (one per rotor), got %d'
+                           % (n, arr.size)))
+        coeffs[k] = np.broadcast_to(arr, (n,)).copy() if arr.size in (1, n) else None
+    if not errors and np.any(coeffs['a'] <= 0.0):
+        errors.append(('motor.a', 'must be > 0 (thrust must grow with the command)'))
+    if errors:
+        raise ConfigError(errors)
+    curve = ThrustCurve(coeffs['a'], coeffs['b'], coeffs['c'], values['motor.voltage_scale'],
+                        values['motor.command_max'])
+    return geometry, curve, sorted(set(values['rotors.failed']))
+
+
+def mixer(values):
+    """The Mixer (allocation + thrust curve) of resolved controller parameters."""
+    from geoctl_ros.airframe import AirframeError, Allocator, Mixer
+    geometry, curve, failed = airframe(values)
+    top = float(np.min(curve.max_thrust()))
+    if values['thrust_max'] > top:
+        raise ConfigError([('thrust_max', '%.3g N is more than the thrust curve gives at '
+                            'motor.command_max (%.3g N)' % (values['thrust_max'], top))])
+    if values['thrust_min'] >= values['thrust_max']:
+        raise ConfigError([('thrust_min', 'must be below thrust_max (%g)' % values['thrust_max'])])
+    try:
+        allocator = Allocator(geometry, values['cog_offset'], values['thrust_min'],
+                              values['thrust_max'], failed)
+    except AirframeError as e:
+        raise ConfigError([('rotors', str(e))]) from None
+    collective = values['collective_thrust'] or values['mass'] * float(
+        np.linalg.norm(values['gravity']))
+    return Mixer(allocator, curve, collective)
+
+
+def testbed_sim(values):
+    """The TestbedSim of resolved sim parameters, at its initial state."""
+    from geoctl_ros.testbed import RotorActuator, TestbedSim
+    actuator = None
+    if values['actuation'] == 'rotors':
+        geometry, curve, failed = airframe(values)
+        actuator = RotorActuator(geometry, values['cog_offset'], curve,
+                                 values['motor_time_constant'], failed)
+    return TestbedSim(plant_config(values), so3.quat_to_rot(values['initial_attitude']),
+                      values['initial_angular_velocity'], actuator,
+                      math.radians(values['noise.attitude_deg']),
+                      values['noise.angular_velocity'], values['noise.gyro_bias'],
+                      values['noise.seed'])
 
 
 def plant_config(values):

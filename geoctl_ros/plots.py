@@ -19,8 +19,8 @@ def _cols(result, prefix):
 
 
 def scenario_figures(result, out_dir):
-    """Write attitude_error.png, psi.png, cone_angles.png, disturbance.png, control_moment.png and
-    sensor_path.png; returns their paths."""
+    """Write attitude_error.png, psi.png, cone_angles.png, disturbance.png, control_moment.png,
+    motor_commands.png (rotor actuation only) and sensor_path.png; returns their paths."""
     title = result.summary.get('title') or result.scenario.name
     t = _col(result, 't')
     paths = []
@@ -77,6 +77,20 @@ def scenario_figures(result, out_dir):
     ax.grid(True, alpha=0.3)
     ax.legend()
     save(fig, 'control_moment.png')
+
+    cmd_cols = _cols(result, 'cmd_')
+    if cmd_cols:
+        fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
+        for c in cmd_cols:
+            ax1.plot(t, _col(result, c), lw=1, label='motor %s' % c[len('cmd_'):])
+        ax1.set(ylabel='ESC command', title='motor commands (integer, 0..command_max)')
+        ax1.grid(True, alpha=0.3)
+        ax1.legend(ncol=3, fontsize=8)
+        for c in _cols(result, 'thrust_'):
+            ax2.plot(t, _col(result, c), lw=1)
+        ax2.set(xlabel='t [s]', ylabel='thrust [N]', title='rotor thrusts (after the motor lag)')
+        ax2.grid(True, alpha=0.3)
+        save(fig, 'motor_commands.png')
 
     fig = plt.figure(figsize=(6, 6))
     ax = fig.add_subplot(projection='3d')

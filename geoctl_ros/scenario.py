@@ -20,9 +20,8 @@ from geoctl_ros import so3
 from geoctl_ros.control import AttitudeController, SetpointRejected, gain_condition
 from geoctl_ros.mechanics import gravity_moment
 from geoctl_ros.params import (CONTROLLER, SCENARIO, SIM, ConfigError, controller_config,
-                               load_parameter_file, node_overrides, plant_config, resolve,
-                               setpoint_rotation)
-from geoctl_ros.plant import Plant
+                               load_parameter_file, mixer, node_overrides, resolve,
+                               setpoint_rotation, testbed_sim)
 
 SETTLE_PSI = 1e-3
 
@@ -54,6 +53,13 @@ def load(path):
         raise ConfigError([('sim: integration_rate_hz', 'must be an integer multiple of the '
                             'controller rate_hz (%g / %g)' % (resolved[SIM]['integration_rate_hz'],
                                                               resolved[CONTROLLER]['rate_hz']))])
+    for node, build in ((CONTROLLER, mixer), (SIM, testbed_sim)):
+        try:
+            build(resolved[node])
+        except ConfigError as e:
+            errors += [('%s: %s' % (node, name), reason) for name, reason in e.errors]
+    if errors:
+        raise ConfigError(errors)
     name = os.path.splitext(os.path.basename(str(path)))[0]
     return Scenario(name, resolved[CONTROLLER], resolved[SIM], resolved[SCENARIO])
 
@@ -67,13 +73,20 @@ class Result:
 
 
 def run(scenario, duration=None):
-    """Run the closed loop; returns a Result with the history and the summary."""
+    """Run the closed loop; returns a Result with the history and the summary.
+
+    Each control step the controller sees the simulator's measurements (with their noise); with
+    rotor actuation its moment goes through the mixer (allocation, thrust curve) and the integer
+    commands drive the simulated motors, otherwise the moment acts directly. Either is held over
+    the control period while the simulator integrates at its own rate.
+    """
     ccfg = controller_config(scenario.controller)
-    pcfg = plant_config(scenario.sim)
     controller = AttitudeController(ccfg)
     controller.set_setpoint(setpoint_rotation(scenario.controller))
-    plant = Plant(pcfg, so3.quat_to_rot(scenario.sim['initial_attitude']),
-                    scenario.sim['initial_angular_velocity'])
+    sim = testbed_sim(scenario.sim)
+    rotors = sim.actuator is not None
+    mix = mixer(scenario.controller) if rotors else None
+    pcfg = sim.plant.config
     rate = scenario.controller['rate_hz']
     n_sub = int(round(scenario.sim['integration_rate_hz'] / rate))
     dt, h = 1.0 / rate, 1.0 / (rate * n_sub)
@@ -82,6 +95,7 @@ def run(scenario, duration=None):
     cones = ccfg.cones
     names = cones.names
     n_dbar = ccfg.n_params
+    n_rot = mix.allocator.count if rotors else 0
     m_rho_true = pcfg.mass * pcfg.cog_offset
     m_rho_model = ccfg.mass * ccfg.cog_offset if ccfg.gravity_compensation else np.zeros(3)
 
@@ -89,24 +103,38 @@ def run(scenario, duration=None):
                 'u_x', 'u_y', 'u_z']
                + ['dbar_%d' % i for i in range(n_dbar)]
                + ['dtrue_%d' % i for i in range(n_dbar)]
-               + ['angle_%s' % n for n in names])
+               + ['angle_%s' % n for n in names]
+               + ['cmd_%d' % (i + 1) for i in range(n_rot)]
+               + ['thrust_%d' % (i + 1) for i in range(n_rot)]
+               + (['moment_lost'] if rotors else []))
     hist = np.empty((steps, len(columns)))
+    plant = sim.plant
     min_angle = cones.angles_deg(plant.R)          # then after every integration step
+    saturated_steps = 0
     t0 = time.perf_counter()
     for k in range(steps):
-        R, Omega, t = plant.R, plant.Omega, plant.t
-        out = controller.step(R, Omega, dt)
+        R, t = plant.R, plant.t
+        out = controller.step(sim.measure_attitude(), sim.measure_angular_velocity(), dt)
         # What the controller does not model: disturbance plus uncompensated gravity moment, or
         # with the constant+cog model, the disturbance and the error in m*rho separately.
         if n_dbar == 3:
             truth = pcfg.disturbance(t) + gravity_moment(R, m_rho_true - m_rho_model, pcfg.gravity)
         else:
             truth = np.concatenate((pcfg.disturbance(t), m_rho_true - m_rho_model))
-        angles = out.margins_deg + np.degrees(cones.theta)
-        hist[k] = np.concatenate(([t], so3.rot_to_quat(R), Omega, out.e_R, [out.psi], out.u,
-                                  out.delta_bar, truth, angles))
+        angles = cones.angles_deg(R)
+        row = [[t], so3.rot_to_quat(R), plant.Omega, out.e_R, [out.psi], out.u, out.delta_bar,
+               truth, angles]
+        if rotors:
+            motors = mix.mix(out.u)
+            command = motors.commands
+            saturated_steps += motors.allocation.saturated
+            row += [command, sim.actuator.thrusts,
+                    [np.linalg.norm(motors.allocation.moment_lost)]]
+        else:
+            command = out.u
+        hist[k] = np.concatenate(row)
         for _ in range(n_sub):
-            plant.step(out.u, h)
+            sim.step(command, h)
             if len(cones):
                 min_angle = np.minimum(min_angle, cones.angles_deg(plant.R))
         if not np.all(np.isfinite(plant.Omega)):
@@ -141,6 +169,16 @@ def run(scenario, duration=None):
         'wall_time_s': wall,
         'gain_check': gain_condition(ccfg).message(),
     }
+    if rotors:
+        cmd = hist[:, [columns.index('cmd_%d' % (i + 1)) for i in range(n_rot)]]
+        summary.update({
+            'actuation': 'rotors',
+            'max_command': int(cmd.max()) if steps else 0,
+            'min_command': int(cmd.min()) if steps else 0,
+            'saturated_fraction': saturated_steps / max(steps, 1),
+            'max_moment_lost_Nm': float(hist[:, columns.index('moment_lost')].max()),
+            'airframe_warnings': mix.allocator.health.warnings,
+        })
     return Result(scenario, columns, hist, summary)
 
 

@@ -1,0 +1,260 @@
+"""Rotor geometry, effectiveness matrix, allocation with saturation, and the motors' thrust curve.
+
+Frames: ROS body frame (REP-103: x forward, y left, z up), origin at the centre of mass for the
+rotor positions; moments are taken about the pivot, which is at -rho from the centre of mass.
+
+Rotor i (1-based) has a position p_i (from the centre of mass), a unit thrust axis n_i, a spin
+direction s_i (+1: counter-clockwise about n_i, seen from above) and the airframe's yaw-reaction
+coefficient k (moment per newton of thrust). Its thrust f_i >= 0 gives the force f_i n_i and the
+moment about the pivot f_i ((rho + p_i) x n_i - s_i k n_i): a rotor spinning counter-clockwise
+pushes the body clockwise.
+
+The lab's hexrotor (``tilted_ring`` layout, the defaults), seen from above, nose up the page:
+
+                 x (forward)
+                 ^
+           6     |     2            rotor i at azimuth -(i - 1) 60 deg, i.e. numbered clockwise
+            \    1    /             from the nose, as in the lab's forward-right-down code
+             \   |   /              (the lab's rotor i is this rotor i and ESC address 0x28 + i)
+     y <------ (pivot)              arm 0.31 m; each thrust axis tilted 15 deg tangentially;
+             /       \              odd rotors spin counter-clockwise (s = +1), even clockwise;
+            /    4    \             each tilt leans towards the rotor's direction of travel
+           5           3            ... (so that tilt and reaction moments add up in yaw)
+
+Allocation (``Allocator``) serves the testbed: the spherical joint carries any net force except
+the collective thrust along body z, so it solves for the collective thrust and the three moments
+about the pivot (the minimum-norm thrusts when more rotors than that are alive), within
+[thrust_min, thrust_max] per rotor. A feasible request is met exactly. An infeasible one is
+degraded in strict priority: roll and pitch first, then yaw, then collective thrust, each scaled
+down only as far as needed, and the moment not delivered is reported.
+"""
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+
+class AirframeError(ValueError):
+    """A rotor layout that cannot produce every moment (with the reason)."""
+
+
+@dataclass(frozen=True)
+class RotorGeometry:
+    """Per-rotor geometry (n rotors): positions (n, 3) from the centre of mass, unit axes (n, 3),
+    spins (n,) of +-1, and the yaw-reaction coefficient (m)."""
+
+    positions: np.ndarray
+    axes: np.ndarray
+    spins: np.ndarray
+    yaw_coefficient: float
+
+    @property
+    def count(self):
+        return len(self.spins)
+
+
+def tilted_ring(count=6, arm_length=0.31, tilt_deg=15.0, first_azimuth_deg=0.0, height=0.0,
+                yaw_coefficient=0.1):
+    """The usual layout: rotors numbered clockwise seen from above, alternating spin and tilt."""
+    i = np.arange(count)
+    azimuth = np.radians(first_azimuth_deg) - 2.0 * np.pi * i / count     # clockwise from above
+    radial = np.column_stack((np.cos(azimuth), np.sin(azimuth), np.zeros(count)))
+    tangential = np.column_stack((-np.sin(azimuth), np.cos(azimuth), np.zeros(count)))  # CCW
+    spins = np.where(i % 2 == 0, 1.0, -1.0)
+    # A CCW rotor's reaction pushes the body clockwise (-z); tilting its thrust towards -tangential
+    # (clockwise travel) gives a moment arm x axis with the same sign: the two add in yaw.
+    tilt = math.radians(tilt_deg)
+    axes = (math.cos(tilt) * np.array([0.0, 0.0, 1.0])[None, :]
+            - math.sin(tilt) * spins[:, None] * tangential)
+    positions = arm_length * radial + np.array([0.0, 0.0, height])[None, :]
+    return RotorGeometry(positions, axes, spins, float(yaw_coefficient))
+
+
+def effectiveness(geometry, rho):
+    """The 6 x n matrix mapping rotor thrusts to [force; moment about the pivot] (body frame)."""
+    arms = geometry.positions + np.asarray(rho, dtype=float)[None, :]      # from the pivot
+    moments = (np.cross(arms, geometry.axes)
+               - (geometry.spins * geometry.yaw_coefficient)[:, None] * geometry.axes)
+    return np.vstack((geometry.axes.T, moments.T))
+
+
+@dataclass
+class AirframeHealth:
+    """What the start-up check found."""
+
+    rank: int               # of the 6 x n effectiveness (6: fully actuated)
+    moment_rank: int        # of its moment rows (must be 3)
+    condition: float        # of the allocated rows [F_z; M]
+    alive: list             # 1-based numbers of the rotors in use
+    warnings: list
+
+
+def check(B, alive):
+    """Check an effectiveness matrix (6 x n_alive); raises AirframeError when a moment cannot be
+    produced, returns AirframeHealth with warnings for what is merely degraded."""
+    rank = int(np.linalg.matrix_rank(B))
+    moment_rank = int(np.linalg.matrix_rank(B[3:]))
+    if moment_rank < 3:
+        raise AirframeError('the rotors %s cannot produce every moment (moment rank %d of 3)'
+                            % (alive, moment_rank))
+    B4 = B[2:]
+    if np.linalg.matrix_rank(B4) < 4:
+        raise AirframeError('the rotors %s cannot produce collective thrust independently of the '
+                            'moments' % (alive,))
+    s = np.linalg.svd(B4, compute_uv=False)
+    warnings = []
+    if rank < 6:
+        warnings.append('not fully actuated (effectiveness rank %d of 6): lateral forces '
+                        'follow from the moments, which the joint absorbs' % rank)
+    cond = float(s[0] / s[-1])
+    if cond > 100.0:
+        warnings.append('poorly conditioned allocation (condition number %.0f)' % cond)
+    return AirframeHealth(rank, moment_rank, cond, list(alive), warnings)
+
+
+@dataclass
+class Allocation:
+    """One allocation's result."""
+
+    thrusts: np.ndarray        # N, one per rotor (failed rotors: 0)
+    moment: np.ndarray         # moment the thrusts produce about the pivot
+    collective: float          # thrust they produce along body z
+    moment_lost: np.ndarray    # requested minus produced moment
+    saturated: bool            # the request was not met exactly
+    valid: bool                # False: the request was not finite (thrusts at thrust_min)
+
+
+class Allocator:
+    """Thrusts for a desired moment (about the pivot) and collective thrust, within limits."""
+
+    def __init__(self, geometry, rho, thrust_min, thrust_max, failed=()):
+        n = geometry.count
+        self.count = n
+        self.alive = [i for i in range(n) if i + 1 not in set(failed)]
+        self.B_full = effectiveness(geometry, rho)
+        self.B = self.B_full[:, self.alive]
+        self.health = check(self.B, [i + 1 for i in self.alive])
+        if failed:
+            self.health.warnings.insert(0, 'rotor(s) %s marked failed: flying on %s'
+                                        % (sorted(failed), self.health.alive))
+        self.B4 = self.B[2:]                                  # rows F_z, M_x, M_y, M_z
+        P = np.linalg.pinv(self.B4)                           # n_alive x 4, minimum norm
+        self._d, self._p_rp, self._p_y = P[:, 0], P[:, 1:3], P[:, 3]
+        if np.any(self._d <= 1e-9):
+            raise AirframeError('collective thrust would need rotor(s) %s to push the other way'
+                                % [self.alive[i] + 1 for i in np.nonzero(self._d <= 1e-9)[0]])
+        self.lo, self.hi = float(thrust_min), float(thrust_max)
+        self._inv_d = 1.0 / self._d
+        self._thrusts = np.zeros(n)
+
+    def allocate(self, moment, collective):
+        """Allocation for the desired moment (3,) about the pivot and collective thrust (N)."""
+        if not (np.all(np.isfinite(moment)) and math.isfinite(collective)):
+            f = np.full(len(self.alive), self.lo)
+            return self._result(f, moment, valid=False)
+        f_rp = self._p_rp @ moment[:2]
+        f_y = self._p_y * moment[2]
+        f = collective * self._d + f_rp + f_y
+        if f.min() >= self.lo and f.max() <= self.hi:
+            return self._result(f, moment, saturated=False)
+        s_rp = self._max_scale(np.zeros_like(f_rp), f_rp)
+        base = s_rp * f_rp
+        if s_rp >= 1.0:
+            base = base + self._max_scale(base, f_y) * f_y
+        t_lo, t_hi = self._t_interval(base)
+        t = min(max(collective, t_lo), t_hi)
+        f = np.clip(t * self._d + base, self.lo, self.hi)     # clip: round-off only
+        return self._result(f, moment, saturated=True)
+
+    def _t_interval(self, base):
+        """The collective levels t with lo <= t d + base <= hi for every rotor."""
+        return (float(np.max((self.lo - base) * self._inv_d)),
+                float(np.min((self.hi - base) * self._inv_d)))
+
+    def _max_scale(self, base, a):
+        """Largest s in [0, 1] such that some t gives lo <= t d + base + s a <= hi per rotor.
+
+        Per rotor, L_i - s A_i <= t <= H_i - s A_i; some t exists iff for every pair (i, j)
+        s (A_j - A_i) <= H_j - L_i.
+        """
+        L = (self.lo - base) * self._inv_d
+        H = (self.hi - base) * self._inv_d
+        A = a * self._inv_d
+        D = A[None, :] - A[:, None]
+        N = H[None, :] - L[:, None]
+        if np.any(N < -1e-12):
+            return 0.0                                        # base itself infeasible
+        limit = D > 1e-12
+        if not limit.any():
+            return 1.0
+        return float(min(1.0, max(0.0, np.min(N[limit] / D[limit]))))
+
+    def _result(self, f_alive, moment, saturated=True, valid=True):
+        thrusts = np.zeros(self.count)
+        thrusts[self.alive] = f_alive
+        wrench = self.B @ f_alive
+        req = np.asarray(moment, dtype=float) if valid else np.zeros(3)
+        return Allocation(thrusts=thrusts, moment=wrench[3:], collective=float(wrench[2]),
+                          moment_lost=req - wrench[3:], saturated=saturated, valid=valid)
+
+
+@dataclass(frozen=True)
+class ThrustCurve:
+    """Per-motor quadratic thrust curve f = a x^2 + b x + c, x = voltage_scale * command, with an
+    integer command in 0..command_max (the lab's BL-Ctrl 2.0 fit by default)."""
+
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    voltage_scale: float
+    command_max: int
+
+    def thrust(self, command):
+        """Thrust (N) of integer commands (n,); never negative."""
+        x = self.voltage_scale * np.asarray(command, dtype=float)
+        return np.maximum(self.a * x * x + self.b * x + self.c, 0.0)
+
+    def command(self, thrust):
+        """Smallest integer command whose thrust is at least the requested one (the lab's ceil),
+        clipped to 0..command_max; negative thrust counts as 0."""
+        f = np.maximum(np.asarray(thrust, dtype=float), 0.0)
+        x = (-self.b + np.sqrt(self.b * self.b - 4.0 * self.a * (self.c - f))) / (2.0 * self.a)
+        return np.clip(np.ceil(x / self.voltage_scale - 1e-9), 0, self.command_max).astype(int)
+
+    def max_thrust(self):
+        """Thrust of each motor at command_max."""
+        return self.thrust(np.full(len(self.a), self.command_max))
+
+    def normalised(self, command):
+        """Command as a fraction of command_max, in [0, 1]."""
+        return np.asarray(command, dtype=float) / self.command_max
+
+
+@dataclass
+class MotorOutput:
+    """What the mixer sends to the motors for one control step."""
+
+    commands: np.ndarray     # integer ESC commands, 0..command_max
+    normalised: np.ndarray   # commands / command_max, in [0, 1]
+    allocation: Allocation
+
+
+class Mixer:
+    """Moment about the pivot -> six motor commands: allocation, then the thrust curve."""
+
+    def __init__(self, allocator, curve, collective_thrust):
+        self.allocator = allocator
+        self.curve = curve
+        self.collective_thrust = float(collective_thrust)
+        self._zero = np.zeros(allocator.count, dtype=int)
+        self._dead = np.array([i for i in range(allocator.count) if i not in allocator.alive],
+                              dtype=int)
+
+    def mix(self, moment, armed=True):
+        """Motor commands for the moment; all zero when not armed."""
+        allocation = self.allocator.allocate(moment, self.collective_thrust)
+        if not armed:
+            return MotorOutput(self._zero.copy(), np.zeros(len(self._zero)), allocation)
+        commands = self.curve.command(allocation.thrusts)
+        commands[self._dead] = 0
+        return MotorOutput(commands, self.curve.normalised(commands), allocation)

@@ -1,0 +1,75 @@
+"""The simulated testbed as its users see it: commands in, measurements out.
+
+Composes the rigid body about the pivot (``geoctl_ros.plant``), the actuation and the sensors:
+
+- actuation ``rotors``: integer ESC commands -> thrust through the motors' thrust curve, a
+  first-order lag per rotor (time constant ``motor_time_constant``, discretised exactly and held
+  over each integration step), saturation at the curve's range, and the rotors' forces and
+  reaction moments about the pivot (``geoctl_ros.airframe.effectiveness``) from the true geometry;
+- actuation ``torque``: the commanded moment itself (ideal);
+- sensors: attitude R exp(hat(n)), n ~ N(0, sigma_R^2 I) (motion capture), and angular velocity
+  Omega + bias + N(0, sigma_w^2 I) (gyro).
+
+The scenario runner and the sim node both drive this class, so the physics exists once.
+"""
+import math
+
+import numpy as np
+
+from geoctl_ros import so3
+from geoctl_ros.airframe import effectiveness
+from geoctl_ros.plant import Plant
+
+
+class RotorActuator:
+    """Commands -> thrusts (lagged) -> moment about the pivot."""
+
+    def __init__(self, geometry, rho, curve, time_constant, failed=()):
+        self.curve = curve
+        self.B_moment = effectiveness(geometry, rho)[3:]
+        self.time_constant = time_constant
+        self.thrusts = np.zeros(geometry.count)
+        self._alive = np.ones(geometry.count)
+        for i in failed:
+            self._alive[i - 1] = 0.0
+        self._h = None
+
+    def moment(self, commands, h):
+        """Advance the rotors by h with the commands held; the moment about the pivot."""
+        if h != self._h:
+            self._h, self._blend = h, 1.0 - math.exp(-h / self.time_constant)
+        target = self.curve.thrust(commands) * self._alive
+        self.thrusts += self._blend * (target - self.thrusts)
+        return self.B_moment @ self.thrusts
+
+
+class TestbedSim:
+    """Plant + actuation + sensors, integrated at a fixed step."""
+
+    __test__ = False   # not a pytest test class
+
+    def __init__(self, plant_config, R0, Omega0, actuator=None, attitude_noise_rad=0.0,
+                 gyro_noise=0.0, gyro_bias=(0.0, 0.0, 0.0), seed=0):
+        self.plant = Plant(plant_config, R0, Omega0)
+        self.actuator = actuator                  # None: ideal torque actuation
+        self.attitude_noise = attitude_noise_rad
+        self.gyro_noise = gyro_noise
+        self.gyro_bias = np.asarray(gyro_bias, dtype=float)
+        self.rng = np.random.default_rng(seed)
+
+    def step(self, command, h):
+        """Advance by h: command is the integer ESC commands (rotors) or the moment (torque)."""
+        tau = command if self.actuator is None else self.actuator.moment(command, h)
+        self.plant.step(tau, h)
+
+    def measure_attitude(self):
+        R = self.plant.R
+        if self.attitude_noise > 0.0:
+            R = R @ so3.exp(self.rng.normal(0.0, self.attitude_noise, 3))
+        return R
+
+    def measure_angular_velocity(self):
+        w = self.plant.Omega + self.gyro_bias
+        if self.gyro_noise > 0.0:
+            w = w + self.rng.normal(0.0, self.gyro_noise, 3)
+        return w
