@@ -1,4 +1,4 @@
-"""Rotor geometry, effectiveness matrix, allocation with saturation, and the motors' thrust curve.
+r"""Rotor geometry, effectiveness matrix, allocation with saturation, and the motors' thrust curve.
 
 Frames: ROS body frame (REP-103: x forward, y left, z up), origin at the centre of mass for the
 rotor positions; moments are taken about the pivot, which is at -rho from the centre of mass.

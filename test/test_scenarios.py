@@ -137,3 +137,44 @@ def test_readme_results_table_matches_the_runs(runs):
         got = [float(x) for x in number.findall(shown)]
         want = [float(x) for x in number.findall(expected)]
         assert got == pytest.approx(want, rel=0.05, abs=2e-3), (name, shown, expected)
+
+
+def _history(d):
+    with open(d / 'history.csv') as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_testbed_rotors_keep_the_cone_converge_and_plot_motor_commands(runs):
+    s, d = runs['testbed_yaw90']
+    assert s['actuation'] == 'rotors' and not s['constraint_violated']
+    assert 12.0 < s['min_cone_angle_deg']['obstacle'] < 20.0
+    rows = _history(d)
+    psi = [float(r['psi']) for r in rows]
+    assert psi[-1] < 0.01 * psi[0]
+    assert s['final_attitude_error_deg'] < 6.0
+    # still converging at the end (the slow tail of the adaptive law), not stuck
+    err = [float(r['eR_z']) for r in rows]
+    assert abs(err[-1]) < abs(err[-1000])
+    assert s['min_command'] > 60 and s['max_command'] < 240              # never saturated
+    assert s['saturated_fraction'] == 0.0
+    cmds = [int(float(rows[-1]['cmd_%d' % i])) for i in range(1, 7)]
+    assert all(110 <= c <= 125 for c in cmds)                            # near hover (118)
+    img = matplotlib.image.imread(d / 'motor_commands.png')
+    assert img.shape[0] > 300 and img.std() > 0.01
+
+
+def test_testbed_without_gravity_compensation_or_adaptation_falls_over(runs):
+    s, d = runs['testbed_yaw90_uncompensated']
+    assert s['final_attitude_error_deg'] > 90.0
+    tilt = [math.degrees(math.acos(max(-1.0, min(1.0, 1 - 2 * (float(r['qx']) ** 2
+                                                                + float(r['qy']) ** 2)))))
+            for r in _history(d)]
+    assert max(tilt) > 90.0
+
+
+def test_testbed_with_wrong_mass_recovers_with_the_cog_model(runs):
+    s, _ = runs['testbed_yaw90_wrong_mass']
+    good, _ = runs['testbed_yaw90']
+    assert not s['constraint_violated']
+    assert len(s['final_disturbance_estimate']) == 6
+    assert s['final_attitude_error_deg'] < good['final_attitude_error_deg'] + 1.0
