@@ -21,10 +21,11 @@ setup(
     maintainer_email='geoctl-ros@example.com',
     description='Geometric adaptive constrained attitude control on SO(3) for a hexrotor testbed',
     license='BSD-3-Clause',
-    tests_require=['pytest'],
     entry_points={
         'console_scripts': [
             'scenario = geoctl_ros.scenario:main',
+            'controller = geoctl_ros.nodes.controller:main',
+            'sim = geoctl_ros.nodes.sim:main',
         ],
     },
 )

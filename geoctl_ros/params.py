@@ -162,6 +162,17 @@ SCHEMA = [
        'desired attitude R_d as a quaternion (x, y, z, w), world frame', CONTROLLER, length=4,
        check=_unit_quaternion),
     _p('rate_hz', 'double', 100.0, 'Hz', 'control rate', CONTROLLER, check=_rate),
+    _p('pose_timeout', 'double', 0.1, 's', 'pose older than this (by receipt) is stale',
+       CONTROLLER, check=_positive),
+    _p('imu_timeout', 'double', 0.05, 's', 'angular velocity older than this is stale',
+       CONTROLLER, check=_positive),
+    _p('max_angular_velocity', 'double', 100.0, 'rad/s',
+       'gyro readings faster than this are refused', CONTROLLER, check=_positive),
+    _p('setpoint_schedule.times', 'double_array', [], 's',
+       'optional: times after arming at which the scheduled set points take over', CONTROLLER),
+    _p('setpoint_schedule.quaternions', 'double_array', [], '-',
+       'optional: the scheduled set points, 4 values (x, y, z, w) per time', CONTROLLER),
+    _p('frame_id', 'string', 'base_link', '-', 'body frame id on stamped outputs', BOTH),
     # Physical model, read by the controller (its model) and the simulator (the truth).
     _p('inertia', 'double_array', LAB_INERTIA, 'kg m^2',
        'inertia about the centre of mass, 9 values row-major', BOTH, length=9, check=_inertia),
@@ -238,6 +249,15 @@ SCHEMA = [
        'amplitudes of [sin wt, cos wt, (sin wt + cos wt)/2] added to it', SIM, length=3),
     _p('disturbance.frequency', 'double', 0.0, 'rad/s', 'w of the sinusoidal disturbance', SIM,
        check=_nonnegative),
+    _p('pose_rate_hz', 'double', 200.0, 'Hz', 'sim node: rate of pose (motion capture)', SIM,
+       check=_rate),
+    _p('imu_rate_hz', 'double', 100.0, 'Hz', 'sim node: rate of imu', SIM, check=_rate),
+    _p('publish_clock', 'bool', False, '-', 'sim node: publish /clock (for use_sim_time)', SIM),
+    _p('real_time_factor', 'double', 1.0, '-', 'sim node: simulated seconds per wall second',
+       SIM, check=lambda v: None if 0.0 < v <= 20.0 else 'must be in (0, 20]'),
+    _p('command_timeout', 'double', 0.1, 's',
+       'sim node: motors stop when motor_commands are older than this', SIM, check=_positive),
+    _p('world_frame_id', 'string', 'world', '-', 'world frame id of pose messages', SIM),
     # Headless runner.
     _p('duration', 'double', 20.0, 's', 'simulated time of a scenario run', SCENARIO,
        check=_positive),
@@ -330,11 +350,13 @@ def _describe(value):
 
 
 # --- resolving a node's parameters ---------------------------------------------------------------
-def resolve(node, overrides):
+def resolve(node, overrides, staged_cones=False):
     """Merge overrides (flat dict) into node's defaults and check everything.
 
     Returns a flat dict of converted values (cone keys included). Raises ConfigError listing every
     problem: wrong types, failed checks, unknown parameters, cones without their parameters.
+    staged_cones accepts parameters of cones not (yet) in cones.names, as a running node must while
+    a user adds a cone one parameter at a time; files are read without it, to catch typos.
     """
     errors = []
     known_elsewhere = {p.name for p in SCHEMA}
@@ -368,7 +390,7 @@ def resolve(node, overrides):
             continue
         m = _CONE_KEY.match(key)
         if m:
-            if node == CONTROLLER and m.group(1) not in names:
+            if node == CONTROLLER and m.group(1) not in names and not staged_cones:
                 errors.append((key, 'cone %r is not in cones.names %s' % (m.group(1), names)))
             continue
         errors.append((key, 'unknown parameter' + _suggest(key)))
@@ -407,6 +429,50 @@ def controller_config(values):
 def setpoint_rotation(values):
     """R_d of the resolved controller parameters."""
     return so3.quat_to_rot(values['setpoint'])
+
+
+@dataclass
+class ControllerSetup:
+    """Everything a controller (node or headless) builds from its parameters."""
+
+    config: ControllerConfig
+    mixer: object                # geoctl_ros.airframe.Mixer
+    setpoint: np.ndarray         # R_d
+    schedule: object             # geoctl_ros.safety.SetpointSchedule
+    values: dict
+
+
+def controller_setup(values):
+    """Build and cross-check a controller from resolved parameters; ConfigError on any problem,
+    including a set point (or scheduled one) that puts the sensor in a cone."""
+    from geoctl_ros.control import AttitudeController
+    from geoctl_ros.safety import SetpointSchedule
+    config = controller_config(values)
+    mix = mixer(values)
+    probe = AttitudeController(config)
+    errors = []
+    R_d = setpoint_rotation(values)
+    problem = probe.setpoint_problem(R_d)
+    if problem:
+        errors.append(('setpoint', problem))
+    times, quats = values['setpoint_schedule.times'], values['setpoint_schedule.quaternions']
+    rotations = []
+    if quats.size != 4 * times.size:
+        errors.append(('setpoint_schedule.quaternions', 'expected 4 values per time (%d times), '
+                       'got %d' % (times.size, quats.size)))
+    elif np.any(np.diff(times) <= 0.0) or (times.size and times[0] < 0.0):
+        errors.append(('setpoint_schedule.times', 'must be increasing and not negative'))
+    else:
+        for k, q in enumerate(quats.reshape(-1, 4)):
+            reason = _unit_quaternion(q)
+            R = so3.quat_to_rot(q) if reason is None else None
+            reason = reason or probe.setpoint_problem(R)
+            if reason:
+                errors.append(('setpoint_schedule.quaternions', 'set point %d: %s' % (k + 1, reason)))
+            rotations.append(R)
+    if errors:
+        raise ConfigError(errors)
+    return ControllerSetup(config, mix, R_d, SetpointSchedule(times, rotations), values)
 
 
 def airframe(values):

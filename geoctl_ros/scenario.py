@@ -17,11 +17,12 @@ import time
 import numpy as np
 
 from geoctl_ros import so3
-from geoctl_ros.control import AttitudeController, SetpointRejected, gain_condition
+from geoctl_ros.control import SetpointRejected, gain_condition
+from geoctl_ros.loop import ControlLoop
 from geoctl_ros.mechanics import gravity_moment
 from geoctl_ros.params import (CONTROLLER, SCENARIO, SIM, ConfigError, controller_config,
-                               load_parameter_file, mixer, node_overrides, resolve,
-                               setpoint_rotation, testbed_sim)
+                               controller_setup, load_parameter_file, node_overrides, resolve,
+                               testbed_sim)
 
 SETTLE_PSI = 1e-3
 
@@ -53,7 +54,7 @@ def load(path):
         raise ConfigError([('sim: integration_rate_hz', 'must be an integer multiple of the '
                             'controller rate_hz (%g / %g)' % (resolved[SIM]['integration_rate_hz'],
                                                               resolved[CONTROLLER]['rate_hz']))])
-    for node, build in ((CONTROLLER, mixer), (SIM, testbed_sim)):
+    for node, build in ((CONTROLLER, controller_setup), (SIM, testbed_sim)):
         try:
             build(resolved[node])
         except ConfigError as e:
@@ -80,12 +81,12 @@ def run(scenario, duration=None):
     commands drive the simulated motors, otherwise the moment acts directly. Either is held over
     the control period while the simulator integrates at its own rate.
     """
-    ccfg = controller_config(scenario.controller)
-    controller = AttitudeController(ccfg)
-    controller.set_setpoint(setpoint_rotation(scenario.controller))
+    setup = controller_setup(scenario.controller)
+    loop = ControlLoop(setup)            # the controller node's logic, minus ROS
+    controller, ccfg = loop.controller, setup.config
     sim = testbed_sim(scenario.sim)
     rotors = sim.actuator is not None
-    mix = mixer(scenario.controller) if rotors else None
+    mix = setup.mixer
     pcfg = sim.plant.config
     rate = scenario.controller['rate_hz']
     n_sub = int(round(scenario.sim['integration_rate_hz'] / rate))
@@ -114,7 +115,12 @@ def run(scenario, duration=None):
     t0 = time.perf_counter()
     for k in range(steps):
         R, t = plant.R, plant.t
-        out = controller.step(sim.measure_attitude(), sim.measure_angular_velocity(), dt)
+        loop.offer_pose(so3.rot_to_quat(sim.measure_attitude()), t, t)
+        loop.offer_angular_velocity(sim.measure_angular_velocity(), t, t)
+        if k == 0:
+            loop.arm(t)                  # armed from the start; the schedule runs from here
+        tick = loop.tick(t, dt)
+        out = tick.control
         # What the controller does not model: disturbance plus uncompensated gravity moment, or
         # with the constant+cog model, the disturbance and the error in m*rho separately.
         if n_dbar == 3:
@@ -125,7 +131,7 @@ def run(scenario, duration=None):
         row = [[t], so3.rot_to_quat(R), plant.Omega, out.e_R, [out.psi], out.u, out.delta_bar,
                truth, angles]
         if rotors:
-            motors = mix.mix(out.u)
+            motors = tick.motors
             command = motors.commands
             saturated_steps += motors.allocation.saturated
             row += [command, sim.actuator.thrusts,

@@ -1,0 +1,274 @@
+"""The controller node: ``ros2 run geoctl_ros controller --ros-args --params-file FILE``.
+
+A thin shell over ``geoctl_ros.loop.ControlLoop``: subscriptions feed it checked measurements and
+set points, a timer at ``rate_hz`` runs one control step and publishes the results, services arm,
+disarm and reset the estimate, and parameter changes are validated by the shared schema before
+they touch the running controller. Topics, services and parameters: see the README.
+"""
+import math
+import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped, QuaternionStamped, Vector3Stamped, WrenchStamped
+import numpy as np
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Float64, Float64MultiArray
+from std_srvs.srv import SetBool, Trigger
+
+from geoctl_ros.control import gain_condition
+from geoctl_ros.loop import ControlLoop
+from geoctl_ros.nodes import ros_params
+from geoctl_ros.nodes.conversions import quaternion, set_vector, stamp_seconds, vector
+from geoctl_ros.nodes.runtime import spin
+from geoctl_ros.params import CONTROLLER, ConfigError, controller_setup, resolve
+
+COMMAND_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
+DIAGNOSTICS_PERIOD = 0.5      # s
+NEAR_CONE_DEG = 2.0           # a cone margin below this is reported (WARN)
+
+
+def build(values, staged_cones=True):
+    return controller_setup(resolve(CONTROLLER, values, staged_cones=staged_cones))
+
+
+class Stats:
+    """Running mean and max of a quantity over a diagnostics window."""
+
+    def __init__(self):
+        self.reset()
+
+    def add(self, x):
+        self.n += 1
+        self.total += x
+        self.peak = max(self.peak, x)
+        self.sq += x * x
+
+    def reset(self):
+        self.n, self.total, self.peak, self.sq = 0, 0.0, 0.0, 0.0
+
+    def summary(self, scale=1e3):
+        if not self.n:
+            return 'n/a'
+        mean = self.total / self.n
+        std = math.sqrt(max(self.sq / self.n - mean * mean, 0.0))
+        return 'mean %.3f std %.3f max %.3f' % (mean * scale, std * scale, self.peak * scale)
+
+
+class ControllerNode(Node):
+    def __init__(self, **kwargs):
+        super().__init__('controller', allow_undeclared_parameters=True, **kwargs)
+        errors = ros_params.declare(self, CONTROLLER)
+        if errors:
+            raise ConfigError(errors)
+        setup = build(ros_params.values(self, CONTROLLER), staged_cones=False)
+        self.loop = ControlLoop(setup)
+        check = gain_condition(setup.config)
+        if not check.ok:
+            self.get_logger().warning(check.message())
+        for w in setup.mixer.allocator.health.warnings:
+            self.get_logger().warning('airframe: ' + w)
+        ros_params.watch(self, CONTROLLER, build, self._apply)
+
+        sim_time = self.get_parameter('use_sim_time').value
+        self.clock_ = self.get_clock() if sim_time else Clock(clock_type=ClockType.STEADY_TIME)
+        self.period = 1.0 / setup.values['rate_hz']
+        self.frame_id = setup.values['frame_id']
+
+        self.create_subscription(PoseStamped, 'pose', self._on_pose, qos_profile_sensor_data)
+        self.create_subscription(Imu, 'imu', self._on_imu, qos_profile_sensor_data)
+        self.create_subscription(QuaternionStamped, 'attitude_setpoint', self._on_setpoint, 10)
+        self.pub_motors = self.create_publisher(Float64MultiArray, 'motor_commands', COMMAND_QOS)
+        self.pub_wrench = self.create_publisher(WrenchStamped, 'control_wrench', 10)
+        self.pub_eR = self.create_publisher(Vector3Stamped, 'attitude_error', 10)
+        self.pub_eW = self.create_publisher(Vector3Stamped, 'angular_velocity_error', 10)
+        self.pub_psi = self.create_publisher(Float64, 'configuration_error', 10)
+        self.pub_dbar = self.create_publisher(Float64MultiArray, 'disturbance_estimate', 10)
+        self.pub_margins = self.create_publisher(Float64MultiArray, 'cone_margins', 10)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_service(SetBool, '~/arm', self._on_arm)
+        self.create_service(Trigger, '~/reset_adaptation', self._on_reset)
+
+        self._msgs = {'motors': Float64MultiArray(), 'wrench': WrenchStamped(),
+                      'eR': Vector3Stamped(), 'eW': Vector3Stamped(), 'psi': Float64(),
+                      'dbar': Float64MultiArray(), 'margins': Float64MultiArray()}
+        for key in ('wrench', 'eR', 'eW'):
+            self._msgs[key].header.frame_id = self.frame_id
+        self._pose_stamp_msg = None
+        self._last_tick = None
+        self._period_stats, self._compute_stats, self._latency_stats = Stats(), Stats(), Stats()
+        self._saturated = 0
+        self._ticks = 0
+        self._last_tick_out = None
+        self._last_state = None
+        self.create_timer(self.period, self._on_tick, clock=self.clock_)
+        self.create_timer(DIAGNOSTICS_PERIOD, self._publish_diagnostics, clock=self.clock_)
+        self.get_logger().info('controller ready at %g Hz (%s clock), %d cone(s), disarmed'
+                               % (setup.values['rate_hz'], 'ROS' if sim_time else 'steady',
+                                  len(setup.config.cones)))
+
+    def _now(self):
+        return self.clock_.now().nanoseconds * 1e-9
+
+    def on_shutdown(self):
+        """Leave the motors at zero when the node stops."""
+        self.pub_motors.publish(Float64MultiArray(data=[0.0] * self.loop.setup.mixer.allocator.count))
+
+    # --- inputs ------------------------------------------------------------------------------
+    def _on_pose(self, msg):
+        problem = self.loop.offer_pose(quaternion(msg.pose.orientation),
+                                       stamp_seconds(msg.header.stamp), self._now())
+        if problem:
+            self.get_logger().warning('pose refused: ' + problem, throttle_duration_sec=1.0)
+        else:
+            self._pose_stamp_msg = msg.header.stamp
+
+    def _on_imu(self, msg):
+        problem = self.loop.offer_angular_velocity(vector(msg.angular_velocity),
+                                                   stamp_seconds(msg.header.stamp), self._now())
+        if problem:
+            self.get_logger().warning('imu refused: ' + problem, throttle_duration_sec=1.0)
+
+    def _on_setpoint(self, msg):
+        problem = self.loop.request_setpoint(quaternion(msg.quaternion))
+        if problem:
+            self.get_logger().warning('setpoint rejected: ' + problem)
+            self._publish_diagnostics()
+
+    # --- services and parameters -------------------------------------------------------------
+    def _on_arm(self, request, response):
+        result = self.loop.arm(self._now()) if request.data else self.loop.disarm()
+        response.success, response.message = result.ok, result.message
+        self.get_logger().info(result.message)
+        self._publish_diagnostics()
+        return response
+
+    def _on_reset(self, request, response):
+        self.loop.reset_adaptation()
+        response.success, response.message = True, 'disturbance estimate reset to zero'
+        return response
+
+    def _apply(self, setup, changed):
+        problem = self.loop.reconfigure(
+            setup, setpoint_changed='setpoint' in changed,
+            schedule_changed=any(n.startswith('setpoint_schedule.') for n in changed))
+        if problem:       # validated before; only a set point that arrived since can do this
+            self.get_logger().error('parameters not applied: ' + problem)
+        else:
+            self.get_logger().info('parameters applied: %s' % ', '.join(sorted(changed)))
+
+    # --- the control tick --------------------------------------------------------------------
+    def _on_tick(self):
+        t0 = time.perf_counter()
+        now = self._now()
+        if self._last_tick is not None:
+            self._period_stats.add(now - self._last_tick)
+        self._last_tick = now
+        tick = self.loop.tick(now, self.period)
+        out = tick.control
+        if out is not None and not np.all(np.isfinite(out.u)):   # cannot happen; never publish it
+            self.loop.disarm('failsafe: non-finite control output')
+            out = None
+            tick.motors = self.loop.setup.mixer.mix(np.zeros(3), armed=False)
+        m = self._msgs
+        m['motors'].data = tick.motors.normalised.tolist()
+        self.pub_motors.publish(m['motors'])
+        if tick.armed and self.loop.pose.last_receipt is not None:
+            self._latency_stats.add(self._now() - self.loop.pose.last_receipt)
+        self._ticks += 1
+        self._saturated += bool(tick.armed and tick.motors.allocation.saturated)
+        self._last_tick_out = tick
+        if out is not None:
+            stamp = self._pose_stamp_msg
+            w = m['wrench']
+            w.header.stamp = stamp
+            set_vector(w.wrench.torque, out.u)
+            set_vector(w.wrench.force, (0.0, 0.0, tick.motors.allocation.collective))
+            self.pub_wrench.publish(w)
+            m['eR'].header.stamp = stamp
+            set_vector(m['eR'].vector, out.e_R)
+            self.pub_eR.publish(m['eR'])
+            m['eW'].header.stamp = stamp
+            set_vector(m['eW'].vector, out.e_Omega)
+            self.pub_eW.publish(m['eW'])
+            m['psi'].data = float(out.psi)
+            self.pub_psi.publish(m['psi'])
+            m['dbar'].data = out.delta_bar.tolist()
+            self.pub_dbar.publish(m['dbar'])
+            m['margins'].data = out.margins_deg.tolist()
+            self.pub_margins.publish(m['margins'])
+        self._compute_stats.add(time.perf_counter() - t0)
+        state = (tick.armed, self.loop.supervisor.reason)
+        if state != self._last_state:
+            if self._last_state is not None and not tick.armed and state[1].startswith('failsafe'):
+                self.get_logger().error(state[1])
+            self._last_state = state
+            self._publish_diagnostics()
+
+    # --- diagnostics -------------------------------------------------------------------------
+    def _publish_diagnostics(self):
+        now = self._now()
+        loop = self.loop
+        errors, warnings = [], []
+        sup = loop.supervisor
+        if not sup.armed:
+            (errors if sup.reason.startswith('failsafe') else warnings).append(sup.reason)
+        stale = sup.input_problem(now)
+        if stale:
+            (errors if sup.armed else warnings).append(stale)
+        for s in (loop.pose, loop.rate):
+            if s.last_refusal:
+                warnings.append('%s refused: %s (%d so far)' % (s.name, s.last_refusal, s.refused))
+                s.last_refusal = None
+        tick = self._last_tick_out
+        out = tick.control if tick else None
+        if out is not None and len(out.margins_deg):
+            i = int(np.argmin(out.margins_deg))
+            name = loop.setup.config.cones.names[i]
+            if out.violated:
+                errors.append('sensor inside cone %r (margin %.2f deg)' % (name, out.margins_deg[i]))
+            elif out.margins_deg[i] < NEAR_CONE_DEG:
+                warnings.append('near cone %r (margin %.2f deg)' % (name, out.margins_deg[i]))
+        if self._saturated:
+            warnings.append('allocation saturated in %d of %d ticks' % (self._saturated,
+                                                                        self._ticks))
+        if loop.setpoint_note:
+            warnings.append(loop.setpoint_note)
+        level = (DiagnosticStatus.ERROR if errors else
+                 DiagnosticStatus.WARN if warnings else DiagnosticStatus.OK)
+        status = DiagnosticStatus(level=level, name='geoctl_ros: controller',
+                                  hardware_id='hexrotor',
+                                  message='; '.join(errors + warnings) or 'armed, all inputs fresh')
+        values = {
+            'armed': str(sup.armed), 'state': sup.reason,
+            'pose age [s]': '%.4f' % loop.pose.age(now), 'imu age [s]': '%.4f' % loop.rate.age(now),
+            'pose accepted/refused': '%d/%d' % (loop.pose.accepted, loop.pose.refused),
+            'imu accepted/refused': '%d/%d' % (loop.rate.accepted, loop.rate.refused),
+            'loop period [ms]': self._period_stats.summary(),
+            'step compute [ms]': self._compute_stats.summary(),
+            'pose-to-command latency [ms]': self._latency_stats.summary(),
+            'ticks': str(self._ticks),
+        }
+        if out is not None:
+            values['Psi'] = '%.6g' % out.psi
+            values['min cone margin [deg]'] = ('%.3f' % float(np.min(out.margins_deg))
+                                               if len(out.margins_deg) else 'no cones')
+            values['motor commands'] = ' '.join(str(c) for c in tick.motors.commands)
+        status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.pub_diag.publish(msg)
+        for s in (self._period_stats, self._compute_stats, self._latency_stats):
+            s.reset()
+        self._saturated = self._ticks = 0
+
+
+def main():
+    sys.exit(spin(ControllerNode, 'controller'))
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,111 @@
+"""The shared parameter schema as ROS 2 parameters: declaration, reading, run-time validation.
+
+Every schema parameter of the node is declared with its default, type and description (the
+parameter-file overrides apply at declaration). Cones listed in ``cones.names`` are declared too;
+cones added at run time are set as new parameters (the node allows undeclared ones) and take effect
+when their name joins ``cones.names``. Every change is validated as a whole configuration by the
+same code the headless runner uses; a refused change leaves the running node untouched and the
+reason is returned to the caller (``ros2 param set`` prints it).
+"""
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
+                              ParameterUninitializedException)
+from rclpy.parameter import Parameter
+
+from geoctl_ros.nodes.conversions import python_value
+from geoctl_ros.params import (BY_NAME, CONE_SCHEMA, CONTROLLER, ConfigError, cone_param,
+                               schema_for)
+
+ROS_TYPE = {
+    'double': Parameter.Type.DOUBLE, 'double_array': Parameter.Type.DOUBLE_ARRAY,
+    'bool': Parameter.Type.BOOL, 'string': Parameter.Type.STRING,
+    'string_array': Parameter.Type.STRING_ARRAY, 'integer': Parameter.Type.INTEGER,
+    'integer_array': Parameter.Type.INTEGER_ARRAY,
+}
+# Changing these needs a restart (timers, frames); ROS refuses them at run time.
+READ_ONLY = {'rate_hz', 'integration_rate_hz', 'pose_rate_hz', 'imu_rate_hz', 'publish_clock',
+             'real_time_factor', 'frame_id', 'world_frame_id', 'actuation'}
+ROS_OWN = ('use_sim_time', 'start_type_description_service', 'qos_overrides.')
+
+
+def _descriptor(p):
+    return ParameterDescriptor(description='%s [%s]' % (p.doc, p.unit),
+                               read_only=p.name in READ_ONLY)
+
+
+def _declare(node, p, errors):
+    try:
+        if p.default is None or p.default == []:
+            node.declare_parameter(p.name, ROS_TYPE[p.type], _descriptor(p))
+        else:
+            node.declare_parameter(p.name, p.default, _descriptor(p))
+    except (InvalidParameterTypeException, InvalidParameterValueException, TypeError) as e:
+        errors.append((p.name, 'expected a %s: %s' % (p.type.replace('_', ' of '), e)))
+
+
+def _get(node, name):
+    """A declared parameter's value, or None while it is declared without a value."""
+    try:
+        return node.get_parameter(name).value
+    except ParameterUninitializedException:
+        return None
+
+
+def declare(node, kind):
+    """Declare kind's parameters on node; returns (parameter, reason) pairs for bad overrides."""
+    errors = []
+    for p in schema_for(kind):
+        _declare(node, p, errors)
+    if kind == CONTROLLER:
+        names = _get(node, 'cones.names') or []
+        for name in names:
+            for template in CONE_SCHEMA:
+                p = cone_param(name, template.name.rsplit('.', 1)[1])
+                if not node.has_parameter(p.name):
+                    _declare(node, p, errors)
+    return errors
+
+
+def values(node, kind, pending=()):
+    """The node's parameters as a flat dict of Python values, with pending (not yet applied)
+    rclpy Parameters laid over them, and any parameter-file entries that are not declared (so
+    that validation reports them as unknown; those of the other node, which a shared '/**'
+    section gives every node, are left out)."""
+    out = {}
+    for name in node.list_parameters([], 0).names:
+        if name.startswith(ROS_OWN):
+            continue
+        value = _get(node, name)
+        if value is not None:
+            out[name] = python_value(value)
+    for name, param in getattr(node, '_parameter_overrides', {}).items():
+        if name in out or name.startswith(ROS_OWN) or node.has_parameter(name):
+            continue
+        if name in BY_NAME and kind not in BY_NAME[name].nodes:
+            continue
+        out[name] = python_value(param.value)
+    for param in pending:
+        if param.name.startswith(ROS_OWN):
+            continue
+        if param.type_ == Parameter.Type.NOT_SET:
+            out.pop(param.name, None)
+        else:
+            out[param.name] = python_value(param.value)
+    return out
+
+
+def watch(node, kind, build, apply):
+    """Validate every parameter change with build(values) (raising ConfigError); after a change
+    is accepted, call apply(build(values), changed names)."""
+    def on_set(params):
+        try:
+            build(values(node, kind, params))
+        except ConfigError as e:
+            return SetParametersResult(successful=False, reason=str(e))
+        return SetParametersResult(successful=True)
+
+    def after_set(params):
+        apply(build(values(node, kind)), {p.name for p in params})
+
+    node.add_on_set_parameters_callback(on_set)
+    node.add_post_set_parameters_callback(after_set)

@@ -1,0 +1,130 @@
+"""The simulation node: ``ros2 run geoctl_ros sim --ros-args --params-file FILE``.
+
+A thin shell over ``geoctl_ros.testbed.TestbedSim``: integrates the testbed at
+``integration_rate_hz`` from the latest ``motor_commands`` (normalised, as the controller publishes
+them), and publishes ``pose`` (motion capture) and ``imu`` with the configured noise, the true
+state on ``sim/true_pose``, and ``/clock`` when ``publish_clock`` is set. Simulated time follows
+the wall clock times ``real_time_factor``: one timer, at the faster of the two sensor rates,
+integrates as many steps as are due and publishes what is due.
+
+Commands older than ``command_timeout`` stop the motors (as the ESCs do when the I2C bus goes
+quiet); a malformed command message (wrong length, not finite, outside [0, 1]) is refused with a
+warning and the previous one stays.
+"""
+import math
+import sys
+import time
+
+from geometry_msgs.msg import PoseStamped
+import numpy as np
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Float64MultiArray
+
+from geoctl_ros import so3
+from geoctl_ros.nodes import ros_params
+from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg
+from geoctl_ros.nodes.runtime import spin
+from geoctl_ros.params import SIM, ConfigError, airframe, resolve, testbed_sim
+
+COMMAND_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
+
+
+class SimNode(Node):
+    def __init__(self, **kwargs):
+        super().__init__('sim', **kwargs)
+        errors = ros_params.declare(self, SIM)
+        if errors:
+            raise ConfigError(errors)
+        v = resolve(SIM, ros_params.values(self, SIM))
+        self.sim = testbed_sim(v)
+        self.values = v
+        _, self.curve, _ = airframe(v)
+        self.n_rotors = len(self.sim.actuator.thrusts) if self.sim.actuator else 0
+        self.h = 1.0 / v['integration_rate_hz']
+        self.rtf = v['real_time_factor']
+        self.command_timeout = v['command_timeout']
+        self.publish_clock = v['publish_clock']
+        self.commands = np.zeros(self.n_rotors, dtype=int)
+        self.torque = np.zeros(3)
+        self.last_command_wall = -math.inf
+        self.wall0 = time.monotonic()
+        self.pose_period = 1.0 / v['pose_rate_hz']
+        self.imu_period = 1.0 / v['imu_rate_hz']
+        self.next_pose = self.next_imu = 0.0
+
+        self.create_subscription(Float64MultiArray, 'motor_commands', self._on_commands,
+                                 COMMAND_QOS)
+        self.pub_pose = self.create_publisher(PoseStamped, 'pose', qos_profile_sensor_data)
+        self.pub_imu = self.create_publisher(Imu, 'imu', qos_profile_sensor_data)
+        self.pub_true = self.create_publisher(PoseStamped, 'sim/true_pose', 10)
+        self.pub_clock = (self.create_publisher(ClockMsg, '/clock', 10)
+                          if self.publish_clock else None)
+        self.pose_msg, self.true_msg, self.imu_msg = PoseStamped(), PoseStamped(), Imu()
+        self.pose_msg.header.frame_id = self.true_msg.header.frame_id = v['world_frame_id']
+        self.imu_msg.header.frame_id = v['frame_id']
+        self.imu_msg.orientation_covariance[0] = -1.0            # no orientation in this imu
+        wall_period = min(self.pose_period, self.imu_period) / self.rtf
+        self.create_timer(wall_period, self._on_timer)
+        self.get_logger().info('sim ready: %s actuation, %g Hz integration, pose %g Hz, imu %g Hz, '
+                               'real-time factor %g' % (v['actuation'], v['integration_rate_hz'],
+                                                         v['pose_rate_hz'], v['imu_rate_hz'],
+                                                         self.rtf))
+
+    def _on_commands(self, msg):
+        data = np.asarray(msg.data, dtype=float)
+        n = self.n_rotors or 3
+        if data.shape != (n,) or not np.all(np.isfinite(data)):
+            self.get_logger().warning('motor_commands refused: expected %d finite values, got %r'
+                                      % (n, list(msg.data)[:8]), throttle_duration_sec=1.0)
+            return
+        if self.n_rotors:
+            if data.min() < 0.0 or data.max() > 1.0:
+                self.get_logger().warning('motor_commands refused: values outside [0, 1]',
+                                          throttle_duration_sec=1.0)
+                return
+            self.commands = np.rint(data * self.curve.command_max).astype(int)
+        else:
+            self.torque = data                 # ideal actuation: the moment itself (N m)
+        self.last_command_wall = time.monotonic()
+
+    def _stamp(self, t_sim):
+        return time_msg(t_sim) if self.publish_clock else self.get_clock().now().to_msg()
+
+    def _on_timer(self):
+        target = (time.monotonic() - self.wall0) * self.rtf
+        plant = self.sim.plant
+        fresh = time.monotonic() - self.last_command_wall < self.command_timeout
+        command = (self.commands if fresh else np.zeros_like(self.commands)) if self.n_rotors \
+            else (self.torque if fresh else np.zeros(3))
+        steps = 0
+        while plant.t + self.h <= target + 1e-12 and steps < 1000:
+            self.sim.step(command, self.h)
+            steps += 1
+        t = plant.t
+        if self.pub_clock is not None:
+            self.pub_clock.publish(ClockMsg(clock=time_msg(t)))
+        if t + 1e-9 >= self.next_pose:
+            self.next_pose = t + self.pose_period
+            stamp = self._stamp(t)
+            self.pose_msg.header.stamp = stamp
+            set_quaternion(self.pose_msg.pose.orientation, so3.rot_to_quat(self.sim.measure_attitude()))
+            self.pub_pose.publish(self.pose_msg)
+            self.true_msg.header.stamp = stamp
+            set_quaternion(self.true_msg.pose.orientation, so3.rot_to_quat(plant.R))
+            self.pub_true.publish(self.true_msg)
+        if t + 1e-9 >= self.next_imu:
+            self.next_imu = t + self.imu_period
+            self.imu_msg.header.stamp = self._stamp(t)
+            set_vector(self.imu_msg.angular_velocity, self.sim.measure_angular_velocity())
+            self.pub_imu.publish(self.imu_msg)
+
+
+def main():
+    sys.exit(spin(SimNode, 'sim'))
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,146 @@
+"""Input checks and the arming supervisor: the controller node's safety logic, ROS-free.
+
+Rules (the README's "Safety behaviour" section says the same to users):
+
+- A measurement is refused, with its reason, if it is not finite, if its quaternion is not a unit
+  quaternion (|q| off by more than 1e-3; within that it is normalised), if its angular velocity is
+  beyond ``max_angular_velocity``, or if its stamp is not newer than the last accepted one.
+- A stream is fresh while its last accepted sample arrived (receipt time, on the node's clock)
+  less than its timeout ago. Receipt time is used because the motion-capture host's clock need not
+  agree with the onboard one; stamps are used only for ordering.
+- Arming is refused unless pose and angular velocity are both fresh. While armed, if either goes
+  stale the supervisor disarms (failsafe) and says why. Motor commands are zero unless armed.
+"""
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+QUATERNION_TOLERANCE = 1e-3
+
+
+def quaternion_problem(q):
+    """Why q (x, y, z, w) is not an acceptable attitude, or None."""
+    if not all(math.isfinite(v) for v in q):
+        return 'quaternion is not finite'
+    n = math.sqrt(sum(v * v for v in q))
+    if abs(n - 1.0) > QUATERNION_TOLERANCE:
+        return 'quaternion is not unit length (norm %.6g)' % n
+    return None
+
+
+def angular_velocity_problem(w, limit):
+    """Why w is not an acceptable angular velocity, or None."""
+    if not all(math.isfinite(v) for v in w):
+        return 'angular velocity is not finite'
+    n = math.sqrt(sum(v * v for v in w))
+    if n > limit:
+        return 'angular velocity %.1f rad/s is above max_angular_velocity %.1f' % (n, limit)
+    return None
+
+
+class Stream:
+    """Freshness, ordering and refusal counts of one input stream."""
+
+    def __init__(self, name, timeout):
+        self.name = name
+        self.timeout = timeout
+        self.last_stamp = -math.inf
+        self.last_receipt = None
+        self.accepted = 0
+        self.refused = 0
+        self.last_refusal = None
+
+    def offer(self, stamp, receipt, problem=None):
+        """Record a sample; returns None if accepted, else the reason it was refused."""
+        if problem is None and stamp <= self.last_stamp:
+            problem = 'stamp %.6f is not newer than the last accepted %.6f' % (stamp,
+                                                                              self.last_stamp)
+        if problem is not None:
+            self.refused += 1
+            self.last_refusal = problem
+            return problem
+        self.last_stamp = stamp
+        self.last_receipt = receipt
+        self.accepted += 1
+        return None
+
+    def age(self, now):
+        return math.inf if self.last_receipt is None else now - self.last_receipt
+
+    def fresh(self, now):
+        return self.age(now) < self.timeout
+
+    def staleness(self, now):
+        """A sentence if the stream is stale, else None."""
+        if self.last_receipt is None:
+            return 'no %s received yet' % self.name
+        if not self.fresh(now):
+            return '%s stale (last %.3f s ago, timeout %.3f s)' % (self.name, self.age(now),
+                                                                 self.timeout)
+        return None
+
+    def reset_order(self):
+        """Forget the last stamp (after a clock jump, e.g. a simulator restart)."""
+        self.last_stamp = -math.inf
+
+
+@dataclass
+class ArmResult:
+    ok: bool
+    message: str
+
+
+class Supervisor:
+    """Armed/disarmed state with its reasons; decides whether the motors may turn."""
+
+    def __init__(self, streams):
+        self.streams = streams
+        self.armed = False
+        self.armed_since = None
+        self.reason = 'disarmed at start-up'
+
+    def input_problem(self, now):
+        for s in self.streams:
+            problem = s.staleness(now)
+            if problem:
+                return problem
+        return None
+
+    def arm(self, now, extra_problem=None):
+        """Try to arm; refused (with the reason) unless every input is fresh."""
+        problem = extra_problem or self.input_problem(now)
+        if problem:
+            return ArmResult(False, 'arming refused: ' + problem)
+        if not self.armed:
+            self.armed, self.armed_since = True, now
+        self.reason = 'armed'
+        return ArmResult(True, 'armed')
+
+    def disarm(self, reason='disarm requested'):
+        self.armed, self.armed_since = False, None
+        self.reason = reason
+        return ArmResult(True, 'disarmed')
+
+    def check(self, now):
+        """Called every control tick: disarm if an input went stale. True if the motors may run."""
+        if self.armed:
+            problem = self.input_problem(now)
+            if problem:
+                self.disarm('failsafe: ' + problem)
+        return self.armed
+
+
+class SetpointSchedule:
+    """Set points at times (s) after arming, held until the next; empty means none."""
+
+    def __init__(self, times, rotations):
+        self.times = np.asarray(times, dtype=float)
+        self.rotations = list(rotations)
+
+    def __len__(self):
+        return len(self.times)
+
+    def index_at(self, t):
+        """Index of the set point in force t seconds after arming (-1 before the first)."""
+        return int(np.searchsorted(self.times, t, side='right')) - 1

@@ -1,0 +1,180 @@
+"""Sim-in-the-loop plumbing shared by the demo and the node tests: start the installed nodes as
+processes (as ``ros2 run`` would), and a monitor node that records their topics and calls their
+services and parameters.
+
+Every process started here runs with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and the caller's
+``ROS_DOMAIN_ID`` (``ensure_local_ros_env`` picks one when none is set), so DDS discovery stays on
+loopback.
+"""
+import os
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, QuaternionStamped
+from rcl_interfaces.srv import SetParameters
+import rclpy
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Float64, Float64MultiArray
+from std_srvs.srv import SetBool, Trigger
+
+from geoctl_ros.nodes.conversions import stamp_seconds
+
+
+def ensure_local_ros_env():
+    """Loopback-only discovery, and a DDS domain of this process's own unless one is set."""
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    os.environ.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randint(10, 99)))
+
+
+def executable(name):
+    """Path of an installed console script: beside this Python (venv, pip) or in an ament
+    prefix's lib/geoctl_ros (colcon). None if not found."""
+    candidates = [os.path.join(os.path.dirname(sys.executable), name)]
+    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
+        if prefix:
+            candidates.append(os.path.join(prefix, 'lib', 'geoctl_ros', name))
+    for c in candidates:
+        if os.access(c, os.X_OK):
+            return c
+    return shutil.which(name)
+
+
+class NodeProcess:
+    """One node as a child process, its output in a log file."""
+
+    def __init__(self, name, params_file=None, ros_args=(), log_dir='.'):
+        ensure_local_ros_env()
+        exe = executable(name)
+        cmd = ([exe] if exe else [sys.executable, '-m', 'geoctl_ros.nodes.' + name])
+        cmd += ['--ros-args'] + (['--params-file', str(params_file)] if params_file else [])
+        cmd += list(ros_args)
+        self.name = name
+        self.log_path = os.path.join(str(log_dir), '%s.log' % name)
+        self._log = open(self.log_path, 'w')
+        self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT,
+                                     env=dict(os.environ, PYTHONUNBUFFERED='1'))
+
+    def stop(self, timeout=5.0):
+        """SIGINT (a clean stop), then SIGKILL if need be; returns the exit code."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self._log.close()
+        return self.proc.returncode
+
+    def kill(self):
+        """Die at once, as a crash would."""
+        self.proc.kill()
+        self.proc.wait()
+        self._log.close()
+
+    def output(self):
+        self._log.flush()
+        with open(self.log_path) as f:
+            return f.read()
+
+
+class Monitor(Node):
+    """Records what the controller and the sim publish; arms, sets parameters, injects input."""
+
+    def __init__(self, controller='controller'):
+        super().__init__('geoctl_monitor')
+        reliable1 = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
+        self.log = {k: [] for k in ('motors', 'margins', 'psi', 'dbar', 'true_pose', 'pose',
+                                    'diagnostics', 'eR')}
+        self._sub(Float64MultiArray, 'motor_commands', 'motors', reliable1, lambda m: list(m.data))
+        self._sub(Float64MultiArray, 'cone_margins', 'margins', 10, lambda m: list(m.data))
+        self._sub(Float64, 'configuration_error', 'psi', 10, lambda m: m.data)
+        self._sub(Float64MultiArray, 'disturbance_estimate', 'dbar', 10, lambda m: list(m.data))
+        self._sub(PoseStamped, 'sim/true_pose', 'true_pose', 10, _pose_quat)
+        self._sub(PoseStamped, 'pose', 'pose', qos_profile_sensor_data, _pose_quat)
+        self._sub(DiagnosticArray, '/diagnostics', 'diagnostics', 10, _diag)
+        from geometry_msgs.msg import Vector3Stamped
+        self._sub(Vector3Stamped, 'attitude_error', 'eR', 10,
+                  lambda m: (m.vector.x, m.vector.y, m.vector.z))
+        self.arm_client = self.create_client(SetBool, '/%s/arm' % controller)
+        self.reset_client = self.create_client(Trigger, '/%s/reset_adaptation' % controller)
+        self.param_client = self.create_client(SetParameters, '/%s/set_parameters' % controller)
+        self.pub_pose = self.create_publisher(PoseStamped, 'pose', qos_profile_sensor_data)
+        self.pub_imu = self.create_publisher(Imu, 'imu', qos_profile_sensor_data)
+        self.pub_setpoint = self.create_publisher(QuaternionStamped, 'attitude_setpoint', 10)
+        self.pub_commands = self.create_publisher(Float64MultiArray, 'motor_commands', reliable1)
+        self.executor_ = rclpy.executors.SingleThreadedExecutor()
+        self.executor_.add_node(self)
+
+    def _sub(self, msg_type, topic, key, qos, convert):
+        def record(msg):
+            self.log[key].append((time.monotonic(), convert(msg)))
+        self.create_subscription(msg_type, topic, record, qos)
+
+    # --- waiting -----------------------------------------------------------------------------
+    def spin_for(self, seconds):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor_.spin_once(timeout_sec=min(0.05, max(end - time.monotonic(), 0.0)))
+
+    def wait_for(self, predicate, timeout, what='condition'):
+        """Spin until predicate() is true; raises TimeoutError naming what did not happen."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if predicate():
+                return
+            self.executor_.spin_once(timeout_sec=0.05)
+        if predicate():
+            return
+        raise TimeoutError('timed out after %.1f s waiting for %s' % (timeout, what))
+
+    def since(self, key, t0):
+        return [v for t, v in self.log[key] if t >= t0]
+
+    def last(self, key):
+        return self.log[key][-1][1] if self.log[key] else None
+
+    def last_diagnostic(self):
+        return self.last('diagnostics')
+
+    # --- calls -------------------------------------------------------------------------------
+    def _call(self, client, request, timeout=10.0):
+        self.wait_for(client.service_is_ready, timeout, 'service %s' % client.srv_name)
+        future = client.call_async(request)
+        self.wait_for(future.done, timeout, 'reply from %s' % client.srv_name)
+        return future.result()
+
+    def arm(self, on=True):
+        return self._call(self.arm_client, SetBool.Request(data=on))
+
+    def reset_adaptation(self):
+        return self._call(self.reset_client, Trigger.Request())
+
+    def set_parameters(self, **values):
+        """Set controller parameters (names with '.' given as '__'); returns the results."""
+        params = [Parameter(name.replace('__', '.'), value=v).to_parameter_msg()
+                  for name, v in values.items()]
+        return self._call(self.param_client, SetParameters.Request(parameters=params)).results
+
+    def set_parameter(self, name, value):
+        msg = Parameter(name, value=value).to_parameter_msg()
+        return self._call(self.param_client, SetParameters.Request(parameters=[msg])).results[0]
+
+
+def _pose_quat(msg):
+    o = msg.pose.orientation
+    return (stamp_seconds(msg.header.stamp), (o.x, o.y, o.z, o.w))
+
+
+def _diag(msg):
+    s = msg.status[0]
+    return {'level': int.from_bytes(s.level, 'little') if isinstance(s.level, bytes) else s.level,
+            'message': s.message, **{kv.key: kv.value for kv in s.values}}
