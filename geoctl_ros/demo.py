@@ -1,14 +1,28 @@
-"""The main job (``./run demo``): every shipped scenario through the headless runner.
+"""The main job (``./run demo``): the testbed flown in the loop over real DDS.
 
-Writes each run's summary.json, history.csv and figures to OUT/<scenario>/ (default ./out) and
-prints the table of results that the README shows.
+Starts the ``sim`` and ``controller`` nodes as two processes with ``config/testbed.yaml`` (as
+``ros2 run ... --ros-args --params-file`` would), waits for them, arms the controller through its
+``~/arm`` service, records the topics while the 90 deg yaw round the cone plays, disarms, and prints
+a summary: the closest approach to each cone (from the simulator's true attitude), the final error,
+the control loop's rate and jitter and its input-to-command latency (from the controller's
+diagnostics), and what a subscriber sees of the command stream. Writes OUT/sil_summary.json,
+OUT/sil.png and the two nodes' logs. Discovery stays on loopback in a DDS domain of its own.
+
+``./run demo --headless`` instead runs every shipped scenario through the headless runner and prints
+the README's results table.
 """
 import argparse
 import glob
+import json
+import math
 import os
+import re
 import sys
+import time
 
-from geoctl_ros import scenario
+import numpy as np
+
+from geoctl_ros import scenario, so3
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TABLE_HEAD = ('| scenario | min angle to each cone (half-angle), deg | final attitude error, deg '
@@ -27,29 +41,180 @@ def table_row(summary):
         settle, dbar, summary['wall_time_s'])
 
 
-def scenario_files():
-    """The shipped scenario files, from the source tree or the installed share directory."""
-    here = os.path.join(ROOT, 'config', 'scenarios')
+def config_dir():
+    """The shipped config folder, from the source tree or the installed share directory."""
+    here = os.path.join(ROOT, 'config')
     if not os.path.isdir(here):
         from ament_index_python.packages import get_package_share_directory
-        here = os.path.join(get_package_share_directory('geoctl_ros'), 'config', 'scenarios')
-    return sorted(glob.glob(os.path.join(here, '*.yaml')))
+        here = os.path.join(get_package_share_directory('geoctl_ros'), 'config')
+    return here
+
+
+def headless(out):
+    rows = []
+    for path in sorted(glob.glob(os.path.join(config_dir(), 'scenarios', '*.yaml'))):
+        name = os.path.splitext(os.path.basename(path))[0]
+        result = scenario.run(scenario.load(path))
+        scenario.write(result, os.path.join(out, name))
+        rows.append(table_row(result.summary))
+        print('%-34s done (%s)' % (name, os.path.join(out, name)), file=sys.stderr)
+    print(TABLE_HEAD)
+    print('\n'.join(rows))
+    return 0
+
+
+_NUMBERS = re.compile(r'mean ([\d.]+) std ([\d.]+) max ([\d.]+)')
+
+
+def _diag_stats(diags, key):
+    """Aggregate the controller's windowed 'mean std max' figures of one diagnostics key."""
+    rows = [tuple(float(x) for x in m.groups()) for d in diags
+            for m in [_NUMBERS.match(d.get(key, ''))] if m]
+    if not rows:
+        return None
+    a = np.array(rows)
+    return {'mean_ms': float(a[:, 0].mean()), 'std_ms': float(np.sqrt((a[:, 1] ** 2).mean())),
+            'max_ms': float(a[:, 2].max())}
+
+
+def fly(params_file, out, duration, monitor_factory=None):
+    """Run sim + controller as processes, arm, record duration seconds; returns the summary."""
+    import rclpy
+    from geoctl_ros.params import CONTROLLER, cone_set, load_parameter_file, node_overrides, \
+        resolve, controller_setup
+    from geoctl_ros.sil import Monitor, NodeProcess, ensure_local_ros_env
+
+    ensure_local_ros_env()
+    values = resolve(CONTROLLER, node_overrides(load_parameter_file(params_file), CONTROLLER))
+    setup = controller_setup(values)
+    cones = cone_set(values)
+    final_setpoint = (setup.schedule.rotations[-1] if len(setup.schedule) else setup.setpoint)
+    os.makedirs(out, exist_ok=True)
+    procs = [NodeProcess('sim', params_file, log_dir=out),
+             NodeProcess('controller', params_file, log_dir=out)]
+    rclpy.init()
+    mon = (monitor_factory or Monitor)()
+    try:
+        mon.wait_for(lambda: len(mon.log['pose']) > 10 and mon.last('diagnostics') is not None,
+                     30.0, 'the sim and the controller to come up')
+        reply = mon.arm(True)
+        if not reply.success:
+            raise RuntimeError(reply.message)
+        t_arm = time.monotonic()
+        print('armed; flying %.0f s ...' % duration, file=sys.stderr)
+        mon.spin_for(duration)
+        t_end = time.monotonic()
+        mon.arm(False)
+        mon.spin_for(0.5)
+        after_disarm = mon.last('motors')
+    finally:
+        mon.destroy_node()
+        rclpy.try_shutdown()
+        codes = [p.stop() for p in procs]
+
+    flight = [(t - t_arm, v[1]) for t, v in mon.log['true_pose'] if t_arm <= t <= t_end]
+    t = np.array([x[0] for x in flight])
+    Rs = [so3.quat_to_rot(q) for _, q in flight]
+    angles = np.array([cones.angles_deg(R) for R in Rs]).reshape(len(Rs), len(cones))
+    err = np.array([math.degrees(so3.angle(final_setpoint.T @ R)) for R in Rs])
+    diags = [d for tt, d in mon.log['diagnostics'] if t_arm + 1.0 <= tt <= t_end]
+    cmd_times = np.array([tt for tt, _ in mon.log['motors'] if t_arm <= tt <= t_end])
+    gaps = np.diff(cmd_times) * 1e3 if len(cmd_times) > 1 else np.array([0.0])
+    commands = np.array([c for tt, c in mon.log['motors'] if t_arm <= tt <= t_end])
+    psi = [(tt - t_arm, v) for tt, v in mon.log['psi'] if t_arm <= tt <= t_end]
+    summary = {
+        'params_file': str(params_file),
+        'flight_s': duration,
+        'min_cone_angle_deg': {n: float(angles[:, i].min()) for i, n in enumerate(cones.names)},
+        'cone_half_angle_deg': {n: float(math.degrees(th)) for n, th in zip(cones.names,
+                                                                            cones.theta)},
+        'min_cone_margin_deg': float((angles - np.degrees(cones.theta)).min()) if len(cones)
+        else None,
+        'final_attitude_error_deg': float(err[-1]),
+        'loop_period': _diag_stats(diags, 'loop period [ms]'),
+        'step_compute': _diag_stats(diags, 'step compute [ms]'),
+        'pose_to_command_latency': _diag_stats(diags, 'pose-to-command latency [ms]'),
+        'commands_seen_by_subscriber': {'count': int(len(cmd_times)),
+                                        'rate_hz': float(1e3 / gaps.mean()),
+                                        'gap_std_ms': float(gaps.std()),
+                                        'gap_max_ms': float(gaps.max())},
+        'commands_zero_after_disarm': bool(after_disarm is not None and not any(after_disarm)),
+        'node_exit_codes': codes,
+    }
+    with open(os.path.join(out, 'sil_summary.json'), 'w') as f:
+        json.dump(summary, f, indent=2)
+        f.write('\n')
+    _plot(out, t, angles, cones, err, psi, cmd_times - t_arm, commands)
+    return summary
+
+
+def _plot(out, t, angles, cones, err, psi, cmd_t, commands):
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    fig, axs = plt.subplots(2, 2, figsize=(11, 7))
+    ax = axs[0, 0]
+    for i, name in enumerate(cones.names):
+        line, = ax.plot(t, angles[:, i], label=name)
+        ax.axhline(math.degrees(cones.theta[i]), color=line.get_color(), ls='--', lw=1)
+    ax.set(xlabel='t since arming [s]', ylabel='deg', title='true angle to each cone (dashed: limit)')
+    ax.legend()
+    ax = axs[0, 1]
+    ax.plot(t, err)
+    ax.set(xlabel='t since arming [s]', ylabel='deg', title='true attitude error to the final set point')
+    ax = axs[1, 0]
+    if psi:
+        ax.semilogy([p[0] for p in psi], [max(p[1], 1e-12) for p in psi])
+    ax.set(xlabel='t since arming [s]', ylabel='Psi', title='configuration error (as published)')
+    ax = axs[1, 1]
+    if len(commands):
+        ax.plot(cmd_t, commands, lw=0.8)
+    ax.set(xlabel='t since arming [s]', ylabel='normalised command',
+           title='motor_commands (as received)')
+    for a in axs.flat:
+        a.grid(True, alpha=0.3)
+    fig.suptitle('sim-in-the-loop over DDS: controller and sim as separate processes')
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, 'sil.png'), dpi=100)
+    plt.close(fig)
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(prog='demo', description=__doc__.split('\n\n')[0])
     parser.add_argument('--out', default='out', help='output folder (default: ./out)')
+    parser.add_argument('--headless', action='store_true',
+                        help='run every shipped scenario headless and print the results table')
+    parser.add_argument('--params-file', default=None,
+                        help='parameter file for both nodes (default: config/testbed.yaml)')
+    parser.add_argument('--duration', type=float, default=25.0, help='seconds to fly (25)')
     args = parser.parse_args(argv)
-    rows = []
-    for path in scenario_files():
-        name = os.path.splitext(os.path.basename(path))[0]
-        result = scenario.run(scenario.load(path))
-        scenario.write(result, os.path.join(args.out, name))
-        rows.append(table_row(result.summary))
-        print('%-34s done (%s)' % (name, os.path.join(args.out, name)), file=sys.stderr)
-    print(TABLE_HEAD)
-    print('\n'.join(rows))
-    return 0
+    if args.headless:
+        return headless(args.out)
+    params_file = args.params_file or os.path.join(config_dir(), 'testbed.yaml')
+    s = fly(params_file, args.out, args.duration)
+    lp, lat, sub = s['loop_period'], s['pose_to_command_latency'], s['commands_seen_by_subscriber']
+    print('sim-in-the-loop: %s, %.0f s armed' % (os.path.basename(params_file), s['flight_s']))
+    for n, a in s['min_cone_angle_deg'].items():
+        print('  cone %-10s closest %.2f deg (half-angle %.1f): margin %.2f deg'
+              % (n, a, s['cone_half_angle_deg'][n], a - s['cone_half_angle_deg'][n]))
+    print('  final attitude error   %.2f deg' % s['final_attitude_error_deg'])
+    if lp:
+        print('  control loop           %.2f Hz, period std %.3f ms, max %.2f ms'
+              % (1e3 / lp['mean_ms'], lp['std_ms'], lp['max_ms']))
+    if s['step_compute']:
+        print('  tick compute           mean %.3f ms, max %.3f ms'
+              % (s['step_compute']['mean_ms'], s['step_compute']['max_ms']))
+    if lat:
+        print('  pose-to-command        mean %.2f ms, max %.2f ms (pose receipt to publish)'
+              % (lat['mean_ms'], lat['max_ms']))
+    print('  commands at subscriber %.1f Hz, gap std %.2f ms, max %.1f ms'
+          % (sub['rate_hz'], sub['gap_std_ms'], sub['gap_max_ms']))
+    print('  commands after disarm  %s' % ('all zero' if s['commands_zero_after_disarm']
+                                          else 'NOT ZERO'))
+    print('  wrote %s/sil_summary.json, %s/sil.png' % (args.out, args.out))
+    ok = (s['min_cone_margin_deg'] is None or s['min_cone_margin_deg'] > 0) and \
+        s['commands_zero_after_disarm']
+    return 0 if ok else 1
 
 
 if __name__ == '__main__':

@@ -49,7 +49,7 @@ class Stream:
         self.last_receipt = None
         self.accepted = 0
         self.refused = 0
-        self.last_refusal = None
+        self.recent_refusals = []     # distinct reasons since take_refusals(), at most 5
 
     def offer(self, stamp, receipt, problem=None):
         """Record a sample; returns None if accepted, else the reason it was refused."""
@@ -58,12 +58,18 @@ class Stream:
                                                                               self.last_stamp)
         if problem is not None:
             self.refused += 1
-            self.last_refusal = problem
+            if problem not in self.recent_refusals and len(self.recent_refusals) < 5:
+                self.recent_refusals.append(problem)
             return problem
         self.last_stamp = stamp
         self.last_receipt = receipt
         self.accepted += 1
         return None
+
+    def take_refusals(self):
+        """The distinct refusal reasons since the last call (and forget them)."""
+        out, self.recent_refusals = self.recent_refusals, []
+        return out
 
     def age(self, now):
         return math.inf if self.last_receipt is None else now - self.last_receipt

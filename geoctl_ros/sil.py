@@ -145,6 +145,42 @@ class Monitor(Node):
     def last_diagnostic(self):
         return self.last('diagnostics')
 
+    # --- fake inputs (the tests' motion capture and IMU) --------------------------------------
+    def feed(self, q=(0.0, 0.0, 0.0, 1.0), w=(0.0, 0.0, 0.0), rate_hz=100.0):
+        """Publish pose and imu at rate_hz with fresh stamps until stop_feed(); q and w can be
+        changed on the fly through self.feed_q / self.feed_w."""
+        self.feed_q, self.feed_w = tuple(q), tuple(w)
+        self._feed_timer = self.create_timer(1.0 / rate_hz, self._feed_tick)
+
+    def _feed_tick(self):
+        stamp = self.get_clock().now().to_msg()
+        self.publish_pose(self.feed_q, stamp)
+        self.publish_imu(self.feed_w, stamp)
+
+    def stop_feed(self):
+        self.destroy_timer(self._feed_timer)
+
+    def publish_pose(self, q, stamp=None):
+        msg = PoseStamped()
+        msg.header.stamp = stamp or self.get_clock().now().to_msg()
+        o = msg.pose.orientation
+        o.x, o.y, o.z, o.w = (float(v) for v in q)
+        self.pub_pose.publish(msg)
+
+    def publish_imu(self, w, stamp=None):
+        msg = Imu()
+        msg.header.stamp = stamp or self.get_clock().now().to_msg()
+        v = msg.angular_velocity
+        v.x, v.y, v.z = (float(x) for x in w)
+        self.pub_imu.publish(msg)
+
+    def publish_setpoint(self, q):
+        msg = QuaternionStamped()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        o = msg.quaternion
+        o.x, o.y, o.z, o.w = (float(v) for v in q)
+        self.pub_setpoint.publish(msg)
+
     # --- calls -------------------------------------------------------------------------------
     def _call(self, client, request, timeout=10.0):
         self.wait_for(client.service_is_ready, timeout, 'service %s' % client.srv_name)

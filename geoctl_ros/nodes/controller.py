@@ -71,7 +71,7 @@ class ControllerNode(Node):
             self.get_logger().warning(check.message())
         for w in setup.mixer.allocator.health.warnings:
             self.get_logger().warning('airframe: ' + w)
-        ros_params.watch(self, CONTROLLER, build, self._apply)
+        ros_params.watch(self, CONTROLLER, self._validate, self._apply)
 
         sim_time = self.get_parameter('use_sim_time').value
         self.clock_ = self.get_clock() if sim_time else Clock(clock_type=ClockType.STEADY_TIME)
@@ -151,6 +151,16 @@ class ControllerNode(Node):
         response.success, response.message = True, 'disturbance estimate reset to zero'
         return response
 
+    def _validate(self, values):
+        """A run-time change: the whole configuration, and the set point now being flown (which
+        may have come in on the topic) against the new cones."""
+        setup = build(values)
+        controller = self.loop.controller
+        problem = controller.setpoint_problem(controller.R_d, setup.config.cones)
+        if problem:
+            raise ConfigError([('cones', 'the current ' + problem)])
+        return setup
+
     def _apply(self, setup, changed):
         problem = self.loop.reconfigure(
             setup, setpoint_changed='setpoint' in changed,
@@ -220,9 +230,10 @@ class ControllerNode(Node):
         if stale:
             (errors if sup.armed else warnings).append(stale)
         for s in (loop.pose, loop.rate):
-            if s.last_refusal:
-                warnings.append('%s refused: %s (%d so far)' % (s.name, s.last_refusal, s.refused))
-                s.last_refusal = None
+            reasons = s.take_refusals()
+            if reasons:
+                warnings.append('%s refused: %s (%d so far)' % (s.name, ' | '.join(reasons),
+                                                                 s.refused))
         tick = self._last_tick_out
         out = tick.control if tick else None
         if out is not None and len(out.margins_deg):

@@ -1,4 +1,4 @@
-"""Running a node: events executor, clean Ctrl-C, exit code 2 for bad parameters."""
+"""Running a node: events executor, clean stop on SIGINT/SIGTERM, exit code 2 for bad parameters."""
 import signal
 
 import rclpy
@@ -7,18 +7,24 @@ from rclpy.signals import SignalHandlerOptions
 from geoctl_ros.params import ConfigError
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
+class _StopFlag:
+    def __init__(self):
+        self.raised = False
+
+    def __call__(self, signum, frame):
+        self.raised = True
 
 
 def spin(node_class, name, args=None):
-    """Create and spin node_class; returns the process exit code.
+    """Create and spin node_class until SIGINT or SIGTERM; returns the process exit code.
 
-    rclpy's own signal handler is off, so that after Ctrl-C (or SIGTERM turned into
-    KeyboardInterrupt by the caller) the node can still publish its last words (``on_shutdown``,
-    e.g. zero motor commands) before the context goes down.
+    The signals only set a flag (rclpy's own handler is off), so a stop never lands inside a
+    callback, and the node can still publish its last words (``on_shutdown``, e.g. zero motor
+    commands) before the context goes down.
     """
-    signal.signal(signal.SIGTERM, _interrupt)
+    stop = _StopFlag()
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     try:
         node = node_class()
@@ -34,10 +40,8 @@ def spin(node_class, name, args=None):
     executor.add_node(node)
     try:
         # spin_once in a loop: this rclpy's EventsExecutor.spin() was seen to busy-loop here
-        while rclpy.ok():
+        while rclpy.ok() and not stop.raised:
             executor.spin_once(timeout_sec=0.1)
-    except KeyboardInterrupt:
-        pass
     finally:
         hook = getattr(node, 'on_shutdown', None)
         if hook is not None:

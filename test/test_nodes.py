@@ -1,0 +1,258 @@
+"""The ROS nodes over real DDS (loopback, a domain of this test run's own): the installed console
+scripts run as separate processes, and a monitor node in this process checks what they publish."""
+import math
+import os
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+
+from geoctl_ros import so3  # noqa: E402
+from geoctl_ros.params import cone_set, controller_setup, load_parameter_file, node_overrides, \
+    resolve  # noqa: E402
+from geoctl_ros.sil import Monitor, NodeProcess  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+TESTBED = os.path.join(ROOT, 'config', 'testbed.yaml')
+LEVEL_YAW90 = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))     # the testbed's start attitude
+OK, WARN, ERROR = 0, 1, 2
+
+
+@pytest.fixture
+def ros(tmp_path):
+    """A monitor node in this process and a launcher for node processes; all stopped after."""
+    procs = []
+    rclpy.init()
+    mon = Monitor()
+
+    def launch(name, params_file=TESTBED, *ros_args):
+        p = NodeProcess(name, params_file, ros_args, log_dir=tmp_path)
+        procs.append(p)
+        return p
+
+    yield mon, launch
+    mon.destroy_node()
+    rclpy.try_shutdown()
+    for p in procs:
+        p.stop()
+
+
+def published_values_are_finite(mon):
+    for key in ('motors', 'margins', 'psi', 'dbar', 'eR'):
+        for _, v in mon.log[key]:
+            assert np.all(np.isfinite(v)), (key, v)
+
+
+def wait_for_controller(mon):
+    mon.wait_for(lambda: mon.last_diagnostic() is not None, 30.0, 'controller diagnostics')
+
+
+def zero_commands(mon):
+    return mon.last('motors') is not None and not any(mon.last('motors'))
+
+
+def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros):
+    mon, launch = ros
+    launch('sim')
+    launch('controller')
+    mon.wait_for(lambda: len(mon.log['pose']) > 10 and mon.last_diagnostic() is not None, 30.0,
+                 'the sim and the controller')
+    assert zero_commands(mon)                                  # disarmed at start-up
+    assert mon.last_diagnostic()['armed'] == 'False'
+    reply = mon.arm(True)
+    assert reply.success, reply.message
+    t0 = time.monotonic()
+    mon.spin_for(20.0)
+    values = resolve('controller', node_overrides(load_parameter_file(TESTBED), 'controller'))
+    cones = cone_set(values)
+    true = [so3.quat_to_rot(q) for t, (_, q) in mon.log['true_pose'] if t >= t0]
+    margins = [cones.margins_deg(R)[0] for R in true]
+    assert min(margins) > 5.0                                  # kept the cone, with room
+    psi = mon.since('psi', t0)
+    assert psi[-1] < 0.05 * max(psi)
+    final = controller_setup(values).schedule.rotations[-1]
+    assert math.degrees(so3.angle(final.T @ true[-1])) < 8.0
+    cmds = np.array(mon.since('motors', t0))
+    assert len(cmds) > 1500 and cmds.shape[1] == 6
+    assert np.all((cmds > 0.2) & (cmds < 1.0))                 # armed: spinning, not saturated
+    diag = mon.last_diagnostic()
+    assert diag['level'] == OK and diag['armed'] == 'True'
+    assert diag['pose accepted/refused'].endswith('/0')
+    published_values_are_finite(mon)
+    assert mon.arm(False).success
+    mon.wait_for(lambda: zero_commands(mon), 2.0, 'zero commands after disarming')
+
+
+def test_arming_needs_fresh_inputs_and_disarming_zeroes_the_motors(ros):
+    mon, launch = ros
+    launch('controller')
+    wait_for_controller(mon)
+    mon.spin_for(0.5)
+    assert zero_commands(mon)
+    reply = mon.arm(True)
+    assert not reply.success and 'no pose received yet' in reply.message
+    diag = mon.last_diagnostic()
+    assert diag['level'] == WARN and 'disarmed' in diag['message']
+    mon.feed(LEVEL_YAW90)
+    mon.spin_for(0.5)
+    reply = mon.arm(True)
+    assert reply.success, reply.message
+    mon.spin_for(0.5)
+    assert all(0.3 < c < 0.7 for c in mon.last('motors'))    # about hover (118/240)
+    assert mon.arm(False).success
+    mon.wait_for(lambda: zero_commands(mon), 2.0, 'zero commands after disarming')
+
+
+def test_input_dropout_fails_safe_to_zero_and_disarms(ros):
+    mon, launch = ros
+    launch('controller')
+    wait_for_controller(mon)
+    mon.feed(LEVEL_YAW90)
+    mon.spin_for(0.5)
+    assert mon.arm(True).success
+    mon.spin_for(0.5)
+    assert any(mon.last('motors'))
+    mon.stop_feed()                                           # motion capture and IMU go quiet
+    t_drop = time.monotonic()
+    mon.wait_for(lambda: zero_commands(mon), 1.0, 'zero commands after the drop-out')
+    assert time.monotonic() - t_drop < 0.5
+    mon.wait_for(lambda: mon.last_diagnostic()['level'] == ERROR, 2.0, 'an ERROR diagnostic')
+    diag = mon.last_diagnostic()
+    assert diag['armed'] == 'False' and 'failsafe' in diag['message'] and 'stale' in diag['message']
+    mon.feed(LEVEL_YAW90)                                     # data back: stays disarmed
+    mon.spin_for(0.5)
+    assert zero_commands(mon)
+    assert mon.arm(True).success                              # until armed again
+
+
+def test_nan_and_garbage_inputs_are_refused_and_never_reach_a_topic(ros):
+    mon, launch = ros
+    launch('controller')
+    wait_for_controller(mon)
+    mon.feed(LEVEL_YAW90)
+    mon.spin_for(0.3)
+    assert mon.arm(True).success
+    bad_poses = [(math.nan, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0, 2.0), (0.0, 0.0, 0.0, 0.0),
+                 (math.inf, 0.0, 0.0, 0.0)]
+    for q in bad_poses:
+        mon.publish_pose(q)
+        mon.spin_for(0.05)
+    old = rclpy.time.Time(seconds=1.0).to_msg()               # out of order
+    mon.publish_pose(LEVEL_YAW90, old)
+    for w in [(math.nan, 0.0, 0.0), (500.0, 0.0, 0.0)]:
+        mon.publish_imu(w)
+        mon.spin_for(0.05)
+    mon.wait_for(lambda: mon.last_diagnostic()['pose accepted/refused'].endswith('/5')
+                 and mon.last_diagnostic()['imu accepted/refused'].endswith('/2'), 3.0,
+                 'the refusals to show in the diagnostics')
+    refusals = ' '.join(d['message'] for _, d in mon.log['diagnostics'])
+    for reason in ('not finite', 'not unit length', 'not newer than', 'max_angular_velocity'):
+        assert reason in refusals
+    assert mon.last_diagnostic()['armed'] == 'True'          # the good stream went on
+    published_values_are_finite(mon)
+
+
+def test_parameters_change_at_run_time_and_bad_ones_are_refused(ros):
+    mon, launch = ros
+    launch('controller')
+    wait_for_controller(mon)
+    mon.feed(LEVEL_YAW90)
+    mon.spin_for(0.5)
+    assert mon.set_parameter('k_R', 0.5).successful
+    bad = mon.set_parameter('k_R', -1.0)
+    assert not bad.successful and 'k_R: must be > 0' in bad.reason
+    typo = mon.set_parameter('k_r', 0.5)
+    assert not typo.successful and "did you mean 'k_R'" in typo.reason
+    wrong_type = mon.set_parameter('k_R', 1)
+    assert not wrong_type.successful
+    # add a cone at run time: its parameters first, then its name
+    assert mon.set_parameter('cones.sun.axis', [0.0, 0.0, 1.0]).successful
+    assert mon.set_parameter('cones.sun.half_angle_deg', 10.0).successful
+    assert mon.set_parameter('cones.names', ['obstacle', 'sun']).successful
+    mon.wait_for(lambda: len(mon.last('margins')) == 2, 2.0, 'two cone margins')
+    assert mon.last('margins')[1] == pytest.approx(80.0, abs=0.5)    # sensor level: 90 - 10
+    # a cone round the current set point (R_d = I puts the sensor on +x) is refused
+    assert mon.set_parameter('cones.bad.axis', [1.0, 0.0, 0.0]).successful
+    assert mon.set_parameter('cones.bad.half_angle_deg', 5.0).successful
+    refused = mon.set_parameter('cones.names', ['obstacle', 'sun', 'bad'])
+    assert not refused.successful and "inside cone 'bad'" in refused.reason
+    assert mon.set_parameter('cones.names', ['obstacle']).successful
+    mon.wait_for(lambda: len(mon.last('margins')) == 1, 2.0, 'one cone margin')
+    # a set point flown from the topic is protected too: a cone round it is refused
+    mon.publish_setpoint(so3.rot_to_quat(so3.axis_angle([0, 0, 1], math.radians(-90.0))))
+    mon.spin_for(0.3)
+    assert mon.set_parameter('cones.south.axis', [0.0, -1.0, 0.0]).successful
+    assert mon.set_parameter('cones.south.half_angle_deg', 10.0).successful
+    refused = mon.set_parameter('cones.names', ['obstacle', 'south'])
+    assert not refused.successful and "the current setpoint" in refused.reason
+    # the controller kept running throughout
+    n = len(mon.log['motors'])
+    mon.spin_for(0.3)
+    assert len(mon.log['motors']) > n + 20
+
+
+def test_setpoint_inside_a_cone_is_rejected(ros):
+    mon, launch = ros
+    launch('controller')
+    wait_for_controller(mon)
+    mon.feed(LEVEL_YAW90)
+    mon.spin_for(0.5)
+    e_before = mon.last('eR')
+    inside = so3.rot_to_quat(so3.axis_angle([0, 0, 1], math.radians(45.0)))
+    mon.publish_setpoint(inside)
+    mon.wait_for(lambda: 'setpoint rejected' in mon.last_diagnostic()['message'], 2.0,
+                 'the rejection in the diagnostics')
+    assert "inside cone 'obstacle'" in mon.last_diagnostic()['message']
+    mon.spin_for(0.3)
+    assert np.allclose(mon.last('eR'), e_before, atol=1e-3)   # the old set point stays
+    fine = so3.rot_to_quat(so3.axis_angle([0, 0, 1], math.radians(80.0)))
+    mon.publish_setpoint(fine)
+    mon.spin_for(0.5)
+    assert np.linalg.norm(mon.last('eR')) < np.linalg.norm(e_before)
+
+
+def test_controller_restart_comes_back_disarmed_and_the_sim_stops_its_motors(ros):
+    mon, launch = ros
+    launch('sim')
+    first = launch('controller')
+    mon.wait_for(lambda: len(mon.log['pose']) > 10 and mon.last_diagnostic() is not None, 30.0,
+                 'the sim and the controller')
+    assert mon.arm(True).success
+    mon.spin_for(1.0)
+    first.kill()                                              # a crash: no last words
+    t_kill = time.monotonic()
+    mon.spin_for(1.0)
+    # with no commands the sim's motors stop: the testbed tips (nothing holds the pendulum)
+    launch('controller')
+    mon.wait_for(lambda: any(t > t_kill for t, _ in mon.log['diagnostics']), 30.0,
+                 'the restarted controller')
+    mon.spin_for(0.5)
+    assert zero_commands(mon)
+    assert mon.last_diagnostic()['armed'] == 'False'
+    assert mon.arm(True).success
+
+
+def test_a_bad_parameter_file_stops_the_node_with_the_reason(ros, tmp_path):
+    _, launch = ros
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('controller:\n  ros__parameters:\n    k_Omega: -0.7\n    G: [1.0, 1.0, 1.0]\n')
+    p = launch('controller', bad)
+    assert p.proc.wait(30) == 2
+    out = p.output()
+    assert 'k_Omega: must be > 0' in out and 'G: weights must be distinct' in out
+
+
+def test_sim_refuses_garbage_motor_commands(ros):
+    mon, launch = ros
+    sim = launch('sim')
+    mon.wait_for(lambda: len(mon.log['pose']) > 5, 30.0, 'the sim')
+    from std_msgs.msg import Float64MultiArray
+    for data in ([0.5] * 5, [math.nan] * 6, [2.0] * 6):
+        mon.pub_commands.publish(Float64MultiArray(data=data))
+        mon.spin_for(0.2)
+    mon.spin_for(0.3)
+    out = sim.output()
+    assert 'expected 6 finite values' in out and 'outside [0, 1]' in out
+    assert len(mon.log['true_pose']) > 5
