@@ -66,8 +66,9 @@ class ControlLoop:
         return problem
 
     # --- commands ----------------------------------------------------------------------------
-    def arm(self, now):
-        result = self.supervisor.arm(now)
+    def arm(self, now, extra_problem=None):
+        """Arm unless an input is stale or extra_problem (a sentence from the caller) says no."""
+        result = self.supervisor.arm(now, extra_problem)
         if result.ok:
             self._schedule_index = -1
         return result

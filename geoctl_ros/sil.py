@@ -110,7 +110,7 @@ class Monitor(Node):
         self.pub_pose = self.create_publisher(PoseStamped, 'pose', qos_profile_sensor_data)
         self.pub_imu = self.create_publisher(Imu, 'imu', qos_profile_sensor_data)
         self.pub_setpoint = self.create_publisher(QuaternionStamped, 'attitude_setpoint', 10)
-        self.pub_commands = self.create_publisher(Float64MultiArray, 'motor_commands', reliable1)
+        self._reliable1 = reliable1
         self.executor_ = rclpy.executors.SingleThreadedExecutor()
         self.executor_.add_node(self)
 
@@ -180,6 +180,14 @@ class Monitor(Node):
         o = msg.quaternion
         o.x, o.y, o.z, o.w = (float(v) for v in q)
         self.pub_setpoint.publish(msg)
+
+    def publish_commands(self, data):
+        """Publish on motor_commands as if this were a controller (created on first use: while
+        it exists, the real controller refuses to arm)."""
+        if not hasattr(self, 'pub_commands'):
+            self.pub_commands = self.create_publisher(Float64MultiArray, 'motor_commands',
+                                                      self._reliable1)
+        self.pub_commands.publish(Float64MultiArray(data=list(data)))
 
     # --- calls -------------------------------------------------------------------------------
     def _call(self, client, request, timeout=10.0):

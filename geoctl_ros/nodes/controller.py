@@ -139,8 +139,17 @@ class ControllerNode(Node):
             self._publish_diagnostics()
 
     # --- services and parameters -------------------------------------------------------------
+    def _other_commanders(self):
+        """A sentence if another node publishes our motor_commands topic, else None."""
+        n = self.count_publishers(self.pub_motors.topic_name)
+        if n > 1:
+            return ('%d other publisher(s) on %s (another controller running?)'
+                    % (n - 1, self.pub_motors.topic_name))
+        return None
+
     def _on_arm(self, request, response):
-        result = self.loop.arm(self._now()) if request.data else self.loop.disarm()
+        result = (self.loop.arm(self._now(), self._other_commanders()) if request.data
+                  else self.loop.disarm())
         response.success, response.message = result.ok, result.message
         self.get_logger().info(result.message)
         self._publish_diagnostics()
@@ -248,6 +257,9 @@ class ControllerNode(Node):
                                                                         self._ticks))
         if loop.setpoint_note:
             warnings.append(loop.setpoint_note)
+        others = self._other_commanders()
+        if others:
+            (errors if sup.armed else warnings).append(others)
         level = (DiagnosticStatus.ERROR if errors else
                  DiagnosticStatus.WARN if warnings else DiagnosticStatus.OK)
         status = DiagnosticStatus(level=level, name='geoctl_ros: controller',

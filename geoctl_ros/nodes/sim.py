@@ -50,6 +50,7 @@ class SimNode(Node):
         self.commands = np.zeros(self.n_rotors, dtype=int)
         self.torque = np.zeros(3)
         self.last_command_wall = -math.inf
+        self.commands_fresh = False
         self.wall0 = time.monotonic()
         self.pose_period = 1.0 / v['pose_rate_hz']
         self.imu_period = 1.0 / v['imu_rate_hz']
@@ -97,6 +98,13 @@ class SimNode(Node):
         target = (time.monotonic() - self.wall0) * self.rtf
         plant = self.sim.plant
         fresh = time.monotonic() - self.last_command_wall < self.command_timeout
+        if fresh != self.commands_fresh:
+            self.commands_fresh = fresh
+            if fresh:
+                self.get_logger().info('motor_commands received: motors running')
+            elif self.last_command_wall > -math.inf:
+                self.get_logger().warning('motor_commands stale (older than %.3f s): motors '
+                                          'stopped' % self.command_timeout)
         command = (self.commands if fresh else np.zeros_like(self.commands)) if self.n_rotors \
             else (self.torque if fresh else np.zeros(3))
         steps = 0
