@@ -8,7 +8,6 @@ control period with room to spare on the ODROID (10 ms at 100 Hz, 2 ms at 500 Hz
 was measured on the 2-core development machine. Not a test: nothing here passes or fails.
 """
 import json
-import math
 import os
 import sys
 import timeit

@@ -18,6 +18,10 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TESTBED = os.path.join(ROOT, 'config', 'testbed.yaml')
 LEVEL_YAW90 = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))     # the testbed's start attitude
 OK, WARN, ERROR = 0, 1, 2
+# When this process feeds the inputs, its (Python, single-threaded) publisher can stall for tens of
+# milliseconds under load; generous timeouts keep those tests about what they test. The drop-out
+# test checks that the failsafe still comes within them.
+FED = ('-p', 'pose_timeout:=0.25', '-p', 'imu_timeout:=0.25')
 
 
 @pytest.fixture
@@ -91,7 +95,7 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros):
 
 def test_arming_needs_fresh_inputs_and_disarming_zeroes_the_motors(ros):
     mon, launch = ros
-    launch('controller')
+    launch('controller', TESTBED, *FED)
     wait_for_controller(mon)
     mon.spin_for(0.5)
     assert zero_commands(mon)
@@ -111,7 +115,7 @@ def test_arming_needs_fresh_inputs_and_disarming_zeroes_the_motors(ros):
 
 def test_input_dropout_fails_safe_to_zero_and_disarms(ros):
     mon, launch = ros
-    launch('controller')
+    launch('controller', TESTBED, *FED)
     wait_for_controller(mon)
     mon.feed(LEVEL_YAW90)
     mon.spin_for(0.5)
@@ -120,8 +124,8 @@ def test_input_dropout_fails_safe_to_zero_and_disarms(ros):
     assert any(mon.last('motors'))
     mon.stop_feed()                                           # motion capture and IMU go quiet
     t_drop = time.monotonic()
-    mon.wait_for(lambda: zero_commands(mon), 1.0, 'zero commands after the drop-out')
-    assert time.monotonic() - t_drop < 0.5
+    mon.wait_for(lambda: zero_commands(mon), 2.0, 'zero commands after the drop-out')
+    assert time.monotonic() - t_drop < 0.25 + 0.5              # the timeout, plus slack
     mon.wait_for(lambda: mon.last_diagnostic()['level'] == ERROR, 2.0, 'an ERROR diagnostic')
     diag = mon.last_diagnostic()
     assert diag['armed'] == 'False' and 'failsafe' in diag['message'] and 'stale' in diag['message']
@@ -133,7 +137,7 @@ def test_input_dropout_fails_safe_to_zero_and_disarms(ros):
 
 def test_nan_and_garbage_inputs_are_refused_and_never_reach_a_topic(ros):
     mon, launch = ros
-    launch('controller')
+    launch('controller', TESTBED, *FED)
     wait_for_controller(mon)
     mon.feed(LEVEL_YAW90)
     mon.spin_for(0.3)
@@ -160,7 +164,7 @@ def test_nan_and_garbage_inputs_are_refused_and_never_reach_a_topic(ros):
 
 def test_parameters_change_at_run_time_and_bad_ones_are_refused(ros):
     mon, launch = ros
-    launch('controller')
+    launch('controller', TESTBED, *FED)
     wait_for_controller(mon)
     mon.feed(LEVEL_YAW90)
     mon.spin_for(0.5)
@@ -199,7 +203,7 @@ def test_parameters_change_at_run_time_and_bad_ones_are_refused(ros):
 
 def test_setpoint_inside_a_cone_is_rejected(ros):
     mon, launch = ros
-    launch('controller')
+    launch('controller', TESTBED, *FED)
     wait_for_controller(mon)
     mon.feed(LEVEL_YAW90)
     mon.spin_for(0.5)
@@ -237,7 +241,11 @@ def test_controller_restart_comes_back_disarmed_and_the_sim_stops_its_motors(ros
     mon.wait_for(lambda: any(t > t_kill for t, _ in mon.log['diagnostics']), 10.0,
                  'diagnostics of the restarted controller')
     assert mon.last_diagnostic()['armed'] == 'False'
-    assert mon.arm(True).success
+    mon.wait_for(lambda: not mon.last_diagnostic()['imu accepted/refused'].startswith('0/')
+                 and not mon.last_diagnostic()['pose accepted/refused'].startswith('0/'), 10.0,
+                 'the restarted controller to receive the sim')
+    reply = mon.arm(True)
+    assert reply.success, reply.message
 
 
 def test_a_bad_parameter_file_stops_the_node_with_the_reason(ros, tmp_path):
@@ -265,7 +273,7 @@ def test_sim_refuses_garbage_motor_commands(ros):
 
 def test_arming_is_refused_while_another_node_commands_the_motors(ros):
     mon, launch = ros
-    launch('controller')
+    launch('controller', TESTBED, *FED)
     wait_for_controller(mon)
     mon.feed(LEVEL_YAW90)
     mon.publish_commands([0.0] * 6)            # a second "controller" on motor_commands

@@ -40,7 +40,6 @@ class SimNode(Node):
             raise ConfigError(errors)
         v = resolve(SIM, ros_params.values(self, SIM))
         self.sim = testbed_sim(v)
-        self.values = v
         _, self.curve, _ = airframe(v)
         self.n_rotors = len(self.sim.actuator.thrusts) if self.sim.actuator else 0
         self.h = 1.0 / v['integration_rate_hz']
