@@ -21,6 +21,7 @@ setup(
     maintainer_email='geoctl-ros@example.com',
     description='Geometric adaptive constrained attitude control on SO(3) for a hexrotor testbed',
     license='BSD-3-Clause',
+    extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
             'scenario = geoctl_ros.scenario:main',
