@@ -54,6 +54,17 @@ def wait_for_controller(mon):
     mon.wait_for(lambda: mon.last_diagnostic() is not None, 30.0, 'controller diagnostics')
 
 
+def fed_controller(mon, launch, arm=False):
+    """A controller (generous input timeouts) fed level-at-yaw-90 attitude from this process."""
+    launch('controller', TESTBED, *FED)
+    wait_for_controller(mon)
+    mon.feed(LEVEL_YAW90)
+    mon.spin_for(0.5)
+    if arm:
+        reply = mon.arm(True)
+        assert reply.success, reply.message
+
+
 def zero_commands(mon):
     return mon.last('motors') is not None and not any(mon.last('motors'))
 
@@ -115,11 +126,7 @@ def test_arming_needs_fresh_inputs_and_disarming_zeroes_the_motors(ros):
 
 def test_input_dropout_fails_safe_to_zero_and_disarms(ros):
     mon, launch = ros
-    launch('controller', TESTBED, *FED)
-    wait_for_controller(mon)
-    mon.feed(LEVEL_YAW90)
-    mon.spin_for(0.5)
-    assert mon.arm(True).success
+    fed_controller(mon, launch, arm=True)
     mon.spin_for(0.5)
     assert any(mon.last('motors'))
     mon.stop_feed()                                           # motion capture and IMU go quiet
@@ -137,11 +144,7 @@ def test_input_dropout_fails_safe_to_zero_and_disarms(ros):
 
 def test_nan_and_garbage_inputs_are_refused_and_never_reach_a_topic(ros):
     mon, launch = ros
-    launch('controller', TESTBED, *FED)
-    wait_for_controller(mon)
-    mon.feed(LEVEL_YAW90)
-    mon.spin_for(0.3)
-    assert mon.arm(True).success
+    fed_controller(mon, launch, arm=True)
     bad_poses = [(math.nan, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0, 2.0), (0.0, 0.0, 0.0, 0.0),
                  (math.inf, 0.0, 0.0, 0.0)]
     for q in bad_poses:
@@ -164,10 +167,7 @@ def test_nan_and_garbage_inputs_are_refused_and_never_reach_a_topic(ros):
 
 def test_parameters_change_at_run_time_and_bad_ones_are_refused(ros):
     mon, launch = ros
-    launch('controller', TESTBED, *FED)
-    wait_for_controller(mon)
-    mon.feed(LEVEL_YAW90)
-    mon.spin_for(0.5)
+    fed_controller(mon, launch)
     assert mon.set_parameter('k_R', 0.5).successful
     bad = mon.set_parameter('k_R', -1.0)
     assert not bad.successful and 'k_R: must be > 0' in bad.reason
@@ -203,10 +203,7 @@ def test_parameters_change_at_run_time_and_bad_ones_are_refused(ros):
 
 def test_setpoint_inside_a_cone_is_rejected(ros):
     mon, launch = ros
-    launch('controller', TESTBED, *FED)
-    wait_for_controller(mon)
-    mon.feed(LEVEL_YAW90)
-    mon.spin_for(0.5)
+    fed_controller(mon, launch)
     e_before = mon.last('eR')
     inside = so3.rot_to_quat(so3.axis_angle([0, 0, 1], math.radians(45.0)))
     mon.publish_setpoint(inside)
