@@ -95,8 +95,8 @@ def fly(params_file, out, duration, monitor_factory=None):
     rclpy.init()
     mon = (monitor_factory or Monitor)()
     try:
-        mon.wait_for(lambda: len(mon.log['pose']) > 10 and mon.last('diagnostics') is not None,
-                     30.0, 'the sim and the controller to come up')
+        mon.wait_for(mon.controller_has_inputs, 30.0,
+                     'the sim and the controller to come up and find each other')
         reply = mon.arm(True)
         if not reply.success:
             raise RuntimeError(reply.message)

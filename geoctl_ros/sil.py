@@ -136,6 +136,12 @@ class Monitor(Node):
             return
         raise TimeoutError('timed out after %.1f s waiting for %s' % (timeout, what))
 
+    def controller_has_inputs(self):
+        """True once the controller's diagnostics show accepted pose and imu samples."""
+        d = self.last_diagnostic()
+        return (d is not None and not d.get('pose accepted/refused', '0/').startswith('0/')
+                and not d.get('imu accepted/refused', '0/').startswith('0/'))
+
     def since(self, key, t0):
         return [v for t, v in self.log[key] if t >= t0]
 
