@@ -95,9 +95,7 @@ def fly(params_file, out, duration, monitor_factory=None):
     rclpy.init()
     mon = (monitor_factory or Monitor)()
     try:
-        mon.wait_for(mon.controller_has_inputs, 30.0,
-                     'the sim and the controller to come up and find each other')
-        reply = mon.arm(True)
+        reply = mon.arm_when_ready(30.0)
         if not reply.success:
             raise RuntimeError(reply.message)
         t_arm = time.monotonic()

@@ -205,6 +205,18 @@ class Monitor(Node):
     def arm(self, on=True):
         return self._call(self.arm_client, SetBool.Request(data=on))
 
+    def arm_when_ready(self, timeout=30.0):
+        """Wait for the controller to report inputs, then arm, retrying while it refuses for
+        stale or missing inputs (as an operator would); returns the last reply."""
+        end = time.monotonic() + timeout
+        self.wait_for(self.controller_has_inputs, timeout, 'the controller to receive its inputs')
+        while True:
+            reply = self.arm(True)
+            if reply.success or time.monotonic() > end or not any(
+                    w in reply.message for w in ('stale', 'received yet')):
+                return reply
+            self.spin_for(0.2)
+
     def reset_adaptation(self):
         return self._call(self.reset_client, Trigger.Request())
 

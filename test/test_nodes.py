@@ -76,7 +76,7 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros):
     mon.wait_for(mon.controller_has_inputs, 30.0, 'the sim and the controller')
     assert zero_commands(mon)                                  # disarmed at start-up
     assert mon.last_diagnostic()['armed'] == 'False'
-    reply = mon.arm(True)
+    reply = mon.arm_when_ready()
     assert reply.success, reply.message
     t0 = time.monotonic()
     mon.spin_for(20.0)
@@ -221,8 +221,7 @@ def test_controller_restart_comes_back_disarmed_and_the_sim_stops_its_motors(ros
     mon, launch = ros
     launch('sim')
     first = launch('controller')
-    mon.wait_for(mon.controller_has_inputs, 30.0, 'the sim and the controller')
-    assert mon.arm(True).success
+    assert mon.arm_when_ready().success
     mon.spin_for(1.0)
     first.kill()                                              # a crash: no last words
     # with no commands the sim's motors stop after command_timeout, as the ESCs would
@@ -235,10 +234,11 @@ def test_controller_restart_comes_back_disarmed_and_the_sim_stops_its_motors(ros
     t_new = time.monotonic()
     mon.wait_for(mon.controller_has_inputs, 10.0, 'the restarted controller to receive the sim')
     mon.spin_for(0.3)
+    # the restarted controller comes up disarmed and sends only zeros
     new_commands = [c for t, c in mon.log['motors'] if t > t_new]
     assert new_commands and all(not any(c) for c in new_commands)
     assert mon.last_diagnostic()['armed'] == 'False'
-    reply = mon.arm(True)
+    reply = mon.arm_when_ready()
     assert reply.success, reply.message
 
 
@@ -276,3 +276,22 @@ def test_arming_is_refused_while_another_node_commands_the_motors(ros):
     assert not reply.success and 'other publisher(s) on /motor_commands' in reply.message
     mon.wait_for(lambda: 'another controller' in mon.last_diagnostic()['message'], 2.0,
                  'the warning in the diagnostics')
+
+
+def test_sim_time_the_sim_drives_the_controllers_clock(ros):
+    """use_sim_time: the sim publishes /clock and the controller's timer and timeouts follow it."""
+    mon, launch = ros
+    launch('sim', TESTBED, '-p', 'publish_clock:=true')
+    launch('controller', TESTBED, '-p', 'use_sim_time:=true')
+    reply = mon.arm_when_ready()
+    assert reply.success, reply.message
+    t0 = time.monotonic()
+    mon.spin_for(8.0)
+    stamps = [v[0] for t, v in mon.log['true_pose'] if t >= t0]
+    assert stamps[-1] - stamps[0] == pytest.approx(8.0, abs=1.0)   # simulated time, real rate
+    values = resolve('controller', node_overrides(load_parameter_file(TESTBED), 'controller'))
+    cones = cone_set(values)
+    assert min(cones.margins_deg(so3.quat_to_rot(v[1]))[0]
+               for t, v in mon.log['true_pose'] if t >= t0) > 0.0
+    assert mon.last_diagnostic()['armed'] == 'True'
+    published_values_are_finite(mon)

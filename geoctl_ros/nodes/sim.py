@@ -2,7 +2,7 @@
 
 A thin shell over ``geoctl_ros.testbed.TestbedSim``: integrates the testbed at
 ``integration_rate_hz`` from the latest ``motor_commands`` (normalised, as the controller publishes
-them), and publishes ``pose`` (motion capture) and ``imu`` with the configured noise, the true
+them; with ``actuation: torque``, from the torque of the latest ``control_wrench``), and publishes ``pose`` (motion capture) and ``imu`` with the configured noise, the true
 state on ``sim/true_pose``, and ``/clock`` when ``publish_clock`` is set. Simulated time follows
 the wall clock times ``real_time_factor``: one timer, at the faster of the two sensor rates,
 integrates as many steps as are due and publishes what is due.
@@ -15,7 +15,7 @@ import math
 import sys
 import time
 
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 import numpy as np
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -25,7 +25,7 @@ from std_msgs.msg import Float64MultiArray
 
 from geoctl_ros import so3
 from geoctl_ros.nodes import ros_params
-from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg
+from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg, vector
 from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.params import SIM, ConfigError, airframe, resolve, testbed_sim
 
@@ -55,8 +55,11 @@ class SimNode(Node):
         self.imu_period = 1.0 / v['imu_rate_hz']
         self.next_pose = self.next_imu = 0.0
 
-        self.create_subscription(Float64MultiArray, 'motor_commands', self._on_commands,
-                                 COMMAND_QOS)
+        if self.n_rotors:
+            self.create_subscription(Float64MultiArray, 'motor_commands', self._on_commands,
+                                     COMMAND_QOS)
+        else:                          # ideal actuation: the controller's moment itself
+            self.create_subscription(WrenchStamped, 'control_wrench', self._on_wrench, 10)
         self.pub_pose = self.create_publisher(PoseStamped, 'pose', qos_profile_sensor_data)
         self.pub_imu = self.create_publisher(Imu, 'imu', qos_profile_sensor_data)
         self.pub_true = self.create_publisher(PoseStamped, 'sim/true_pose', 10)
@@ -75,19 +78,25 @@ class SimNode(Node):
 
     def _on_commands(self, msg):
         data = np.asarray(msg.data, dtype=float)
-        n = self.n_rotors or 3
-        if data.shape != (n,) or not np.all(np.isfinite(data)):
+        if data.shape != (self.n_rotors,) or not np.all(np.isfinite(data)):
             self.get_logger().warning('motor_commands refused: expected %d finite values, got %r'
-                                      % (n, list(msg.data)[:8]), throttle_duration_sec=1.0)
+                                      % (self.n_rotors, list(msg.data)[:8]),
+                                      throttle_duration_sec=1.0)
             return
-        if self.n_rotors:
-            if data.min() < 0.0 or data.max() > 1.0:
-                self.get_logger().warning('motor_commands refused: values outside [0, 1]',
-                                          throttle_duration_sec=1.0)
-                return
-            self.commands = np.rint(data * self.curve.command_max).astype(int)
-        else:
-            self.torque = data                 # ideal actuation: the moment itself (N m)
+        if data.min() < 0.0 or data.max() > 1.0:
+            self.get_logger().warning('motor_commands refused: values outside [0, 1]',
+                                      throttle_duration_sec=1.0)
+            return
+        self.commands = np.rint(data * self.curve.command_max).astype(int)
+        self.last_command_wall = time.monotonic()
+
+    def _on_wrench(self, msg):
+        torque = np.array(vector(msg.wrench.torque))
+        if not np.all(np.isfinite(torque)):
+            self.get_logger().warning('control_wrench refused: not finite',
+                                      throttle_duration_sec=1.0)
+            return
+        self.torque = torque
         self.last_command_wall = time.monotonic()
 
     def _stamp(self, t_sim):
