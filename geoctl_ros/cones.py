@@ -26,7 +26,6 @@ is, and evaluations report which cones are violated (g_i <= 0) and which are in 
 (g_i < g0_i), so callers can flag them.
 """
 from dataclasses import dataclass
-import math
 
 import numpy as np
 
@@ -128,8 +127,3 @@ class ConeSet:
             term = np.outer(R.T @ (hat(v) @ (R @ r)), v @ R @ r_hat)
             out[i] = (float(v @ R @ r) * np.eye(3) - np.outer(RTv, r) + term / d) / (self.alpha * d)
         return out
-
-    def feasible_margin_deg(self, R):
-        """Smallest margin over all cones (inf when there are none), degrees."""
-        return float(np.min(self.margins_deg(R))) if len(self) else math.inf
-

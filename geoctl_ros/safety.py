@@ -86,10 +86,6 @@ class Stream:
                                                                  self.timeout)
         return None
 
-    def reset_order(self):
-        """Forget the last stamp (after a clock jump, e.g. a simulator restart)."""
-        self.last_stamp = -math.inf
-
 
 @dataclass
 class ArmResult:
