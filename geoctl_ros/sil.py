@@ -220,12 +220,6 @@ class Monitor(Node):
     def reset_adaptation(self):
         return self._call(self.reset_client, Trigger.Request())
 
-    def set_parameters(self, **values):
-        """Set controller parameters (names with '.' given as '__'); returns the results."""
-        params = [Parameter(name.replace('__', '.'), value=v).to_parameter_msg()
-                  for name, v in values.items()]
-        return self._call(self.param_client, SetParameters.Request(parameters=params)).results
-
     def set_parameter(self, name, value):
         msg = Parameter(name, value=value).to_parameter_msg()
         return self._call(self.param_client, SetParameters.Request(parameters=[msg])).results[0]
