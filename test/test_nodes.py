@@ -119,6 +119,13 @@ def test_arming_needs_fresh_inputs_and_disarming_zeroes_the_motors(ros):
     assert reply.success, reply.message
     mon.spin_for(0.5)
     assert all(0.3 < c < 0.7 for c in mon.last('motors'))    # about hover (118/240)
+    mon.spin_for(1.0)                                         # 90 deg from R_d: the estimate grows
+    before = np.linalg.norm(mon.last('dbar'))
+    assert before > 1e-3
+    assert mon.reset_adaptation().success
+    t_reset = time.monotonic()
+    mon.spin_for(0.2)
+    assert np.linalg.norm(mon.since('dbar', t_reset)[-1]) < 0.2 * before
     assert mon.arm(False).success
     mon.wait_for(lambda: zero_commands(mon), 2.0, 'zero commands after disarming')
 
