@@ -1,8 +1,8 @@
 """The controller node's logic without ROS: checked inputs, arming, set points, step, mixing.
 
 The node turns messages into calls of this class and its results into messages; every decision
-(refuse a sample, refuse to arm, fail safe, adopt a set point, freeze adaptation) is made here, so
-it is tested without rclpy.
+(refuse a sample, refuse to arm, ride through a gap, fail safe, adopt a set point, freeze
+adaptation, the diagnostics level and its reasons) is made here, so it is tested without rclpy.
 """
 from dataclasses import dataclass
 
@@ -10,7 +10,14 @@ import numpy as np
 
 from geoctl_ros import so3
 from geoctl_ros.control import AttitudeController, SetpointRejected
+from geoctl_ros.gaps import GapBridge
 from geoctl_ros.safety import (Stream, Supervisor, angular_velocity_problem, quaternion_problem)
+from geoctl_ros.stats import WindowStats
+
+# Diagnostics levels (the values of diagnostic_msgs/DiagnosticStatus).
+OK, WARN, ERROR = 0, 1, 2
+NEAR_CONE_DEG = 2.0           # a cone margin below this is reported (WARN)
+NON_FINITE = 'failsafe: non-finite control output'
 
 
 @dataclass
@@ -21,6 +28,16 @@ class Tick:
     motors: object           # MotorOutput (zero commands unless armed)
     armed: bool
     measurement_stamp: float  # stamp of the pose the step used (None before the first)
+    bridging: bool = False    # a gap is being ridden through (see geoctl_ros.gaps)
+
+
+@dataclass
+class Status:
+    """What the diagnostics say: level (OK/WARN/ERROR), one message, and key/value figures."""
+
+    level: int
+    message: str
+    values: dict
 
 
 class ControlLoop:
@@ -30,29 +47,52 @@ class ControlLoop:
         self.setup = setup
         self.controller = AttitudeController(setup.config)
         self.controller.set_setpoint(setup.setpoint)
-        self.pose = Stream('pose', setup.values['pose_timeout'])
-        self.rate = Stream('angular velocity', setup.values['imu_timeout'])
+        v = setup.values
+        self.pose = Stream('pose', v['pose_timeout'], v['pose_ride_through'])
+        self.rate = Stream('angular velocity', v['imu_timeout'], v['imu_ride_through'])
         self.supervisor = Supervisor([self.pose, self.rate])
-        self.R = None
+        self.bridge = GapBridge(v['pose_rate_window'])
+        self.R = None                   # last accepted measurements
         self.Omega = None
         self.setpoint_note = None       # last set-point refusal, for diagnostics
+        self.last_tick = None
         self._schedule_index = -1
+        # per diagnostics window: input ages at the ticks, armed ticks saturated / bridging
+        self.pose_age = WindowStats()
+        self.rate_age = WindowStats()
+        self._window = {'ticks': 0, 'saturated': 0, 'bridging': 0}
+        self.gaps = {'pose': [0, 0.0], 'angular velocity': [0, 0.0]}   # count, longest (s)
 
     # --- inputs ------------------------------------------------------------------------------
     def offer_pose(self, q, stamp, receipt):
         """A motion-capture attitude (x, y, z, w); None if accepted, else why it was refused."""
+        previous = self.pose.last_receipt
         problem = self.pose.offer(stamp, receipt, quaternion_problem(q))
         if problem is None:
+            self._end_gap(self.pose, previous, receipt)
             self.R = so3.quat_to_rot(q)
+            self.bridge.pose(self.R, stamp, receipt)
         return problem
 
     def offer_angular_velocity(self, w, stamp, receipt):
         """A body angular velocity (rad/s); None if accepted, else why it was refused."""
+        previous = self.rate.last_receipt
         problem = self.rate.offer(
             stamp, receipt, angular_velocity_problem(w, self.setup.values['max_angular_velocity']))
         if problem is None:
+            self._end_gap(self.rate, previous, receipt)
             self.Omega = np.array(w, dtype=float)
+            self.bridge.gyro(self.Omega)
         return problem
+
+    def _end_gap(self, stream, previous, receipt):
+        """Count a gap (a stale spell) of stream that the sample received at receipt ends."""
+        if previous is not None:
+            age = receipt - previous
+            if age >= stream.timeout:
+                g = self.gaps[stream.name]
+                g[0] += 1
+                g[1] = max(g[1], age)
 
     def request_setpoint(self, q):
         """A new desired attitude; None if adopted, else why it was refused (old one stays)."""
@@ -89,8 +129,10 @@ class ControlLoop:
         except SetpointRejected as e:
             return str(e)
         self.setup = setup
-        self.pose.timeout = setup.values['pose_timeout']
-        self.rate.timeout = setup.values['imu_timeout']
+        v = setup.values
+        self.pose.timeout, self.pose.ride_through = v['pose_timeout'], v['pose_ride_through']
+        self.rate.timeout, self.rate.ride_through = v['imu_timeout'], v['imu_ride_through']
+        self.bridge.rate_window = v['pose_rate_window']
         if setpoint_changed:
             self.controller.set_setpoint(setup.setpoint)
         if schedule_changed:
@@ -107,9 +149,103 @@ class ControlLoop:
             if i != self._schedule_index and i >= 0:
                 self.controller.set_setpoint(schedule.rotations[i])   # checked at configuration
                 self._schedule_index = i
-        if self.R is None or self.Omega is None:
-            motors = self.setup.mixer.mix(np.zeros(3), armed=False)
-            return Tick(None, motors, armed, None)
-        out = self.controller.step(self.R, self.Omega, dt, adapt=armed)
-        motors = self.setup.mixer.mix(out.u, armed=armed)
-        return Tick(out, motors, armed, self.pose.last_stamp)
+        state = self.bridge.update(now, self.pose.fresh(now), self.rate.fresh(now))
+        if state is None:
+            tick = Tick(None, self.setup.mixer.mix(np.zeros(3), armed=False), armed, None)
+        else:
+            bridging = self.bridge.bridging
+            # the estimate learns only from measurements, not from a bridged state
+            out = self.controller.step(state[0], state[1], dt, adapt=armed and not bridging)
+            if not np.all(np.isfinite(out.u)):      # a last line of defence: never publish it
+                self.disarm(NON_FINITE)
+                armed, out = False, None
+            motors = self.setup.mixer.mix(np.zeros(3) if out is None else out.u, armed=armed)
+            tick = Tick(out, motors, armed, self.pose.last_stamp, bridging)
+        if self.pose.last_receipt is not None:
+            self.pose_age.add(self.pose.age(now))
+        if self.rate.last_receipt is not None:
+            self.rate_age.add(self.rate.age(now))
+        w = self._window
+        w['ticks'] += 1
+        w['saturated'] += bool(armed and tick.motors.allocation.saturated)
+        w['bridging'] += bool(armed and tick.bridging)
+        self.last_tick = tick
+        return tick
+
+    # --- what the diagnostics say ------------------------------------------------------------
+    def gap_notes(self, now):
+        """Sentences for the gaps being ridden through (empty in normal flight)."""
+        notes = []
+        b = self.bridge
+        if b.attitude_source != 'pose':
+            notes.append('pose gap: attitude %s (pose %.3f s old, failsafe at %.3f s)'
+                         % (b.attitude_source, self.pose.age(now), self.pose.limit))
+        if b.rate_source != 'gyro':
+            notes.append('angular velocity gap: rate %s (imu %.3f s old, failsafe at %.3f s)'
+                         % (b.rate_source, self.rate.age(now), self.rate.limit))
+        return notes
+
+    def status(self, now, other_commanders=None):
+        """The diagnostics: level, message and figures. other_commanders is the node's sentence
+        when another node publishes the motor commands (an error while armed)."""
+        errors, warnings = [], []
+        sup = self.supervisor
+        if not sup.armed:
+            (errors if sup.reason.startswith('failsafe') else warnings).append(sup.reason)
+            stale = sup.input_problem(now)
+            if stale:
+                warnings.append(stale)
+        else:
+            lost = sup.input_loss(now)
+            if lost:
+                errors.append(lost)
+            warnings += self.gap_notes(now)
+        for s in (self.pose, self.rate):
+            reasons = s.take_refusals()
+            if reasons:
+                warnings.append('%s refused: %s (%d so far)' % (s.name, ' | '.join(reasons),
+                                                                 s.refused))
+        tick = self.last_tick
+        out = tick.control if tick else None
+        if out is not None and len(out.margins_deg):
+            i = int(np.argmin(out.margins_deg))
+            name = self.setup.config.cones.names[i]
+            if out.violated:
+                errors.append('sensor inside cone %r (margin %.2f deg)' % (name, out.margins_deg[i]))
+            elif out.margins_deg[i] < NEAR_CONE_DEG:
+                warnings.append('near cone %r (margin %.2f deg)' % (name, out.margins_deg[i]))
+        w = self._window
+        if w['saturated']:
+            warnings.append('allocation saturated in %d of %d ticks' % (w['saturated'], w['ticks']))
+        if self.setpoint_note:
+            warnings.append(self.setpoint_note)
+        if other_commanders:
+            (errors if sup.armed else warnings).append(other_commanders)
+        level = ERROR if errors else WARN if warnings else OK
+        values = {
+            'armed': str(sup.armed), 'state': sup.reason,
+            'pose age [s]': '%.4f' % self.pose.age(now),
+            'imu age [s]': '%.4f' % self.rate.age(now),
+            'pose accepted/refused': '%d/%d' % (self.pose.accepted, self.pose.refused),
+            'imu accepted/refused': '%d/%d' % (self.rate.accepted, self.rate.refused),
+            'pose age at tick [ms]': self.pose_age.summary(),
+            'imu age at tick [ms]': self.rate_age.summary(),
+            'pose gaps ridden through': '%d (longest %.3f s)' % tuple(self.gaps['pose']),
+            'imu gaps ridden through': '%d (longest %.3f s)' % tuple(
+                self.gaps['angular velocity']),
+            'ticks bridging a gap': str(w['bridging']),
+            'ticks': str(w['ticks']),
+        }
+        if out is not None:
+            values['Psi'] = '%.6g' % out.psi
+            values['min cone margin [deg]'] = ('%.3f' % float(np.min(out.margins_deg))
+                                               if len(out.margins_deg) else 'no cones')
+            values['motor commands'] = ' '.join(str(c) for c in tick.motors.commands)
+        message = '; '.join(errors + warnings) or 'armed, all inputs fresh'
+        return Status(level, message, values)
+
+    def end_window(self):
+        """Start a new diagnostics window (the node calls this on its fixed period)."""
+        self.pose_age.reset()
+        self.rate_age.reset()
+        self._window = dict.fromkeys(self._window, 0)

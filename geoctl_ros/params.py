@@ -166,6 +166,15 @@ SCHEMA = [
        CONTROLLER, check=_positive),
     _p('imu_timeout', 'double', 0.05, 's', 'angular velocity older than this is stale',
        CONTROLLER, check=_positive),
+    _p('pose_ride_through', 'double', 0.5, 's',
+       'a pose gap up to this long is flown through on the gyro-propagated attitude; longer: '
+       'failsafe (0: failsafe at pose_timeout)', CONTROLLER, check=_nonnegative),
+    _p('imu_ride_through', 'double', 0.25, 's',
+       'an angular-velocity gap up to this long is flown through on rates from successive poses; '
+       'longer: failsafe (0: failsafe at imu_timeout)', CONTROLLER, check=_nonnegative),
+    _p('pose_rate_window', 'double', 0.05, 's',
+       'time between the two poses that give the rate during an angular-velocity gap',
+       CONTROLLER, check=lambda v: None if 0.0 < v <= 0.5 else 'must be in (0, 0.5] s'),
     _p('max_angular_velocity', 'double', 100.0, 'rad/s',
        'gyro readings faster than this are refused', CONTROLLER, check=_positive),
     _p('setpoint_schedule.times', 'double_array', [], 's',
@@ -470,6 +479,11 @@ def controller_setup(values):
             if reason:
                 errors.append(('setpoint_schedule.quaternions', 'set point %d: %s' % (k + 1, reason)))
             rotations.append(R)
+    for stream, timeout in (('pose', 'pose_timeout'), ('imu', 'imu_timeout')):
+        limit = values[stream + '_ride_through']
+        if 0.0 < limit < values[timeout]:
+            errors.append((stream + '_ride_through', 'must be 0 or at least %s (%g s)'
+                           % (timeout, values[timeout])))
     if errors:
         raise ConfigError(errors)
     return ControllerSetup(config, mix, R_d, SetpointSchedule(times, rotations), values)

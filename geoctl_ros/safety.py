@@ -8,8 +8,11 @@ Rules (the README's "Safety behaviour" section says the same to users):
 - A stream is fresh while its last accepted sample arrived (receipt time, on the node's clock)
   less than its timeout ago. Receipt time is used because the motion-capture host's clock need not
   agree with the onboard one; stamps are used only for ordering.
-- Arming is refused unless pose and angular velocity are both fresh. While armed, if either goes
-  stale the supervisor disarms (failsafe) and says why. Motor commands are zero unless armed.
+- A stale stream is not yet lost: up to its ride-through limit (``pose_ride_through``,
+  ``imu_ride_through``) the control loop bridges the gap (``geoctl_ros.loop``: attitude propagated
+  with the gyro, rates from successive poses) and reports it. Past the limit the stream is lost.
+- Arming is refused unless pose and angular velocity are both fresh. While armed, if either is
+  lost the supervisor disarms (failsafe) and says why. Motor commands are zero unless armed.
 """
 from dataclasses import dataclass
 import math
@@ -40,11 +43,15 @@ def angular_velocity_problem(w, limit):
 
 
 class Stream:
-    """Freshness, ordering and refusal counts of one input stream."""
+    """Freshness, ordering and refusal counts of one input stream.
 
-    def __init__(self, name, timeout):
+    timeout: older than this (by receipt), the stream is stale. ride_through: older than this, it
+    is lost (0: lost as soon as it is stale)."""
+
+    def __init__(self, name, timeout, ride_through=0.0):
         self.name = name
         self.timeout = timeout
+        self.ride_through = ride_through
         self.last_stamp = -math.inf
         self.last_receipt = None
         self.accepted = 0
@@ -77,6 +84,11 @@ class Stream:
     def fresh(self, now):
         return self.age(now) < self.timeout
 
+    @property
+    def limit(self):
+        """Age at which the stream is lost: the ride-through limit, or the timeout without one."""
+        return max(self.ride_through, self.timeout)
+
     def staleness(self, now):
         """A sentence if the stream is stale, else None."""
         if self.last_receipt is None:
@@ -84,6 +96,18 @@ class Stream:
         if not self.fresh(now):
             return '%s stale (last %.3f s ago, timeout %.3f s)' % (self.name, self.age(now),
                                                                  self.timeout)
+        return None
+
+    def loss(self, now):
+        """A sentence if the stream is lost (older than its limit, or never received), else
+        None."""
+        if self.last_receipt is None:
+            return 'no %s received yet' % self.name
+        if self.age(now) >= self.limit:
+            return '%s lost (last %.3f s ago, %s %.3f s)' % (
+                self.name, self.age(now),
+                'ride-through limit' if self.ride_through > self.timeout else 'timeout',
+                self.limit)
         return None
 
 
@@ -103,8 +127,17 @@ class Supervisor:
         self.reason = 'disarmed at start-up'
 
     def input_problem(self, now):
+        """Why the inputs are not fresh enough to arm (the first stale stream), or None."""
         for s in self.streams:
             problem = s.staleness(now)
+            if problem:
+                return problem
+        return None
+
+    def input_loss(self, now):
+        """Why the inputs can no longer carry a flight (the first lost stream), or None."""
+        for s in self.streams:
+            problem = s.loss(now)
             if problem:
                 return problem
         return None
@@ -125,9 +158,9 @@ class Supervisor:
         return ArmResult(True, 'disarmed')
 
     def check(self, now):
-        """Called every control tick: disarm if an input went stale. True if the motors may run."""
+        """Called every control tick: disarm if an input is lost. True if the motors may run."""
         if self.armed:
-            problem = self.input_problem(now)
+            problem = self.input_loss(now)
             if problem:
                 self.disarm('failsafe: ' + problem)
         return self.armed

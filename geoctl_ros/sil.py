@@ -234,3 +234,42 @@ def _diag(msg):
     s = msg.status[0]
     return {'level': int.from_bytes(s.level, 'little') if isinstance(s.level, bytes) else s.level,
             'message': s.message, **{kv.key: kv.value for kv in s.values}}
+
+
+def process_sockets(pid):
+    """The IP sockets process pid holds, as (protocol, local address, local port, remote address),
+    read from /proc (Linux). The tests use it to prove that every socket is on loopback."""
+    inodes = set()
+    fd_dir = '/proc/%d/fd' % pid
+    for fd in os.listdir(fd_dir):
+        try:
+            target = os.readlink(os.path.join(fd_dir, fd))
+        except OSError:
+            continue
+        if target.startswith('socket:['):
+            inodes.add(target[8:-1])
+    out = []
+    for proto in ('udp', 'tcp', 'udp6', 'tcp6'):
+        try:
+            with open('/proc/%d/net/%s' % (pid, proto)) as f:
+                rows = f.read().splitlines()[1:]
+        except OSError:
+            continue
+        for row in rows:
+            cols = row.split()
+            if cols[9] in inodes:
+                local_ip, local_port = _proc_address(cols[1])
+                remote_ip, _ = _proc_address(cols[2])
+                out.append((proto, local_ip, local_port, remote_ip))
+    return out
+
+
+def _proc_address(text):
+    """'0100007F:1C8B' (/proc/net: 32-bit words in host byte order) -> ('127.0.0.1', 7307)."""
+    import ipaddress
+    import struct
+    addr, port = text.split(':')
+    words = [int(addr[k:k + 8], 16) for k in range(0, len(addr), 8)]
+    raw = b''.join(struct.pack('=I', w) for w in words)
+    ip = ipaddress.IPv4Address(raw) if len(raw) == 4 else ipaddress.IPv6Address(raw)
+    return str(ip), int(port, 16)

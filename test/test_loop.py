@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from geoctl_ros import so3
-from geoctl_ros.loop import ControlLoop
+from geoctl_ros.loop import ERROR, NON_FINITE, OK, WARN, ControlLoop
 from geoctl_ros.params import CONTROLLER, ConfigError, controller_setup, resolve
 
 YAW90 = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))
@@ -37,15 +37,16 @@ def test_disarmed_until_armed_with_fresh_inputs():
     assert tick.armed and np.all(tick.motors.commands > 0)
 
 
-def test_stale_input_disarms_with_the_reason_and_stays_disarmed():
-    loop = make_loop(imu_timeout=0.05, pose_timeout=0.1)
+def test_without_ride_through_a_stale_input_disarms_at_its_timeout_and_stays_disarmed():
+    loop = make_loop(imu_timeout=0.05, pose_timeout=0.1, imu_ride_through=0.0,
+                     pose_ride_through=0.0)
     feed(loop, 0.0)
     assert loop.arm(0.0).ok
     assert loop.offer_pose(YAW90, 0.04, 0.04) is None        # pose goes on, imu stops
     assert loop.tick(0.04, 0.01).armed
     tick = loop.tick(0.06, 0.01)
     assert not tick.armed and not tick.motors.commands.any()
-    assert loop.supervisor.reason.startswith('failsafe: angular velocity stale')
+    assert loop.supervisor.reason.startswith('failsafe: angular velocity lost')
     feed(loop, 0.07)                                          # data back: still disarmed
     assert not loop.tick(0.08, 0.01).armed
     assert not loop.arm(0.5).ok                               # now stale again
@@ -121,3 +122,150 @@ def test_adaptation_runs_only_while_armed():
     assert loop.arm(0.01).ok
     loop.tick(0.02, 0.01)
     assert loop.controller.delta_bar.any()
+
+
+# --- riding through input gaps (exact times; the defaults: pose 0.1 s stale, 0.5 s lost; imu
+# 0.05 s stale, 0.25 s lost) ------------------------------------------------------------------
+SPIN = np.array([0.1, -0.2, 0.5])          # rad/s, body frame
+R0 = so3.quat_to_rot(YAW90)
+
+
+def spinning(t):
+    """The attitude of a body turning at the constant body rate SPIN from R0."""
+    return R0 @ so3.exp(SPIN * t)
+
+
+def fly_spinning(loop, t_end, pose_until=np.inf, imu_until=np.inf, dt=0.005):
+    """Feed poses and gyro of the spinning body every dt (each stream until its cut-off) and
+    tick every 2 dt; returns the last tick."""
+    tick = None
+    for k in range(int(round(t_end / dt)) + 1):
+        t = k * dt
+        if t <= pose_until:
+            assert loop.offer_pose(so3.rot_to_quat(spinning(t)), t, t) is None
+        if t <= imu_until:
+            assert loop.offer_angular_velocity(SPIN, t, t) is None
+        if k == 0:
+            assert loop.arm(t).ok
+        if k % 2 == 0:
+            tick = loop.tick(t, 2 * dt)
+    return tick
+
+
+def test_a_pose_gap_is_flown_on_the_attitude_propagated_with_the_gyro():
+    loop = make_loop()
+    tick = fly_spinning(loop, 0.6, pose_until=0.2)             # poses stop: a 0.4 s gap
+    assert tick.armed and tick.bridging
+    # constant rate: gyro propagation from the last pose is exact
+    R_true = spinning(0.6)
+    assert np.allclose(loop.bridge.R, R_true, atol=1e-12)
+    # the control step (cone margins included) ran on the propagated attitude
+    cones = loop.setup.config.cones
+    assert np.allclose(tick.control.margins_deg, cones.margins_deg(R_true), atol=1e-9)
+    st = loop.status(0.6)
+    assert st.level == WARN
+    assert 'pose gap: attitude propagated with the gyro (pose 0.400 s old, failsafe at 0.500 s)' \
+        in st.message
+
+
+def test_a_pose_gap_longer_than_the_limit_fails_safe_at_the_limit():
+    loop = make_loop()
+    fly_spinning(loop, 0.69, pose_until=0.2)                   # 0.49 s: still flying
+    assert loop.supervisor.armed
+    tick = loop.tick(0.705, 0.01)                              # 0.505 s: past the limit
+    assert not tick.armed and not tick.motors.commands.any()
+    assert loop.supervisor.reason == ('failsafe: pose lost (last 0.505 s ago, ride-through '
+                                      'limit 0.500 s)')
+    assert loop.status(0.705).level == ERROR
+
+
+def test_an_imu_gap_is_flown_on_rates_from_successive_poses():
+    loop = make_loop()
+    dbar = []
+    tick = fly_spinning(loop, 0.3, imu_until=0.1)              # gyro stops: a 0.2 s gap
+    assert tick.armed and tick.bridging
+    # constant rate: the rate from two poses 50 ms apart is exact
+    assert np.allclose(loop.bridge.Omega, SPIN, atol=1e-9)
+    assert np.allclose(tick.control.e_Omega, SPIN, atol=1e-9)      # R_d still: e_Omega = Omega
+    assert 'angular velocity gap: rate from successive poses (imu 0.200 s old, failsafe at ' \
+        '0.250 s)' in loop.status(0.3).message
+    # the estimate does not learn from a bridged state
+    dbar.append(loop.controller.delta_bar.copy())
+    loop.offer_pose(so3.rot_to_quat(spinning(0.305)), 0.305, 0.305)
+    loop.tick(0.31, 0.01)
+    assert np.array_equal(loop.controller.delta_bar, dbar[0])
+    # past the limit: failsafe
+    tick = loop.tick(0.36, 0.01)
+    assert not tick.armed
+    assert loop.supervisor.reason.startswith('failsafe: angular velocity lost (last 0.260 s')
+
+
+def test_both_gaps_hold_the_rate_and_propagate_until_the_shorter_limit():
+    loop = make_loop()
+    tick = fly_spinning(loop, 0.34, pose_until=0.2, imu_until=0.2)   # both stop: 0.14 s gap
+    assert tick.armed and tick.bridging
+    assert loop.bridge.rate_source == 'held'
+    assert np.allclose(loop.bridge.R, spinning(0.34), atol=1e-12)    # held constant rate: exact
+    assert not loop.tick(0.45, 0.01).armed                           # imu lost at 0.25 s
+    # and the gyro reading it held was the last measurement
+    assert np.allclose(loop.bridge.Omega, SPIN)
+
+
+def test_arming_needs_fresh_inputs_even_within_the_ride_through():
+    loop = make_loop()
+    feed(loop, 0.0)
+    loop.tick(0.0, 0.01)
+    assert loop.offer_angular_velocity((0.0, 0.0, 0.0), 0.2, 0.2) is None   # pose 0.2 s old
+    refused = loop.arm(0.2)
+    assert not refused.ok and 'pose stale (last 0.200 s ago' in refused.message
+
+
+def test_a_gap_and_its_length_are_counted_when_it_ends():
+    loop = make_loop()
+    fly_spinning(loop, 0.45, pose_until=0.2)
+    loop.offer_pose(so3.rot_to_quat(spinning(0.45)), 0.45, 0.45)
+    tick = loop.tick(0.45, 0.01)
+    assert not tick.bridging
+    assert loop.status(0.45).values['pose gaps ridden through'] == '1 (longest 0.250 s)'
+
+
+def test_a_non_finite_control_output_disarms_and_publishes_zero(monkeypatch):
+    loop = make_loop()
+    feed(loop, 0.0)
+    assert loop.arm(0.0).ok
+    real_step = loop.controller.step
+
+    def poisoned(*args, **kwargs):           # stands in for a defect in the control law
+        out = real_step(*args, **kwargs)
+        out.u[1] = math.nan
+        return out
+    monkeypatch.setattr(loop.controller, 'step', poisoned)
+    tick = loop.tick(0.01, 0.01)
+    assert tick.control is None and not tick.armed and not tick.motors.commands.any()
+    assert loop.supervisor.reason == NON_FINITE
+    assert loop.status(0.01).level == ERROR
+
+
+def test_diagnostics_levels_and_fixed_windows():
+    loop = make_loop()
+    assert loop.status(0.0).level == WARN                      # disarmed at start-up
+    feed(loop, 0.0)
+    assert loop.arm(0.0).ok
+    for k in range(5):
+        if k:
+            feed(loop, 0.01 * k)
+        loop.tick(0.01 * k, 0.01)
+    st = loop.status(0.04)
+    assert st.level == OK and st.message == 'armed, all inputs fresh'
+    assert st.values['ticks'] == '5'
+    loop.status(0.04)                                          # an event publish: same window
+    assert loop.status(0.04).values['ticks'] == '5'
+    loop.end_window()
+    assert loop.status(0.04).values['ticks'] == '0'
+    # near a cone: the set point close to the obstacle, the attitude at it
+    near = so3.axis_angle([0, 0, 1], math.radians(45.0 - 13.0))
+    loop.request_setpoint(so3.rot_to_quat(near))
+    feed(loop, 0.05, q=so3.rot_to_quat(near))
+    loop.tick(0.05, 0.01)
+    st = loop.status(0.05)
+    assert st.level == WARN and "near cone 'obstacle' (margin 1.00 deg)" in st.message

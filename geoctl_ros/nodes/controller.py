@@ -5,13 +5,11 @@ set points, a timer at ``rate_hz`` runs one control step and publishes the resul
 disarm and reset the estimate, and parameter changes are validated by the shared schema before
 they touch the running controller. Topics, services and parameters: see the README.
 """
-import math
 import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, QuaternionStamped, Vector3Stamped, WrenchStamped
-import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -24,38 +22,15 @@ from geoctl_ros.loop import ControlLoop
 from geoctl_ros.nodes import ros_params
 from geoctl_ros.nodes.conversions import quaternion, set_vector, stamp_seconds, vector
 from geoctl_ros.nodes.runtime import spin
+from geoctl_ros.stats import WindowStats
 from geoctl_ros.params import CONTROLLER, ConfigError, controller_setup, resolve
 
 COMMAND_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
-DIAGNOSTICS_PERIOD = 0.5      # s
-NEAR_CONE_DEG = 2.0           # a cone margin below this is reported (WARN)
+DIAGNOSTICS_PERIOD = 0.5      # s: the fixed statistics window
 
 
 def build(values, staged_cones=True):
     return controller_setup(resolve(CONTROLLER, values, staged_cones=staged_cones))
-
-
-class Stats:
-    """Running mean and max of a quantity over a diagnostics window."""
-
-    def __init__(self):
-        self.reset()
-
-    def add(self, x):
-        self.n += 1
-        self.total += x
-        self.peak = max(self.peak, x)
-        self.sq += x * x
-
-    def reset(self):
-        self.n, self.total, self.peak, self.sq = 0, 0.0, 0.0, 0.0
-
-    def summary(self, scale=1e3):
-        if not self.n:
-            return 'n/a'
-        mean = self.total / self.n
-        std = math.sqrt(max(self.sq / self.n - mean * mean, 0.0))
-        return 'mean %.3f std %.3f max %.3f' % (mean * scale, std * scale, self.peak * scale)
 
 
 class ControllerNode(Node):
@@ -99,13 +74,12 @@ class ControllerNode(Node):
             self._msgs[key].header.frame_id = self.frame_id
         self._pose_stamp_msg = None
         self._last_tick = None
-        self._period_stats, self._compute_stats, self._latency_stats = Stats(), Stats(), Stats()
-        self._saturated = 0
-        self._ticks = 0
-        self._last_tick_out = None
+        self._period_stats = WindowStats()
+        self._compute_stats = WindowStats()
+        self._latency_stats = WindowStats()
         self._last_state = None
         self.create_timer(self.period, self._on_tick, clock=self.clock_)
-        self.create_timer(DIAGNOSTICS_PERIOD, self._publish_diagnostics, clock=self.clock_)
+        self.create_timer(DIAGNOSTICS_PERIOD, self._end_window, clock=self.clock_)
         self.get_logger().info('controller ready at %g Hz (%s clock), %d cone(s), disarmed'
                                % (setup.values['rate_hz'], 'ROS' if sim_time else 'steady',
                                   len(setup.config.cones)))
@@ -188,18 +162,11 @@ class ControllerNode(Node):
         self._last_tick = now
         tick = self.loop.tick(now, self.period)
         out = tick.control
-        if out is not None and not np.all(np.isfinite(out.u)):   # cannot happen; never publish it
-            self.loop.disarm('failsafe: non-finite control output')
-            out = None
-            tick.motors = self.loop.setup.mixer.mix(np.zeros(3), armed=False)
         m = self._msgs
         m['motors'].data = tick.motors.normalised.tolist()
         self.pub_motors.publish(m['motors'])
         if tick.armed and self.loop.pose.last_receipt is not None:
             self._latency_stats.add(self._now() - self.loop.pose.last_receipt)
-        self._ticks += 1
-        self._saturated += bool(tick.armed and tick.motors.allocation.saturated)
-        self._last_tick_out = tick
         if out is not None:
             stamp = self._pose_stamp_msg
             w = m['wrench']
@@ -220,73 +187,36 @@ class ControllerNode(Node):
             m['margins'].data = out.margins_deg.tolist()
             self.pub_margins.publish(m['margins'])
         self._compute_stats.add(time.perf_counter() - t0)
-        state = (tick.armed, self.loop.supervisor.reason)
+        state = (tick.armed, self.loop.supervisor.reason, tick.bridging)
         if state != self._last_state:
             if self._last_state is not None and not tick.armed and state[1].startswith('failsafe'):
                 self.get_logger().error(state[1])
+            elif tick.bridging and not (self._last_state or (0, 0, False))[2]:
+                self.get_logger().warning('; '.join(self.loop.gap_notes(now)))
             self._last_state = state
             self._publish_diagnostics()
 
     # --- diagnostics -------------------------------------------------------------------------
     def _publish_diagnostics(self):
-        now = self._now()
-        loop = self.loop
-        errors, warnings = [], []
-        sup = loop.supervisor
-        if not sup.armed:
-            (errors if sup.reason.startswith('failsafe') else warnings).append(sup.reason)
-        stale = sup.input_problem(now)
-        if stale:
-            (errors if sup.armed else warnings).append(stale)
-        for s in (loop.pose, loop.rate):
-            reasons = s.take_refusals()
-            if reasons:
-                warnings.append('%s refused: %s (%d so far)' % (s.name, ' | '.join(reasons),
-                                                                 s.refused))
-        tick = self._last_tick_out
-        out = tick.control if tick else None
-        if out is not None and len(out.margins_deg):
-            i = int(np.argmin(out.margins_deg))
-            name = loop.setup.config.cones.names[i]
-            if out.violated:
-                errors.append('sensor inside cone %r (margin %.2f deg)' % (name, out.margins_deg[i]))
-            elif out.margins_deg[i] < NEAR_CONE_DEG:
-                warnings.append('near cone %r (margin %.2f deg)' % (name, out.margins_deg[i]))
-        if self._saturated:
-            warnings.append('allocation saturated in %d of %d ticks' % (self._saturated,
-                                                                        self._ticks))
-        if loop.setpoint_note:
-            warnings.append(loop.setpoint_note)
-        others = self._other_commanders()
-        if others:
-            (errors if sup.armed else warnings).append(others)
-        level = (DiagnosticStatus.ERROR if errors else
-                 DiagnosticStatus.WARN if warnings else DiagnosticStatus.OK)
-        status = DiagnosticStatus(level=level, name='geoctl_ros: controller',
-                                  hardware_id='hexrotor',
-                                  message='; '.join(errors + warnings) or 'armed, all inputs fresh')
-        values = {
-            'armed': str(sup.armed), 'state': sup.reason,
-            'pose age [s]': '%.4f' % loop.pose.age(now), 'imu age [s]': '%.4f' % loop.rate.age(now),
-            'pose accepted/refused': '%d/%d' % (loop.pose.accepted, loop.pose.refused),
-            'imu accepted/refused': '%d/%d' % (loop.rate.accepted, loop.rate.refused),
-            'loop period [ms]': self._period_stats.summary(),
-            'step compute [ms]': self._compute_stats.summary(),
-            'pose-to-command latency [ms]': self._latency_stats.summary(),
-            'ticks': str(self._ticks),
-        }
-        if out is not None:
-            values['Psi'] = '%.6g' % out.psi
-            values['min cone margin [deg]'] = ('%.3f' % float(np.min(out.margins_deg))
-                                               if len(out.margins_deg) else 'no cones')
-            values['motor commands'] = ' '.join(str(c) for c in tick.motors.commands)
-        status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
+        """Publish the loop's status with this window's timing figures so far."""
+        st = self.loop.status(self._now(), self._other_commanders())
+        values = dict(st.values)
+        values['loop period [ms]'] = self._period_stats.summary()
+        values['step compute [ms]'] = self._compute_stats.summary()
+        values['pose-to-command latency [ms]'] = self._latency_stats.summary()
+        status = DiagnosticStatus(level=bytes([st.level]), name='geoctl_ros: controller',
+                                  hardware_id='hexrotor', message=st.message,
+                                  values=[KeyValue(key=k, value=v) for k, v in values.items()])
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(msg)
+
+    def _end_window(self):
+        """Every DIAGNOSTICS_PERIOD: publish, then start a new statistics window."""
+        self._publish_diagnostics()
         for s in (self._period_stats, self._compute_stats, self._latency_stats):
             s.reset()
-        self._saturated = self._ticks = 0
+        self.loop.end_window()
 
 
 def main():
