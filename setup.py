@@ -14,6 +14,7 @@ setup(
         ('share/' + PACKAGE, ['package.xml']),
         ('share/' + PACKAGE + '/config', glob('config/*.yaml')),
         ('share/' + PACKAGE + '/config/scenarios', glob('config/scenarios/*.yaml')),
+        ('share/' + PACKAGE + '/config/dds', glob('config/dds/*.xml')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,

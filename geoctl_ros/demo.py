@@ -23,8 +23,8 @@ import time
 import numpy as np
 
 from geoctl_ros import scenario, so3
+from geoctl_ros.rosenv import config_dir
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TABLE_HEAD = ('| scenario | min angle to each cone (half-angle), deg | final attitude error, deg '
               '| final Psi | settle time (Psi < 1e-3), s | final Delta_bar | wall time, s |\n'
               '|---|---|---|---|---|---|---|')
@@ -39,15 +39,6 @@ def table_row(summary):
     return '| `%s` | %s | %.2g | %.2g | %s | %s | %.1f |' % (
         summary['scenario'], cones, summary['final_attitude_error_deg'], summary['final_psi'],
         settle, dbar, summary['wall_time_s'])
-
-
-def config_dir():
-    """The shipped config folder, from the source tree or the installed share directory."""
-    here = os.path.join(ROOT, 'config')
-    if not os.path.isdir(here):
-        from ament_index_python.packages import get_package_share_directory
-        here = os.path.join(get_package_share_directory('geoctl_ros'), 'config')
-    return here
 
 
 def headless(out):
@@ -82,9 +73,10 @@ def fly(params_file, out, duration, monitor_factory=None):
     import rclpy
     from geoctl_ros.params import CONTROLLER, cone_set, load_parameter_file, node_overrides, \
         resolve, controller_setup
-    from geoctl_ros.sil import Monitor, NodeProcess, ensure_local_ros_env
+    from geoctl_ros.rosenv import use_node_env
+    from geoctl_ros.sil import Monitor, NodeProcess
 
-    ensure_local_ros_env()
+    use_node_env()
     values = resolve(CONTROLLER, node_overrides(load_parameter_file(params_file), CONTROLLER))
     setup = controller_setup(values)
     cones = cone_set(values)

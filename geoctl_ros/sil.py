@@ -2,12 +2,10 @@
 processes (as ``ros2 run`` would), and a monitor node that records their topics and calls their
 services and parameters.
 
-Every process started here runs with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and the caller's
-``ROS_DOMAIN_ID`` (``ensure_local_ros_env`` picks one when none is set), so DDS discovery stays on
-loopback.
+Every process started here runs with the loopback DDS profile and the caller's ``ROS_DOMAIN_ID``
+(``geoctl_ros.rosenv.node_env``), so DDS traffic stays on 127.0.0.1.
 """
 import os
-import random
 import shutil
 import signal
 import subprocess
@@ -26,12 +24,7 @@ from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.nodes.conversions import stamp_seconds
-
-
-def ensure_local_ros_env():
-    """Loopback-only discovery, and a DDS domain of this process's own unless one is set."""
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    os.environ.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randint(10, 99)))
+from geoctl_ros.rosenv import node_env
 
 
 def executable(name):
@@ -50,17 +43,19 @@ def executable(name):
 class NodeProcess:
     """One node as a child process, its output in a log file."""
 
-    def __init__(self, name, params_file=None, ros_args=(), log_dir='.'):
-        ensure_local_ros_env()
+    def __init__(self, name, params_file=None, ros_args=(), log_dir='.', env=None, prefix=()):
+        """env: the process's environment (default: geoctl_ros.rosenv.node_env()); prefix: a
+        command to run it under (as ``ros2 run --prefix``), e.g. ('nice', '-n', '-10')."""
         exe = executable(name)
-        cmd = ([exe] if exe else [sys.executable, '-m', 'geoctl_ros.nodes.' + name])
+        cmd = list(prefix) + ([exe] if exe else [sys.executable, '-m', 'geoctl_ros.nodes.' + name])
         cmd += ['--ros-args'] + (['--params-file', str(params_file)] if params_file else [])
         cmd += list(ros_args)
         self.name = name
         self.log_path = os.path.join(str(log_dir), '%s.log' % name)
         self._log = open(self.log_path, 'w')
         self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT,
-                                     env=dict(os.environ, PYTHONUNBUFFERED='1'))
+                                     env=dict(node_env() if env is None else env,
+                                              PYTHONUNBUFFERED='1'))
 
     def stop(self, timeout=5.0):
         """SIGINT (a clean stop), then SIGKILL if need be; returns the exit code."""
@@ -89,9 +84,11 @@ class NodeProcess:
 class Monitor(Node):
     """Records what the controller and the sim publish; arms, sets parameters, injects input."""
 
-    def __init__(self, controller='controller'):
+    def __init__(self, controller='controller', record=None):
+        """record: the log keys to subscribe to (default: all of them)."""
         super().__init__('geoctl_monitor')
         reliable1 = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
+        self._record = None if record is None else set(record)
         self.log = {k: [] for k in ('motors', 'margins', 'psi', 'dbar', 'true_pose', 'pose',
                                     'diagnostics', 'eR')}
         self._sub(Float64MultiArray, 'motor_commands', 'motors', reliable1, lambda m: list(m.data))
@@ -115,6 +112,9 @@ class Monitor(Node):
         self.executor_.add_node(self)
 
     def _sub(self, msg_type, topic, key, qos, convert):
+        if self._record is not None and key not in self._record:
+            return
+
         def record(msg):
             self.log[key].append((time.monotonic(), convert(msg)))
         self.create_subscription(msg_type, topic, record, qos)

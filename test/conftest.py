@@ -1,8 +1,11 @@
-"""Test-wide settings: ROS traffic on loopback in a domain of this run's own, Agg plots."""
-import os
-import random
+"""Test-wide settings: ROS traffic on loopback in a domain of this run's own, Agg plots.
 
-# Set before anything imports rclpy, so that no test can multicast off this machine.
-os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-os.environ.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randint(10, 99)))
+Set before anything imports rclpy: every node of the tests (this process's and the ones it
+starts) uses the loopback DDS profile (geoctl_ros.rosenv), so nothing can leave 127.0.0.1.
+"""
+import os
+
+from geoctl_ros.rosenv import use_node_env
+
+use_node_env()
 os.environ['MPLBACKEND'] = 'Agg'

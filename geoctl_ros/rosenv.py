@@ -1,0 +1,64 @@
+"""The DDS environment of every ROS process this project starts: loopback only, a domain of its own.
+
+Two settings, both keeping traffic on 127.0.0.1 (README, "DDS transport"):
+
+- ``node_env``: the nodes (and the tests' and tools' own rclpy nodes) use the shipped Fast DDS
+  profile ``config/dds/fastdds_loopback.xml``: UDPv4 only, every locator and initial peer on
+  127.0.0.1, no shared memory, no multicast. It needs ``ROS_AUTOMATIC_DISCOVERY_RANGE=
+  SYSTEM_DEFAULT``, because in LOCALHOST mode rmw_fastrtps replaces the profile's transports with its
+  own (shared memory + UDP), and shared memory is what stalls a process for ~333 ms whenever a
+  participant (a ``ros2`` command) joins.
+- ``cli_env``: what a lab's own shell has for the ``ros2`` command:
+  ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and no profile. It reaches the nodes over UDP on
+  loopback.
+
+Both keep the caller's ``ROS_DOMAIN_ID`` or pick a random one (10-99), so that runs side by side
+do not hear each other. No rclpy here: this is read before anything creates a node.
+"""
+import os
+import random
+
+PROFILE_VAR = 'FASTRTPS_DEFAULT_PROFILES_FILE'   # Fast DDS 2.x (ROS 2 Jazzy)
+RANGE_VAR = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
+
+
+def config_dir():
+    """The shipped config folder: the source tree's, or the installed share directory's."""
+    here = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config')
+    if not os.path.isdir(here):
+        from ament_index_python.packages import get_package_share_directory
+        here = os.path.join(get_package_share_directory('geoctl_ros'), 'config')
+    return here
+
+
+def dds_profile():
+    """Path of the shipped Fast DDS loopback profile."""
+    return os.path.join(config_dir(), 'dds', 'fastdds_loopback.xml')
+
+
+def _domain(env):
+    return env.get('ROS_DOMAIN_ID') or str(random.SystemRandom().randint(10, 99))
+
+
+def node_env(env=None):
+    """A copy of env (default: os.environ) set up for nodes: the loopback profile, own domain."""
+    out = dict(os.environ if env is None else env)
+    out[RANGE_VAR] = 'SYSTEM_DEFAULT'
+    out[PROFILE_VAR] = dds_profile()
+    out['ROS_DOMAIN_ID'] = _domain(out)
+    out.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
+    return out
+
+
+def cli_env(env=None):
+    """A copy of env as a lab's shell has it for the ``ros2`` command: LOCALHOST, no profile."""
+    out = dict(os.environ if env is None else env)
+    out[RANGE_VAR] = 'LOCALHOST'
+    out.pop(PROFILE_VAR, None)
+    out['ROS_DOMAIN_ID'] = _domain(out)
+    return out
+
+
+def use_node_env():
+    """Set this process's environment for nodes (call before rclpy creates a context)."""
+    os.environ.update(node_env())

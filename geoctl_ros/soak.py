@@ -1,0 +1,488 @@
+"""Load and fault runs over real DDS: does the lab's own workflow ever drop the testbed?
+
+    ./run soak                                   # every case, 60 s each, prints a table
+    ./run soak --case monitoring --duration 600  # the README's monitoring commands for 10 min
+    ./run soak --transport rmw-default ...       # the same with the rmw's default transports
+
+Each case flies the sim-in-the-loop (``sim`` and ``controller`` processes on
+``config/testbed.yaml``, armed) while loads run beside it or
+faults are injected into its inputs, and measures what matters for a vehicle on a joint:
+
+- failsafes (each one is counted, then the controller is re-armed, as an operator would; the
+  set-point schedule plays from each arming and then holds R_d),
+- input age at the controller's ticks (p99 of its 0.5 s diagnostics windows, and max),
+- the gap between motor commands at a subscriber (p99, max) and the control loop period (p99,
+  max), and the sensor's closest approach to the cone (from the sim's true attitude).
+
+Loads (other people's processes, in a plain ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` shell):
+``cli`` the README's monitoring commands with the real ``ros2`` command in a loop (topic echo,
+topic hz, param dump and get on both nodes, service call, service list); ``churn`` a ROS process
+joining every second and leaving after 0.5-1.5 s, one in three killed with SIGKILL; ``params``
+an rclpy client reading every parameter of both nodes every 0.5 s; ``cpu`` one busy process
+per core. Faults, through a relay between the sim and the controller: inputs delayed by 0-10 ms,
+duplicated, reordered, held back and released in bursts, poses or IMU missing for a while; and
+the sim process paused with SIGSTOP/SIGCONT (both inputs missing).
+
+``--transport profile`` (default) runs the nodes on the shipped loopback profile
+(``geoctl_ros.rosenv``), ``rmw-default`` on the rmw's defaults (shared memory + UDP, LOCALHOST):
+the "before" of the README's table. Everything stays on 127.0.0.1.
+"""
+import argparse
+import json
+import os
+import random
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from geoctl_ros.rosenv import PROFILE_VAR, cli_env, config_dir, node_env
+
+# name: (loads, fault, what). A fault is (kind, argument, period s) or None.
+CASES = {
+    'idle': ((), None, 'no load, no fault'),
+    'monitoring': (('cli',), None, 'the README monitoring commands (ros2 CLI) in a loop'),
+    'monitoring+cpu': (('cli', 'cpu'), None, 'the same, and one busy process per core'),
+    'churn+params': (('churn', 'params'), None,
+                     'processes joining/leaving every second (1 in 3 SIGKILLed), full '
+                     'parameter reads every 0.5 s'),
+    'all loads': (('cli', 'churn', 'params', 'cpu'), None, 'every load at once'),
+    'delayed': ((), ('delay', 0.010, 0), 'inputs delayed by 0-10 ms (so some reordered)'),
+    'duplicated': ((), ('duplicate', 0, 0), 'every input sent twice'),
+    'reordered': ((), ('reorder', 0, 0), 'one input pair in ten swapped'),
+    'bursty': ((), ('hold', 0.080, 1.0), 'inputs held back 80 ms every second, then released'),
+    'pose gap 0.4 s': ((), ('drop_pose', 0.4, 5.0), 'no pose for 0.4 s every 5 s'),
+    'imu gap 0.15 s': ((), ('drop_imu', 0.15, 5.0), 'no imu for 0.15 s every 5 s'),
+    'sim paused 0.15 s': ((), ('pause', 0.15, 5.0), 'sim SIGSTOPped 0.15 s every 5 s'),
+    'sim paused 2 s': ((), ('pause', 2.0, 10.0), 'sim SIGSTOPped 2 s every 10 s: failsafe'),
+}
+RELAYED = ('delay', 'duplicate', 'reorder', 'hold', 'drop_pose', 'drop_imu')
+
+CLI_LOOP = r'''
+while true; do
+  timeout 4 ros2 topic echo /cone_margins > /dev/null
+  timeout 4 ros2 topic hz /pose > /dev/null
+  ros2 param dump /controller > /dev/null
+  ros2 param dump /sim > /dev/null
+  ros2 param get /controller k_R > /dev/null
+  ros2 param get /sim mass > /dev/null
+  ros2 service call /controller/get_parameters rcl_interfaces/srv/GetParameters "{names: [k_R]}" > /dev/null
+  ros2 service call /sim/get_parameters rcl_interfaces/srv/GetParameters "{names: [mass]}" > /dev/null
+  ros2 service list > /dev/null
+  timeout 3 ros2 topic echo /diagnostics > /dev/null
+done
+'''
+
+CHURN_LOOP = r'''
+import random, signal, subprocess, sys, time
+CHILD = ("import rclpy, sys, time\nfrom geometry_msgs.msg import PoseStamped\n"
+         "from rclpy.qos import qos_profile_sensor_data\nrclpy.init()\n"
+         "n = rclpy.create_node('churn')\n"
+         "n.create_subscription(PoseStamped, 'pose', lambda m: None, qos_profile_sensor_data)\n"
+         "end = time.monotonic() + float(sys.argv[1])\n"
+         "while time.monotonic() < end: rclpy.spin_once(n, timeout_sec=0.05)\n")
+rng = random.Random(1)
+children = []
+k = 0
+while True:
+    life = rng.uniform(0.5, 1.5)
+    p = subprocess.Popen([sys.executable, '-c', CHILD, str(life)], stdout=subprocess.DEVNULL,
+                         stderr=subprocess.DEVNULL)
+    children.append((p, time.monotonic() + 0.7 if k % 3 == 2 else None))
+    k += 1
+    end = time.monotonic() + 1.0
+    while time.monotonic() < end:
+        for p, kill_at in children:
+            if kill_at is not None and time.monotonic() >= kill_at and p.poll() is None:
+                p.send_signal(signal.SIGKILL)
+        children = [(p, t) for p, t in children if p.poll() is None]
+        time.sleep(0.05)
+'''
+
+PARAMS_LOOP = r'''
+import time, rclpy
+from rcl_interfaces.srv import GetParameters, ListParameters
+rclpy.init()
+n = rclpy.create_node('soak_param_reader')
+clients = [(n.create_client(ListParameters, '/%s/list_parameters' % x),
+            n.create_client(GetParameters, '/%s/get_parameters' % x)) for x in ('controller', 'sim')]
+def call(c, req):
+    if not c.wait_for_service(timeout_sec=2.0):
+        return None
+    f = c.call_async(req)
+    rclpy.spin_until_future_complete(n, f, timeout_sec=2.0)
+    return f.result()
+while True:
+    t = time.monotonic()
+    for lc, gc in clients:
+        r = call(lc, ListParameters.Request())
+        if r is not None:
+            call(gc, GetParameters.Request(names=list(r.result.names)))
+    rclpy.spin_once(n, timeout_sec=max(0.0, 0.5 - (time.monotonic() - t)))
+'''
+
+
+# --- the relay (a separate process: ``python -m geoctl_ros.soak --relay``) ---------------------
+def relay_main():
+    """Republish raw/pose and raw/imu on pose and imu, with the faults commanded on soak/fault."""
+    import heapq
+    import rclpy
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import Imu
+    from std_msgs.msg import String
+
+    rclpy.init()
+    node = rclpy.create_node('soak_relay')
+    pubs = {'pose': node.create_publisher(PoseStamped, 'pose', qos_profile_sensor_data),
+            'imu': node.create_publisher(Imu, 'imu', qos_profile_sensor_data)}
+    state = {'mode': 'off', 'arg': 0.0, 'until': 0.0, 'held': {}, 'seq': 0}
+    queue = []                      # (due, seq, stream, msg)
+    rng = random.Random(2)
+
+    def on_fault(msg):
+        kind, arg = msg.data.split()
+        state['mode'], state['arg'] = kind, float(arg)
+        state['until'] = time.monotonic() + float(arg)
+
+    def push(due, stream, msg):
+        state['seq'] += 1
+        heapq.heappush(queue, (due, state['seq'], stream, msg))
+
+    def on_input(stream):
+        def cb(msg):
+            now = time.monotonic()
+            mode, active = state['mode'], now < state['until']
+            if mode == 'drop_' + stream and active:
+                return
+            if mode == 'hold' and active:
+                push(state['until'], stream, msg)
+            elif mode == 'delay':
+                push(now + rng.uniform(0.0, state['arg']), stream, msg)
+            elif mode == 'duplicate':
+                pubs[stream].publish(msg)
+                pubs[stream].publish(msg)
+            elif mode == 'reorder':
+                held = state['held'].pop(stream, None)
+                if held is not None:
+                    pubs[stream].publish(msg)
+                    pubs[stream].publish(held)
+                elif rng.random() < 0.1:
+                    state['held'][stream] = msg
+                else:
+                    pubs[stream].publish(msg)
+            else:
+                pubs[stream].publish(msg)
+        return cb
+
+    def flush():
+        now = time.monotonic()
+        while queue and queue[0][0] <= now:
+            _, _, stream, msg = heapq.heappop(queue)
+            pubs[stream].publish(msg)
+
+    node.create_subscription(PoseStamped, 'raw/pose', on_input('pose'), qos_profile_sensor_data)
+    node.create_subscription(Imu, 'raw/imu', on_input('imu'), qos_profile_sensor_data)
+    node.create_subscription(String, 'soak/fault', on_fault, 10)
+    node.create_timer(0.001, flush)
+    signal.signal(signal.SIGTERM, lambda *a: sys.exit(0))
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, SystemExit):
+        pass
+    return 0
+
+
+def listen_main(path):
+    """A subscriber to motor_commands alone (as an ESC bridge would be): writes the receipt times
+    (CLOCK_MONOTONIC, shared by every process) to path when stopped with SIGTERM."""
+    import rclpy
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import Float64MultiArray
+
+    rclpy.init()
+    node = rclpy.create_node('soak_command_listener')
+    stamps = []
+    node.create_subscription(Float64MultiArray, 'motor_commands',
+                             lambda m: stamps.append(time.monotonic()),
+                             QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE))
+    stop = []
+    signal.signal(signal.SIGTERM, lambda *a: stop.append(1))
+    try:
+        from rclpy.experimental import EventsExecutor
+        executor = EventsExecutor()
+    except ImportError:        # pragma: no cover - rclpy before 7.1.4
+        executor = rclpy.executors.SingleThreadedExecutor()
+    executor.add_node(node)
+    while not stop:
+        executor.spin_once(timeout_sec=0.1)
+    np.save(path, np.array(stamps))
+    return 0
+
+
+# --- a flight under load ---------------------------------------------------------------------
+class Session:
+    """sim + controller (+ the relay) + a monitor in this process, armed; stopped by close()."""
+
+    def __init__(self, params_file, out, transport='profile', relay=False, prefix=()):
+        import rclpy
+        from geoctl_ros.sil import Monitor, NodeProcess
+        env = node_env() if transport == 'profile' else cli_env()
+        os.environ.update(env)          # this process's monitor joins the same way
+        if PROFILE_VAR not in env:
+            os.environ.pop(PROFILE_VAR, None)
+        self.env, self.out = env, out
+        self.cones = _cones(params_file)
+        os.makedirs(out, exist_ok=True)
+        sim_args = ('-r', 'pose:=raw/pose', '-r', 'imu:=raw/imu') if relay else ()
+        self.procs = []
+        self.sim = NodeProcess('sim', params_file, sim_args, log_dir=out, env=env, prefix=prefix)
+        self.procs.append(self.sim)
+        if relay:
+            self.relay = subprocess.Popen([sys.executable, '-m', 'geoctl_ros.soak', '--relay'],
+                                          env=env, stdout=subprocess.DEVNULL,
+                                          stderr=subprocess.DEVNULL)
+        else:
+            self.relay = None
+        self.controller = NodeProcess('controller', params_file, log_dir=out, env=env,
+                                      prefix=prefix)
+        self.procs.append(self.controller)
+        self._listen_file = os.path.join(out, 'command_times.npy')
+        self.listener = subprocess.Popen([sys.executable, '-m', 'geoctl_ros.soak', '--listen',
+                                          self._listen_file], env=env,
+                                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        rclpy.init()
+        self.mon = Monitor(record=('diagnostics', 'true_pose'))
+        from std_msgs.msg import String
+        self._String = String
+        self._fault_pub = self.mon.create_publisher(String, 'soak/fault', 10)
+        reply = self.mon.arm_when_ready(40.0)
+        if not reply.success:
+            self.close()
+            raise RuntimeError('could not arm: ' + reply.message)
+        self.mon.spin_for(1.0)
+        self.loads = []
+
+    def fault(self, kind, arg):
+        """Start a fault now: a relay mode, or 'pause' (SIGSTOP the sim for arg seconds)."""
+        if kind == 'pause':
+            self.sim.proc.send_signal(signal.SIGSTOP)
+            try:
+                self.mon.spin_for(arg)
+            finally:
+                self.sim.proc.send_signal(signal.SIGCONT)
+        else:
+            self._fault_pub.publish(self._String(data='%s %g' % (kind, arg)))
+
+    def start_loads(self, loads):
+        env = cli_env(self.env)
+        for load in loads:
+            if load == 'cli':
+                if not shutil.which('ros2', path=os.path.dirname(sys.executable) + os.pathsep
+                                    + env.get('PATH', '')):
+                    raise RuntimeError('the cli load needs the ros2 command (README, "Set-up")')
+                env_cli = dict(env, PATH=os.path.dirname(sys.executable) + os.pathsep
+                               + env.get('PATH', ''))
+                self.loads.append(subprocess.Popen(['bash', '-c', CLI_LOOP], env=env_cli,
+                                                   stdout=subprocess.DEVNULL,
+                                                   stderr=subprocess.DEVNULL,
+                                                   start_new_session=True))
+            elif load in ('churn', 'params'):
+                code = CHURN_LOOP if load == 'churn' else PARAMS_LOOP
+                self.loads.append(subprocess.Popen([sys.executable, '-c', code], env=env,
+                                                   stdout=subprocess.DEVNULL,
+                                                   stderr=subprocess.DEVNULL,
+                                                   start_new_session=True))
+            elif load == 'cpu':
+                for _ in range(os.cpu_count() or 1):
+                    self.loads.append(subprocess.Popen(
+                        [sys.executable, '-c', 'while True: pass'], start_new_session=True))
+            else:
+                raise ValueError('unknown load %r' % load)
+
+    def stop_loads(self):
+        for p in self.loads:
+            try:
+                os.killpg(p.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            p.wait()
+        self.loads = []
+        if shutil.which('ros2', path=os.path.dirname(sys.executable)):
+            subprocess.run([os.path.join(os.path.dirname(sys.executable), 'ros2'), 'daemon',
+                            'stop'], env=cli_env(self.env), stdout=subprocess.DEVNULL,
+                           stderr=subprocess.DEVNULL, timeout=30)
+
+    def phase(self, duration, loads=(), fault=None):
+        """Fly duration seconds with the loads running and the fault repeating; the figures."""
+        mon = self.mon
+        self.start_loads(loads)
+        t0 = time.monotonic()
+        next_fault = t0 + 1.0
+        try:
+            while time.monotonic() - t0 < duration:
+                if fault is not None and time.monotonic() >= next_fault:
+                    kind, arg, period = fault
+                    self.fault(kind, arg)
+                    next_fault = (time.monotonic() + period) if period else float('inf')
+                mon.spin_for(0.1)
+                d = mon.last_diagnostic()
+                if d and d['state'].startswith('failsafe'):
+                    self.fault('off', 0)
+                    mon.wait_for(lambda: mon.arm(True).success, 10.0, 're-arming after a failsafe')
+        finally:
+            self.stop_loads()          # the loads' teardown is part of the window
+            self.fault('off', 0)
+            mon.spin_for(1.0)
+        self.t_end = time.monotonic()
+        return figures(mon, t0, self.t_end, self.cones)
+
+    def command_times(self):
+        """Receipt times of motor_commands at the listener (stops it)."""
+        if self.listener.poll() is None:
+            self.listener.terminate()
+            self.listener.wait(10)
+        try:
+            return np.load(self._listen_file)
+        except OSError:
+            return np.array([])
+
+    def close(self):
+        import rclpy
+        self.command_times()
+        self.mon.destroy_node()
+        rclpy.try_shutdown()
+        if self.relay is not None:
+            self.relay.terminate()
+            self.relay.wait(10)
+        return [p.stop() for p in self.procs]
+
+
+_WINDOW = re.compile(r'mean ([\d.]+) std ([\d.]+) p99 ([\d.]+) max ([\d.]+)')
+
+
+def _windows(diags, key):
+    """(p99 over the windows' p99, max) of a controller diagnostics figure, ms."""
+    rows = [tuple(float(x) for x in m.groups()) for d in diags for m in [_WINDOW.match(d.get(key, ''))]
+            if m]
+    if not rows:
+        return float('nan'), float('nan')
+    a = np.array(rows)
+    return float(np.percentile(a[:, 2], 99)), float(a[:, 3].max())
+
+
+def _cones(params_file):
+    from geoctl_ros.params import CONTROLLER, cone_set, load_parameter_file, node_overrides, \
+        resolve
+    return cone_set(resolve(CONTROLLER, node_overrides(load_parameter_file(params_file),
+                                                       CONTROLLER)))
+
+
+def command_gaps(times, t0, t1):
+    """(p99, max) of the gaps between command receipts within [t0, t1], ms."""
+    t = times[(times >= t0) & (times <= t1)]
+    if len(t) < 2:
+        return float('nan'), float('nan')
+    gaps = np.diff(t) * 1e3
+    return float(np.percentile(gaps, 99)), float(gaps.max())
+
+
+def figures(mon, t0, t1, cones):
+    """The figures of the flight between t0 and t1 (monotonic, as the monitor's log)."""
+    from geoctl_ros import so3
+    diags = [d for t, d in mon.log['diagnostics'] if t0 <= t <= t1]
+    states = [d['state'] for d in diags]
+    failsafes = sum(1 for a, b in zip(['armed'] + states, states)
+                    if b.startswith('failsafe') and not a.startswith('failsafe'))
+    margins = [float(np.min(cones.margins_deg(so3.quat_to_rot(q))))
+               for t, (_, q) in mon.log['true_pose'] if t0 <= t <= t1] if len(cones) else [np.nan]
+    last = diags[-1] if diags else {}
+    out = {
+        'seconds': t1 - t0,
+        'failsafes': failsafes,
+        'warn windows': sum(1 for d in diags if d['level'] == 1),
+        'pose age p99/max [ms]': _windows(diags, 'pose age at tick [ms]'),
+        'imu age p99/max [ms]': _windows(diags, 'imu age at tick [ms]'),
+        'loop period p99/max [ms]': _windows(diags, 'loop period [ms]'),
+        'min cone margin [deg]': min(margins) if margins else float('nan'),
+        'gaps ridden (pose, imu)': (last.get('pose gaps ridden through', '-'),
+                                    last.get('imu gaps ridden through', '-')),
+    }
+    return out
+
+
+TABLE_HEAD = ('| case | s | failsafes | pose age p99 / max, ms | imu age p99 / max, ms | '
+              'command gap p99 / max, ms | loop period p99 / max, ms | min cone margin, deg |\n'
+              '|---|---|---|---|---|---|---|---|')
+
+
+def table_row(name, f):
+    def pair(p):
+        return '%.1f / %.1f' % p
+    return '| %s | %.0f | %d | %s | %s | %s | %s | %.1f |' % (
+        name, f['seconds'], f['failsafes'], pair(f['pose age p99/max [ms]']),
+        pair(f['imu age p99/max [ms]']), pair(f['command gap p99/max [ms]']),
+        pair(f['loop period p99/max [ms]']), f['min cone margin [deg]'])
+
+
+def run_cases(names, duration, params_file, out, transport='profile', prefix=(),
+              progress=print):
+    """Run the named cases, each on a fresh session (relay when a fault needs one); returns
+    {name: figures}."""
+    results = {}
+    for name in names:
+        loads, fault, what = CASES[name]
+        progress('%s: %s, %.0f s ...' % (name, what, duration))
+        relay = fault is not None and fault[0] in RELAYED
+        s = Session(params_file, os.path.join(out, re.sub(r'\W+', '_', name)), transport, relay,
+                    prefix)
+        try:
+            results[name] = s.phase(duration, loads, fault)
+            results[name]['command gap p99/max [ms]'] = command_gaps(
+                s.command_times(), s.t_end - results[name]['seconds'], s.t_end)
+        finally:
+            s.close()
+        progress('  ' + table_row(name, results[name]))
+    return results
+
+
+def main(argv=None):
+    if argv is None and sys.argv[1:2] == ['--relay']:
+        return relay_main()
+    if argv is None and sys.argv[1:2] == ['--listen']:
+        return listen_main(sys.argv[2])
+    parser = argparse.ArgumentParser(prog='soak', description=__doc__.split('\n\n')[0])
+    parser.add_argument('--case', action='append', choices=sorted(CASES),
+                        help='a case to run (repeatable; default: all)')
+    parser.add_argument('--duration', type=float, default=60.0, help='seconds per case (60)')
+    parser.add_argument('--transport', choices=('profile', 'rmw-default'), default='profile',
+                        help='the nodes on the loopback profile (default) or the rmw defaults')
+    parser.add_argument('--params-file', default=None, help='default: config/testbed.yaml')
+    parser.add_argument('--prefix', default='',
+                        help="run sim and controller under this command, as ros2 run --prefix "
+                             "(e.g. 'nice -n -10'; README, \"Scheduling\")")
+    parser.add_argument('--out', default=None, help='folder for logs and soak.json')
+    args = parser.parse_args(argv)
+    params_file = args.params_file or os.path.join(config_dir(), 'testbed.yaml')
+    out = args.out or tempfile.mkdtemp(prefix='soak-')
+    names = args.case or list(CASES)
+    results = run_cases(names, args.duration, params_file, out, args.transport,
+                        args.prefix.split(), progress=lambda m: print(m, file=sys.stderr, flush=True))
+    with open(os.path.join(out, 'soak.json'), 'w') as f:
+        json.dump({'transport': args.transport, 'results': results}, f, indent=2)
+    print('transport: %s, %s%s' % (args.transport, os.path.basename(params_file),
+                                    ', nodes under ' + args.prefix if args.prefix else ''))
+    print(TABLE_HEAD)
+    for name in names:
+        print(table_row(name, results[name]))
+    print('logs and soak.json in %s' % out)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
