@@ -282,7 +282,7 @@ CONE_SCHEMA = [
 ]
 
 BY_NAME = {p.name: p for p in SCHEMA}
-_CONE_KEY = re.compile(r'^cones\.([^.]+)\.(axis|half_angle_deg)$')
+CONE_KEY = re.compile(r'^cones\.([^.]+)\.(axis|half_angle_deg)$')
 _CONE_NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
 
 
@@ -397,7 +397,7 @@ def resolve(node, overrides, staged_cones=False):
     for key in overrides:
         if key in known_elsewhere:
             continue
-        m = _CONE_KEY.match(key)
+        m = CONE_KEY.match(key)
         if m:
             if node == CONTROLLER and m.group(1) not in names and not staged_cones:
                 errors.append((key, 'cone %r is not in cones.names %s' % (m.group(1), names)))
@@ -615,8 +615,8 @@ def node_overrides(sections, node):
     """
     own = {p.name for p in schema_for(node)}
     merged = {k: v for k, v in sections.get('/**', {}).items()
-              if k in own or (node == CONTROLLER and _CONE_KEY.match(k))
-              or k not in BY_NAME and not _CONE_KEY.match(k)}
+              if k in own or (node == CONTROLLER and CONE_KEY.match(k))
+              or k not in BY_NAME and not CONE_KEY.match(k)}
     for key in (node, '/' + node):
         merged.update(sections.get(key, {}))
     return merged

@@ -29,8 +29,10 @@ COMMAND_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
 DIAGNOSTICS_PERIOD = 0.5      # s: the fixed statistics window
 
 
-def build(values, staged_cones=True):
-    return controller_setup(resolve(CONTROLLER, values, staged_cones=staged_cones))
+def build(values):
+    """The controller setup of a node's parameters: cones defined but not yet in cones.names are
+    allowed (they are being added, one parameter at a time, or came from a dump)."""
+    return controller_setup(resolve(CONTROLLER, values, staged_cones=True))
 
 
 class ControllerNode(Node):
@@ -39,8 +41,12 @@ class ControllerNode(Node):
         errors = ros_params.declare(self, CONTROLLER)
         if errors:
             raise ConfigError(errors)
-        setup = build(ros_params.values(self, CONTROLLER), staged_cones=False)
+        setup = build(ros_params.values(self, CONTROLLER))
         self.loop = ControlLoop(setup)
+        unnamed = ros_params.unnamed_cones(self)
+        if unnamed:
+            self.get_logger().warning('cone(s) %s are defined but not in cones.names: not in '
+                                      'effect until named' % ', '.join(unnamed))
         check = gain_condition(setup.config)
         if not check.ok:
             self.get_logger().warning(check.message())

@@ -1,9 +1,14 @@
 """The shared parameter schema as ROS 2 parameters: declaration, reading, run-time validation.
 
 Every schema parameter of the node is declared with its default, type and description (the
-parameter-file overrides apply at declaration). Cones listed in ``cones.names`` are declared too;
-cones added at run time are set as new parameters (the node allows undeclared ones) and take effect
-when their name joins ``cones.names``. Every change is validated as a whole configuration by the
+parameter-file overrides apply at declaration), and every one has a value, so that ``ros2 param
+dump`` lists them all (rclpy answers a get_parameters request with nothing at all when one name in
+it has no value). An empty array is declared with its type and then set to a typed empty value:
+a parameter file's ``[]`` reaches rclpy as "not set", which is how a dump of an empty array reads
+back. Cones listed in ``cones.names`` are declared too; cones added at run time are set as new
+parameters (the node allows undeclared ones) and take effect when their name joins
+``cones.names``. A file may define cones that ``cones.names`` does not list (a dump taken while a
+cone was being added does): they are declared, and take effect when named. Every change is validated as a whole configuration by the
 same code the headless runner uses; a refused change leaves the running node untouched and the
 reason is returned to the caller (``ros2 param set`` prints it).
 """
@@ -13,8 +18,8 @@ from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterVal
 from rclpy.parameter import Parameter
 
 from geoctl_ros.nodes.conversions import python_value
-from geoctl_ros.params import (BY_NAME, CONE_SCHEMA, CONTROLLER, ConfigError, cone_param,
-                               schema_for)
+from geoctl_ros.params import (BY_NAME, CONE_KEY, CONE_SCHEMA, CONTROLLER, ConfigError,
+                               cone_param, schema_for)
 
 ROS_TYPE = {
     'double': Parameter.Type.DOUBLE, 'double_array': Parameter.Type.DOUBLE_ARRAY,
@@ -37,10 +42,22 @@ def _declare(node, p, errors):
     try:
         if p.default is None or p.default == []:
             node.declare_parameter(p.name, ROS_TYPE[p.type], _descriptor(p))
+            if p.default == [] and _get(node, p.name) is None:
+                node.set_parameters([Parameter(p.name, ROS_TYPE[p.type], [])])
         else:
             node.declare_parameter(p.name, p.default, _descriptor(p))
     except (InvalidParameterTypeException, InvalidParameterValueException, TypeError) as e:
         errors.append((p.name, 'expected a %s: %s' % (p.type.replace('_', ' of '), e)))
+
+
+def file_overrides(node):
+    """The parameter-file (and -p) values the node was started with, by name.
+
+    rclpy (Jazzy) keeps them only in the private ``Node._parameter_overrides`` and offers no
+    public accessor (``automatically_declare_parameters_from_overrides`` would declare them
+    without our types and descriptions, and fails on an empty array). Read here and nowhere else.
+    """
+    return dict(getattr(node, '_parameter_overrides', {}))
 
 
 def _get(node, name):
@@ -57,13 +74,24 @@ def declare(node, kind):
     for p in schema_for(kind):
         _declare(node, p, errors)
     if kind == CONTROLLER:
-        names = _get(node, 'cones.names') or []
+        names = list(_get(node, 'cones.names') or [])
         for name in names:
             for template in CONE_SCHEMA:
                 p = cone_param(name, template.name.rsplit('.', 1)[1])
                 if not node.has_parameter(p.name):
                     _declare(node, p, errors)
+        for key in file_overrides(node):      # what the file defines of cones it does not name
+            m = CONE_KEY.match(key)
+            if m and m.group(1) not in names and not node.has_parameter(key):
+                _declare(node, cone_param(m.group(1), m.group(2)), errors)
     return errors
+
+
+def unnamed_cones(node):
+    """Cones with parameters on the node that cones.names does not list (not in effect)."""
+    names = set(_get(node, 'cones.names') or [])
+    return sorted({m.group(1) for n in node.list_parameters([], 0).names
+                   for m in [CONE_KEY.match(n)] if m and m.group(1) not in names})
 
 
 def values(node, kind, pending=()):
@@ -78,7 +106,7 @@ def values(node, kind, pending=()):
         value = _get(node, name)
         if value is not None:
             out[name] = python_value(value)
-    for name, param in getattr(node, '_parameter_overrides', {}).items():
+    for name, param in file_overrides(node).items():
         if name in out or name.startswith(ROS_OWN) or node.has_parameter(name):
             continue
         if name in BY_NAME and kind not in BY_NAME[name].nodes:
