@@ -595,8 +595,18 @@ def flatten(tree, prefix=''):
 
 def load_parameter_file(path):
     """Read a ROS 2 parameter YAML file: {node name or '/**': flat parameter dict}."""
-    with open(path) as f:
-        doc = yaml.safe_load(f) or {}
+    try:
+        with open(path) as f:
+            doc = yaml.safe_load(f) or {}
+    except OSError as e:
+        raise ConfigError([(str(path), 'cannot be read (%s)' % (e.strerror or e))]) from None
+    except yaml.YAMLError as e:
+        mark, context = getattr(e, 'problem_mark', None), getattr(e, 'context_mark', None)
+        where = ' at line %d, column %d' % (mark.line + 1, mark.column + 1) if mark else ''
+        if context is not None and getattr(e, 'context', None):
+            where += ' (%s at line %d)' % (e.context, context.line + 1)
+        what = getattr(e, 'problem', None) or str(e).splitlines()[0]
+        raise ConfigError([(str(path), 'not valid YAML%s: %s' % (where, what))]) from None
     if not isinstance(doc, dict):
         raise ConfigError([(str(path), 'not a ROS 2 parameter file (top level must be a mapping)')])
     sections = {}

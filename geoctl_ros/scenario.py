@@ -201,6 +201,17 @@ def write(result, out_dir, plots=True):
         plotting.scenario_figures(result, out_dir)
 
 
+def _output_problem(out_dir):
+    """Why out_dir cannot take the results (a short phrase), or None; creates it."""
+    try:
+        os.makedirs(out_dir, exist_ok=True)
+    except OSError as e:
+        return 'cannot be created (%s)' % (e.strerror or e)
+    if not os.access(out_dir, os.W_OK):
+        return 'is not writable'
+    return None
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog='scenario', description=__doc__.split('\n\n')[0])
     parser.add_argument('config', help='scenario file (ROS 2 parameter YAML)')
@@ -212,14 +223,29 @@ def main(argv=None):
         parser.error('--duration must be a positive number of seconds')
     try:
         scenario = load(args.config)
-        check = gain_condition(controller_config(scenario.controller))
-        if not check.ok:
-            print('warning: ' + check.message(), file=sys.stderr)
+    except ConfigError as e:
+        if len(e.errors) == 1 and e.errors[0][0] == str(args.config):
+            print('scenario: %s: %s' % e.errors[0], file=sys.stderr)      # the file itself
+        else:
+            print('scenario: %s: %s' % (args.config, e), file=sys.stderr)
+        return 2
+    problem = _output_problem(args.out)
+    if problem:
+        print('scenario: --out %s: %s' % (args.out, problem), file=sys.stderr)
+        return 2
+    check = gain_condition(controller_config(scenario.controller))
+    if not check.ok:
+        print('warning: ' + check.message(), file=sys.stderr)
+    try:
         result = run(scenario, args.duration)
-    except (ConfigError, SetpointRejected, OSError) as e:
+    except SetpointRejected as e:
         print('scenario: %s: %s' % (args.config, e), file=sys.stderr)
         return 2
-    write(result, args.out, plots=not args.no_plots)
+    try:
+        write(result, args.out, plots=not args.no_plots)
+    except OSError as e:
+        print('scenario: --out %s: %s' % (args.out, e.strerror or e), file=sys.stderr)
+        return 2
     s = result.summary
     print('%s: %d steps in %.2f s wall; final attitude error %.3g deg, Psi %.3g, settle %s s; '
           'constraint %s' % (scenario.name, s['control_steps'], s['wall_time_s'],

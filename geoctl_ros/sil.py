@@ -51,6 +51,7 @@ class NodeProcess:
         cmd += ['--ros-args'] + (['--params-file', str(params_file)] if params_file else [])
         cmd += list(ros_args)
         self.name = name
+        os.makedirs(str(log_dir), exist_ok=True)
         self.log_path = os.path.join(str(log_dir), '%s.log' % name)
         self._log = open(self.log_path, 'w')
         self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT,

@@ -1,0 +1,164 @@
+"""The lab's own workflow over real DDS: sockets stay on loopback, short input gaps are ridden
+through and long ones fail safe, the real ``ros2`` command monitors without dropping the vehicle,
+and ``ros2 param dump`` round-trips through ``--params-file``.
+
+Tests that need the ``ros2`` command (../shared/wheels/ros2cli, installed by ./run) are skipped,
+with the reason, where it is missing.
+"""
+import os
+import shutil
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import yaml
+
+rclpy = pytest.importorskip('rclpy')
+
+from geoctl_ros.rosenv import cli_env, config_dir  # noqa: E402
+from geoctl_ros.sil import NodeProcess, process_sockets  # noqa: E402
+from geoctl_ros.soak import Session, command_gaps  # noqa: E402
+
+TESTBED = os.path.join(config_dir(), 'testbed.yaml')
+ROS2 = shutil.which('ros2', path=os.path.dirname(sys.executable)) or shutil.which('ros2')
+needs_ros2 = pytest.mark.skipif(ROS2 is None, reason='no `ros2` command: install it from '
+                                '../shared/wheels/ros2cli (./run does when the folder exists)')
+
+
+def _rot(q):
+    from geoctl_ros import so3
+    return so3.quat_to_rot(q)
+
+
+def ros2(*args, timeout=60):
+    """Run the real `ros2` command as a lab's shell would (LOCALHOST, no profile)."""
+    env = cli_env()
+    env['PATH'] = os.path.dirname(ROS2) + os.pathsep + env.get('PATH', '')
+    return subprocess.run([ROS2, *args], env=env, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+@pytest.fixture
+def stop_daemon():
+    yield
+    if ROS2:
+        ros2('daemon', 'stop')
+
+
+def test_every_socket_of_the_nodes_and_of_this_process_is_on_loopback(tmp_path):
+    procs = [NodeProcess('sim', TESTBED, log_dir=tmp_path),
+             NodeProcess('controller', TESTBED, log_dir=tmp_path)]
+    rclpy.init()
+    node = rclpy.create_node('socket_probe')
+    try:
+        time.sleep(4.0)
+        for pid in [p.proc.pid for p in procs] + [os.getpid()]:
+            socks = process_sockets(pid)
+            assert socks, 'no sockets found for pid %d' % pid
+            assert all(ip == '127.0.0.1' for _, ip, _, _ in socks), socks
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+        for p in procs:
+            p.stop()
+
+
+def test_short_gaps_are_ridden_through_and_a_long_one_fails_safe(tmp_path):
+    s = Session(TESTBED, str(tmp_path), relay=True)
+    mon = s.mon
+    try:
+        t0 = time.monotonic()
+        for kind, arg in (('drop_pose', 0.4), ('drop_imu', 0.15)):
+            s.fault(kind, arg)
+            mon.spin_for(1.5)
+        s.fault('pause', 0.15)                  # the sim SIGSTOPped: both inputs missing
+        mon.spin_for(1.5)
+        diags = [d for t, d in mon.log['diagnostics'] if t >= t0]
+        assert all(d['armed'] == 'True' for d in diags), [d['state'] for d in diags][-3:]
+        messages = ' '.join(d['message'] for d in diags if d['level'] == 1)
+        assert 'pose gap: attitude propagated with the gyro' in messages
+        assert 'angular velocity gap: rate from successive poses' in messages
+        last = diags[-1]
+        assert not last['pose gaps ridden through'].startswith('0 ')
+        assert not last['imu gaps ridden through'].startswith('0 ')
+        margins = [np.min(s.cones.margins_deg(_rot(q))) for t, (_, q) in mon.log['true_pose']
+                   if t >= t0]
+        assert min(margins) > 0.0
+        # a 2 s pause: the failsafe at the imu's ride-through limit, motors zero
+        s.fault('pause', 2.0)
+        mon.spin_for(0.5)
+        d = mon.last_diagnostic()
+        assert d['armed'] == 'False' and d['level'] == 2
+        assert d['state'].startswith('failsafe: angular velocity lost') and \
+            'ride-through limit 0.250 s' in d['state']
+        assert d['motor commands'] == '0 0 0 0 0 0'
+        times = s.command_times()
+        assert len(times) > 100                  # the listener heard the flight
+    finally:
+        s.close()
+
+
+@needs_ros2
+def test_monitoring_with_the_ros2_command_does_not_drop_the_vehicle(tmp_path, stop_daemon):
+    s = Session(TESTBED, str(tmp_path))
+    try:
+        f = s.phase(20.0, loads=('cli',))
+        gaps = command_gaps(s.command_times(), s.t_end - f['seconds'], s.t_end)
+    finally:
+        s.close()
+    assert f['failsafes'] == 0
+    assert f['min cone margin [deg]'] > 0.0
+    assert gaps[1] < 250.0, gaps                # never beyond the ride-through limit
+
+
+@needs_ros2
+@pytest.mark.parametrize('node', ['controller', 'sim'])
+def test_param_dump_restarts_a_node_with_identical_parameters(tmp_path, stop_daemon, node):
+    first = NodeProcess(node, TESTBED, log_dir=tmp_path)
+    try:
+        if node == 'controller':       # a cone added at run time, and one half-defined
+            for name, value in (('cones.sun.axis', '[0.0, 0.0, 1.0]'),
+                                ('cones.sun.half_angle_deg', '10.0'),
+                                ('cones.names', '[obstacle, sun]'),
+                                ('cones.moon.axis', '[0.0, 0.0, -1.0]')):
+                r = ros2('param', 'set', '--timeout', '20', '/' + node, name, value)
+                assert 'successful' in r.stdout, r.stdout + r.stderr
+        dump = ros2('param', 'dump', '--timeout', '20', '/' + node)
+        assert dump.returncode == 0, dump.stderr
+    finally:
+        first.stop()
+    params = yaml.safe_load(dump.stdout)['/' + node]['ros__parameters']
+    assert 'k_R' in params if node == 'controller' else 'integration_rate_hz' in params
+    assert params['rotors']['failed'] == []                   # an empty array is listed
+    (tmp_path / 'dump.yaml').write_text(dump.stdout)
+    second = NodeProcess(node, tmp_path / 'dump.yaml', log_dir=tmp_path / 'second')
+    try:
+        again = ros2('param', 'dump', '--timeout', '20', '/' + node)
+    finally:
+        second.stop()
+    assert yaml.safe_load(again.stdout) == yaml.safe_load(dump.stdout)
+
+
+def test_scenario_reports_a_bad_file_or_output_in_one_line(tmp_path):
+    bad_yaml = tmp_path / 'broken.yaml'
+    bad_yaml.write_text('controller:\n  ros__parameters:\n    k_R: [0.4\n')
+    r = subprocess.run([sys.executable, '-m', 'geoctl_ros.scenario', str(bad_yaml), '--out',
+                        str(tmp_path / 'o')], capture_output=True, text=True)
+    assert r.returncode == 2 and 'Traceback' not in r.stderr
+    assert str(bad_yaml) in r.stderr and 'line 3' in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+    missing = tmp_path / 'nope.yaml'
+    r = subprocess.run([sys.executable, '-m', 'geoctl_ros.scenario', str(missing), '--out',
+                        str(tmp_path / 'o')], capture_output=True, text=True)
+    assert r.returncode == 2 and 'Traceback' not in r.stderr and str(missing) in r.stderr
+    blocker = tmp_path / 'file'
+    blocker.write_text('')
+    r = subprocess.run([sys.executable, '-m', 'geoctl_ros.scenario', TESTBED, '--out',
+                        str(blocker / 'out'), '--duration', '0.05', '--no-plots'],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and 'Traceback' not in r.stderr, r.stderr
+    assert str(blocker / 'out') in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+
