@@ -261,6 +261,9 @@ class Session:
         from std_msgs.msg import String
         self._String = String
         self._fault_pub = self.mon.create_publisher(String, 'soak/fault', 10)
+        if relay:     # a fault command sent before the relay has matched would be lost
+            self.mon.wait_for(lambda: self._fault_pub.get_subscription_count() > 0, 40.0,
+                              'the relay')
         reply = self.mon.arm_when_ready(40.0)
         if not reply.success:
             self.close()

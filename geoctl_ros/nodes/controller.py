@@ -193,11 +193,13 @@ class ControllerNode(Node):
             m['margins'].data = out.margins_deg.tolist()
             self.pub_margins.publish(m['margins'])
         self._compute_stats.add(time.perf_counter() - t0)
-        state = (tick.armed, self.loop.supervisor.reason, tick.bridging)
+        bridge = self.loop.bridge
+        state = (tick.armed, self.loop.supervisor.reason, bridge.attitude_source,
+                 bridge.rate_source)
         if state != self._last_state:
             if self._last_state is not None and not tick.armed and state[1].startswith('failsafe'):
                 self.get_logger().error(state[1])
-            elif tick.bridging and not (self._last_state or (0, 0, False))[2]:
+            elif tick.bridging:
                 self.get_logger().warning('; '.join(self.loop.gap_notes(now)))
             self._last_state = state
             self._publish_diagnostics()
