@@ -211,7 +211,8 @@ class ControlLoop:
             i = int(np.argmin(out.margins_deg))
             name = self.setup.config.cones.names[i]
             if out.violated:
-                errors.append('sensor inside cone %r (margin %.2f deg)' % (name, out.margins_deg[i]))
+                errors.append('sensor inside cone %r (margin %.2f deg)'
+                              % (name, out.margins_deg[i]))
             elif out.margins_deg[i] < NEAR_CONE_DEG:
                 warnings.append('near cone %r (margin %.2f deg)' % (name, out.margins_deg[i]))
         w = self._window

@@ -5,9 +5,9 @@ Two settings, both keeping traffic on 127.0.0.1 (README, "DDS transport"):
 - ``node_env``: the nodes (and the tests' and tools' own rclpy nodes) use the shipped Fast DDS
   profile ``config/dds/fastdds_loopback.xml``: UDPv4 only, every locator and initial peer on
   127.0.0.1, no shared memory, no multicast. It needs ``ROS_AUTOMATIC_DISCOVERY_RANGE=
-  SYSTEM_DEFAULT``, because in LOCALHOST mode rmw_fastrtps replaces the profile's transports with its
-  own (shared memory + UDP), and shared memory is what stalls a process for ~333 ms whenever a
-  participant (a ``ros2`` command) joins.
+  SYSTEM_DEFAULT``, because in LOCALHOST mode rmw_fastrtps replaces the profile's transports
+  with its own (shared memory + UDP), and shared memory is what stalls a process for ~333 ms
+  whenever a participant (a ``ros2`` command) joins.
 - ``cli_env``: what a lab's own shell has for the ``ros2`` command:
   ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and no profile. It reaches the nodes over UDP on
   loopback.

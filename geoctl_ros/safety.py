@@ -128,19 +128,11 @@ class Supervisor:
 
     def input_problem(self, now):
         """Why the inputs are not fresh enough to arm (the first stale stream), or None."""
-        for s in self.streams:
-            problem = s.staleness(now)
-            if problem:
-                return problem
-        return None
+        return next(filter(None, (s.staleness(now) for s in self.streams)), None)
 
     def input_loss(self, now):
         """Why the inputs can no longer carry a flight (the first lost stream), or None."""
-        for s in self.streams:
-            problem = s.loss(now)
-            if problem:
-                return problem
-        return None
+        return next(filter(None, (s.loss(now) for s in self.streams)), None)
 
     def arm(self, now, extra_problem=None):
         """Try to arm; refused (with the reason) unless every input is fresh."""
