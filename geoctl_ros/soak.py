@@ -253,8 +253,9 @@ class Session:
                                       prefix=prefix)
         self.procs.append(self.controller)
         self._listen_file = os.path.join(out, 'command_times.npy')
-        self.listener = subprocess.Popen([sys.executable, '-m', 'geoctl_ros.soak', '--listen',
-                                          self._listen_file], env=env,
+        # the listener stands in for the ESC bridge: part of the flight chain, same priority
+        self.listener = subprocess.Popen([*prefix, sys.executable, '-m', 'geoctl_ros.soak',
+                                          '--listen', self._listen_file], env=env,
                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         rclpy.init()
         self.mon = Monitor(record=('diagnostics', 'true_pose'))
@@ -343,6 +344,10 @@ class Session:
             self.fault('off', 0)
             mon.spin_for(1.0)
         self.t_end = time.monotonic()
+        with open(os.path.join(self.out, 'diagnostics.jsonl'), 'w') as f:
+            for t, d in mon.log['diagnostics']:
+                if t0 <= t <= self.t_end:
+                    f.write(json.dumps(dict(d, t=round(t - t0, 3))) + '\n')
         return figures(mon, t0, self.t_end, self.cones)
 
     def command_times(self):

@@ -30,6 +30,7 @@ from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.params import SIM, ConfigError, airframe, resolve, testbed_sim
 
 COMMAND_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
+LATE = 0.05     # s behind real time before the sim warns
 
 
 class SimNode(Node):
@@ -105,6 +106,10 @@ class SimNode(Node):
     def _on_timer(self):
         target = (time.monotonic() - self.wall0) * self.rtf
         plant = self.sim.plant
+        behind = (target - plant.t) / self.rtf
+        if behind > LATE:       # the process did not get the CPU (or was stopped): say so
+            self.get_logger().warning('sim %.0f ms behind real time: its measurements come late'
+                                      % (behind * 1e3), throttle_duration_sec=1.0)
         fresh = time.monotonic() - self.last_command_wall < self.command_timeout
         if fresh != self.commands_fresh:
             self.commands_fresh = fresh
