@@ -25,7 +25,7 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
-            'scenario = geoctl_ros.scenario:main',
+            'scenario = geoctl_ros.tools.scenario:main',
             'controller = geoctl_ros.nodes.controller:main',
             'sim = geoctl_ros.nodes.sim:main',
         ],

@@ -14,8 +14,8 @@ import timeit
 
 import numpy as np
 
-from geoctl_ros import so3
-from geoctl_ros.loop import ControlLoop
+from geoctl_ros.core import so3
+from geoctl_ros.core.loop import ControlLoop
 from geoctl_ros.params import CONTROLLER, SIM, controller_setup, resolve, testbed_sim
 
 HERE = os.path.dirname(os.path.abspath(__file__))

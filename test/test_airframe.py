@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from geoctl_ros import params
-from geoctl_ros.airframe import (AirframeError, Allocator, RotorGeometry, ThrustCurve,
+from geoctl_ros.core.airframe import (AirframeError, Allocator, RotorGeometry, ThrustCurve,
                                  effectiveness, tilted_ring)
 from geoctl_ros.params import CONTROLLER, ConfigError, resolve
-from geoctl_ros.testbed import RotorActuator
+from geoctl_ros.sim.testbed import RotorActuator
 
 RHO = np.array([0.0, 0.0, 0.1])
 LAB_CURVE = ThrustCurve(np.full(6, 6.0252e-5), np.full(6, 8.4086e-3), np.full(6, -2.5194e-2),
@@ -146,7 +146,10 @@ def test_custom_layout_from_parameters():
     assert np.allclose(effectiveness(geometry, RHO), EXPECTED_B, atol=6e-5)
     with pytest.raises(ConfigError, match='3 values per rotor'):
         params.airframe(resolve(CONTROLLER, {'rotors.layout': 'custom',
-                                             'rotors.positions': [0.0, 0.0, 0.0]}))
+                                             'rotors.positions': [0.0, 0.0, 0.0],
+                                             'rotors.spins': [1, -1]}))
+    with pytest.raises(ConfigError, match='custom needs rotors.positions'):
+        params.airframe(resolve(CONTROLLER, {'rotors.layout': 'custom'}))
 
 
 def test_thrust_curve_commands():

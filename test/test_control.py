@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from geoctl_ros import so3
-from geoctl_ros.cones import ConeSet
-from geoctl_ros.control import (AttitudeController, ControllerConfig, E_matrix, SetpointRejected,
+from geoctl_ros.core import so3
+from geoctl_ros.core.cones import ConeSet
+from geoctl_ros.core.control import (AttitudeController, ControllerConfig, E_matrix, SetpointRejected,
                                 attractive_error, configuration_error, gain_condition)
-from geoctl_ros.plant import Disturbance, PlantConfig, Plant
+from geoctl_ros.sim.plant import Disturbance, PlantConfig, Plant
 
 rng = np.random.default_rng(7)
 G = np.array([0.9, 1.1, 1.0])

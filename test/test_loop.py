@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from geoctl_ros import so3
-from geoctl_ros.loop import ERROR, NON_FINITE, OK, WARN, ControlLoop
+from geoctl_ros.core import so3
+from geoctl_ros.core.loop import ERROR, NON_FINITE, OK, WARN, ControlLoop
 from geoctl_ros.params import CONTROLLER, ConfigError, controller_setup, resolve
 
 YAW90 = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))

@@ -9,10 +9,10 @@ import pytest
 
 rclpy = pytest.importorskip('rclpy')
 
-from geoctl_ros import so3  # noqa: E402
+from geoctl_ros.core import so3  # noqa: E402
 from geoctl_ros.params import cone_set, controller_setup, load_parameter_file, node_overrides, \
     resolve  # noqa: E402
-from geoctl_ros.sil import Monitor, NodeProcess  # noqa: E402
+from geoctl_ros.tools.processes import Monitor, NodeProcess  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TESTBED = os.path.join(ROOT, 'config', 'testbed.yaml')

@@ -127,7 +127,7 @@ def test_malformed_parameter_files_are_refused(tmp_path):
 
 
 def test_shipped_configs_are_valid():
-    from geoctl_ros import scenario
+    from geoctl_ros.tools import scenario
     folder = os.path.join(ROOT, 'config', 'scenarios')
     files = sorted(f for f in os.listdir(folder) if f.endswith('.yaml'))
     assert len(files) >= 5
@@ -135,11 +135,19 @@ def test_shipped_configs_are_valid():
         scenario.load(os.path.join(folder, f))
 
 
-def test_readme_parameter_table_is_generated_from_the_schema():
+def test_readme_parameter_table_is_in_sync_with_the_schema():
+    """A documentation snapshot (it keeps the README true), not a correctness test."""
+    from geoctl_ros.params import readme as readme_table
     with open(os.path.join(ROOT, 'README.md')) as f:
         readme = f.read()
     m = re.search(r'<!-- params:begin -->\n(.*?)\n<!-- params:end -->', readme, re.S)
     assert m, 'README.md lacks the generated parameter table markers'
-    assert m.group(1).strip() == params.markdown_table().strip(), (
+    assert m.group(1).strip() == readme_table.markdown_table().strip(), (
         'README parameter table is stale: regenerate it with '
-        '`./run shell -m geoctl_ros.params --write-readme README.md`')
+        '`./run shell -m geoctl_ros.params.readme --write-readme README.md`')
+
+
+def test_every_default_passes_its_own_type_and_check():
+    for p in params.SCHEMA:
+        value, reason = params.check_value(p, p.default)
+        assert reason is None, (p.name, reason)

@@ -4,10 +4,10 @@ import math
 import numpy as np
 import pytest
 
-from geoctl_ros import so3
-from geoctl_ros.mechanics import gravity_moment, pivot_inertia
+from geoctl_ros.core import so3
+from geoctl_ros.core.mechanics import gravity_moment, pivot_inertia
 from geoctl_ros.params import LAB_INERTIA
-from geoctl_ros.plant import Disturbance, Plant, PlantConfig
+from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
 
 J_LAB = np.array(LAB_INERTIA).reshape(3, 3)
 NO_DIST = Disturbance(np.zeros(3), np.zeros(3), 0.0)

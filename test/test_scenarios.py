@@ -7,7 +7,7 @@ import os
 import matplotlib.image
 import pytest
 
-from geoctl_ros import scenario
+from geoctl_ros.tools import scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENARIOS = os.path.join(ROOT, 'config', 'scenarios')
@@ -124,7 +124,7 @@ def test_duration_option_and_errors(tmp_path, capsys):
 def test_readme_results_table_matches_the_runs(runs):
     """The README's table of what each scenario gives is what the runs give (wall time aside)."""
     import re
-    from geoctl_ros.demo import table_row
+    from geoctl_ros.tools.demo import table_row
     with open(os.path.join(ROOT, 'README.md')) as fh:
         readme = fh.read()
     number = re.compile(r'-?\d+(?:\.\d+)?(?:e[-+]?\d+)?')

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from geoctl_ros import so3
+from geoctl_ros.core import so3
 
 rng = np.random.default_rng(42)
 

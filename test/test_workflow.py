@@ -17,9 +17,9 @@ import yaml
 
 rclpy = pytest.importorskip('rclpy')
 
-from geoctl_ros.rosenv import cli_env, config_dir  # noqa: E402
-from geoctl_ros.sil import NodeProcess, process_sockets  # noqa: E402
-from geoctl_ros.soak import Session, command_gaps  # noqa: E402
+from geoctl_ros.tools.rosenv import cli_env, config_dir  # noqa: E402
+from geoctl_ros.tools.processes import NodeProcess, process_sockets  # noqa: E402
+from geoctl_ros.tools.soak import Session, command_gaps  # noqa: E402
 
 TESTBED = os.path.join(config_dir(), 'testbed.yaml')
 ROS2 = shutil.which('ros2', path=os.path.dirname(sys.executable)) or shutil.which('ros2')
@@ -28,7 +28,7 @@ needs_ros2 = pytest.mark.skipif(ROS2 is None, reason='no `ros2` command: install
 
 
 def _rot(q):
-    from geoctl_ros import so3
+    from geoctl_ros.core import so3
     return so3.quat_to_rot(q)
 
 
@@ -144,18 +144,18 @@ def test_param_dump_restarts_a_node_with_identical_parameters(tmp_path, stop_dae
 def test_scenario_reports_a_bad_file_or_output_in_one_line(tmp_path):
     bad_yaml = tmp_path / 'broken.yaml'
     bad_yaml.write_text('controller:\n  ros__parameters:\n    k_R: [0.4\n')
-    r = subprocess.run([sys.executable, '-m', 'geoctl_ros.scenario', str(bad_yaml), '--out',
+    r = subprocess.run([sys.executable, '-m', 'geoctl_ros.tools.scenario', str(bad_yaml), '--out',
                         str(tmp_path / 'o')], capture_output=True, text=True)
     assert r.returncode == 2 and 'Traceback' not in r.stderr
     assert str(bad_yaml) in r.stderr and 'line 3' in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1, r.stderr
     missing = tmp_path / 'nope.yaml'
-    r = subprocess.run([sys.executable, '-m', 'geoctl_ros.scenario', str(missing), '--out',
+    r = subprocess.run([sys.executable, '-m', 'geoctl_ros.tools.scenario', str(missing), '--out',
                         str(tmp_path / 'o')], capture_output=True, text=True)
     assert r.returncode == 2 and 'Traceback' not in r.stderr and str(missing) in r.stderr
     blocker = tmp_path / 'file'
     blocker.write_text('')
-    r = subprocess.run([sys.executable, '-m', 'geoctl_ros.scenario', TESTBED, '--out',
+    r = subprocess.run([sys.executable, '-m', 'geoctl_ros.tools.scenario', TESTBED, '--out',
                         str(blocker / 'out'), '--duration', '0.05', '--no-plots'],
                        capture_output=True, text=True)
     assert r.returncode == 2 and 'Traceback' not in r.stderr, r.stderr

@@ -1,6 +1,6 @@
 """The controller node: ``ros2 run geoctl_ros controller --ros-args --params-file FILE``.
 
-A thin shell over ``geoctl_ros.loop.ControlLoop``: subscriptions feed it checked measurements and
+A thin shell over ``geoctl_ros.core.loop.ControlLoop``: subscriptions feed it checked measurements and
 set points, a timer at ``rate_hz`` runs one control step and publishes the results, services arm,
 disarm and reset the estimate, and parameter changes are validated by the shared schema before
 they touch the running controller. Topics, services and parameters: see the README.
@@ -17,12 +17,12 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
-from geoctl_ros.control import gain_condition
-from geoctl_ros.loop import ControlLoop
+from geoctl_ros.core.control import gain_condition
+from geoctl_ros.core.loop import ControlLoop
 from geoctl_ros.nodes import ros_params
 from geoctl_ros.nodes.conversions import quaternion, set_vector, stamp_seconds, vector
 from geoctl_ros.nodes.runtime import spin
-from geoctl_ros.stats import WindowStats
+from geoctl_ros.core.stats import WindowStats
 from geoctl_ros.params import CONTROLLER, ConfigError, controller_setup, resolve
 
 COMMAND_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)

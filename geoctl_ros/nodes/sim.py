@@ -1,6 +1,6 @@
 """The simulation node: ``ros2 run geoctl_ros sim --ros-args --params-file FILE``.
 
-A thin shell over ``geoctl_ros.testbed.TestbedSim``: integrates the testbed at
+A thin shell over ``geoctl_ros.sim.testbed.TestbedSim``: integrates the testbed at
 ``integration_rate_hz`` from the latest ``motor_commands`` (normalised, as the controller publishes
 them; with ``actuation: torque``, from the torque of the latest ``control_wrench``), and publishes ``pose`` (motion capture) and ``imu`` with the configured noise, the true
 state on ``sim/true_pose``, and ``/clock`` when ``publish_clock`` is set. Simulated time follows
@@ -23,7 +23,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 
-from geoctl_ros import so3
+from geoctl_ros.core import so3
 from geoctl_ros.nodes import ros_params
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg, vector
 from geoctl_ros.nodes.runtime import spin

@@ -3,7 +3,7 @@ processes (as ``ros2 run`` would), and a monitor node that records their topics 
 services and parameters.
 
 Every process started here runs with the loopback DDS profile and the caller's ``ROS_DOMAIN_ID``
-(``geoctl_ros.rosenv.node_env``), so DDS traffic stays on 127.0.0.1.
+(``geoctl_ros.tools.rosenv.node_env``), so DDS traffic stays on 127.0.0.1.
 """
 import os
 import shutil
@@ -24,7 +24,7 @@ from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.nodes.conversions import stamp_seconds
-from geoctl_ros.rosenv import node_env
+from geoctl_ros.tools.rosenv import node_env
 
 
 def executable(name):
@@ -44,7 +44,7 @@ class NodeProcess:
     """One node as a child process, its output in a log file."""
 
     def __init__(self, name, params_file=None, ros_args=(), log_dir='.', env=None, prefix=()):
-        """env: the process's environment (default: geoctl_ros.rosenv.node_env()); prefix: a
+        """env: the process's environment (default: geoctl_ros.tools.rosenv.node_env()); prefix: a
         command to run it under (as ``ros2 run --prefix``), e.g. ('nice', '-n', '-10')."""
         exe = executable(name)
         cmd = list(prefix) + ([exe] if exe else [sys.executable, '-m', 'geoctl_ros.nodes.' + name])

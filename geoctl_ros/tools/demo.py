@@ -22,8 +22,9 @@ import time
 
 import numpy as np
 
-from geoctl_ros import scenario, so3
-from geoctl_ros.rosenv import config_dir
+from geoctl_ros.tools import scenario
+from geoctl_ros.core import so3
+from geoctl_ros.tools.rosenv import config_dir
 
 TABLE_HEAD = ('| scenario | min angle to each cone (half-angle), deg | final attitude error, deg '
               '| final Psi | settle time (Psi < 1e-3), s | final Delta_bar | wall time, s |\n'
@@ -73,8 +74,8 @@ def fly(params_file, out, duration, monitor_factory=None):
     import rclpy
     from geoctl_ros.params import CONTROLLER, cone_set, load_parameter_file, node_overrides, \
         resolve, controller_setup
-    from geoctl_ros.rosenv import use_node_env
-    from geoctl_ros.sil import Monitor, NodeProcess
+    from geoctl_ros.tools.rosenv import use_node_env
+    from geoctl_ros.tools.processes import Monitor, NodeProcess
 
     use_node_env()
     values = resolve(CONTROLLER, node_overrides(load_parameter_file(params_file), CONTROLLER))

@@ -9,7 +9,7 @@ Rules (the README's "Safety behaviour" section says the same to users):
   less than its timeout ago. Receipt time is used because the motion-capture host's clock need not
   agree with the onboard one; stamps are used only for ordering.
 - A stale stream is not yet lost: up to its ride-through limit (``pose_ride_through``,
-  ``imu_ride_through``) the control loop bridges the gap (``geoctl_ros.loop``: attitude propagated
+  ``imu_ride_through``) the control loop bridges the gap (``geoctl_ros.core.loop``: attitude propagated
   with the gyro, rates from successive poses) and reports it. Past the limit the stream is lost.
 - Arming is refused unless pose and angular velocity are both fresh. While armed, if either is
   lost the supervisor disarms (failsafe) and says why. Motor commands are zero unless armed.

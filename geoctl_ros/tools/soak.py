@@ -24,7 +24,7 @@ duplicated, reordered, held back and released in bursts, poses or IMU missing fo
 the sim process paused with SIGSTOP/SIGCONT (both inputs missing).
 
 ``--transport profile`` (default) runs the nodes on the shipped loopback profile
-(``geoctl_ros.rosenv``), ``rmw-default`` on the rmw's defaults (shared memory + UDP, LOCALHOST):
+(``geoctl_ros.tools.rosenv``), ``rmw-default`` on the rmw's defaults (shared memory + UDP, LOCALHOST):
 the "before" of the README's table. Everything stays on 127.0.0.1.
 """
 import argparse
@@ -41,7 +41,7 @@ import time
 
 import numpy as np
 
-from geoctl_ros.rosenv import PROFILE_VAR, cli_env, config_dir, node_env
+from geoctl_ros.tools.rosenv import PROFILE_VAR, cli_env, config_dir, node_env
 
 # name: (loads, fault, what). A fault is (kind, argument, period s) or None.
 CASES = {
@@ -127,7 +127,7 @@ while True:
 '''
 
 
-# --- the relay (a separate process: ``python -m geoctl_ros.soak --relay``) ---------------------
+# --- the relay (a separate process: ``python -m geoctl_ros.tools.soak --relay``) ---------------------
 def relay_main():
     """Republish raw/pose and raw/imu on pose and imu, with the faults commanded on soak/fault."""
     import heapq
@@ -231,7 +231,7 @@ class Session:
 
     def __init__(self, params_file, out, transport='profile', relay=False, prefix=()):
         import rclpy
-        from geoctl_ros.sil import Monitor, NodeProcess
+        from geoctl_ros.tools.processes import Monitor, NodeProcess
         env = node_env() if transport == 'profile' else cli_env()
         os.environ.update(env)          # this process's monitor joins the same way
         if PROFILE_VAR not in env:
@@ -244,7 +244,7 @@ class Session:
         self.sim = NodeProcess('sim', params_file, sim_args, log_dir=out, env=env, prefix=prefix)
         self.procs.append(self.sim)
         if relay:
-            self.relay = subprocess.Popen([sys.executable, '-m', 'geoctl_ros.soak', '--relay'],
+            self.relay = subprocess.Popen([sys.executable, '-m', 'geoctl_ros.tools.soak', '--relay'],
                                           env=env, stdout=subprocess.DEVNULL,
                                           stderr=subprocess.DEVNULL)
         else:
@@ -254,7 +254,7 @@ class Session:
         self.procs.append(self.controller)
         self._listen_file = os.path.join(out, 'command_times.npy')
         # the listener stands in for the ESC bridge: part of the flight chain, same priority
-        self.listener = subprocess.Popen([*prefix, sys.executable, '-m', 'geoctl_ros.soak',
+        self.listener = subprocess.Popen([*prefix, sys.executable, '-m', 'geoctl_ros.tools.soak',
                                           '--listen', self._listen_file], env=env,
                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         rclpy.init()
@@ -402,7 +402,7 @@ def command_gaps(times, t0, t1):
 
 def figures(mon, t0, t1, cones):
     """The figures of the flight between t0 and t1 (monotonic, as the monitor's log)."""
-    from geoctl_ros import so3
+    from geoctl_ros.core import so3
     diags = [d for t, d in mon.log['diagnostics'] if t0 <= t <= t1]
     states = [d['state'] for d in diags]
     failsafes = sum(1 for a, b in zip(['armed'] + states, states)

@@ -5,7 +5,7 @@ Equations of motion about the pivot (body frame):
     J_p Omega' + Omega x J_p Omega = tau + M_g(R) + Delta(t),     R' = R hat(Omega)
 
 with J_p the inertia about the pivot, M_g the gravity moment of the centre of mass offset rho
-(``geoctl_ros.mechanics``), tau the actuation moment (held constant over a step) and Delta(t) the
+(``geoctl_ros.core.mechanics``), tau the actuation moment (held constant over a step) and Delta(t) the
 disturbance: constant + amplitude * [sin wt, cos wt, (sin wt + cos wt) / 2] (elementwise; the
 dissertation's time-varying case).
 
@@ -22,9 +22,9 @@ import math
 
 import numpy as np
 
-from geoctl_ros import so3
-from geoctl_ros.so3 import cross
-from geoctl_ros.mechanics import gravity_moment, pivot_inertia
+from geoctl_ros.core import so3
+from geoctl_ros.core.so3 import cross
+from geoctl_ros.core.mechanics import gravity_moment, pivot_inertia
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from geoctl_ros import so3  # noqa: E402
+from geoctl_ros.core import so3  # noqa: E402
 
 
 def _col(result, name):

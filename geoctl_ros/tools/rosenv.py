@@ -24,7 +24,8 @@ RANGE_VAR = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
 
 def config_dir():
     """The shipped config folder: the source tree's, or the installed share directory's."""
-    here = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config')
+    top = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    here = os.path.join(top, 'config')
     if not os.path.isdir(here):
         from ament_index_python.packages import get_package_share_directory
         here = os.path.join(get_package_share_directory('geoctl_ros'), 'config')

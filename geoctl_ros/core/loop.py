@@ -8,11 +8,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geoctl_ros import so3
-from geoctl_ros.control import AttitudeController, SetpointRejected
-from geoctl_ros.gaps import GapBridge
-from geoctl_ros.safety import (Stream, Supervisor, angular_velocity_problem, quaternion_problem)
-from geoctl_ros.stats import WindowStats
+from geoctl_ros.core import so3
+from geoctl_ros.core.control import AttitudeController, SetpointRejected
+from geoctl_ros.core.gaps import GapBridge
+from geoctl_ros.core.safety import (Stream, Supervisor, angular_velocity_problem, quaternion_problem)
+from geoctl_ros.core.stats import WindowStats
 
 # Diagnostics levels (the values of diagnostic_msgs/DiagnosticStatus).
 OK, WARN, ERROR = 0, 1, 2
@@ -28,7 +28,7 @@ class Tick:
     motors: object           # MotorOutput (zero commands unless armed)
     armed: bool
     measurement_stamp: float  # stamp of the pose the step used (None before the first)
-    bridging: bool = False    # a gap is being ridden through (see geoctl_ros.gaps)
+    bridging: bool = False    # a gap is being ridden through (see geoctl_ros.core.gaps)
 
 
 @dataclass

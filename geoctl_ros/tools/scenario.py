@@ -16,10 +16,10 @@ import time
 
 import numpy as np
 
-from geoctl_ros import so3
-from geoctl_ros.control import SetpointRejected, gain_condition
-from geoctl_ros.loop import ControlLoop
-from geoctl_ros.mechanics import gravity_moment
+from geoctl_ros.core import so3
+from geoctl_ros.core.control import SetpointRejected, gain_condition
+from geoctl_ros.core.loop import ControlLoop
+from geoctl_ros.core.mechanics import gravity_moment
 from geoctl_ros.params import (CONTROLLER, SCENARIO, SIM, ConfigError, controller_config,
                                controller_setup, load_parameter_file, node_overrides, resolve,
                                testbed_sim)
@@ -197,7 +197,7 @@ def write(result, out_dir, plots=True):
     np.savetxt(os.path.join(out_dir, 'history.csv'), result.history, delimiter=',',
                header=','.join(result.columns), comments='', fmt='%.9g')
     if plots:
-        from geoctl_ros import plots as plotting
+        from geoctl_ros.tools import plots as plotting
         plotting.scenario_figures(result, out_dir)
 
 

@@ -11,7 +11,7 @@ Notation follows the paper and ../shared/design/control-law.md:
     Delta_bar' = k_Delta W^T (e_Omega + c e_R)                adaptive law (eq. 39)
 
 J is the inertia about the pivot, M_g the gravity moment of the centre of mass offset rho (both from
-``geoctl_ros.mechanics``). The tracking feed-forward -J (Omega x R^T R_d Omega_d - R^T R_d Omega_d')
+``geoctl_ros.core.mechanics``). The tracking feed-forward -J (Omega x R^T R_d Omega_d - R^T R_d Omega_d')
 is the standard one of Lee's geometric tracking controller; the paper's stability proof covers
 Omega_d = 0 only.
 
@@ -25,9 +25,9 @@ import math
 
 import numpy as np
 
-from geoctl_ros.cones import ConeSet
-from geoctl_ros.mechanics import cog_regressor, gravity_moment, pivot_inertia
-from geoctl_ros.so3 import cross, vee
+from geoctl_ros.core.cones import ConeSet
+from geoctl_ros.core.mechanics import cog_regressor, gravity_moment, pivot_inertia
+from geoctl_ros.core.so3 import cross, vee
 
 # Disturbance models: name -> number of estimated parameters (the columns of W).
 #   constant:      W = I,                     Delta = a constant moment (the paper's case)

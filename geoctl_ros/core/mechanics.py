@@ -6,7 +6,7 @@ of mass in the body frame; g_w is the gravity vector in the world frame (REP-103
 """
 import numpy as np
 
-from geoctl_ros.so3 import cross, hat
+from geoctl_ros.core.so3 import cross, hat
 
 
 def pivot_inertia(inertia_cm, mass, rho):

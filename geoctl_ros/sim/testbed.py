@@ -1,11 +1,11 @@
 """The simulated testbed as its users see it: commands in, measurements out.
 
-Composes the rigid body about the pivot (``geoctl_ros.plant``), the actuation and the sensors:
+Composes the rigid body about the pivot (``geoctl_ros.sim.plant``), the actuation and the sensors:
 
 - actuation ``rotors``: integer ESC commands -> thrust through the motors' thrust curve, a
   first-order lag per rotor (time constant ``motor_time_constant``, discretised exactly and held
   over each integration step), saturation at the curve's range, and the rotors' forces and
-  reaction moments about the pivot (``geoctl_ros.airframe.effectiveness``) from the true geometry;
+  reaction moments about the pivot (``geoctl_ros.core.airframe.effectiveness``) from the true geometry;
 - actuation ``torque``: the commanded moment itself (ideal);
 - sensors: attitude R exp(hat(n)), n ~ N(0, sigma_R^2 I) (motion capture), and angular velocity
   Omega + bias + N(0, sigma_w^2 I) (gyro).
@@ -16,9 +16,9 @@ import math
 
 import numpy as np
 
-from geoctl_ros import so3
-from geoctl_ros.airframe import effectiveness
-from geoctl_ros.plant import Plant
+from geoctl_ros.core import so3
+from geoctl_ros.core.airframe import effectiveness
+from geoctl_ros.sim.plant import Plant
 
 
 class RotorActuator:

@@ -3,7 +3,7 @@
 Motion capture comes over WiFi and the IMU over a serial link; either can go quiet for a few
 hundred milliseconds (a busy DDS participant, a WiFi retry, a scheduler hiccup) while the vehicle
 is perfectly flyable. Dropping the motors then is the worse choice on a joint with the centre of
-mass above the pivot. So, while a stream is stale but not yet lost (``geoctl_ros.safety.Stream``):
+mass above the pivot. So, while a stream is stale but not yet lost (``geoctl_ros.core.safety.Stream``):
 
 - **pose gap** (gyro fresh): the attitude is propagated from the last pose with the gyro,
   R <- R exp(hat(Omega) dt) at every control tick (the rate held over the tick). Its error grows
@@ -21,7 +21,7 @@ When a stream is fresh its measurement is used as it is: nothing here changes no
 """
 import numpy as np
 
-from geoctl_ros import so3
+from geoctl_ros.core import so3
 
 POSE_HISTORY = 64    # poses kept for the rate estimate (320 ms at 200 Hz)
 

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geoctl_ros.so3 import hat
+from geoctl_ros.core.so3 import hat
 
 
 @dataclass

@@ -1,0 +1,182 @@
+"""Building the core's and the simulator's objects from resolved parameters, with the checks
+that span several parameters (a set point against the cones, a thrust limit against the curve, an
+airframe that must produce every moment)."""
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from geoctl_ros.core import so3
+from geoctl_ros.core.airframe import (AirframeError, Allocator, Mixer, RotorGeometry, ThrustCurve,
+                                      tilted_ring)
+from geoctl_ros.core.cones import ConeSet
+from geoctl_ros.core.control import AttitudeController, ControllerConfig
+from geoctl_ros.core.safety import SetpointSchedule, quaternion_problem
+from geoctl_ros.params.schema import ConfigError
+from geoctl_ros.sim.plant import Disturbance, PlantConfig
+from geoctl_ros.sim.testbed import RotorActuator, TestbedSim
+
+
+def cone_set(values):
+    """The ConeSet described by resolved controller parameters."""
+    names = values['cones.names']
+    return ConeSet(values['sensor_axis'],
+                   [values['cones.%s.axis' % n] for n in names] or np.zeros((0, 3)),
+                   np.radians([values['cones.%s.half_angle_deg' % n] for n in names]),
+                   values['alpha'], math.radians(values['barrier_floor_deg']), names)
+
+
+def controller_config(values):
+    """ControllerConfig from resolved controller parameters (see ``resolve``)."""
+    return ControllerConfig(
+        k_R=values['k_R'], k_Omega=values['k_Omega'], k_Delta=values['k_Delta'], c=values['c'],
+        G=values['G'], cones=cone_set(values), inertia=values['inertia'].reshape(3, 3),
+        mass=values['mass'], cog_offset=values['cog_offset'], gravity=values['gravity'],
+        adaptive=values['adaptive'], gravity_compensation=values['gravity_compensation'],
+        disturbance_model=values['disturbance_model'], delta_bar_max=values['delta_bar_max'],
+        cog_estimate_max=values['cog_estimate_max'])
+
+
+def setpoint_rotation(values):
+    """R_d of the resolved controller parameters."""
+    return so3.quat_to_rot(values['setpoint'])
+
+
+@dataclass
+class ControllerSetup:
+    """Everything a controller (node or headless) builds from its parameters."""
+
+    config: ControllerConfig
+    mixer: object                # geoctl_ros.core.airframe.Mixer
+    setpoint: np.ndarray         # R_d
+    schedule: object             # geoctl_ros.core.safety.SetpointSchedule
+    values: dict
+
+
+def controller_setup(values):
+    """Build and cross-check a controller from resolved parameters; ConfigError on any problem,
+    including a set point (or scheduled one) that puts the sensor in a cone."""
+    config = controller_config(values)
+    mix = mixer(values)
+    probe = AttitudeController(config)
+    errors = []
+    R_d = setpoint_rotation(values)
+    problem = probe.setpoint_problem(R_d)
+    if problem:
+        errors.append(('setpoint', problem))
+    times, quats = values['setpoint_schedule.times'], values['setpoint_schedule.quaternions']
+    rotations = []
+    if quats.size != 4 * times.size:
+        errors.append(('setpoint_schedule.quaternions', 'expected 4 values per time (%d times), '
+                       'got %d' % (times.size, quats.size)))
+    elif np.any(np.diff(times) <= 0.0) or (times.size and times[0] < 0.0):
+        errors.append(('setpoint_schedule.times', 'must be increasing and not negative'))
+    else:
+        for k, q in enumerate(quats.reshape(-1, 4)):
+            reason = quaternion_problem(q)
+            R = so3.quat_to_rot(q) if reason is None else None
+            reason = reason or probe.setpoint_problem(R)
+            if reason:
+                errors.append(('setpoint_schedule.quaternions', 'set point %d: %s' % (k + 1, reason)))
+            rotations.append(R)
+    for stream, timeout in (('pose', 'pose_timeout'), ('imu', 'imu_timeout')):
+        limit = values[stream + '_ride_through']
+        if 0.0 < limit < values[timeout]:
+            errors.append((stream + '_ride_through', 'must be 0 or at least %s (%g s)'
+                           % (timeout, values[timeout])))
+    if errors:
+        raise ConfigError(errors)
+    return ControllerSetup(config, mix, R_d, SetpointSchedule(times, rotations), values)
+
+
+def airframe(values):
+    """(RotorGeometry, ThrustCurve, failed rotor numbers) of resolved parameters; raises
+    ConfigError naming the parameter for a layout or curve that does not fit together."""
+    errors = []
+    if values['rotors.layout'] == 'tilted_ring':
+        geometry = tilted_ring(values['rotors.count'], values['rotors.arm_length'],
+                               values['rotors.tilt_deg'], values['rotors.first_azimuth_deg'],
+                               values['rotors.height'], values['rotors.yaw_coefficient'])
+    else:
+        spins = np.array(values['rotors.spins'], dtype=float)
+        n = len(spins)
+        if n == 0:
+            raise ConfigError([('rotors.spins', 'rotors.layout custom needs rotors.positions, '
+                                'rotors.axes and rotors.spins (one spin per rotor)')])
+        pos, axes = values['rotors.positions'], values['rotors.axes']
+        for name, arr in (('rotors.positions', pos), ('rotors.axes', axes)):
+            if arr.size != 3 * n:
+                errors.append((name, 'expected 3 values per rotor (%d rotors in rotors.spins), '
+                               'got %d' % (n, arr.size)))
+        if errors:
+            raise ConfigError(errors)
+        axes = axes.reshape(n, 3)
+        norms = np.linalg.norm(axes, axis=1)
+        if np.any(norms < 1e-9):
+            raise ConfigError([('rotors.axes', 'rotor %d has a zero thrust axis'
+                                % (int(np.argmin(norms)) + 1))])
+        geometry = RotorGeometry(pos.reshape(n, 3), axes / norms[:, None], spins,
+                                 values['rotors.yaw_coefficient'])
+    n = geometry.count
+    for v in values['rotors.failed']:
+        if not 1 <= v <= n:
+            errors.append(('rotors.failed', 'rotor %d does not exist (1..%d)' % (v, n)))
+    coeffs = {}
+    for k in 'abc':
+        arr = values['motor.' + k]
+        if arr.size not in (1, n):
+            errors.append(('motor.' + k, 'expected 1 value or %d (one per rotor), got %d'
+                           % (n, arr.size)))
+        coeffs[k] = np.broadcast_to(arr, (n,)).copy() if arr.size in (1, n) else None
+    if not errors and np.any(coeffs['a'] <= 0.0):
+        errors.append(('motor.a', 'must be > 0 (thrust must grow with the command)'))
+    if errors:
+        raise ConfigError(errors)
+    curve = ThrustCurve(coeffs['a'], coeffs['b'], coeffs['c'], values['motor.voltage_scale'],
+                        values['motor.command_max'])
+    return geometry, curve, sorted(set(values['rotors.failed']))
+
+
+def mixer(values):
+    """The Mixer (allocation + thrust curve) of resolved controller parameters."""
+    geometry, curve, failed = airframe(values)
+    top = float(np.min(curve.max_thrust()))
+    if values['thrust_max'] > top:
+        raise ConfigError([('thrust_max', '%.3g N is more than the thrust curve gives at '
+                            'motor.command_max (%.3g N)' % (values['thrust_max'], top))])
+    if values['thrust_min'] >= values['thrust_max']:
+        raise ConfigError([('thrust_min', 'must be below thrust_max (%g)' % values['thrust_max'])])
+    try:
+        allocator = Allocator(geometry, values['cog_offset'], values['thrust_min'],
+                              values['thrust_max'], failed)
+    except AirframeError as e:
+        raise ConfigError([('rotors', str(e))]) from None
+    collective = values['collective_thrust'] or values['mass'] * float(
+        np.linalg.norm(values['gravity']))
+    return Mixer(allocator, curve, collective)
+
+
+def testbed_sim(values):
+    """The TestbedSim of resolved sim parameters, at its initial state."""
+    actuator = None
+    if values['actuation'] == 'rotors':
+        geometry, curve, failed = airframe(values)
+        actuator = RotorActuator(geometry, values['cog_offset'], curve,
+                                 values['motor_time_constant'], failed)
+    return TestbedSim(plant_config(values), so3.quat_to_rot(values['initial_attitude']),
+                      values['initial_angular_velocity'], actuator,
+                      math.radians(values['noise.attitude_deg']),
+                      values['noise.angular_velocity'], values['noise.gyro_bias'],
+                      values['noise.seed'])
+
+
+def plant_config(values):
+    """PlantConfig from resolved sim parameters."""
+    return PlantConfig(
+        inertia=values['inertia'].reshape(3, 3), mass=values['mass'],
+        cog_offset=values['cog_offset'], gravity=values['gravity'],
+        disturbance=Disturbance(constant=values['disturbance.constant'],
+                                amplitude=values['disturbance.amplitude'],
+                                frequency=values['disturbance.frequency']))
+
+

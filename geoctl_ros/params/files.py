@@ -1,0 +1,57 @@
+"""ROS 2 parameter files: reading them as ROS does, and what each node takes from them."""
+import yaml
+
+from geoctl_ros.params.schema import BY_NAME, CONE_KEY, CONTROLLER, ConfigError, schema_for
+
+
+def flatten(tree, prefix=''):
+    """Nested dicts -> one dict with dotted keys, as ROS 2 reads parameter files."""
+    out = {}
+    for key, value in tree.items():
+        name = '%s.%s' % (prefix, key) if prefix else str(key)
+        if isinstance(value, dict):
+            out.update(flatten(value, name))
+        else:
+            out[name] = value
+    return out
+
+
+def load_parameter_file(path):
+    """Read a ROS 2 parameter YAML file: {node name or '/**': flat parameter dict}."""
+    try:
+        with open(path) as f:
+            doc = yaml.safe_load(f) or {}
+    except OSError as e:
+        raise ConfigError([(str(path), 'cannot be read (%s)' % (e.strerror or e))]) from None
+    except yaml.YAMLError as e:
+        mark, context = getattr(e, 'problem_mark', None), getattr(e, 'context_mark', None)
+        where = ' at line %d, column %d' % (mark.line + 1, mark.column + 1) if mark else ''
+        if context is not None and getattr(e, 'context', None):
+            where += ' (%s at line %d)' % (e.context, context.line + 1)
+        what = getattr(e, 'problem', None) or str(e).splitlines()[0]
+        raise ConfigError([(str(path), 'not valid YAML%s: %s' % (where, what))]) from None
+    if not isinstance(doc, dict):
+        raise ConfigError([(str(path), 'not a ROS 2 parameter file (top level must be a mapping)')])
+    sections = {}
+    for node, body in doc.items():
+        if not isinstance(body, dict) or not isinstance(body.get('ros__parameters'), dict):
+            raise ConfigError([(str(node), 'section needs a ros__parameters mapping')])
+        sections[str(node)] = flatten(body['ros__parameters'])
+    return sections
+
+
+def node_overrides(sections, node):
+    """The flat overrides node gets from a parameter file: '/**' first, then its own section.
+
+    Parameters in '/**' that node does not read are dropped (ROS ignores them too); its own section
+    must contain only its parameters.
+    """
+    own = {p.name for p in schema_for(node)}
+    merged = {k: v for k, v in sections.get('/**', {}).items()
+              if k in own or (node == CONTROLLER and CONE_KEY.match(k))
+              or k not in BY_NAME and not CONE_KEY.match(k)}
+    for key in (node, '/' + node):
+        merged.update(sections.get(key, {}))
+    return merged
+
+

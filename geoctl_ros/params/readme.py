@@ -1,0 +1,52 @@
+"""The README's parameter table, generated from the schema.
+
+    ./run shell -m geoctl_ros.params.readme --write-readme README.md
+"""
+import sys
+
+from geoctl_ros.params.schema import CONE_SCHEMA, LAB_INERTIA, SCHEMA
+
+
+def markdown_table():
+    """The README's parameter table."""
+    rows = ['| parameter | node | type | default | unit | meaning |', '|---|---|---|---|---|---|']
+    for p in SCHEMA + CONE_SCHEMA:
+        default = '(required)' if p.default is None else _fmt_default(p.default)
+        rows.append('| `%s` | %s | %s%s | %s | %s | %s |' % (
+            p.name, ', '.join(p.nodes), p.type, '[%d]' % p.length if p.length else '', default,
+            p.unit, p.doc))
+    return '\n'.join(rows)
+
+
+def _fmt_default(value):
+    if isinstance(value, bool):
+        return '`%s`' % str(value).lower()
+    if isinstance(value, str):
+        return '`%s`' % value if value else '`""`'
+    if isinstance(value, list) and len(value) > 4:
+        return '(lab hexrotor)' if value == LAB_INERTIA else '`%s`' % value
+    return '`%s`' % (value,)
+
+
+README_MARKERS = ('<!-- params:begin -->', '<!-- params:end -->')
+
+
+def update_readme(path):
+    """Replace the table between README_MARKERS in the file at path; True if it changed."""
+    with open(path) as f:
+        text = f.read()
+    begin, end = README_MARKERS
+    i, j = text.index(begin) + len(begin), text.index(end)
+    new = text[:i] + '\n' + markdown_table() + '\n' + text[j:]
+    if new != text:
+        with open(path, 'w') as f:
+            f.write(new)
+    return new != text
+
+
+if __name__ == '__main__':
+    if sys.argv[1:2] == ['--write-readme']:
+        print('updated' if update_readme(sys.argv[2]) else 'up to date')
+    else:
+        sys.stdout.write(markdown_table() + '\n')
+

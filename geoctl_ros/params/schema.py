@@ -1,0 +1,279 @@
+"""The one parameter schema: every parameter any part of geoctl_ros reads, declared once.
+
+Each ``Param`` has its ROS 2 type, default, unit, one-line doc, the nodes that read it and a check
+(a function returning a reason, or None). The nodes declare their parameters from it
+(``geoctl_ros.nodes.ros_params``), the headless runner reads files through it
+(``geoctl_ros.params.files``) and the README's table is generated from it
+(``geoctl_ros.params.readme``). Cones are parameters too: ``cones.names: [a, b]`` plus
+``cones.<name>.axis`` and ``cones.<name>.half_angle_deg`` per name (``CONE_SCHEMA``).
+"""
+from dataclasses import dataclass
+import re
+
+import numpy as np
+
+from geoctl_ros.core.control import DISTURBANCE_MODELS
+from geoctl_ros.core.safety import quaternion_problem
+
+CONTROLLER, SIM, SCENARIO = 'controller', 'sim', 'scenario'
+BOTH = (CONTROLLER, SIM)
+
+LAB_INERTIA = [5.5710e-3, 6.1766e-5, -2.5028e-5,
+               6.1766e-5, 5.5757e-3, 1.0068e-5,
+               -2.5028e-5, 1.0068e-5, 1.0505e-2]
+
+
+class ConfigError(ValueError):
+    """One or more invalid parameters; ``errors`` lists (parameter, reason) pairs."""
+
+    def __init__(self, errors):
+        self.errors = list(errors)
+        super().__init__('invalid parameters:\n' + '\n'.join(
+            '  %s: %s' % (name, reason) for name, reason in self.errors))
+
+
+# --- checks: each returns a reason (str) or None ---------------------------------------------------
+def _positive(v):
+    return None if v > 0.0 else 'must be > 0 (got %r)' % v
+
+
+def _nonnegative(v):
+    return None if v >= 0.0 else 'must be >= 0 (got %r)' % v
+
+
+def _nonzero_vector(v):
+    return None if np.linalg.norm(v) > 1e-9 else 'must not be the zero vector'
+
+
+def _unit_quaternion(q):
+    problem = quaternion_problem(q)
+    return None if problem is None else 'must be a unit quaternion (x, y, z, w): ' + problem
+
+
+def _half_angle(v):
+    return None if 0.0 < v < 90.0 else 'must be in (0, 90) degrees (got %r)' % v
+
+
+def _weights(G):
+    if min(G) <= 0.0:
+        return 'weights must be positive (got %s)' % list(G)
+    if len(set(G)) < 3:
+        return 'weights must be distinct (Prop. 1 of the paper; got %s)' % list(G)
+    return None
+
+
+def _inertia(vals):
+    J = np.asarray(vals).reshape(3, 3)
+    if not np.allclose(J, J.T, rtol=0.0, atol=1e-12 + 1e-9 * np.abs(J).max()):
+        return 'must be symmetric (row-major 3x3)'
+    eig = np.linalg.eigvalsh(J)
+    if eig[0] <= 0.0:
+        return 'must be positive definite (smallest eigenvalue %.3g)' % eig[0]
+    if eig[0] + eig[1] < eig[2] * (1.0 - 1e-9):
+        return 'violates the triangle inequality of principal moments (not a physical body)'
+    return None
+
+
+def _rate(v):
+    return None if 0.0 < v <= 10000.0 else 'must be in (0, 10000] Hz (got %r)' % v
+
+
+def _floor(v):
+    return None if 0.0 < v < 10.0 else 'must be in (0, 10) degrees (got %r)' % v
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter: ROS type ('double', 'double_array', 'bool', 'string', 'string_array'),
+    array length (0: any), default, unit, one-line doc, the nodes that read it, and a check."""
+
+    name: str
+    type: str
+    default: object
+    unit: str
+    doc: str
+    nodes: tuple
+    length: int = 0
+    check: object = None
+    choices: tuple = ()
+
+
+
+def _p(name, type_, default, unit, doc, nodes, length=0, check=None, choices=()):
+    return Param(name, type_, default, unit, doc, nodes if isinstance(nodes, tuple) else (nodes,),
+                 length, check, choices)
+
+
+SCHEMA = [
+    # Controller gains and shape (paper notation).
+    _p('k_R', 'double', 0.4, 'N m', 'attitude gain k_R', CONTROLLER, check=_positive),
+    _p('k_Omega', 'double', 0.7, 'N m s', 'angular-velocity gain k_Omega', CONTROLLER,
+       check=_positive),
+    _p('k_Delta', 'double', 0.05, '-', 'adaptation gain k_Delta', CONTROLLER, check=_positive),
+    _p('c', 'double', 0.1, '1/s', 'weight of e_R in the adaptive law (Prop. 5)', CONTROLLER,
+       check=_positive),
+    _p('alpha', 'double', 8.0, '-', 'barrier shape alpha (larger: barrier acts closer to a cone)',
+       CONTROLLER, check=_positive),
+    _p('G', 'double_array', [0.9, 1.1, 1.0], '-',
+       'diagonal weights g1, g2, g3 of the attitude error A (distinct, positive)', CONTROLLER,
+       length=3, check=_weights),
+    _p('adaptive', 'bool', True, '-', 'run the adaptive law (else Delta_bar stays 0)', CONTROLLER),
+    _p('disturbance_model', 'string', 'constant', '-',
+       'regressor W: constant (W = I) or constant+cog (also estimates the error in m*rho)',
+       CONTROLLER, choices=tuple(DISTURBANCE_MODELS)),
+    _p('delta_bar_max', 'double', 1.0, 'N m',
+       'bound on |constant disturbance estimate| (projection); 0 = unbounded', CONTROLLER,
+       check=_nonnegative),
+    _p('cog_estimate_max', 'double', 0.1, 'kg m',
+       'bound on |m*rho estimate| of the constant+cog model; 0 = unbounded', CONTROLLER,
+       check=_nonnegative),
+    _p('gravity_compensation', 'bool', True, '-',
+       'subtract the modelled gravity moment of the centre-of-mass offset', CONTROLLER),
+    _p('sensor_axis', 'double_array', [1.0, 0.0, 0.0], '-',
+       'body-fixed sensor axis r (normalised)', CONTROLLER, length=3, check=_nonzero_vector),
+    _p('barrier_floor_deg', 'double', 0.25, 'deg',
+       'within this angle of a cone boundary the barrier is extended linearly (saturated)',
+       CONTROLLER, check=_floor),
+    _p('cones.names', 'string_array', [], '-',
+       'names of the forbidden cones; each needs cones.<name>.axis and .half_angle_deg',
+       CONTROLLER),
+    _p('setpoint', 'double_array', [0.0, 0.0, 0.0, 1.0], '-',
+       'desired attitude R_d as a quaternion (x, y, z, w), world frame', CONTROLLER, length=4,
+       check=_unit_quaternion),
+    _p('rate_hz', 'double', 100.0, 'Hz', 'control rate', CONTROLLER, check=_rate),
+    _p('pose_timeout', 'double', 0.1, 's', 'pose older than this (by receipt) is stale',
+       CONTROLLER, check=_positive),
+    _p('imu_timeout', 'double', 0.05, 's', 'angular velocity older than this is stale',
+       CONTROLLER, check=_positive),
+    _p('pose_ride_through', 'double', 0.5, 's',
+       'a pose gap up to this long is flown through on the gyro-propagated attitude; longer: '
+       'failsafe (0: failsafe at pose_timeout)', CONTROLLER, check=_nonnegative),
+    _p('imu_ride_through', 'double', 0.25, 's',
+       'an angular-velocity gap up to this long is flown through on rates from successive poses; '
+       'longer: failsafe (0: failsafe at imu_timeout)', CONTROLLER, check=_nonnegative),
+    _p('pose_rate_window', 'double', 0.05, 's',
+       'time between the two poses that give the rate during an angular-velocity gap',
+       CONTROLLER, check=lambda v: None if 0.0 < v <= 0.5 else 'must be in (0, 0.5] s'),
+    _p('max_angular_velocity', 'double', 100.0, 'rad/s',
+       'gyro readings faster than this are refused', CONTROLLER, check=_positive),
+    _p('setpoint_schedule.times', 'double_array', [], 's',
+       'optional: times after arming at which the scheduled set points take over', CONTROLLER),
+    _p('setpoint_schedule.quaternions', 'double_array', [], '-',
+       'optional: the scheduled set points, 4 values (x, y, z, w) per time', CONTROLLER),
+    _p('frame_id', 'string', 'base_link', '-', 'body frame id on stamped outputs', BOTH),
+    # Physical model, read by the controller (its model) and the simulator (the truth).
+    _p('inertia', 'double_array', LAB_INERTIA, 'kg m^2',
+       'inertia about the centre of mass, 9 values row-major', BOTH, length=9, check=_inertia),
+    _p('mass', 'double', 1.26, 'kg', 'mass', BOTH, check=_positive),
+    _p('cog_offset', 'double_array', [0.0, 0.0, 0.1], 'm',
+       'pivot -> centre of mass, body frame (z up: above the pivot)', BOTH, length=3),
+    _p('gravity', 'double_array', [0.0, 0.0, -9.81], 'm/s^2', 'gravity vector, world frame',
+       BOTH, length=3),
+    # Airframe: rotor geometry (controller: allocation; sim: the true rotors).
+    _p('rotors.layout', 'string', 'tilted_ring', '-',
+       'tilted_ring (from the five parameters below) or custom (rotors.positions/axes/spins)',
+       BOTH, choices=('tilted_ring', 'custom')),
+    _p('rotors.count', 'integer', 6, '-', 'tilted_ring: number of rotors, numbered clockwise '
+       'from above', BOTH, check=lambda v: None if 3 <= v <= 12 else 'must be 3 to 12'),
+    _p('rotors.arm_length', 'double', 0.31, 'm', 'tilted_ring: centre of mass to rotor', BOTH,
+       check=_positive),
+    _p('rotors.tilt_deg', 'double', 15.0, 'deg', 'tilted_ring: tangential tilt of each thrust '
+       'axis, alternating with the spin', BOTH,
+       check=lambda v: None if 0.0 <= v < 60.0 else 'must be in [0, 60) degrees'),
+    _p('rotors.first_azimuth_deg', 'double', 0.0, 'deg', 'tilted_ring: azimuth of rotor 1 from '
+       'the nose, counter-clockwise from above', BOTH),
+    _p('rotors.height', 'double', 0.0, 'm', 'tilted_ring: rotor plane above the centre of mass',
+       BOTH),
+    _p('rotors.positions', 'double_array', [], 'm',
+       'custom (required): rotor positions from the centre of mass, 3 per rotor', BOTH),
+    _p('rotors.axes', 'double_array', [], '-',
+       'custom (required): rotor thrust axes (normalised), 3 per rotor', BOTH),
+    _p('rotors.spins', 'integer_array', [], '-',
+       'custom (required): +1 counter-clockwise (seen along the thrust axis), -1 clockwise', BOTH,
+       check=lambda v: None if all(x in (-1, 1) for x in v) else 'each must be 1 or -1'),
+    _p('rotors.yaw_coefficient', 'double', 0.1, 'm',
+       'reaction moment per newton of thrust', BOTH, check=_nonnegative),
+    _p('rotors.failed', 'integer_array', [], '-', 'rotor numbers (1-based) to treat as dead',
+       BOTH),
+    # Motors: thrust curve f = a x^2 + b x + c, x = voltage_scale * command.
+    _p('motor.a', 'double_array', [6.0252e-5], 'N', 'thrust curve a (1 value, or 1 per rotor)',
+       BOTH),
+    _p('motor.b', 'double_array', [8.4086e-3], 'N', 'thrust curve b (1 value, or 1 per rotor)',
+       BOTH),
+    _p('motor.c', 'double_array', [-2.5194e-2], 'N', 'thrust curve c (1 value, or 1 per rotor)',
+       BOTH),
+    _p('motor.voltage_scale', 'double', 1.1261, '-',
+       'battery-voltage scale of the command (12.5 V / 11.1 V)', BOTH, check=_positive),
+    _p('motor.command_max', 'integer', 240, '-', 'largest ESC command', BOTH,
+       check=lambda v: None if 1 <= v <= 65535 else 'must be in 1..65535'),
+    _p('thrust_min', 'double', 0.2, 'N', 'least thrust per rotor while armed', CONTROLLER,
+       check=_nonnegative),
+    _p('thrust_max', 'double', 6.5, 'N', 'most thrust per rotor (<= the curve at command_max)',
+       CONTROLLER, check=_positive),
+    _p('collective_thrust', 'double', 0.0, 'N',
+       'thrust along body z to hold while armed; 0 = m * |gravity|', CONTROLLER,
+       check=_nonnegative),
+    # Simulator.
+    _p('actuation', 'string', 'rotors', '-', 'rotors (commands through the motors) or torque '
+       '(the controller\'s moment, ideal)', SIM, choices=('rotors', 'torque')),
+    _p('motor_time_constant', 'double', 0.04, 's', 'first-order lag of each rotor\'s thrust',
+       SIM, check=_positive),
+    _p('noise.attitude_deg', 'double', 0.0, 'deg',
+       'std dev of measured-attitude noise per axis (motion capture)', SIM, check=_nonnegative),
+    _p('noise.angular_velocity', 'double', 0.0, 'rad/s',
+       'std dev of gyro noise per axis', SIM, check=_nonnegative),
+    _p('noise.gyro_bias', 'double_array', [0.0, 0.0, 0.0], 'rad/s', 'constant gyro bias', SIM,
+       length=3),
+    _p('noise.seed', 'integer', 0, '-', 'random seed of the noise', SIM),
+    _p('integration_rate_hz', 'double', 1000.0, 'Hz', 'simulator integration rate (RKMK4)', SIM,
+       check=_rate),
+    _p('initial_attitude', 'double_array', [0.0, 0.0, 0.0, 1.0], '-',
+       'initial attitude quaternion (x, y, z, w)', SIM, length=4, check=_unit_quaternion),
+    _p('initial_angular_velocity', 'double_array', [0.0, 0.0, 0.0], 'rad/s',
+       'initial body angular velocity', SIM, length=3),
+    _p('disturbance.constant', 'double_array', [0.0, 0.0, 0.0], 'N m',
+       'constant disturbance moment, body frame', SIM, length=3),
+    _p('disturbance.amplitude', 'double_array', [0.0, 0.0, 0.0], 'N m',
+       'amplitudes of [sin wt, cos wt, (sin wt + cos wt)/2] added to it', SIM, length=3),
+    _p('disturbance.frequency', 'double', 0.0, 'rad/s', 'w of the sinusoidal disturbance', SIM,
+       check=_nonnegative),
+    _p('pose_rate_hz', 'double', 200.0, 'Hz', 'sim node: rate of pose (motion capture)', SIM,
+       check=_rate),
+    _p('imu_rate_hz', 'double', 100.0, 'Hz', 'sim node: rate of imu', SIM, check=_rate),
+    _p('publish_clock', 'bool', False, '-', 'sim node: publish /clock (for use_sim_time)', SIM),
+    _p('real_time_factor', 'double', 1.0, '-', 'sim node: simulated seconds per wall second',
+       SIM, check=lambda v: None if 0.0 < v <= 20.0 else 'must be in (0, 20]'),
+    _p('command_timeout', 'double', 0.1, 's',
+       'sim node: motors stop when motor_commands are older than this', SIM, check=_positive),
+    _p('world_frame_id', 'string', 'world', '-', 'world frame id of pose messages', SIM),
+    # Headless runner.
+    _p('duration', 'double', 20.0, 's', 'simulated time of a scenario run', SCENARIO,
+       check=_positive),
+    _p('title', 'string', '', '-', 'title for a scenario run\'s plots and summary', SCENARIO),
+]
+
+# Per-cone parameters; <name> is one of cones.names.
+CONE_SCHEMA = [
+    _p('cones.<name>.axis', 'double_array', None, '-', 'cone axis v_i, world frame (normalised)',
+       CONTROLLER, length=3, check=_nonzero_vector),
+    _p('cones.<name>.half_angle_deg', 'double', None, 'deg', 'cone half-angle theta_i',
+       CONTROLLER, check=_half_angle),
+]
+
+BY_NAME = {p.name: p for p in SCHEMA}
+CONE_KEY = re.compile(r'^cones\.([^.]+)\.(axis|half_angle_deg)$')
+CONE_NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
+
+
+def schema_for(node):
+    """The parameters node ('controller', 'sim' or 'scenario') reads, in schema order."""
+    return [p for p in SCHEMA if node in p.nodes]
+
+
+def cone_param(name, field_):
+    """The schema entry for cones.<name>.<field_> (field_ is 'axis' or 'half_angle_deg')."""
+    template = {'axis': CONE_SCHEMA[0], 'half_angle_deg': CONE_SCHEMA[1]}[field_]
+    return Param(template.name.replace('<name>', name), template.type, None, template.unit,
+                 template.doc, template.nodes, template.length, template.check)
+
+
