@@ -7,7 +7,7 @@ import pytest
 
 from geoctl_ros import params
 from geoctl_ros.core.airframe import (AirframeError, Allocator, RotorGeometry, ThrustCurve,
-                                 effectiveness, tilted_ring)
+                                      effectiveness, tilted_ring)
 from geoctl_ros.params import CONTROLLER, ConfigError, resolve
 from geoctl_ros.sim.testbed import RotorActuator
 
@@ -35,7 +35,21 @@ EXPECTED_B = np.array([
 
 
 def lab_allocator(**kw):
-    return Allocator(tilted_ring(), RHO, kw.pop('lo', 0.2), kw.pop('hi', 6.5), **kw)
+    return Allocator(effectiveness(tilted_ring(), RHO), kw.pop('lo', 0.2), kw.pop('hi', 6.5),
+                     **kw)
+
+
+def test_allocation_from_a_hand_written_matrix():
+    """A flat quad in plus layout, B written out: thrust 1 per rotor along z; roll from rotors 2
+    and 4 (y = +-0.2), pitch from 1 and 3 (x = +-0.2), yaw +-0.1 by spin."""
+    B = np.array([[0, 0, 0, 0], [0, 0, 0, 0], [1, 1, 1, 1],
+                  [0, 0.2, 0, -0.2], [-0.2, 0, 0.2, 0], [-0.1, 0.1, -0.1, 0.1]], dtype=float)
+    al = Allocator(B, 0.0, 10.0)
+    a = al.allocate(np.array([0.04, 0.0, 0.0]), 8.0)
+    # by hand: each rotor 2 N, plus 0.1 N on rotor 2 and -0.1 N on rotor 4 for 0.04 N m of roll
+    assert np.allclose(a.thrusts, [2.0, 2.1, 2.0, 1.9]) and not a.saturated
+    a = al.allocate(np.array([0.0, 0.0, 0.2]), 8.0)
+    assert np.allclose(a.thrusts, [1.5, 2.5, 1.5, 2.5])
 
 
 def test_effectiveness_of_the_lab_hexrotor_matches_the_hand_computation():
@@ -123,12 +137,12 @@ def test_layouts_that_cannot_produce_every_moment_are_refused():
     two = RotorGeometry(np.array([[0.3, 0, 0], [-0.3, 0, 0]]), np.tile([0.0, 0.0, 1.0], (2, 1)),
                         np.array([1.0, -1.0]), 0.1)
     with pytest.raises(AirframeError, match='cannot produce every moment'):
-        Allocator(two, RHO, 0.2, 6.5)
+        Allocator(effectiveness(two, RHO), 0.2, 6.5)
     # a flat quad whose rotors all spin the same way: yaw only together with thrust
     same = tilted_ring(count=4, tilt_deg=0.0)
     same = RotorGeometry(same.positions, same.axes, np.ones(4), 0.1)
     with pytest.raises(AirframeError, match='collective thrust independently'):
-        Allocator(same, RHO, 0.2, 6.5)
+        Allocator(effectiveness(same, RHO), 0.2, 6.5)
     # three of six rotors dead (1, 3, 5: same spin left): refused through the parameters
     with pytest.raises(ConfigError) as info:
         params.mixer(resolve(CONTROLLER, {'rotors.failed': [2, 4, 6]}))
@@ -162,8 +176,10 @@ def test_thrust_curve_commands():
         c = LAB_CURVE.command(np.full(6, target))[0]
         assert LAB_CURVE.thrust(np.full(6, c))[0] >= target - 1e-9
         assert LAB_CURVE.thrust(np.full(6, c - 1))[0] < target
-    assert list(LAB_CURVE.command(np.array([-1.0, 0.0, 1e3, 2.13, 2.13, 2.13]))) == [
-        3, 3, 240, 118, 118, 118]                      # f < 0 counts as 0, like the lab
+    # f < 0 counts as 0, like the lab; command 0 gives 0 N (the curve is clipped), which meets 0
+    assert list(LAB_CURVE.command(np.array([-1.0, 0.0, 1e3, 2.13, 2.13, 1e-3]))) == [
+        0, 0, 240, 118, 118, 3]
+    assert LAB_CURVE.thrust(np.full(6, 2))[0] == 0.0 < LAB_CURVE.thrust(np.full(6, 3))[0]
     per_motor = ThrustCurve(np.array([0.6252, 0.8251, 0.7659, 0.8197, 0.8162, 0.7524]) * 1e-4,
                             np.array([0.0142, 0.0097, 0.0097, 0.0087, 0.0088, 0.0099]),
                             np.array([-0.3700, -0.2380, -0.2747, -0.2418, -0.2495, -0.2489]),

@@ -7,6 +7,7 @@ import pytest
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.cones import ConeSet
+from geoctl_ros.core.mechanics import gravity_moment
 from geoctl_ros.core.control import (AttitudeController, ControllerConfig, E_matrix, SetpointRejected,
                                 attractive_error, configuration_error, gain_condition)
 from geoctl_ros.sim.plant import Disturbance, PlantConfig, Plant
@@ -215,6 +216,43 @@ def test_adapt_false_holds_the_estimate_and_reset_zeroes_it():
     assert not ctrl.delta_bar.any()
 
 
+def test_gain_bound_of_eq_40_matches_a_hand_computation():
+    """One cone, theta 30 deg, margin 5 deg, alpha 8, G = diag(0.9, 1.1, 1.0), by hand:
+    h1 = 1.9; b1 = 1.9 / (0.2^2 + 2.1^2) = 0.42697; Psi <= 1.9;
+    |E| <= 3 / sqrt(2) = 2.1213; |e_RA| <= sqrt(1.9 / 0.42697) = 2.1095;
+    beta = cos 35 = 0.81915, d = beta - cos 30 = -0.046880;
+    |e_RB| <= sin 35 / (8 * 0.046880) = 1.5294;
+    |F| <= ((beta^2 + 1) d^2 + 1 + beta^2 (beta^2 - 2)) / (alpha^2 d^4) = 0.11190 / 3.0909e-4 = 362.0;
+    H = 1.9 * 2.1213 + 2 * 2.1095 * 1.5294 + 1.9 * 362.0 = 698.3."""
+    cones = ConeSet([1, 0, 0], [[0.0, 0.0, -1.0]], np.radians([30.0]), 8.0, np.radians(0.25))
+    cfg = config(cones, k_R=0.4, k_Omega=0.7, c=0.1)
+    check = gain_condition(cfg, margin_deg=5.0)
+    assert check.H == pytest.approx(698.3, rel=2e-3)
+    lam = np.linalg.eigvalsh(cfg.J)
+    assert check.c_max_paper == pytest.approx(
+        4 * 0.4 * 0.7 / (0.7 ** 2 + 4 * 0.4 * lam[-1] * 698.3), rel=2e-3)
+
+
+def test_the_gain_check_bounds_hold_where_sampled():
+    """|e_RA|^2 <= A / b1 (the b1 the check uses) and |e_RB| <= its bound on the domain, at
+    random attitudes: the bounds of Prop. 1 and 4 are bounds."""
+    G = np.array([0.9, 1.1, 1.0])
+    b1 = 1.9 / (0.2 ** 2 + 2.1 ** 2)
+    theta, margin, alpha = math.radians(30.0), math.radians(5.0), 8.0
+    cones = ConeSet([1, 0, 0], [[0.0, 0.0, -1.0]], [theta], alpha, math.radians(0.25))
+    bound_eRB = math.sin(theta + margin) / (alpha * (math.cos(theta) - math.cos(theta + margin)))
+    worst_A, worst_B = 0.0, 0.0
+    for _ in range(4000):
+        R = so3.exp(rng.normal(size=3) * 2.0)
+        A, e_RA = attractive_error(R, np.eye(3), G)
+        if A > 1e-6:
+            worst_A = max(worst_A, float(e_RA @ e_RA) / A)
+        if cones.margins_deg(R)[0] >= math.degrees(margin):
+            worst_B = max(worst_B, float(np.linalg.norm(cones.evaluate(R).e_RB[0])))
+    assert 1.905 < worst_A <= 1.0 / b1       # beyond the paper's min form, within the max form
+    assert 0.5 * bound_eRB < worst_B <= bound_eRB
+
+
 def test_gain_check_reports_numbers():
     check = gain_condition(config(four_cones(), c=1e-4))
     assert check.ok and check.c_max > 1e-4 and check.H > 0
@@ -275,7 +313,9 @@ def test_reconfigure_refuses_cones_that_contain_the_current_setpoint():
 
 
 def test_gravity_moment_is_cancelled_and_cog_model_estimates_the_offset():
-    """A wrong mass leaves an uncompensated gravity moment; the constant+cog model learns it."""
+    """A wrong mass leaves an uncompensated gravity moment; the constant+cog model learns it.
+    Held tilted (R_d 0.3 rad about x), where that moment is not zero: the learnt W Delta_bar
+    equals the true uncompensated moment (m rho true - m rho modelled) x R^T g."""
     true_rho = np.array([0.0, 0.0, 0.1])
     cones = ConeSet([1, 0, 0], np.zeros((0, 3)), [], 8.0, 0.01)
     cfg = config(cones, k_R=0.4, k_Omega=0.7, k_Delta=0.5, c=0.5, mass=1.26 * 0.8,
@@ -284,10 +324,15 @@ def test_gravity_moment_is_cancelled_and_cog_model_estimates_the_offset():
                                 Disturbance(np.zeros(3), np.zeros(3), 0.0)),
                     so3.axis_angle([1, 0, 0], 0.3))
     ctrl = AttitudeController(cfg)
+    R_d = so3.axis_angle([1, 0, 0], 0.3)
+    ctrl.set_setpoint(R_d)
     dt = 0.01
     for _ in range(int(60 / dt)):
         out = ctrl.step(plant.R, plant.Omega, dt)
         for _ in range(5):
             plant.step(out.u, dt / 5)
-    assert so3.angle(plant.R) < math.radians(0.2)
-    assert np.all(np.isfinite(ctrl.delta_bar)) and len(ctrl.delta_bar) == 6
+    assert so3.angle(R_d.T @ plant.R) < math.radians(0.2)
+    missing = gravity_moment(plant.R, (1.26 - 1.26 * 0.8) * true_rho, np.array([0, 0, -9.81]))
+    assert np.linalg.norm(missing) > 0.07                       # 10 deg of error if unlearnt
+    learnt = ctrl.regressor(plant.R) @ ctrl.delta_bar
+    assert np.allclose(learnt, missing, atol=0.02 * np.linalg.norm(missing))

@@ -125,13 +125,18 @@ class Allocation:
 
 
 class Allocator:
-    """Thrusts for a desired moment (about the pivot) and collective thrust, within limits."""
+    """Thrusts for a desired moment (about the pivot) and collective thrust, within limits.
 
-    def __init__(self, geometry, rho, thrust_min, thrust_max, failed=()):
-        n = geometry.count
+    It knows rotors only through their effectiveness matrix B (6 x n: thrusts -> [force; moment
+    about the pivot], from ``effectiveness`` or written by hand), as PX4's control allocation
+    receives its matrix from the airframe's ActuatorEffectiveness."""
+
+    def __init__(self, B, thrust_min, thrust_max, failed=()):
+        B = np.asarray(B, dtype=float)
+        n = B.shape[1]
         self.count = n
         self.alive = [i for i in range(n) if i + 1 not in set(failed)]
-        self.B_full = effectiveness(geometry, rho)
+        self.B_full = B
         self.B = self.B_full[:, self.alive]
         self.health = check(self.B, [i + 1 for i in self.alive])
         if failed:
@@ -216,10 +221,13 @@ class ThrustCurve:
 
     def command(self, thrust):
         """Smallest integer command whose thrust is at least the requested one (the lab's ceil),
-        clipped to 0..command_max; negative thrust counts as 0."""
+        clipped to 0..command_max; negative thrust counts as 0, and a request that command 0
+        already meets (the curve is clipped at 0 N) gives 0."""
         f = np.maximum(np.asarray(thrust, dtype=float), 0.0)
         x = (-self.b + np.sqrt(self.b * self.b - 4.0 * self.a * (self.c - f))) / (2.0 * self.a)
-        return np.clip(np.ceil(x / self.voltage_scale - 1e-9), 0, self.command_max).astype(int)
+        cmd = np.clip(np.ceil(x / self.voltage_scale - 1e-9), 0, self.command_max).astype(int)
+        cmd[f <= np.maximum(self.c, 0.0)] = 0
+        return cmd
 
     def max_thrust(self):
         """Thrust of each motor at command_max."""

@@ -26,7 +26,7 @@ import math
 import numpy as np
 
 from geoctl_ros.core.cones import ConeSet
-from geoctl_ros.core.mechanics import cog_regressor, gravity_moment, pivot_inertia
+from geoctl_ros.core.mechanics import cog_regressor, first_moment, gravity_moment, pivot_inertia
 from geoctl_ros.core.so3 import cross, vee
 
 # Disturbance models: name -> number of estimated parameters (the columns of W).
@@ -58,10 +58,12 @@ class ControllerConfig:
     disturbance_model: str = 'constant'
     delta_bar_max: float = 0.0       # bound on |constant estimate| (N m); 0 = none
     cog_estimate_max: float = 0.0    # bound on |m rho estimate| (kg m); 0 = none
-    J: np.ndarray = field(init=False, repr=False)
+    J: np.ndarray = field(init=False, repr=False)        # inertia about the pivot
+    m_rho: np.ndarray = field(init=False, repr=False)    # mass times pivot -> centre of mass
 
     def __post_init__(self):
         object.__setattr__(self, 'J', pivot_inertia(self.inertia, self.mass, self.cog_offset))
+        object.__setattr__(self, 'm_rho', first_moment(self.mass, self.cog_offset))
 
     @property
     def n_params(self):
@@ -116,7 +118,6 @@ class AttitudeController:
         self.R_d = np.eye(3)
         self.Omega_d = np.zeros(3)
         self.dOmega_d = np.zeros(3)
-        self._m_rho = config.mass * np.asarray(config.cog_offset, dtype=float)
 
     # --- configuration-time operations -------------------------------------------------------
     def setpoint_problem(self, R_d, cones=None):
@@ -164,7 +165,6 @@ class AttitudeController:
         if config.n_params != len(self.delta_bar):
             self.delta_bar = np.zeros(config.n_params)
         self.config = config
-        self._m_rho = config.mass * np.asarray(config.cog_offset, dtype=float)
         self._project()
 
     # --- the hot path ----------------------------------------------------------------------------
@@ -192,7 +192,7 @@ class AttitudeController:
         if self.Omega_d.any() or self.dOmega_d.any():
             u -= J @ (cross(Omega, Omega_d) - RtRd @ self.dOmega_d)
         if cfg.gravity_compensation:
-            u -= gravity_moment(R, self._m_rho, cfg.gravity)
+            u -= gravity_moment(R, cfg.m_rho, cfg.gravity)
         saturated = bool(ev.saturated.any())
         adapting = bool(adapt and cfg.adaptive and not saturated)
         if adapting:
@@ -252,11 +252,11 @@ def gain_condition(config, margin_deg=5.0):
     g = np.asarray(config.G, dtype=float)
     pairs = [(0, 1), (1, 2), (2, 0)]
     h1 = min(g[i] + g[j] for i, j in pairs)
-    h2_min = min((g[i] - g[j]) ** 2 for i, j in pairs)
-    h3_min = min((g[i] + g[j]) ** 2 for i, j in pairs)
-    b1 = h1 / (h2_min + h3_min)                          # paper, Prop. 1 (v)
-    n1 = h1 / (max((g[i] - g[j]) ** 2 for i, j in pairs)
-               + max((g[i] + g[j]) ** 2 for i, j in pairs))   # dissertation, Prop. (iv)
+    # |e_RA|^2 <= A / b1. The paper's Prop. 1 (v) prints b1 = h1 / (h2 + h3) with the minima of
+    # (g_i - g_j)^2 and (g_i + g_j)^2; that is not a bound (for G = diag(0.9, 1.1, 1.0), sampled
+    # |e_RA|^2 / A reaches 2.099 > 1/b1 = 1.905). With the maxima, as the dissertation's n1, it is.
+    b1 = n1 = h1 / (max((g[i] - g[j]) ** 2 for i, j in pairs)
+                    + max((g[i] + g[j]) ** 2 for i, j in pairs))
     psi = h1
     c_A = c_B = psi
     E_bound = float(g.sum()) / math.sqrt(2.0)
@@ -266,7 +266,9 @@ def gain_condition(config, margin_deg=5.0):
     for theta in cones.theta:
         beta = math.cos(theta + math.radians(margin_deg))
         d = beta - math.cos(theta)
-        eRB_sum += math.sin(theta) / (config.cones.alpha * -d)
+        # |e_RB| = sin(angle) / (alpha (cos theta - cos angle)); on the domain (angle >= theta +
+        # margin) it is largest at angle = theta + margin, so sin(theta + margin), not sin(theta)
+        eRB_sum += math.sin(theta + math.radians(margin_deg)) / (config.cones.alpha * -d)
         F_sum += (((beta ** 2 + 1.0) * d ** 2 + 1.0 + beta ** 2 * (beta ** 2 - 2.0))
                   / (cones.alpha ** 2 * d ** 4))
     H = c_B * E_bound + 2.0 * eRA_bound * eRB_sum + c_A * F_sum

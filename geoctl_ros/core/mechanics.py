@@ -16,6 +16,12 @@ def pivot_inertia(inertia_cm, mass, rho):
                                                           - np.outer(rho, rho))
 
 
+def first_moment(mass, rho):
+    """m rho, the mass times the pivot -> centre of mass vector: what the gravity moment (and the
+    constant+cog estimate) is linear in."""
+    return mass * np.asarray(rho, dtype=float)
+
+
 def gravity_moment(R, m_rho, g_w):
     """Moment of gravity about the pivot in the body frame: (m rho) x (R^T g_w).
 

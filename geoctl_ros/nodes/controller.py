@@ -12,20 +12,18 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, QuaternionStamped, Vector3Stamped, WrenchStamped
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core.control import gain_condition
 from geoctl_ros.core.loop import ControlLoop
-from geoctl_ros.nodes import ros_params
+from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.conversions import quaternion, set_vector, stamp_seconds, vector
 from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.core.stats import WindowStats
 from geoctl_ros.params import CONTROLLER, ConfigError, controller_setup, resolve
 
-COMMAND_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
 DIAGNOSTICS_PERIOD = 0.5      # s: the fixed statistics window
 
 
@@ -59,17 +57,20 @@ class ControllerNode(Node):
         self.period = 1.0 / setup.values['rate_hz']
         self.frame_id = setup.values['frame_id']
 
-        self.create_subscription(PoseStamped, 'pose', self._on_pose, qos_profile_sensor_data)
-        self.create_subscription(Imu, 'imu', self._on_imu, qos_profile_sensor_data)
-        self.create_subscription(QuaternionStamped, 'attitude_setpoint', self._on_setpoint, 10)
-        self.pub_motors = self.create_publisher(Float64MultiArray, 'motor_commands', COMMAND_QOS)
-        self.pub_wrench = self.create_publisher(WrenchStamped, 'control_wrench', 10)
-        self.pub_eR = self.create_publisher(Vector3Stamped, 'attitude_error', 10)
-        self.pub_eW = self.create_publisher(Vector3Stamped, 'angular_velocity_error', 10)
-        self.pub_psi = self.create_publisher(Float64, 'configuration_error', 10)
-        self.pub_dbar = self.create_publisher(Float64MultiArray, 'disturbance_estimate', 10)
-        self.pub_margins = self.create_publisher(Float64MultiArray, 'cone_margins', 10)
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_subscription(PoseStamped, 'pose', self._on_pose, qos.SENSOR)
+        self.create_subscription(Imu, 'imu', self._on_imu, qos.SENSOR)
+        self.create_subscription(QuaternionStamped, 'attitude_setpoint', self._on_setpoint,
+                                 qos.EVENT)
+        self.pub_motors = self.create_publisher(Float64MultiArray, 'motor_commands', qos.COMMAND)
+        self.pub_wrench = self.create_publisher(WrenchStamped, 'control_wrench', qos.COMMAND)
+        self.pub_eR = self.create_publisher(Vector3Stamped, 'attitude_error', qos.TELEMETRY)
+        self.pub_eW = self.create_publisher(Vector3Stamped, 'angular_velocity_error',
+                                            qos.TELEMETRY)
+        self.pub_psi = self.create_publisher(Float64, 'configuration_error', qos.TELEMETRY)
+        self.pub_dbar = self.create_publisher(Float64MultiArray, 'disturbance_estimate',
+                                              qos.TELEMETRY)
+        self.pub_margins = self.create_publisher(Float64MultiArray, 'cone_margins', qos.TELEMETRY)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
         self.create_service(SetBool, '~/arm', self._on_arm)
         self.create_service(Trigger, '~/reset_adaptation', self._on_reset)
 

@@ -18,18 +18,16 @@ import time
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 
 from geoctl_ros.core import so3
-from geoctl_ros.nodes import ros_params
+from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg, vector
 from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.params import SIM, ConfigError, airframe, resolve, testbed_sim
 
-COMMAND_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
 LATE = 0.05     # s behind real time before the sim warns
 
 
@@ -58,13 +56,14 @@ class SimNode(Node):
 
         if self.n_rotors:
             self.create_subscription(Float64MultiArray, 'motor_commands', self._on_commands,
-                                     COMMAND_QOS)
+                                     qos.COMMAND)
         else:                          # ideal actuation: the controller's moment itself
-            self.create_subscription(WrenchStamped, 'control_wrench', self._on_wrench, 10)
-        self.pub_pose = self.create_publisher(PoseStamped, 'pose', qos_profile_sensor_data)
-        self.pub_imu = self.create_publisher(Imu, 'imu', qos_profile_sensor_data)
-        self.pub_true = self.create_publisher(PoseStamped, 'sim/true_pose', 10)
-        self.pub_clock = (self.create_publisher(ClockMsg, '/clock', 10)
+            self.create_subscription(WrenchStamped, 'control_wrench', self._on_wrench,
+                                     qos.COMMAND)
+        self.pub_pose = self.create_publisher(PoseStamped, 'pose', qos.SENSOR)
+        self.pub_imu = self.create_publisher(Imu, 'imu', qos.SENSOR)
+        self.pub_true = self.create_publisher(PoseStamped, 'sim/true_pose', qos.TELEMETRY)
+        self.pub_clock = (self.create_publisher(ClockMsg, '/clock', qos.EVENT)
                           if self.publish_clock else None)
         self.pose_msg, self.true_msg, self.imu_msg = PoseStamped(), PoseStamped(), Imu()
         self.pose_msg.header.frame_id = self.true_msg.header.frame_id = v['world_frame_id']

@@ -8,7 +8,7 @@ import numpy as np
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.airframe import (AirframeError, Allocator, Mixer, RotorGeometry, ThrustCurve,
-                                      tilted_ring)
+                                      effectiveness, tilted_ring)
 from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.core.control import AttitudeController, ControllerConfig
 from geoctl_ros.core.safety import SetpointSchedule, quaternion_problem
@@ -147,7 +147,7 @@ def mixer(values):
     if values['thrust_min'] >= values['thrust_max']:
         raise ConfigError([('thrust_min', 'must be below thrust_max (%g)' % values['thrust_max'])])
     try:
-        allocator = Allocator(geometry, values['cog_offset'], values['thrust_min'],
+        allocator = Allocator(effectiveness(geometry, values['cog_offset']), values['thrust_min'],
                               values['thrust_max'], failed)
     except AirframeError as e:
         raise ConfigError([('rotors', str(e))]) from None

@@ -18,12 +18,12 @@ from rcl_interfaces.srv import SetParameters
 import rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
-from geoctl_ros.nodes.conversions import stamp_seconds
+from geoctl_ros.nodes import qos
+from geoctl_ros.nodes.conversions import quaternion, set_quaternion, set_vector, stamp_seconds
 from geoctl_ros.tools.rosenv import node_env
 
 
@@ -88,27 +88,27 @@ class Monitor(Node):
     def __init__(self, controller='controller', record=None):
         """record: the log keys to subscribe to (default: all of them)."""
         super().__init__('geoctl_monitor')
-        reliable1 = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
         self._record = None if record is None else set(record)
         self.log = {k: [] for k in ('motors', 'margins', 'psi', 'dbar', 'true_pose', 'pose',
                                     'diagnostics', 'eR')}
-        self._sub(Float64MultiArray, 'motor_commands', 'motors', reliable1, lambda m: list(m.data))
-        self._sub(Float64MultiArray, 'cone_margins', 'margins', 10, lambda m: list(m.data))
-        self._sub(Float64, 'configuration_error', 'psi', 10, lambda m: m.data)
-        self._sub(Float64MultiArray, 'disturbance_estimate', 'dbar', 10, lambda m: list(m.data))
-        self._sub(PoseStamped, 'sim/true_pose', 'true_pose', 10, _pose_quat)
-        self._sub(PoseStamped, 'pose', 'pose', qos_profile_sensor_data, _pose_quat)
-        self._sub(DiagnosticArray, '/diagnostics', 'diagnostics', 10, _diag)
+        tel = qos.TELEMETRY
+        self._sub(Float64MultiArray, 'motor_commands', 'motors', qos.COMMAND,
+                  lambda m: list(m.data))
+        self._sub(Float64MultiArray, 'cone_margins', 'margins', tel, lambda m: list(m.data))
+        self._sub(Float64, 'configuration_error', 'psi', tel, lambda m: m.data)
+        self._sub(Float64MultiArray, 'disturbance_estimate', 'dbar', tel, lambda m: list(m.data))
+        self._sub(PoseStamped, 'sim/true_pose', 'true_pose', tel, _pose_quat)
+        self._sub(PoseStamped, 'pose', 'pose', qos.SENSOR, _pose_quat)
+        self._sub(DiagnosticArray, '/diagnostics', 'diagnostics', qos.EVENT, _diag)
         from geometry_msgs.msg import Vector3Stamped
-        self._sub(Vector3Stamped, 'attitude_error', 'eR', 10,
+        self._sub(Vector3Stamped, 'attitude_error', 'eR', tel,
                   lambda m: (m.vector.x, m.vector.y, m.vector.z))
         self.arm_client = self.create_client(SetBool, '/%s/arm' % controller)
         self.reset_client = self.create_client(Trigger, '/%s/reset_adaptation' % controller)
         self.param_client = self.create_client(SetParameters, '/%s/set_parameters' % controller)
-        self.pub_pose = self.create_publisher(PoseStamped, 'pose', qos_profile_sensor_data)
-        self.pub_imu = self.create_publisher(Imu, 'imu', qos_profile_sensor_data)
-        self.pub_setpoint = self.create_publisher(QuaternionStamped, 'attitude_setpoint', 10)
-        self._reliable1 = reliable1
+        self.pub_pose = self.create_publisher(PoseStamped, 'pose', qos.SENSOR)
+        self.pub_imu = self.create_publisher(Imu, 'imu', qos.SENSOR)
+        self.pub_setpoint = self.create_publisher(QuaternionStamped, 'attitude_setpoint', qos.EVENT)
         self.executor_ = rclpy.executors.SingleThreadedExecutor()
         self.executor_.add_node(self)
 
@@ -170,22 +170,19 @@ class Monitor(Node):
     def publish_pose(self, q, stamp=None):
         msg = PoseStamped()
         msg.header.stamp = stamp or self.get_clock().now().to_msg()
-        o = msg.pose.orientation
-        o.x, o.y, o.z, o.w = (float(v) for v in q)
+        set_quaternion(msg.pose.orientation, q)
         self.pub_pose.publish(msg)
 
     def publish_imu(self, w, stamp=None):
         msg = Imu()
         msg.header.stamp = stamp or self.get_clock().now().to_msg()
-        v = msg.angular_velocity
-        v.x, v.y, v.z = (float(x) for x in w)
+        set_vector(msg.angular_velocity, w)
         self.pub_imu.publish(msg)
 
     def publish_setpoint(self, q):
         msg = QuaternionStamped()
         msg.header.stamp = self.get_clock().now().to_msg()
-        o = msg.quaternion
-        o.x, o.y, o.z, o.w = (float(v) for v in q)
+        set_quaternion(msg.quaternion, q)
         self.pub_setpoint.publish(msg)
 
     def publish_commands(self, data):
@@ -193,7 +190,7 @@ class Monitor(Node):
         it exists, the real controller refuses to arm)."""
         if not hasattr(self, 'pub_commands'):
             self.pub_commands = self.create_publisher(Float64MultiArray, 'motor_commands',
-                                                      self._reliable1)
+                                                      qos.COMMAND)
         self.pub_commands.publish(Float64MultiArray(data=list(data)))
 
     # --- calls -------------------------------------------------------------------------------
@@ -227,8 +224,7 @@ class Monitor(Node):
 
 
 def _pose_quat(msg):
-    o = msg.pose.orientation
-    return (stamp_seconds(msg.header.stamp), (o.x, o.y, o.z, o.w))
+    return (stamp_seconds(msg.header.stamp), quaternion(msg.pose.orientation))
 
 
 def _diag(msg):

@@ -97,8 +97,8 @@ def run(scenario, duration=None):
     names = cones.names
     n_dbar = ccfg.n_params
     n_rot = mix.allocator.count if rotors else 0
-    m_rho_true = pcfg.mass * pcfg.cog_offset
-    m_rho_model = ccfg.mass * ccfg.cog_offset if ccfg.gravity_compensation else np.zeros(3)
+    m_rho_true = pcfg.m_rho
+    m_rho_model = ccfg.m_rho if ccfg.gravity_compensation else np.zeros(3)
 
     columns = (['t', 'qx', 'qy', 'qz', 'qw', 'wx', 'wy', 'wz', 'eR_x', 'eR_y', 'eR_z', 'psi',
                 'u_x', 'u_y', 'u_z']

@@ -133,14 +133,14 @@ def relay_main():
     import heapq
     import rclpy
     from geometry_msgs.msg import PoseStamped
-    from rclpy.qos import qos_profile_sensor_data
+    from geoctl_ros.nodes.qos import EVENT, SENSOR
     from sensor_msgs.msg import Imu
     from std_msgs.msg import String
 
     rclpy.init()
     node = rclpy.create_node('soak_relay')
-    pubs = {'pose': node.create_publisher(PoseStamped, 'pose', qos_profile_sensor_data),
-            'imu': node.create_publisher(Imu, 'imu', qos_profile_sensor_data)}
+    pubs = {'pose': node.create_publisher(PoseStamped, 'pose', SENSOR),
+            'imu': node.create_publisher(Imu, 'imu', SENSOR)}
     state = {'mode': 'off', 'arg': 0.0, 'until': 0.0, 'held': {}, 'seq': 0}
     queue = []                      # (due, seq, stream, msg)
     rng = random.Random(2)
@@ -186,9 +186,9 @@ def relay_main():
             _, _, stream, msg = heapq.heappop(queue)
             pubs[stream].publish(msg)
 
-    node.create_subscription(PoseStamped, 'raw/pose', on_input('pose'), qos_profile_sensor_data)
-    node.create_subscription(Imu, 'raw/imu', on_input('imu'), qos_profile_sensor_data)
-    node.create_subscription(String, 'soak/fault', on_fault, 10)
+    node.create_subscription(PoseStamped, 'raw/pose', on_input('pose'), SENSOR)
+    node.create_subscription(Imu, 'raw/imu', on_input('imu'), SENSOR)
+    node.create_subscription(String, 'soak/fault', on_fault, EVENT)
     node.create_timer(0.001, flush)
     signal.signal(signal.SIGTERM, lambda *a: sys.exit(0))
     try:
@@ -202,15 +202,16 @@ def listen_main(path):
     """A subscriber to motor_commands alone (as an ESC bridge would be): writes the receipt times
     (CLOCK_MONOTONIC, shared by every process) to path when stopped with SIGTERM."""
     import rclpy
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
     from std_msgs.msg import Float64MultiArray
+
+    from geoctl_ros.nodes.qos import COMMAND
 
     rclpy.init()
     node = rclpy.create_node('soak_command_listener')
     stamps = []
     node.create_subscription(Float64MultiArray, 'motor_commands',
                              lambda m: stamps.append(time.monotonic()),
-                             QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE))
+                             COMMAND)
     stop = []
     signal.signal(signal.SIGTERM, lambda *a: stop.append(1))
     try:
@@ -260,8 +261,10 @@ class Session:
         rclpy.init()
         self.mon = Monitor(record=('diagnostics', 'true_pose'))
         from std_msgs.msg import String
+
+        from geoctl_ros.nodes.qos import EVENT
         self._String = String
-        self._fault_pub = self.mon.create_publisher(String, 'soak/fault', 10)
+        self._fault_pub = self.mon.create_publisher(String, 'soak/fault', EVENT)
         if relay:     # a fault command sent before the relay has matched would be lost
             self.mon.wait_for(lambda: self._fault_pub.get_subscription_count() > 0, 40.0,
                               'the relay')
