@@ -15,6 +15,7 @@ setup(
         ('share/' + PACKAGE + '/config', glob('config/*.yaml')),
         ('share/' + PACKAGE + '/config/scenarios', glob('config/scenarios/*.yaml')),
         ('share/' + PACKAGE + '/config/dds', glob('config/dds/*.xml')),
+        ('share/' + PACKAGE + '/launch', glob('launch/*.launch.xml')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -28,6 +29,7 @@ setup(
             'scenario = geoctl_ros.tools.scenario:main',
             'controller = geoctl_ros.nodes.controller:main',
             'sim = geoctl_ros.nodes.sim:main',
+            'soak = geoctl_ros.tools.soak:main',
         ],
     },
 )

@@ -18,9 +18,12 @@ from geoctl_ros.core.safety import quaternion_problem
 CONTROLLER, SIM, SCENARIO = 'controller', 'sim', 'scenario'
 BOTH = (CONTROLLER, SIM)
 
-LAB_INERTIA = [5.5710e-3, 6.1766e-5, -2.5028e-5,
-               6.1766e-5, 5.5757e-3, 1.0068e-5,
-               -2.5028e-5, 1.0068e-5, 1.0505e-2]
+# The lab's inertia about the centre of mass is given in its code's forward-right-down body frame;
+# in this package's forward-left-up frame (F = diag(1, -1, -1), J_FLU = F J_FRD F) the products
+# J12 and J13 change sign and J23 does not.
+LAB_INERTIA = [5.5710e-3, -6.1766e-5, 2.5028e-5,
+               -6.1766e-5, 5.5757e-3, 1.0068e-5,
+               2.5028e-5, 1.0068e-5, 1.0505e-2]
 
 
 class ConfigError(ValueError):

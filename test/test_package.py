@@ -1,0 +1,107 @@
+"""The package as a maintainer and a lab receive it: layers that import without ROS, launch files
+that name only what exists, and the packaging metadata.
+
+``ros2 launch`` is not installable here, so the launch files are checked for what can be checked
+without it: they parse, and every executable, parameter file and remapping they name exists.
+"""
+import ast
+import os
+import re
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+PKG = os.path.join(ROOT, 'geoctl_ros')
+LAYERS = ['core', 'sim', 'params', 'nodes', 'tools']      # lowest first
+
+
+def test_core_sim_and_params_import_without_rclpy():
+    """With rclpy (and every ROS message package) made unimportable."""
+    code = ('import sys\n'
+            'class Block:\n'
+            '    def find_spec(self, name, path=None, target=None):\n'
+            '        if name.split(".")[0] in ("rclpy", "rcl_interfaces", "std_msgs", '
+            '"geometry_msgs", "sensor_msgs", "diagnostic_msgs", "builtin_interfaces"):\n'
+            '            raise ImportError("blocked: " + name)\n'
+            'sys.meta_path.insert(0, Block())\n'
+            'import pkgutil, importlib, geoctl_ros\n'
+            'for sub in ("core", "sim", "params"):\n'
+            '    pkg = importlib.import_module("geoctl_ros." + sub)\n'
+            '    for m in pkgutil.iter_modules(pkg.__path__):\n'
+            '        importlib.import_module("geoctl_ros.%s.%s" % (sub, m.name))\n'
+            'import geoctl_ros.tools.rosenv\n'
+            'print("ok")\n')
+    r = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0 and r.stdout.strip() == 'ok', r.stderr
+
+
+def _imports(path):
+    tree = ast.parse(open(path).read())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            yield node.module
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                yield a.name
+
+
+def test_no_layer_imports_a_higher_one():
+    rank = {name: i for i, name in enumerate(LAYERS)}
+    bad = []
+    for layer in LAYERS:
+        for f in os.listdir(os.path.join(PKG, layer)):
+            if not f.endswith('.py'):
+                continue
+            for mod in _imports(os.path.join(PKG, layer, f)):
+                m = re.match(r'geoctl_ros\.(\w+)', mod)
+                if m and m.group(1) in rank and rank[m.group(1)] > rank[layer]:
+                    bad.append('%s/%s imports %s' % (layer, f, mod))
+    assert not bad, bad
+
+
+def _console_scripts():
+    text = open(os.path.join(ROOT, 'setup.py')).read()
+    return set(re.findall(r"'(\w+) = geoctl_ros\.[\w.]+:main'", text))
+
+
+@pytest.mark.parametrize('name', ['testbed.launch.xml', 'sil.launch.xml'])
+def test_launch_files_name_only_what_exists(name):
+    root = ET.parse(os.path.join(ROOT, 'launch', name)).getroot()
+    assert root.tag == 'launch'
+    args = {a.get('name'): a.get('default') for a in root.iter('arg')}
+    nodes = list(root.iter('node'))
+    assert nodes
+    subscribed = {'controller': {'pose', 'imu', 'attitude_setpoint'},
+                  'sim': {'motor_commands', 'control_wrench'}}
+    for node in nodes:
+        assert node.get('pkg') == 'geoctl_ros'
+        assert node.get('exec') in _console_scripts(), node.get('exec')
+        for param in node.iter('param'):
+            src = param.get('from')
+            m = re.fullmatch(r'\$\(var (\w+)\)', src)
+            src = args[m.group(1)] if m else src
+            path = src.replace('$(find-pkg-share geoctl_ros)', ROOT)
+            assert os.path.isfile(path), src
+        for remap in node.iter('remap'):
+            assert remap.get('from') in subscribed[node.get('exec')], remap.get('from')
+    # installed where ros2 launch looks for them
+    assert "('share/' + PACKAGE + '/launch'" in open(os.path.join(ROOT, 'setup.py')).read()
+
+
+def test_package_xml_declares_what_the_code_imports():
+    deps = set(re.findall(r'<exec_depend>([\w-]+)</exec_depend>',
+                          open(os.path.join(ROOT, 'package.xml')).read()))
+    imported = set()
+    for dirpath, _, files in os.walk(PKG):
+        for f in files:
+            if f.endswith('.py'):
+                imported |= {m.split('.')[0] for m in _imports(os.path.join(dirpath, f))}
+    ros = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python', 'std_msgs',
+           'geometry_msgs', 'sensor_msgs', 'std_srvs', 'diagnostic_msgs', 'rosgraph_msgs'}
+    assert (imported & ros) <= deps, (imported & ros) - deps
+    assert {'python3-numpy', 'python3-yaml', 'python3-matplotlib'} <= deps
+    assert os.path.isfile(os.path.join(ROOT, 'LICENSE'))
+    assert 'BSD 3-Clause' in open(os.path.join(ROOT, 'LICENSE')).read()
