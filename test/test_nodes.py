@@ -12,7 +12,8 @@ rclpy = pytest.importorskip('rclpy')
 from geoctl_ros.core import so3  # noqa: E402
 from geoctl_ros.params import cone_set, controller_setup, load_parameter_file, node_overrides, \
     resolve  # noqa: E402
-from geoctl_ros.tools.processes import Monitor, NodeProcess  # noqa: E402
+from geoctl_ros.tools.processes import NodeProcess  # noqa: E402
+from support import FakeInputs  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TESTBED = os.path.join(ROOT, 'config', 'testbed.yaml')
@@ -29,7 +30,7 @@ def ros(tmp_path):
     """A monitor node in this process and a launcher for node processes; all stopped after."""
     procs = []
     rclpy.init()
-    mon = Monitor()
+    mon = FakeInputs()
 
     def launch(name, params_file=TESTBED, *ros_args):
         p = NodeProcess(name, params_file, ros_args, log_dir=tmp_path)

@@ -1,0 +1,60 @@
+"""Test support (not installed): a monitor that also plays the motion capture, the IMU, an
+operator's set points and a rival controller."""
+from geometry_msgs.msg import PoseStamped, QuaternionStamped
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Float64MultiArray
+
+from geoctl_ros.nodes import qos
+from geoctl_ros.nodes.conversions import set_quaternion, set_vector
+from geoctl_ros.tools.processes import Monitor
+
+
+class FakeInputs(Monitor):
+    """Monitor plus fake inputs."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.pub_pose = self.create_publisher(PoseStamped, 'pose', qos.SENSOR)
+        self.pub_imu = self.create_publisher(Imu, 'imu', qos.SENSOR)
+        self.pub_setpoint = self.create_publisher(QuaternionStamped, 'attitude_setpoint', qos.EVENT)
+
+    def feed(self, q=(0.0, 0.0, 0.0, 1.0), w=(0.0, 0.0, 0.0), rate_hz=100.0):
+        """Publish pose and imu at rate_hz with fresh stamps until stop_feed(); q and w can be
+        changed on the fly through self.feed_q / self.feed_w."""
+        self.feed_q, self.feed_w = tuple(q), tuple(w)
+        self._feed_timer = self.create_timer(1.0 / rate_hz, self._feed_tick)
+
+    def _feed_tick(self):
+        stamp = self.get_clock().now().to_msg()
+        self.publish_pose(self.feed_q, stamp)
+        self.publish_imu(self.feed_w, stamp)
+
+    def stop_feed(self):
+        self.destroy_timer(self._feed_timer)
+
+    def publish_pose(self, q, stamp=None):
+        msg = PoseStamped()
+        msg.header.stamp = stamp or self.get_clock().now().to_msg()
+        set_quaternion(msg.pose.orientation, q)
+        self.pub_pose.publish(msg)
+
+    def publish_imu(self, w, stamp=None):
+        msg = Imu()
+        msg.header.stamp = stamp or self.get_clock().now().to_msg()
+        set_vector(msg.angular_velocity, w)
+        self.pub_imu.publish(msg)
+
+    def publish_setpoint(self, q):
+        msg = QuaternionStamped()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        set_quaternion(msg.quaternion, q)
+        self.pub_setpoint.publish(msg)
+
+    def publish_commands(self, data):
+        """Publish on motor_commands as if this were a controller (created on first use: while
+        it exists, the real controller refuses to arm)."""
+        if not hasattr(self, 'pub_commands'):
+            self.pub_commands = self.create_publisher(Float64MultiArray, 'motor_commands',
+                                                      qos.COMMAND)
+        self.pub_commands.publish(Float64MultiArray(data=list(data)))
+
