@@ -1,6 +1,6 @@
-"""Sim-in-the-loop plumbing shared by the demo, the soak tool and the tests: start the installed nodes as
-processes (as ``ros2 run`` would), and a monitor node that records their topics and calls their
-services and parameters.
+"""Sim-in-the-loop plumbing shared by the demo, the soak tool and the tests: start the installed
+nodes as processes (as ``ros2 run`` would), and a monitor node that records their topics and calls
+their services and parameters.
 
 Every process started here runs with the loopback DDS profile and the caller's ``ROS_DOMAIN_ID``
 (``geoctl_ros.tools.rosenv.node_env``), so DDS traffic stays on 127.0.0.1.
