@@ -30,6 +30,7 @@ setup(
             'controller = geoctl_ros.nodes.controller:main',
             'sim = geoctl_ros.nodes.sim:main',
             'soak = geoctl_ros.tools.soak:main',
+            'mavlink_bridge = geoctl_ros.nodes.mavlink_bridge:main',
         ],
     },
 )

@@ -16,10 +16,12 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
+from geoctl_ros.core import so3
 from geoctl_ros.core.control import gain_condition
 from geoctl_ros.core.loop import ControlLoop
 from geoctl_ros.nodes import qos, ros_params
-from geoctl_ros.nodes.conversions import quaternion, set_vector, stamp_seconds, vector
+from geoctl_ros.nodes.conversions import (quaternion, set_quaternion, set_vector, stamp_seconds,
+                                          vector)
 from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.core.stats import WindowStats
 from geoctl_ros.params import CONTROLLER, ConfigError, controller_setup, resolve
@@ -56,6 +58,7 @@ class ControllerNode(Node):
         self.clock_ = self.get_clock() if sim_time else Clock(clock_type=ClockType.STEADY_TIME)
         self.period = 1.0 / setup.values['rate_hz']
         self.frame_id = setup.values['frame_id']
+        self.world_frame_id = setup.values['world_frame_id']
 
         self.create_subscription(PoseStamped, 'pose', self._on_pose, qos.SENSOR)
         self.create_subscription(Imu, 'imu', self._on_imu, qos.SENSOR)
@@ -71,6 +74,9 @@ class ControllerNode(Node):
                                               qos.TELEMETRY)
         self.pub_margins = self.create_publisher(Float64MultiArray, 'cone_margins', qos.TELEMETRY)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
+        self.pub_setpoint = self.create_publisher(QuaternionStamped, 'active_setpoint',
+                                                  qos.LATCHED)
+        self._published_R_d = None
         self.create_service(SetBool, '~/arm', self._on_arm)
         self.create_service(Trigger, '~/reset_adaptation', self._on_reset)
 
@@ -194,6 +200,14 @@ class ControllerNode(Node):
             m['margins'].data = out.margins_deg.tolist()
             self.pub_margins.publish(m['margins'])
         self._compute_stats.add(time.perf_counter() - t0)
+        R_d = self.loop.controller.R_d
+        if R_d is not self._published_R_d:      # a new set point (set_setpoint copies)
+            self._published_R_d = R_d
+            sp = QuaternionStamped()
+            sp.header.stamp = self.get_clock().now().to_msg()
+            sp.header.frame_id = self.world_frame_id
+            set_quaternion(sp.quaternion, so3.rot_to_quat(R_d))
+            self.pub_setpoint.publish(sp)
         bridge = self.loop.bridge
         state = (tick.armed, self.loop.supervisor.reason, bridge.attitude_source,
                  bridge.rate_source)

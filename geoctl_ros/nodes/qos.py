@@ -8,10 +8,14 @@
   pose): best effort, depth 1. A slow or dropped monitor never holds a publisher up. Subscribe with
   TELEMETRY too: a reliable subscriber would not connect to them. ``ros2 topic echo`` adapts.
 - EVENT: set points and /diagnostics: reliable, depth 10, nothing lost.
+- LATCHED: state that changes rarely (the active set point): reliable, depth 1, transient local,
+  so a node that starts later still gets the current value.
 """
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
 SENSOR = qos_profile_sensor_data
 COMMAND = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
 TELEMETRY = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 EVENT = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)

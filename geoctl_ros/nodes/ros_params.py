@@ -27,7 +27,8 @@ ROS_TYPE = {
     'string_array': Parameter.Type.STRING_ARRAY, 'integer': Parameter.Type.INTEGER,
     'integer_array': Parameter.Type.INTEGER_ARRAY,
 }
-# Changing these needs a restart (timers, frames); ROS refuses them at run time.
+# Changing these needs a restart (timers, frames, links); ROS refuses them at run time. So do all
+# of the MAVLink bridge's (mavlink.*).
 READ_ONLY = {'rate_hz', 'integration_rate_hz', 'pose_rate_hz', 'imu_rate_hz', 'publish_clock',
              'real_time_factor', 'frame_id', 'world_frame_id', 'actuation'}
 ROS_OWN = ('use_sim_time', 'start_type_description_service', 'qos_overrides.')
@@ -35,7 +36,7 @@ ROS_OWN = ('use_sim_time', 'start_type_description_service', 'qos_overrides.')
 
 def _descriptor(p):
     return ParameterDescriptor(description='%s [%s]' % (p.doc, p.unit),
-                               read_only=p.name in READ_ONLY)
+                               read_only=p.name in READ_ONLY or p.name.startswith('mavlink.'))
 
 
 def _declare(node, p, errors):

@@ -15,7 +15,7 @@ import numpy as np
 from geoctl_ros.core.control import DISTURBANCE_MODELS
 from geoctl_ros.core.safety import quaternion_problem
 
-CONTROLLER, SIM, SCENARIO = 'controller', 'sim', 'scenario'
+CONTROLLER, SIM, SCENARIO, MAVLINK = 'controller', 'sim', 'scenario', 'mavlink_bridge'
 BOTH = (CONTROLLER, SIM)
 
 # The lab's inertia about the centre of mass is given in its code's forward-right-down body frame;
@@ -248,7 +248,31 @@ SCHEMA = [
        SIM, check=lambda v: None if 0.0 < v <= 20.0 else 'must be in (0, 20]'),
     _p('command_timeout', 'double', 0.1, 's',
        'sim node: motors stop when motor_commands are older than this', SIM, check=_positive),
-    _p('world_frame_id', 'string', 'world', '-', 'world frame id of pose messages', SIM),
+    _p('world_frame_id', 'string', 'world', '-', 'world frame id (sim: of pose messages; '
+       'controller: of active_setpoint)', BOTH),
+    # MAVLink bridge (geoctl_ros.nodes.mavlink_bridge).
+    _p('mavlink.url', 'string', 'udpout:127.0.0.1:14550', '-',
+       'ground-station link, as pymavlink takes it (udpout:HOST:PORT, udpin:IP:PORT, tcp:HOST:PORT, '
+       'DEVICE,BAUD)', MAVLINK),
+    _p('mavlink.system_id', 'integer', 1, '-', 'MAVLink system id of the vehicle (component 1)',
+       MAVLINK, check=lambda v: None if 1 <= v <= 255 else 'must be 1..255'),
+    _p('mavlink.controller', 'string', 'controller', '-', 'name of the controller node to bridge',
+       MAVLINK),
+    _p('mavlink.heartbeat_rate_hz', 'double', 1.0, 'Hz', 'HEARTBEAT rate', MAVLINK,
+       check=_positive),
+    _p('mavlink.status_rate_hz', 'double', 1.0, 'Hz', 'SYS_STATUS rate', MAVLINK, check=_positive),
+    _p('mavlink.attitude_rate_hz', 'double', 10.0, 'Hz', 'ATTITUDE_QUATERNION and ATTITUDE_TARGET '
+       'rate', MAVLINK, check=_positive),
+    _p('mavlink.actuator_rate_hz', 'double', 5.0, 'Hz', 'ACTUATOR_OUTPUT_STATUS rate', MAVLINK,
+       check=_positive),
+    _p('mavlink.internals_rate_hz', 'double', 2.0, 'Hz', 'rate of Psi, cone margins and the '
+       'estimate (NAMED_VALUE_FLOAT, DEBUG_FLOAT_ARRAY)', MAVLINK, check=_positive),
+    _p('mavlink.statustext_rate_hz', 'double', 2.0, 'Hz', 'most STATUSTEXT messages per second '
+       '(controller warnings and errors)', MAVLINK, check=_positive),
+    _p('mavlink.autopilot_url', 'string', '', '-', 'optional link to a PX4/ArduPilot board used '
+       'as IMU (empty: none)', MAVLINK),
+    _p('mavlink.autopilot_imu_rate_hz', 'double', 100.0, 'Hz', 'HIGHRES_IMU rate requested from '
+       'the autopilot', MAVLINK, check=_positive),
     # Headless runner.
     _p('duration', 'double', 20.0, 's', 'simulated time of a scenario run', SCENARIO,
        check=_positive),

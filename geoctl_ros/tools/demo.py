@@ -69,7 +69,7 @@ def _diag_stats(diags, key):
             'p99_ms': float(np.percentile(a[:, 2], 99)), 'max_ms': float(a[:, 3].max())}
 
 
-def fly(params_file, out, duration, monitor_factory=None):
+def fly(params_file, out, duration, monitor_factory=None, mavlink=None):
     """Run sim + controller as processes, arm, record duration seconds; returns the summary."""
     import rclpy
     from geoctl_ros.params import CONTROLLER, cone_set, load_parameter_file, node_overrides, \
@@ -85,6 +85,9 @@ def fly(params_file, out, duration, monitor_factory=None):
     os.makedirs(out, exist_ok=True)
     procs = [NodeProcess('sim', params_file, log_dir=out),
              NodeProcess('controller', params_file, log_dir=out)]
+    if mavlink:        # a ground station on this machine can watch the flight
+        procs.append(NodeProcess('mavlink_bridge', None, ('-p', 'mavlink.url:=' + mavlink),
+                                 log_dir=out))
     rclpy.init()
     mon = (monitor_factory or Monitor)()
     try:
@@ -178,11 +181,17 @@ def main(argv=None):
     parser.add_argument('--params-file', default=None,
                         help='parameter file for both nodes (default: config/testbed.yaml)')
     parser.add_argument('--duration', type=float, default=25.0, help='seconds to fly (25)')
+    parser.add_argument('--mavlink', metavar='URL', nargs='?', const='udpout:127.0.0.1:14550',
+                        help='also run the MAVLink bridge to a ground station on this machine '
+                             '(default URL udpout:127.0.0.1:14550, where QGroundControl listens)')
     args = parser.parse_args(argv)
     if args.headless:
         return headless(args.out)
     params_file = args.params_file or os.path.join(config_dir(), 'testbed.yaml')
-    s = fly(params_file, args.out, args.duration)
+    if args.mavlink and not args.mavlink.split(':')[1:2] in (['127.0.0.1'], ['localhost']) \
+            and args.mavlink.startswith(('udp', 'tcp')):
+        parser.error('--mavlink: the demo talks to this machine only (127.0.0.1)')
+    s = fly(params_file, args.out, args.duration, mavlink=args.mavlink)
     lp, lat, sub = s['loop_period'], s['pose_to_command_latency'], s['commands_seen_by_subscriber']
     print('sim-in-the-loop: %s, %.0f s armed' % (os.path.basename(params_file), s['flight_s']))
     for n, a in s['min_cone_angle_deg'].items():

@@ -1,0 +1,247 @@
+"""The testbed as a MAVLink vehicle, without ROS and without I/O: what to send, what a message asks.
+
+A ground station makes a vehicle of heartbeats from component 1 (MAV_COMP_ID_AUTOPILOT1) with a
+vehicle type, and on connecting asks for AUTOPILOT_VERSION, the parameter list and the mission list.
+This class answers those from the controller's state, which the bridge node feeds in (attitude,
+set point, motor commands, the controller's diagnostics, parameter values). Messages are built with
+pymavlink's encoder (``mav`` is a ``MAVLink`` object of the common dialect, MAVLink 2); sending
+them, and carrying out what ``handle`` asks of the controller (arm, set a parameter), is the
+bridge's job.
+
+Identity: MAV_TYPE_HEXAROTOR, MAV_AUTOPILOT_GENERIC (it is neither PX4 nor ArduPilot). Heartbeat
+base_mode carries the armed flag; system_status is STANDBY (disarmed), ACTIVE (armed) or CRITICAL
+(disarmed by a failsafe, until armed again).
+"""
+from dataclasses import dataclass, field
+import math
+
+import numpy as np
+
+from geoctl_ros.mavlink import frames
+from geoctl_ros.mavlink.params import BY_ID, TABLE, to_mavlink
+
+# DEBUG_FLOAT_ARRAY / NAMED_VALUE_FLOAT names (at most 10 characters; README, "MAVLink").
+NAME_PSI = 'GC_PSI'            # configuration error Psi
+NAME_MARGIN = 'GC_MARGIN'      # smallest cone margin, deg
+NAME_MARGINS = 'GC_MARGINS'    # DEBUG_FLOAT_ARRAY: every cone margin, deg, in cones.names order
+NAME_DBAR = 'GC_DBAR'          # DEBUG_FLOAT_ARRAY: the disturbance estimate Delta_bar
+ARRAY_MARGINS, ARRAY_DBAR = 1, 2
+
+
+@dataclass
+class ControllerView:
+    """What the bridge knows of the controller (ROS frames), updated as messages arrive."""
+
+    R: np.ndarray = None                 # attitude ENU <- FLU (from pose)
+    omega: np.ndarray = None             # body rate FLU (from imu)
+    R_d: np.ndarray = None               # set point
+    commands: list = field(default_factory=list)   # normalised motor commands
+    psi: float = math.nan
+    margins: list = field(default_factory=list)
+    dbar: list = field(default_factory=list)
+    diagnostics: dict = None             # the controller's last diagnostics (key -> value)
+    params: dict = field(default_factory=dict)     # ROS name -> value
+
+
+class Vehicle:
+    """Builds the vehicle's messages and interprets the ground station's."""
+
+    def __init__(self, mav, system_id, version=(0, 1, 0), git_hash=''):
+        self.mav = mav
+        self.system_id = system_id
+        self.version = version
+        self.git_hash = git_hash
+        self.view = ControllerView()
+        self.t0 = None
+
+    # --- state -------------------------------------------------------------------------------
+    @property
+    def armed(self):
+        d = self.view.diagnostics
+        return bool(d) and d.get('armed') == 'True'
+
+    @property
+    def failsafe(self):
+        d = self.view.diagnostics
+        return bool(d) and d.get('state', '').startswith('failsafe')
+
+    def system_status(self):
+        if self.view.diagnostics is None:
+            return m_const('MAV_STATE_BOOT')
+        if self.armed:
+            return m_const('MAV_STATE_ACTIVE')
+        return m_const('MAV_STATE_CRITICAL') if self.failsafe else m_const('MAV_STATE_STANDBY')
+
+    def _boot_ms(self, now):
+        if self.t0 is None:
+            self.t0 = now
+        return int((now - self.t0) * 1e3) & 0xFFFFFFFF
+
+    # --- periodic messages -------------------------------------------------------------------
+    def heartbeat(self):
+        base = m_const('MAV_MODE_FLAG_CUSTOM_MODE_ENABLED')
+        if self.armed:
+            base |= m_const('MAV_MODE_FLAG_SAFETY_ARMED')
+        return self.mav.heartbeat_encode(m_const('MAV_TYPE_HEXAROTOR'),
+                                         m_const('MAV_AUTOPILOT_GENERIC'), base, 0,
+                                         self.system_status())
+
+    def sys_status(self):
+        """Sensors present/enabled/healthy: gyro (imu), attitude (motion capture, as AHRS),
+        attitude stabilisation and rate control (the controller), motor outputs."""
+        d = self.view.diagnostics or {}
+        gyro, ahrs = m_const('MAV_SYS_STATUS_SENSOR_3D_GYRO'), m_const('MAV_SYS_STATUS_AHRS')
+        stab = (m_const('MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION')
+                | m_const('MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL'))
+        motors = m_const('MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS')
+        present = gyro | ahrs | stab | motors
+        enabled = gyro | ahrs | (stab | motors if self.armed else 0)
+        health = 0
+        p = self.view.params
+        if _fresh(d, 'imu age [s]', p.get('imu_timeout', 0.05)):
+            health |= gyro
+        if _fresh(d, 'pose age [s]', p.get('pose_timeout', 0.1)):
+            health |= ahrs
+        if d and d.get('level') != 2:
+            health |= stab | motors
+        return self.mav.sys_status_encode(present, enabled, health, 0, 0xFFFF, -1, -1,
+                                          0, 0, 0, 0, 0, 0)
+
+    def attitude(self, now):
+        """ATTITUDE_QUATERNION of the body (NED/FRD), or None before the first pose."""
+        v = self.view
+        if v.R is None:
+            return None
+        q = frames.wxyz(frames.ned_frd(v.R))
+        w = frames.body_vector(v.omega) if v.omega is not None else np.zeros(3)
+        return self.mav.attitude_quaternion_encode(self._boot_ms(now), *q, *map(float, w))
+
+    def attitude_target(self, now):
+        """ATTITUDE_TARGET: the set point (NED/FRD); rates and thrust are not commanded."""
+        v = self.view
+        if v.R_d is None:
+            return None
+        ignore = (m_const('ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE')
+                  | m_const('ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE')
+                  | m_const('ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE')
+                  | m_const('ATTITUDE_TARGET_TYPEMASK_THROTTLE_IGNORE'))
+        q = frames.wxyz(frames.ned_frd(v.R_d))
+        return self.mav.attitude_target_encode(self._boot_ms(now), ignore, q, 0.0, 0.0, 0.0, 0.0)
+
+    def actuators(self, now):
+        c = list(self.view.commands)[:32]
+        if not c:
+            return None
+        return self.mav.actuator_output_status_encode(int(self._boot_ms(now) * 1000),
+                                                      (1 << len(c)) - 1,
+                                                      c + [0.0] * (32 - len(c)))
+
+    def internals(self, now):
+        """Psi and the smallest cone margin as NAMED_VALUE_FLOAT; every margin and the estimate as
+        DEBUG_FLOAT_ARRAY."""
+        v, t = self.view, self._boot_ms(now)
+        out = []
+        if not math.isnan(v.psi):
+            out.append(self.mav.named_value_float_encode(t, NAME_PSI.encode(), float(v.psi)))
+        if v.margins:
+            out.append(self.mav.named_value_float_encode(t, NAME_MARGIN.encode(),
+                                                         float(min(v.margins))))
+        for name, aid, data in ((NAME_MARGINS, ARRAY_MARGINS, v.margins),
+                                (NAME_DBAR, ARRAY_DBAR, v.dbar)):
+            if data:
+                d = [float(x) for x in data][:58]
+                out.append(self.mav.debug_float_array_encode(t * 1000, name.encode(), aid,
+                                                             d + [0.0] * (58 - len(d))))
+        return out
+
+    def statustext(self, text, severity='MAV_SEVERITY_WARNING'):
+        return self.mav.statustext_encode(m_const(severity), text.encode()[:50])
+
+    # --- answers -----------------------------------------------------------------------------
+    def autopilot_version(self):
+        major, minor, patch = self.version
+        sw = (major << 24) | (minor << 16) | (patch << 8) | 0xFF       # 0xFF: a release
+        custom = list(bytes.fromhex(self.git_hash[:16].ljust(16, '0')))[:8]
+        caps = (m_const('MAV_PROTOCOL_CAPABILITY_MAVLINK2')
+                | m_const('MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT'))
+        return self.mav.autopilot_version_encode(caps, sw, 0, 0, 0, custom, [0] * 8, [0] * 8,
+                                                 0, 0, self.system_id)
+
+    def param_value(self, index):
+        ros, pid, kind = TABLE[index]
+        value = self.view.params.get(ros)
+        if value is None:
+            return None
+        return self.mav.param_value_encode(pid.encode(), to_mavlink(value),
+                                           m_const('MAV_PARAM_TYPE_' + kind), len(TABLE), index)
+
+    def param_index(self, param_id, index):
+        """The table index a PARAM_REQUEST_READ or PARAM_SET names (by id, or by index when the
+        id is empty), or None."""
+        pid = param_id.rstrip('\x00') if isinstance(param_id, str) else param_id
+        if pid:
+            if pid not in BY_ID:
+                return None
+            return [p for _, p, _ in TABLE].index(pid)
+        return index if 0 <= index < len(TABLE) else None
+
+    def for_us(self, msg):
+        """True when msg targets this system (or every system)."""
+        target = getattr(msg, 'target_system', 0)
+        return target in (0, self.system_id)
+
+    def handle(self, msg):
+        """What an incoming message asks: a list of ('send', message) and ('arm', bool, command)
+        / ('set', ros_name, mavlink value, index) actions. Anything not for us: ('ignored', why)."""
+        kind = msg.get_type()
+        if not self.for_us(msg):
+            return [('ignored', 'for system %d' % msg.target_system)]
+        if kind == 'COMMAND_LONG':
+            return self._command(msg)
+        if kind == 'PARAM_REQUEST_LIST':
+            return [('send', p) for p in (self.param_value(i) for i in range(len(TABLE))) if p]
+        if kind == 'PARAM_REQUEST_READ':
+            i = self.param_index(msg.param_id, msg.param_index)
+            p = self.param_value(i) if i is not None else None
+            return [('send', p)] if p else [('ignored', 'unknown parameter %r' % msg.param_id)]
+        if kind == 'PARAM_SET':
+            i = self.param_index(msg.param_id, -1)
+            if i is None:
+                return [('send', self.statustext('unknown parameter %s' % msg.param_id))]
+            return [('set', TABLE[i][0], float(msg.param_value), i)]
+        if kind == 'MISSION_REQUEST_LIST':
+            return [('send', self.mav.mission_count_encode(msg.get_srcSystem(),
+                                                           msg.get_srcComponent(), 0,
+                                                           getattr(msg, 'mission_type', 0)))]
+        return []
+
+    def _command(self, msg):
+        cmd = msg.command
+        ack = self.command_ack
+        if cmd == m_const('MAV_CMD_COMPONENT_ARM_DISARM'):
+            return [('arm', msg.param1 > 0.5, cmd)]
+        if cmd in (m_const('MAV_CMD_REQUEST_MESSAGE'),
+                   m_const('MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES')):
+            wanted = int(msg.param1) if cmd == m_const('MAV_CMD_REQUEST_MESSAGE') else 148
+            if wanted == m_const('MAVLINK_MSG_ID_AUTOPILOT_VERSION'):
+                return [('send', ack(cmd, 'MAV_RESULT_ACCEPTED')),
+                        ('send', self.autopilot_version())]
+            if wanted == m_const('MAVLINK_MSG_ID_HEARTBEAT'):
+                return [('send', ack(cmd, 'MAV_RESULT_ACCEPTED')), ('send', self.heartbeat())]
+        return [('send', ack(cmd, 'MAV_RESULT_UNSUPPORTED'))]
+
+    def command_ack(self, command, result):
+        return self.mav.command_ack_encode(command, m_const(result))
+
+
+def _fresh(d, key, timeout):
+    try:
+        return float(d[key]) < float(timeout)
+    except (KeyError, ValueError):
+        return False
+
+
+def m_const(name):
+    """A constant of the common dialect by name (MAV_TYPE_HEXAROTOR, ...)."""
+    from pymavlink.dialects.v20 import common
+    return getattr(common, name)

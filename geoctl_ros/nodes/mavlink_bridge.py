@@ -1,0 +1,304 @@
+"""The MAVLink bridge: ``ros2 run geoctl_ros mavlink_bridge`` shows the testbed to a ground station.
+
+A thin shell: topics of the controller feed ``geoctl_ros.mavlink.vehicle.Vehicle``, its messages go
+out through ``geoctl_ros.mavlink.link.Link`` (a thread of its own), and what a ground station asks
+is carried out through the controller's own services: ``~/arm`` for MAV_CMD_COMPONENT_ARM_DISARM,
+``set_parameters`` for PARAM_SET (validated exactly as ``ros2 param set`` is). Optionally a second
+link reads a PX4/ArduPilot board's HIGHRES_IMU and publishes it on ``imu`` (FLU). Its own health
+goes to /diagnostics. Parameters: ``mavlink.*`` in the README's table.
+"""
+import subprocess
+import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped, QuaternionStamped
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.srv import GetParameters, SetParameters
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Float64, Float64MultiArray
+from std_srvs.srv import SetBool
+
+from geoctl_ros.core import so3
+from geoctl_ros.mavlink import frames
+from geoctl_ros.mavlink.link import Link, encoder
+from geoctl_ros.mavlink.params import BY_ROS, TABLE, to_ros
+from geoctl_ros.mavlink.vehicle import Vehicle, m_const
+from geoctl_ros.nodes import qos, ros_params
+from geoctl_ros.nodes.conversions import python_value, quaternion, set_vector, vector
+from geoctl_ros.nodes.runtime import spin
+from geoctl_ros.params import MAVLINK, ConfigError, resolve
+
+CONTROLLER_STATUS = 'geoctl_ros: controller'
+GCS_TIMEOUT = 3.0          # s without a ground-station heartbeat: "no ground station"
+PARAM_REFRESH = 5.0        # s between reads of the controller's parameters
+STATUSTEXT_LEN = 50
+
+
+def _version():
+    try:
+        from importlib.metadata import version
+        v = version('geoctl_ros')
+    except Exception:
+        v = '0.0.0'
+    parts = (v.split('.') + ['0', '0', '0'])[:3]
+    return tuple(int(p) if p.isdigit() else 0 for p in parts)
+
+
+def _git_hash():
+    try:
+        import os
+        here = os.path.dirname(os.path.abspath(__file__))
+        return subprocess.run(['git', 'rev-parse', 'HEAD'], cwd=here, capture_output=True,
+                              text=True, timeout=5).stdout.strip()
+    except Exception:
+        return ''
+
+
+class MavlinkBridge(Node):
+    def __init__(self, **kwargs):
+        super().__init__('mavlink_bridge', **kwargs)
+        errors = ros_params.declare(self, MAVLINK)
+        if errors:
+            raise ConfigError(errors)
+        v = resolve(MAVLINK, ros_params.values(self, MAVLINK))
+        self.sysid = v['mavlink.system_id']
+        self.vehicle = Vehicle(encoder(self.sysid, m_const('MAV_COMP_ID_AUTOPILOT1')), self.sysid,
+                               _version(), _git_hash())
+        self.link = Link(v['mavlink.url'], self.sysid, m_const('MAV_COMP_ID_AUTOPILOT1'))
+        self.autopilot = (Link(v['mavlink.autopilot_url'], self.sysid,
+                               m_const('MAV_COMP_ID_ONBOARD_COMPUTER'))
+                          if v['mavlink.autopilot_url'] else None)
+        self.counts = {'ignored': 0, 'arm requests': 0, 'param sets': 0, 'statustext': 0}
+        self.gcs_heartbeat = None
+        self.autopilot_heartbeat = None
+        self.autopilot_imu = 0
+        self._imu_requested = False
+        self._imu_rate = v['mavlink.autopilot_imu_rate_hz']
+        self._text_period = 1.0 / v['mavlink.statustext_rate_hz']
+        self._last_text = -1e9
+        self._last_diag = (None, None)
+        ctl = '/' + v['mavlink.controller'].strip('/')
+
+        view = self.vehicle.view
+        self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, qos.EVENT)
+        self.create_subscription(PoseStamped, 'pose', lambda m: setattr(
+            view, 'R', so3.quat_to_rot(quaternion(m.pose.orientation))), qos.SENSOR)
+        self.create_subscription(Imu, 'imu', lambda m: setattr(
+            view, 'omega', vector(m.angular_velocity)), qos.SENSOR)
+        self.create_subscription(QuaternionStamped, 'active_setpoint', lambda m: setattr(
+            view, 'R_d', so3.quat_to_rot(quaternion(m.quaternion))), qos.LATCHED)
+        self.create_subscription(Float64MultiArray, 'motor_commands', lambda m: setattr(
+            view, 'commands', list(m.data)), qos.COMMAND)
+        self.create_subscription(Float64, 'configuration_error', lambda m: setattr(
+            view, 'psi', m.data), qos.TELEMETRY)
+        self.create_subscription(Float64MultiArray, 'cone_margins', lambda m: setattr(
+            view, 'margins', list(m.data)), qos.TELEMETRY)
+        self.create_subscription(Float64MultiArray, 'disturbance_estimate', lambda m: setattr(
+            view, 'dbar', list(m.data)), qos.TELEMETRY)
+        self.pub_imu = self.create_publisher(Imu, 'imu', qos.SENSOR) if self.autopilot else None
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
+        self.arm_client = self.create_client(SetBool, ctl + '/arm')
+        self.get_client = self.create_client(GetParameters, ctl + '/get_parameters')
+        self.set_client = self.create_client(SetParameters, ctl + '/set_parameters')
+
+        send = self.link.send
+        now = time.monotonic
+        for rate, make in ((v['mavlink.heartbeat_rate_hz'], lambda: [self.vehicle.heartbeat()]),
+                           (v['mavlink.status_rate_hz'], lambda: [self.vehicle.sys_status()]),
+                           (v['mavlink.attitude_rate_hz'],
+                            lambda: [self.vehicle.attitude(now()),
+                                     self.vehicle.attitude_target(now())]),
+                           (v['mavlink.actuator_rate_hz'], lambda: [self.vehicle.actuators(now())]),
+                           (v['mavlink.internals_rate_hz'],
+                            lambda: self.vehicle.internals(now()))):
+            self.create_timer(1.0 / rate, lambda make=make: [send(m) for m in make() if m])
+        self.create_timer(0.01, self._pump)
+        self.create_timer(PARAM_REFRESH, self._read_params)
+        self.create_timer(1.0, self._publish_diagnostics)
+        self._read_params()
+        self.get_logger().info('mavlink_bridge: system %d component 1 on %s%s' % (
+            self.sysid, v['mavlink.url'],
+            ', autopilot IMU from ' + v['mavlink.autopilot_url'] if self.autopilot else ''))
+
+    # --- from the controller -----------------------------------------------------------------
+    def _on_diagnostics(self, msg):
+        for s in msg.status:
+            if s.name != CONTROLLER_STATUS:
+                continue
+            level = s.level[0] if isinstance(s.level, bytes) else int(s.level)
+            d = {kv.key: kv.value for kv in s.values}
+            d['level'], d['message'] = level, s.message
+            self.vehicle.view.diagnostics = d
+            if level >= 1 and (level, s.message) != self._last_diag:
+                self._text(s.message, 'MAV_SEVERITY_ERROR' if level >= 2 else
+                           'MAV_SEVERITY_WARNING', limited=True)
+            self._last_diag = (level, s.message)
+
+    def _read_params(self):
+        if not self.get_client.service_is_ready():
+            return
+        names = [ros for ros, _, _ in TABLE]
+        future = self.get_client.call_async(GetParameters.Request(names=names))
+
+        def done(f):
+            result = f.result()
+            if result is None:
+                return
+            for name, value in zip(names, result.values):
+                p = Parameter.from_parameter_msg(ParameterMsg(name=name, value=value))
+                if p.value is not None:
+                    self.vehicle.view.params[name] = python_value(p.value)
+        future.add_done_callback(done)
+
+    # --- from the ground station -------------------------------------------------------------
+    def _pump(self):
+        for msg in self.link.receive():
+            kind = msg.get_type()
+            if kind == 'HEARTBEAT':
+                if msg.type == m_const('MAV_TYPE_GCS'):
+                    self.gcs_heartbeat = time.monotonic()
+                continue
+            for action in self.vehicle.handle(msg):
+                self._act(action, msg)
+        if self.autopilot is not None:
+            self._pump_autopilot()
+
+    def _act(self, action, msg):
+        what = action[0]
+        if what == 'send':
+            self.link.send(action[1])
+        elif what == 'ignored':
+            self.counts['ignored'] += 1
+        elif what == 'arm':
+            self._arm(action[1], action[2])
+        elif what == 'set':
+            self._set_param(*action[1:])
+
+    def _arm(self, on, command):
+        self.counts['arm requests'] += 1
+        if not self.arm_client.service_is_ready():
+            self.link.send(self.vehicle.command_ack(command, 'MAV_RESULT_TEMPORARILY_REJECTED'))
+            self._text('arm: the controller is not reachable', 'MAV_SEVERITY_ERROR')
+            return
+        self.link.send(self.vehicle.command_ack(command, 'MAV_RESULT_IN_PROGRESS'))
+        future = self.arm_client.call_async(SetBool.Request(data=on))
+
+        def done(f):
+            r = f.result()
+            ok = r is not None and r.success
+            self.link.send(self.vehicle.command_ack(
+                command, 'MAV_RESULT_ACCEPTED' if ok else 'MAV_RESULT_DENIED'))
+            if not ok:
+                self._text(r.message if r is not None else 'arm: no answer', 'MAV_SEVERITY_ERROR')
+        future.add_done_callback(done)
+
+    def _set_param(self, name, value, index):
+        self.counts['param sets'] += 1
+
+        def answer(ok, reason=''):
+            if ok:
+                self.vehicle.view.params[name] = to_ros(name, value)
+            elif reason:
+                self._text('%s refused: %s' % (BY_ROS[name][0], reason), 'MAV_SEVERITY_ERROR')
+            p = self.vehicle.param_value(index)
+            if p is not None:
+                self.link.send(p)
+        if not self.set_client.service_is_ready():
+            answer(False, 'the controller is not reachable')
+            return
+        try:
+            param = Parameter(name, value=to_ros(name, value)).to_parameter_msg()
+        except Exception as e:
+            answer(False, str(e))
+            return
+        future = self.set_client.call_async(SetParameters.Request(parameters=[param]))
+
+        def done(f):
+            r = f.result()
+            res = r.results[0] if r is not None and r.results else None
+            answer(bool(res and res.successful),
+                   ' '.join((res.reason if res else 'no answer').split()))
+        future.add_done_callback(done)
+
+    def _text(self, text, severity, limited=False):
+        """STATUSTEXT, in 50-character chunks (MAVLink 2 id/chunk_seq) when longer."""
+        now = time.monotonic()
+        if limited and now - self._last_text < self._text_period:
+            return
+        self._last_text = now
+        self.counts['statustext'] += 1
+        chunks = [text[i:i + STATUSTEXT_LEN] for i in range(0, len(text), STATUSTEXT_LEN)] or ['']
+        tid = (self.counts['statustext'] % 65535) + 1 if len(chunks) > 1 else 0
+        for k, chunk in enumerate(chunks):
+            msg = self.vehicle.statustext(chunk, severity)
+            msg.id, msg.chunk_seq = tid, k
+            self.link.send(msg)
+
+    # --- the autopilot as IMU ----------------------------------------------------------------
+    def _pump_autopilot(self):
+        for msg in self.autopilot.receive():
+            kind = msg.get_type()
+            if kind == 'HEARTBEAT':
+                self.autopilot_heartbeat = time.monotonic()
+                if not self._imu_requested:
+                    self.autopilot.send(self.vehicle.mav.command_long_encode(
+                        msg.get_srcSystem(), msg.get_srcComponent(),
+                        m_const('MAV_CMD_SET_MESSAGE_INTERVAL'), 0,
+                        m_const('MAVLINK_MSG_ID_HIGHRES_IMU'), 1e6 / self._imu_rate,
+                        0, 0, 0, 0, 0))
+                    self._imu_requested = True
+            elif kind == 'HIGHRES_IMU':
+                out = Imu()
+                out.header.stamp = self.get_clock().now().to_msg()
+                out.header.frame_id = 'base_link'
+                out.orientation_covariance[0] = -1.0
+                set_vector(out.angular_velocity,
+                           frames.body_vector((msg.xgyro, msg.ygyro, msg.zgyro)))
+                set_vector(out.linear_acceleration,
+                           frames.body_vector((msg.xacc, msg.yacc, msg.zacc)))
+                self.pub_imu.publish(out)
+                self.autopilot_imu += 1
+
+    # --- own health --------------------------------------------------------------------------
+    def _publish_diagnostics(self):
+        now = time.monotonic()
+        gcs_age = None if self.gcs_heartbeat is None else now - self.gcs_heartbeat
+        values = {'link': self.link.url,
+                  'ground station': ('none yet' if gcs_age is None else
+                                     'heartbeat %.1f s ago' % gcs_age)}
+        values.update({'link ' + k: str(n) for k, n in self.link.counts.items()})
+        values.update({k: str(n) for k, n in self.counts.items()})
+        warnings = []
+        if gcs_age is None or gcs_age > GCS_TIMEOUT:
+            warnings.append('no ground station heartbeat')
+        if self.link.counts['bad data']:
+            values['link last error'] = self.link.last_error[:80]
+        if self.autopilot is not None:
+            age = None if self.autopilot_heartbeat is None else now - self.autopilot_heartbeat
+            values['autopilot'] = ('none yet' if age is None else 'heartbeat %.1f s ago' % age)
+            values['autopilot imu messages'] = str(self.autopilot_imu)
+            if age is None or age > GCS_TIMEOUT:
+                warnings.append('no autopilot heartbeat')
+        status = DiagnosticStatus(level=bytes([1 if warnings else 0]),
+                                  name='geoctl_ros: mavlink_bridge', hardware_id='mavlink',
+                                  message='; '.join(warnings) or 'ground station connected',
+                                  values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.pub_diag.publish(msg)
+
+    def on_shutdown(self):
+        self.link.close()
+        if self.autopilot is not None:
+            self.autopilot.close()
+
+
+def main():
+    sys.exit(spin(MavlinkBridge, 'mavlink_bridge'))
+
+
+if __name__ == '__main__':
+    main()

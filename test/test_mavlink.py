@@ -1,0 +1,126 @@
+"""MAVLink without a network: frames against known rotations, the parameter-id table, and what the
+vehicle sends and answers (pymavlink's encoder and parser, no socket)."""
+import math
+import os
+
+import numpy as np
+import pytest
+
+os.environ['MAVLINK20'] = '1'
+from pymavlink.dialects.v20 import common as mav  # noqa: E402
+
+from geoctl_ros.core import so3  # noqa: E402
+from geoctl_ros.mavlink import frames  # noqa: E402
+from geoctl_ros.mavlink.link import encoder  # noqa: E402
+from geoctl_ros.mavlink.params import BY_ID, TABLE, to_mavlink, to_ros  # noqa: E402
+from geoctl_ros.mavlink.vehicle import Vehicle  # noqa: E402
+from geoctl_ros.params import BY_NAME  # noqa: E402
+
+
+def yaw(deg):
+    return so3.axis_angle([0, 0, 1], math.radians(deg))
+
+
+@pytest.mark.parametrize('R_ros, R_mav, what', [
+    (np.eye(3), yaw(90.0), 'ROS nose east is MAVLink yaw +90 (east of north)'),
+    (yaw(90.0), np.eye(3), 'ROS nose north is MAVLink yaw 0'),
+    (yaw(180.0), yaw(-90.0), 'ROS nose west is MAVLink yaw -90'),
+    # nose east and pitched 30 deg up: about ROS -y (right); in NED/FRD pitch up is +30 about y
+    (so3.axis_angle([0, 1, 0], math.radians(-30.0)),
+     yaw(90.0) @ so3.axis_angle([0, 1, 0], math.radians(30.0)), 'pitch up stays pitch up'),
+    # right wing down: ROS +20 about x (the left wing, +y, rises towards +z); FRD roll +20
+    (so3.axis_angle([1, 0, 0], math.radians(20.0)),
+     yaw(90.0) @ so3.axis_angle([1, 0, 0], math.radians(20.0)), 'right wing down'),
+])
+def test_attitude_frames_with_known_rotations(R_ros, R_mav, what):
+    assert np.allclose(frames.ned_frd(R_ros), R_mav, atol=1e-12), what
+    assert np.allclose(frames.enu_flu(R_mav), R_ros, atol=1e-12), what
+    q = frames.wxyz(frames.ned_frd(R_ros))
+    assert np.allclose(frames.from_wxyz(q), R_mav, atol=1e-12)
+    assert q[0] >= 0.0
+
+
+def test_body_rates_and_the_quaternion_order():
+    # yawing left (counter-clockwise seen from above) is +z in FLU and -z (yaw rate < 0) in FRD
+    assert np.allclose(frames.body_vector([0.1, 0.2, 0.3]), [0.1, -0.2, -0.3])
+    q = frames.wxyz(yaw(90.0))                 # MAVLink (w, x, y, z)
+    assert np.allclose(q, [math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5)])
+
+
+def test_parameter_ids_are_short_unique_scalars_of_the_controller():
+    ids = [pid for _, pid, _ in TABLE]
+    assert len(set(ids)) == len(ids) and all(len(i) <= 16 for i in ids)
+    for ros, pid, kind in TABLE:
+        p = BY_NAME[ros]
+        assert 'controller' in p.nodes and p.type in ('double', 'integer', 'bool'), ros
+        assert (kind == 'REAL32') == (p.type == 'double'), ros
+    assert to_mavlink(True) == 1.0 and to_ros('adaptive', 0.0) is False
+    assert to_ros('k_R', 0.5) == 0.5 and isinstance(to_ros('k_R', 1.0), float)
+    assert BY_ID['GC_K_R'][0] == 'k_R'
+
+
+def parse(msg, sysid=7):
+    """What a ground station would decode from a message the vehicle built."""
+    m = encoder(sysid, 1)
+    buf = msg.pack(m)
+    return mav.MAVLink(None).decode(bytearray(buf))
+
+
+def vehicle(**view):
+    v = Vehicle(encoder(7, 1), 7, version=(1, 2, 3), git_hash='0123456789abcdef0123')
+    for k, val in view.items():
+        setattr(v.view, k, val)
+    return v
+
+
+def test_heartbeat_identity_and_state():
+    v = vehicle()
+    hb = parse(v.heartbeat())
+    assert hb.get_srcSystem() == 7 and hb.get_srcComponent() == mav.MAV_COMP_ID_AUTOPILOT1
+    assert hb.type == mav.MAV_TYPE_HEXAROTOR and hb.autopilot == mav.MAV_AUTOPILOT_GENERIC
+    assert hb.system_status == mav.MAV_STATE_BOOT
+    v.view.diagnostics = {'armed': 'False', 'state': 'disarmed at start-up', 'level': 1}
+    assert parse(v.heartbeat()).system_status == mav.MAV_STATE_STANDBY
+    v.view.diagnostics = {'armed': 'True', 'state': 'armed', 'level': 0}
+    hb = parse(v.heartbeat())
+    assert hb.system_status == mav.MAV_STATE_ACTIVE and hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED
+    v.view.diagnostics = {'armed': 'False', 'state': 'failsafe: pose lost', 'level': 2}
+    hb = parse(v.heartbeat())
+    assert hb.system_status == mav.MAV_STATE_CRITICAL
+    assert not hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED
+
+
+def test_attitude_and_target_go_out_in_ned_frd():
+    v = vehicle(R=np.eye(3), omega=np.array([0.0, 0.0, 0.2]), R_d=yaw(90.0))
+    att = parse(v.attitude(0.0))
+    assert np.allclose([att.q1, att.q2, att.q3, att.q4], frames.wxyz(yaw(90.0)), atol=1e-6)
+    assert att.yawspeed == pytest.approx(-0.2)
+    tgt = parse(v.attitude_target(0.0))
+    assert np.allclose(tgt.q, [1.0, 0.0, 0.0, 0.0], atol=1e-6)
+
+
+def test_connect_sequence_answers():
+    v = vehicle(params={'k_R': 0.4, 'adaptive': True})
+    g = encoder(255, 190)                                   # a ground station
+    acts = v.handle(g.command_long_encode(7, 1, mav.MAV_CMD_REQUEST_MESSAGE, 0,
+                                          mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0))
+    ack, ver = (parse(a[1]) for a in acts)
+    assert ack.result == mav.MAV_RESULT_ACCEPTED and ver.get_type() == 'AUTOPILOT_VERSION'
+    assert ver.capabilities & mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    assert ver.flight_sw_version >> 8 == (1 << 16) | (2 << 8) | 3
+    assert bytes(ver.flight_custom_version) == bytes.fromhex('0123456789abcdef')
+    values = [parse(a[1]) for a in v.handle(g.param_request_list_encode(7, 1))]
+    assert [p.param_id for p in values] == ['GC_K_R', 'GC_ADAPTIVE']   # those the controller gave
+    assert values[0].param_count == len(TABLE) and values[1].param_value == 1.0
+    count = parse(v.handle(g.mission_request_list_encode(7, 1))[0][1])
+    assert count.get_type() == 'MISSION_COUNT' and count.count == 0
+    arm = v.handle(g.command_long_encode(7, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0,
+                                         0, 0, 0))
+    assert arm == [('arm', True, mav.MAV_CMD_COMPONENT_ARM_DISARM)]
+    other = parse(v.handle(g.command_long_encode(7, 1, mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0,
+                                                 0, 0, 0))[0][1])
+    assert other.result == mav.MAV_RESULT_UNSUPPORTED
+    setp = v.handle(g.param_set_encode(7, 1, b'GC_K_R', 0.5, mav.MAV_PARAM_TYPE_REAL32))
+    assert setp == [('set', 'k_R', 0.5, 0)]
+    assert v.handle(g.param_set_encode(9, 1, b'GC_K_R', 0.5, mav.MAV_PARAM_TYPE_REAL32))[0][0] \
+        == 'ignored'                                         # another system's

@@ -1,0 +1,194 @@
+"""The MAVLink bridge over UDP on 127.0.0.1: a pymavlink ground station and a fake autopilot against
+the real sim, controller and bridge processes (the sim in the loop)."""
+import math
+import os
+import socket
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+os.environ['MAVLINK20'] = '1'
+from pymavlink import mavutil  # noqa: E402
+from pymavlink.dialects.v20 import common as mav  # noqa: E402
+from sensor_msgs.msg import Imu  # noqa: E402
+
+from geoctl_ros.core import so3  # noqa: E402
+from geoctl_ros.mavlink import frames  # noqa: E402
+from geoctl_ros.mavlink.params import TABLE  # noqa: E402
+from geoctl_ros.nodes import qos  # noqa: E402
+from geoctl_ros.tools.processes import NodeProcess  # noqa: E402
+from geoctl_ros.tools.rosenv import config_dir  # noqa: E402
+from support import FakeInputs  # noqa: E402
+
+TESTBED = os.path.join(config_dir(), 'testbed.yaml')
+SYSID = 7
+
+
+def free_udp_port():
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(('127.0.0.1', 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+class Endpoint:
+    """A pymavlink endpoint on 127.0.0.1 that keeps what it receives."""
+
+    def __init__(self, url, sysid, compid):
+        self.conn = mavutil.mavlink_connection(url, source_system=sysid, source_component=compid,
+                                               dialect='common')
+        self.got = []
+
+    def poll(self, seconds):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            m = self.conn.recv_match(blocking=True, timeout=0.02)
+            if m is not None and m.get_type() != 'BAD_DATA':
+                self.got.append((time.monotonic(), m))
+
+    def wait(self, pred, timeout, what, mon=None):
+        end = time.monotonic() + timeout
+        start = len(self.got)
+        while time.monotonic() < end:
+            for _, m in self.got[start:]:
+                if pred(m):
+                    return m
+            start = len(self.got)
+            self.poll(0.05)
+            if mon is not None:
+                mon.spin_for(0.01)
+        raise TimeoutError('timed out waiting for ' + what)
+
+    def since(self, t0, kind):
+        return [m for t, m in self.got if t >= t0 and m.get_type() == kind]
+
+
+@pytest.fixture
+def rig(tmp_path):
+    gcs_port, ap_port = free_udp_port(), free_udp_port()
+    gcs = Endpoint('udpin:127.0.0.1:%d' % gcs_port, 255, 190)
+    procs = [NodeProcess('sim', TESTBED, log_dir=tmp_path),
+             NodeProcess('controller', TESTBED, log_dir=tmp_path),
+             NodeProcess('mavlink_bridge', None, (
+                 '-p', 'mavlink.url:=udpout:127.0.0.1:%d' % gcs_port,
+                 '-p', 'mavlink.system_id:=%d' % SYSID,
+                 '-p', 'mavlink.attitude_rate_hz:=20.0',
+                 '-p', 'mavlink.autopilot_url:=udpin:127.0.0.1:%d' % ap_port,
+                 '-r', 'imu:=autopilot/imu'), log_dir=tmp_path)]
+    rclpy.init()
+    mon = FakeInputs()
+    ap_imu = []
+    mon.create_subscription(Imu, 'autopilot/imu', lambda m: ap_imu.append(
+        (m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z)), qos.SENSOR)
+    try:
+        yield mon, gcs, ap_port, ap_imu, procs
+    finally:
+        mon.destroy_node()
+        rclpy.try_shutdown()
+        for p in procs:
+            p.stop()
+        gcs.conn.close()
+
+
+def is_ours(m):
+    return m.get_srcSystem() == SYSID and m.get_srcComponent() == mav.MAV_COMP_ID_AUTOPILOT1
+
+
+def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
+    mon, gcs, ap_port, ap_imu, procs = rig
+    g = gcs.conn.mav
+    hb = gcs.wait(lambda m: m.get_type() == 'HEARTBEAT' and is_ours(m), 40.0, 'a heartbeat')
+    assert hb.type == mav.MAV_TYPE_HEXAROTOR and hb.autopilot == mav.MAV_AUTOPILOT_GENERIC
+    g.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+    mon.wait_for(mon.controller_has_inputs, 30.0, 'the controller to receive the sim')
+    # QGroundControl's connect sequence: AUTOPILOT_VERSION, the parameters, the mission
+    g.command_long_send(SYSID, 1, mav.MAV_CMD_REQUEST_MESSAGE, 0,
+                        mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0)
+    ver = gcs.wait(lambda m: m.get_type() == 'AUTOPILOT_VERSION', 5.0, 'AUTOPILOT_VERSION')
+    assert ver.capabilities & mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    t0 = time.monotonic()
+    g.param_request_list_send(SYSID, 1)
+    gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE' and m.param_index == len(TABLE) - 1, 5.0,
+             'the whole parameter list')
+    values = {p.param_id: p.param_value for p in gcs.since(t0, 'PARAM_VALUE')}
+    assert len(values) == len(TABLE) and values['GC_K_R'] == pytest.approx(0.4)
+    g.mission_request_list_send(SYSID, 1)
+    assert gcs.wait(lambda m: m.get_type() == 'MISSION_COUNT', 5.0, 'MISSION_COUNT').count == 0
+    # telemetry at its rates, in NED/FRD
+    t0 = time.monotonic()
+    gcs.poll(3.0)
+    mon.spin_for(0.2)
+    atts = [m for m in gcs.since(t0, 'ATTITUDE_QUATERNION') if is_ours(m)]
+    assert 40 <= len(atts) <= 80                                   # 20 Hz for 3 s
+    assert 2 <= len([m for m in gcs.since(t0, 'HEARTBEAT') if is_ours(m)]) <= 4
+    R_true = so3.quat_to_rot(mon.last('true_pose')[1])
+    R_mav = frames.from_wxyz((atts[-1].q1, atts[-1].q2, atts[-1].q3, atts[-1].q4))
+    assert math.degrees(so3.angle(frames.ned_frd(R_true).T @ R_mav)) < 3.0
+    assert gcs.since(t0, 'ATTITUDE_TARGET') and gcs.since(t0, 'SYS_STATUS')
+    assert gcs.since(t0, 'ACTUATOR_OUTPUT_STATUS')
+    # a refused arm: another node publishes the motor commands
+    mon.publish_commands([0.0] * 6)
+    mon.spin_for(1.0)
+    t0 = time.monotonic()
+    g.command_long_send(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+    ack = gcs.wait(lambda m: m.get_type() == 'COMMAND_ACK' and m.result != mav.MAV_RESULT_IN_PROGRESS,
+                   10.0, 'the arm answer', mon)
+    assert ack.result == mav.MAV_RESULT_DENIED
+    text = gcs.wait(lambda m: m.get_type() == 'STATUSTEXT', 5.0, 'the reason')
+    assert 'other publisher' in text.text
+    mon.destroy_publisher(mon.pub_commands)
+    del mon.pub_commands
+    mon.spin_for(1.5)
+    g.command_long_send(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+    t0 = time.monotonic()
+    ack = gcs.wait(lambda m: m.get_type() == 'COMMAND_ACK' and m.result != mav.MAV_RESULT_IN_PROGRESS,
+                   10.0, 'the second arm answer', mon)
+    assert ack.result == mav.MAV_RESULT_ACCEPTED
+    hb = gcs.wait(lambda m: m.get_type() == 'HEARTBEAT' and is_ours(m) and
+                  m.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED, 3.0, 'an armed heartbeat')
+    assert hb.system_status == mav.MAV_STATE_ACTIVE
+    mon.wait_for(lambda: mon.last_diagnostic()['armed'] == 'True', 3.0, 'the controller armed')
+    # parameters through the controller's own validation
+    g.param_set_send(SYSID, 1, b'GC_K_R', 0.5, mav.MAV_PARAM_TYPE_REAL32)
+    p = gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE' and m.param_id == 'GC_K_R', 5.0,
+                 'the new k_R', mon)
+    assert p.param_value == pytest.approx(0.5)
+    g.param_set_send(SYSID, 1, b'GC_K_R', -1.0, mav.MAV_PARAM_TYPE_REAL32)
+    t0 = time.monotonic()
+    p = gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE' and m.param_id == 'GC_K_R' and
+                 gcs.got[-1][0] >= t0, 5.0, 'the refused k_R', mon)
+    assert p.param_value == pytest.approx(0.5)                  # unchanged
+    text = gcs.wait(lambda m: m.get_type() == 'STATUSTEXT' and 'GC_K_R' in m.text, 5.0,
+                    'the refusal')
+    assert 'refused' in text.text
+    # garbage and a corrupted packet: counted and survived, the controller undisturbed
+    raw = bytearray(g.heartbeat_encode(mav.MAV_TYPE_GCS, 0, 0, 0, 0).pack(g))
+    raw[-1] ^= 0xFF
+    for _ in range(50):
+        gcs.conn.write(os.urandom(64))
+        gcs.conn.write(bytes(raw))
+    t0 = time.monotonic()
+    gcs.poll(2.0)
+    mon.spin_for(1.2)
+    assert [m for m in gcs.since(t0, 'HEARTBEAT') if is_ours(m)]
+    diag = [d for _, d in mon.log['diagnostics'] if 'link bad data' in d]
+    assert diag and int(diag[-1]['link bad data']) > 0
+    ctl = mon.last_diagnostic()
+    assert ctl['armed'] == 'True'
+    assert float(ctl['loop period [ms]'].split('max ')[1]) < 50.0
+    # a fake autopilot as IMU: HIGHRES_IMU in FRD comes out on imu in FLU
+    ap = Endpoint('udpout:127.0.0.1:%d' % ap_port, 1, 1)
+    for _ in range(30):
+        ap.conn.mav.heartbeat_send(mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_PX4, 0, 0, 0)
+        ap.conn.mav.highres_imu_send(0, 0.0, 0.0, -9.81, 0.1, 0.2, 0.3, 0, 0, 0, 0, 0, 0, 0)
+        ap.poll(0.02)
+        mon.spin_for(0.02)
+    mon.wait_for(lambda: len(ap_imu) > 5, 5.0, 'the autopilot imu')
+    assert np.allclose(ap_imu[-1], [0.1, -0.2, -0.3])
+    req = ap.wait(lambda m: m.get_type() == 'COMMAND_LONG', 3.0, 'the rate request')
+    assert req.command == mav.MAV_CMD_SET_MESSAGE_INTERVAL
+    assert req.param1 == mav.MAVLINK_MSG_ID_HIGHRES_IMU and req.param2 == pytest.approx(1e4)
+    ap.conn.close()
