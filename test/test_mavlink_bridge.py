@@ -49,18 +49,19 @@ class Endpoint:
             if m is not None and m.get_type() != 'BAD_DATA':
                 self.got.append((time.monotonic(), m))
 
-    def wait(self, pred, timeout, what, mon=None):
+    def wait(self, pred, timeout, what, mon=None, since=None):
+        """The first message received at or after since (default: now) that pred accepts."""
+        since = time.monotonic() if since is None else since
         end = time.monotonic() + timeout
-        start = len(self.got)
-        while time.monotonic() < end:
-            for _, m in self.got[start:]:
-                if pred(m):
+        while True:
+            for t, m in self.got:
+                if t >= since and pred(m):
                     return m
-            start = len(self.got)
+            if time.monotonic() > end:
+                raise TimeoutError('timed out waiting for ' + what)
             self.poll(0.05)
             if mon is not None:
                 mon.spin_for(0.01)
-        raise TimeoutError('timed out waiting for ' + what)
 
     def since(self, t0, kind):
         return [m for t, m in self.got if t >= t0 and m.get_type() == kind]
@@ -135,34 +136,35 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     t0 = time.monotonic()
     g.command_long_send(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
     ack = gcs.wait(lambda m: m.get_type() == 'COMMAND_ACK' and m.result != mav.MAV_RESULT_IN_PROGRESS,
-                   10.0, 'the arm answer', mon)
+                   10.0, 'the arm answer', mon, since=t0)
     assert ack.result == mav.MAV_RESULT_DENIED
-    text = gcs.wait(lambda m: m.get_type() == 'STATUSTEXT', 5.0, 'the reason')
+    text = gcs.wait(lambda m: m.get_type() == 'STATUSTEXT', 5.0, 'the reason', since=t0)
     assert 'other publisher' in text.text
     mon.destroy_publisher(mon.pub_commands)
     del mon.pub_commands
     mon.spin_for(1.5)
-    g.command_long_send(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
     t0 = time.monotonic()
+    g.command_long_send(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
     ack = gcs.wait(lambda m: m.get_type() == 'COMMAND_ACK' and m.result != mav.MAV_RESULT_IN_PROGRESS,
-                   10.0, 'the second arm answer', mon)
+                   10.0, 'the second arm answer', mon, since=t0)
     assert ack.result == mav.MAV_RESULT_ACCEPTED
     hb = gcs.wait(lambda m: m.get_type() == 'HEARTBEAT' and is_ours(m) and
                   m.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED, 3.0, 'an armed heartbeat')
     assert hb.system_status == mav.MAV_STATE_ACTIVE
     mon.wait_for(lambda: mon.last_diagnostic()['armed'] == 'True', 3.0, 'the controller armed')
     # parameters through the controller's own validation
+    t0 = time.monotonic()
     g.param_set_send(SYSID, 1, b'GC_K_R', 0.5, mav.MAV_PARAM_TYPE_REAL32)
     p = gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE' and m.param_id == 'GC_K_R', 5.0,
-                 'the new k_R', mon)
+                 'the new k_R', mon, since=t0)
     assert p.param_value == pytest.approx(0.5)
-    g.param_set_send(SYSID, 1, b'GC_K_R', -1.0, mav.MAV_PARAM_TYPE_REAL32)
     t0 = time.monotonic()
-    p = gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE' and m.param_id == 'GC_K_R' and
-                 gcs.got[-1][0] >= t0, 5.0, 'the refused k_R', mon)
+    g.param_set_send(SYSID, 1, b'GC_K_R', -1.0, mav.MAV_PARAM_TYPE_REAL32)
+    p = gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE' and m.param_id == 'GC_K_R', 5.0,
+                 'the refused k_R', mon, since=t0)
     assert p.param_value == pytest.approx(0.5)                  # unchanged
     text = gcs.wait(lambda m: m.get_type() == 'STATUSTEXT' and 'GC_K_R' in m.text, 5.0,
-                    'the refusal')
+                    'the refusal', since=t0)
     assert 'refused' in text.text
     # garbage and a corrupted packet: counted and survived, the controller undisturbed
     raw = bytearray(g.heartbeat_encode(mav.MAV_TYPE_GCS, 0, 0, 0, 0).pack(g))
@@ -174,7 +176,7 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     gcs.poll(2.0)
     mon.spin_for(1.2)
     assert [m for m in gcs.since(t0, 'HEARTBEAT') if is_ours(m)]
-    diag = [d for _, d in mon.log['diagnostics'] if 'link bad data' in d]
+    diag = [d for _, d in mon.log['other diagnostics'] if 'link bad data' in d]
     assert diag and int(diag[-1]['link bad data']) > 0
     ctl = mon.last_diagnostic()
     assert ctl['armed'] == 'True'
@@ -183,12 +185,12 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     ap = Endpoint('udpout:127.0.0.1:%d' % ap_port, 1, 1)
     for _ in range(30):
         ap.conn.mav.heartbeat_send(mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_PX4, 0, 0, 0)
-        ap.conn.mav.highres_imu_send(0, 0.0, 0.0, -9.81, 0.1, 0.2, 0.3, 0, 0, 0, 0, 0, 0, 0)
+        ap.conn.mav.highres_imu_send(0, 0.0, 0.0, -9.81, 0.1, 0.2, 0.3, 0, 0, 0, 0, 0, 0, 0, 0)
         ap.poll(0.02)
         mon.spin_for(0.02)
     mon.wait_for(lambda: len(ap_imu) > 5, 5.0, 'the autopilot imu')
     assert np.allclose(ap_imu[-1], [0.1, -0.2, -0.3])
-    req = ap.wait(lambda m: m.get_type() == 'COMMAND_LONG', 3.0, 'the rate request')
+    req = ap.wait(lambda m: m.get_type() == 'COMMAND_LONG', 3.0, 'the rate request', since=0.0)
     assert req.command == mav.MAV_CMD_SET_MESSAGE_INTERVAL
     assert req.param1 == mav.MAVLINK_MSG_ID_HIGHRES_IMU and req.param2 == pytest.approx(1e4)
     ap.conn.close()

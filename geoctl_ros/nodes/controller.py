@@ -27,6 +27,7 @@ from geoctl_ros.core.stats import WindowStats
 from geoctl_ros.params import CONTROLLER, ConfigError, controller_setup, resolve
 
 DIAGNOSTICS_PERIOD = 0.5      # s: the fixed statistics window
+STATUS_NAME = 'geoctl_ros: controller'
 
 
 def build(values):
@@ -227,7 +228,7 @@ class ControllerNode(Node):
         values['loop period [ms]'] = self._period_stats.summary()
         values['step compute [ms]'] = self._compute_stats.summary()
         values['pose-to-command latency [ms]'] = self._latency_stats.summary()
-        status = DiagnosticStatus(level=bytes([st.level]), name='geoctl_ros: controller',
+        status = DiagnosticStatus(level=bytes([st.level]), name=STATUS_NAME,
                                   hardware_id='hexrotor', message=st.message,
                                   values=[KeyValue(key=k, value=v) for k, v in values.items()])
         msg = DiagnosticArray(status=[status])

@@ -27,11 +27,11 @@ from geoctl_ros.mavlink.link import Link, encoder
 from geoctl_ros.mavlink.params import BY_ROS, TABLE, to_ros
 from geoctl_ros.mavlink.vehicle import Vehicle, m_const
 from geoctl_ros.nodes import qos, ros_params
+from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
 from geoctl_ros.nodes.conversions import python_value, quaternion, set_vector, vector
 from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.params import MAVLINK, ConfigError, resolve
 
-CONTROLLER_STATUS = 'geoctl_ros: controller'
 GCS_TIMEOUT = 3.0          # s without a ground-station heartbeat: "no ground station"
 PARAM_REFRESH = 5.0        # s between reads of the controller's parameters
 STATUSTEXT_LEN = 50
@@ -116,6 +116,9 @@ class MavlinkBridge(Node):
                             lambda: self.vehicle.internals(now()))):
             self.create_timer(1.0 / rate, lambda make=make: [send(m) for m in make() if m])
         self.create_timer(0.01, self._pump)
+        self._params_loaded = False
+        self._list_pending = False      # a PARAM_REQUEST_LIST waiting for the first read
+        self.create_timer(0.5, lambda: None if self._params_loaded else self._read_params())
         self.create_timer(PARAM_REFRESH, self._read_params)
         self.create_timer(1.0, self._publish_diagnostics)
         self._read_params()
@@ -151,6 +154,13 @@ class MavlinkBridge(Node):
                 p = Parameter.from_parameter_msg(ParameterMsg(name=name, value=value))
                 if p.value is not None:
                     self.vehicle.view.params[name] = python_value(p.value)
+            self._params_loaded = True
+            if self._list_pending:
+                self._list_pending = False
+                for i in range(len(TABLE)):
+                    msg = self.vehicle.param_value(i)
+                    if msg is not None:
+                        self.link.send(msg)
         future.add_done_callback(done)
 
     # --- from the ground station -------------------------------------------------------------
@@ -160,6 +170,10 @@ class MavlinkBridge(Node):
             if kind == 'HEARTBEAT':
                 if msg.type == m_const('MAV_TYPE_GCS'):
                     self.gcs_heartbeat = time.monotonic()
+                continue
+            if kind == 'PARAM_REQUEST_LIST' and not self._params_loaded:
+                self._list_pending = True          # answered when the controller has answered
+                self._read_params()
                 continue
             for action in self.vehicle.handle(msg):
                 self._act(action, msg)

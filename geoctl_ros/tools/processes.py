@@ -22,6 +22,7 @@ from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.nodes import qos
+from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
 from geoctl_ros.nodes.conversions import quaternion, stamp_seconds
 from geoctl_ros.tools.rosenv import node_env
 
@@ -98,6 +99,7 @@ class Monitor(Node):
         self._sub(Float64MultiArray, 'disturbance_estimate', 'dbar', tel, lambda m: list(m.data))
         self._sub(PoseStamped, 'sim/true_pose', 'true_pose', tel, _pose_quat)
         self._sub(PoseStamped, 'pose', 'pose', qos.SENSOR, _pose_quat)
+        self.log['other diagnostics'] = []
         self._sub(DiagnosticArray, '/diagnostics', 'diagnostics', qos.EVENT, _diag)
         from geometry_msgs.msg import Vector3Stamped
         self._sub(Vector3Stamped, 'attitude_error', 'eR', tel,
@@ -113,7 +115,11 @@ class Monitor(Node):
             return
 
         def record(msg):
-            self.log[key].append((time.monotonic(), convert(msg)))
+            value = convert(msg)
+            if key == 'diagnostics' and value.get('name') != CONTROLLER_STATUS:
+                self.log['other diagnostics'].append((time.monotonic(), value))
+                return
+            self.log[key].append((time.monotonic(), value))
         self.create_subscription(msg_type, topic, record, qos)
 
     # --- waiting -----------------------------------------------------------------------------
@@ -183,9 +189,11 @@ def _pose_quat(msg):
 
 
 def _diag(msg):
+    """The first status of a DiagnosticArray as a dict (level, message, name, key/values); the
+    controller's go to the 'diagnostics' log, any other node's to 'other diagnostics'."""
     s = msg.status[0]
     return {'level': int.from_bytes(s.level, 'little') if isinstance(s.level, bytes) else s.level,
-            'message': s.message, **{kv.key: kv.value for kv in s.values}}
+            'message': s.message, 'name': s.name, **{kv.key: kv.value for kv in s.values}}
 
 
 def process_sockets(pid):
