@@ -194,3 +194,30 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     assert req.command == mav.MAV_CMD_SET_MESSAGE_INTERVAL
     assert req.param1 == mav.MAVLINK_MSG_ID_HIGHRES_IMU and req.param2 == pytest.approx(1e4)
     ap.conn.close()
+    # a flood of requests: answered or dropped, never a stall of the controller
+    for _ in range(200):
+        g.param_request_list_send(SYSID, 1)
+        g.command_long_send(SYSID, 1, mav.MAV_CMD_REQUEST_MESSAGE, 0,
+                            mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0)
+    gcs.poll(2.0)
+    mon.spin_for(1.0)
+    # the ground station goes away and comes back on the same port
+    port = int(gcs.conn.address.split(':')[1]) if hasattr(gcs.conn, 'address') else None
+    gcs.conn.close()
+    mon.spin_for(4.5)
+    lost = [d for _, d in mon.log['other diagnostics'] if d.get('link') is not None][-1]
+    assert 'no ground station heartbeat' in lost['message']
+    back = Endpoint('udpin:127.0.0.1:%d' % port, 255, 190)
+    t0 = time.monotonic()
+    back.wait(lambda m: m.get_type() == 'HEARTBEAT' and is_ours(m), 5.0, 'heartbeats again',
+              since=t0)
+    back.conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+    back.conn.mav.param_request_read_send(SYSID, 1, b'GC_K_R', -1)
+    p = back.wait(lambda m: m.get_type() == 'PARAM_VALUE', 5.0, 'a parameter read', mon,
+                  since=t0)
+    assert p.param_id == 'GC_K_R' and p.param_value == pytest.approx(0.5)
+    mon.spin_for(1.2)
+    ctl = mon.last_diagnostic()
+    assert ctl['armed'] == 'True'                 # the flight went on through all of it
+    assert float(ctl['loop period [ms]'].split('max ')[1]) < 50.0
+    back.conn.close()

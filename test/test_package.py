@@ -15,10 +15,10 @@ import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PKG = os.path.join(ROOT, 'geoctl_ros')
-LAYERS = ['core', 'sim', 'params', 'nodes', 'tools']      # lowest first
+LAYERS = ['core', 'sim', 'params', 'mavlink', 'nodes', 'tools']      # lowest first
 
 
-def test_core_sim_and_params_import_without_rclpy():
+def test_core_sim_params_and_mavlink_import_without_rclpy():
     """With rclpy (and every ROS message package) made unimportable."""
     code = ('import sys\n'
             'class Block:\n'
@@ -28,7 +28,7 @@ def test_core_sim_and_params_import_without_rclpy():
             '            raise ImportError("blocked: " + name)\n'
             'sys.meta_path.insert(0, Block())\n'
             'import pkgutil, importlib, geoctl_ros\n'
-            'for sub in ("core", "sim", "params"):\n'
+            'for sub in ("core", "sim", "params", "mavlink"):\n'
             '    pkg = importlib.import_module("geoctl_ros." + sub)\n'
             '    for m in pkgutil.iter_modules(pkg.__path__):\n'
             '        importlib.import_module("geoctl_ros.%s.%s" % (sub, m.name))\n'
