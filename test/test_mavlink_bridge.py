@@ -94,6 +94,16 @@ def rig(tmp_path):
         gcs.conn.close()
 
 
+def arm(gcs, mon):
+    """Send MAV_CMD_COMPONENT_ARM_DISARM (arm) as a ground station; the final COMMAND_ACK result."""
+    t0 = time.monotonic()
+    gcs.conn.mav.command_long_send(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0,
+                                   0, 0)
+    return gcs.wait(lambda m: m.get_type() == 'COMMAND_ACK' and
+                    m.result != mav.MAV_RESULT_IN_PROGRESS, 10.0, 'the arm answer', mon,
+                    since=t0).result
+
+
 def is_ours(m):
     return m.get_srcSystem() == SYSID and m.get_srcComponent() == mav.MAV_COMP_ID_AUTOPILOT1
 
@@ -134,20 +144,13 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     mon.publish_commands([0.0] * 6)
     mon.spin_for(1.0)
     t0 = time.monotonic()
-    g.command_long_send(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-    ack = gcs.wait(lambda m: m.get_type() == 'COMMAND_ACK' and m.result != mav.MAV_RESULT_IN_PROGRESS,
-                   10.0, 'the arm answer', mon, since=t0)
-    assert ack.result == mav.MAV_RESULT_DENIED
+    assert arm(gcs, mon) == mav.MAV_RESULT_DENIED
     text = gcs.wait(lambda m: m.get_type() == 'STATUSTEXT', 5.0, 'the reason', since=t0)
     assert 'other publisher' in text.text
     mon.destroy_publisher(mon.pub_commands)
     del mon.pub_commands
     mon.spin_for(1.5)
-    t0 = time.monotonic()
-    g.command_long_send(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-    ack = gcs.wait(lambda m: m.get_type() == 'COMMAND_ACK' and m.result != mav.MAV_RESULT_IN_PROGRESS,
-                   10.0, 'the second arm answer', mon, since=t0)
-    assert ack.result == mav.MAV_RESULT_ACCEPTED
+    assert arm(gcs, mon) == mav.MAV_RESULT_ACCEPTED
     hb = gcs.wait(lambda m: m.get_type() == 'HEARTBEAT' and is_ours(m) and
                   m.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED, 3.0, 'an armed heartbeat')
     assert hb.system_status == mav.MAV_STATE_ACTIVE

@@ -30,7 +30,7 @@ from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
 from geoctl_ros.nodes.conversions import python_value, quaternion, set_vector, vector
 from geoctl_ros.nodes.runtime import spin
-from geoctl_ros.params import MAVLINK, ConfigError, resolve
+from geoctl_ros.params import MAVLINK
 
 GCS_TIMEOUT = 3.0          # s without a ground-station heartbeat: "no ground station"
 PARAM_REFRESH = 5.0        # s between reads of the controller's parameters
@@ -60,10 +60,7 @@ def _git_hash():
 class MavlinkBridge(Node):
     def __init__(self, **kwargs):
         super().__init__('mavlink_bridge', **kwargs)
-        errors = ros_params.declare(self, MAVLINK)
-        if errors:
-            raise ConfigError(errors)
-        v = resolve(MAVLINK, ros_params.values(self, MAVLINK))
+        v = ros_params.load(self, MAVLINK)
         self.sysid = v['mavlink.system_id']
         self.vehicle = Vehicle(encoder(self.sysid, m_const('MAV_COMP_ID_AUTOPILOT1')), self.sysid,
                                _version(), _git_hash())

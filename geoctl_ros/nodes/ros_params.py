@@ -19,7 +19,7 @@ from rclpy.parameter import Parameter
 
 from geoctl_ros.nodes.conversions import python_value
 from geoctl_ros.params import (BY_NAME, CONE_KEY, CONE_SCHEMA, CONTROLLER, ConfigError,
-                               cone_param, schema_for)
+                               cone_param, resolve, schema_for)
 
 ROS_TYPE = {
     'double': Parameter.Type.DOUBLE, 'double_array': Parameter.Type.DOUBLE_ARRAY,
@@ -86,6 +86,15 @@ def declare(node, kind):
             if m and m.group(1) not in names and not node.has_parameter(key):
                 _declare(node, cone_param(m.group(1), m.group(2)), errors)
     return errors
+
+
+def load(node, kind):
+    """Declare kind's parameters on node and return them resolved (the schema's checks applied);
+    raises ConfigError naming every bad one."""
+    errors = declare(node, kind)
+    if errors:
+        raise ConfigError(errors)
+    return resolve(kind, values(node, kind))
 
 
 def unnamed_cones(node):

@@ -26,7 +26,7 @@ from geoctl_ros.core import so3
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg, vector
 from geoctl_ros.nodes.runtime import spin
-from geoctl_ros.params import SIM, ConfigError, airframe, resolve, testbed_sim
+from geoctl_ros.params import SIM, airframe, testbed_sim
 
 LATE = 0.05     # s behind real time before the sim warns
 
@@ -34,10 +34,7 @@ LATE = 0.05     # s behind real time before the sim warns
 class SimNode(Node):
     def __init__(self, **kwargs):
         super().__init__('sim', **kwargs)
-        errors = ros_params.declare(self, SIM)
-        if errors:
-            raise ConfigError(errors)
-        v = resolve(SIM, ros_params.values(self, SIM))
+        v = ros_params.load(self, SIM)
         self.sim = testbed_sim(v)
         _, self.curve, _ = airframe(v)
         self.n_rotors = len(self.sim.actuator.thrusts) if self.sim.actuator else 0
