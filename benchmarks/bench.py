@@ -6,6 +6,11 @@
 Figures are microseconds per call (median of several repeats). The control tick must fit in the
 control period with room to spare on the ODROID (10 ms at 100 Hz, 2 ms at 500 Hz); the baseline
 was measured on the 2-core development machine. Not a test: nothing here passes or fails.
+
+Then, side by side in the same run (so that a busy machine slows both alike): the control step
+against ``paper_law.py``, a plain numpy transcription of the paper's law with a loop over cones,
+at 1, 4, 16 and 64 cones (after checking that both give the same moment), and the controller
+node's whole tick in-process (loop, mixing and its seven publishes, no subscribers matched).
 """
 import json
 import os
@@ -65,6 +70,63 @@ def measure():
     return results
 
 
+def side_by_side():
+    """(rows of n cones, ours us, transcription us, ratio, max |u difference|), node tick us."""
+    from paper_law import PaperLaw
+    R = so3.axis_angle([0.2, 0.1, 1.0], 0.4)
+    w = np.array([0.1, -0.2, 0.3])
+    rows = []
+    for n in (1, 4, 16, 64):
+        values = resolve(CONTROLLER, dict(cones(n), **{'cog_offset': [0.0, 0.0, 0.0],
+                                                        'gravity_compensation': False}))
+        setup = controller_setup(values)
+        ours = ControlLoop(setup).controller
+        cfg = setup.config
+        paper = PaperLaw(cfg.J, cfg.G, cfg.k_R, cfg.k_Omega, cfg.k_Delta, cfg.c,
+                         cfg.cones.alpha, cfg.cones.r, cfg.cones.V, cfg.cones.theta)
+        assert not cfg.cones.evaluate(R).saturated.any()
+        diff = float(np.abs(ours.step(R, w, 0.0).u - paper.step(R, w, 0.0)[0]).max())
+        t_ours, t_paper = [], []
+        for _ in range(5):                      # interleaved repeats
+            t_ours.append(per_call_us(lambda: ours.step(R, w, 0.0), 1000))
+            t_paper.append(per_call_us(lambda: paper.step(R, w, 0.0), 1000))
+        a, b = sorted(t_ours)[2], sorted(t_paper)[2]
+        rows.append((n, a, b, b / a, diff))
+    return rows, node_tick_us()
+
+
+def node_tick_us():
+    """The controller node's tick in this process: rclpy on the loopback profile."""
+    from geoctl_ros.tools.rosenv import use_node_env
+    use_node_env()
+    import rclpy
+    from geoctl_ros.nodes.controller import ControllerNode
+    rclpy.init()
+    try:
+        node = ControllerNode()
+        from geometry_msgs.msg import PoseStamped
+        from sensor_msgs.msg import Imu
+        from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg
+        pose, imu = PoseStamped(), Imu()
+        set_quaternion(pose.pose.orientation, so3.rot_to_quat(so3.axis_angle([0.2, 0.1, 1.0], 0.4)))
+        set_vector(imu.angular_velocity, (0.1, -0.2, 0.3))
+        t = [0.0]
+
+        def tick():              # a pose and an imu message in, one tick out (as the executor)
+            t[0] += 0.01
+            pose.header.stamp = imu.header.stamp = time_msg(t[0])
+            node._on_pose(pose)
+            node._on_imu(imu)
+            node._on_tick()
+        tick()
+        node.loop.arm(node._now())
+        us = per_call_us(tick, 500)
+        node.destroy_node()
+        return us
+    finally:
+        rclpy.try_shutdown()
+
+
 def main(argv):
     results = measure()
     if '--update-baseline' in argv:
@@ -81,6 +143,14 @@ def main(argv):
         b = baseline.get(k)
         print('%-36s %10.1f %10s %8s' % (k, v, '%.1f' % b if b else '-',
                                          '%.2f' % (v / b) if b else '-'))
+    rows, tick = side_by_side()
+    print()
+    print('%-8s %14s %18s %8s %14s' % ('cones', 'control step', 'paper transcription',
+                                        'ratio', 'max |u diff|'))
+    for n, a, b, ratio, diff in rows:
+        print('%-8d %11.1f us %15.1f us %8.2f %14.1e' % (n, a, b, ratio, diff))
+    print('64 cones / 4 cones (ours): %.2f' % (rows[3][1] / rows[1][1]))
+    print('controller node tick (loop, mixing, 7 publishes, in-process): %.1f us' % tick)
     return 0
 
 

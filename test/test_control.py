@@ -336,3 +336,32 @@ def test_gravity_moment_is_cancelled_and_cog_model_estimates_the_offset():
     assert np.linalg.norm(missing) > 0.07                       # 10 deg of error if unlearnt
     learnt = ctrl.regressor(plant.R) @ ctrl.delta_bar
     assert np.allclose(learnt, missing, atol=0.02 * np.linalg.norm(missing))
+
+
+def test_the_control_step_equals_a_plain_transcription_of_the_paper():
+    """benchmarks/paper_law.py, written from the paper with a loop over cones, independently:
+    the same moment and Psi at random attitudes outside the cones' floor bands."""
+    import os
+    import sys
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                    'benchmarks'))
+    from paper_law import PaperLaw
+    V = rng.normal(size=(5, 3))
+    theta = np.radians([10.0, 15.0, 20.0, 25.0, 12.0])
+    cones = ConeSet([1.0, 0.0, 0.0], V, theta, 8.0, math.radians(0.25))
+    cfg = config(cones, k_R=0.4, k_Omega=0.7, k_Delta=0.05, c=0.1, inertia=J_PAPER,
+                 cog_offset=np.zeros(3), gravity_compensation=False)
+    checked = 0
+    for _ in range(300):
+        R, w = so3.exp(rng.normal(size=3) * 1.5), rng.normal(size=3) * 0.3
+        if cones.evaluate(R).saturated.any():
+            continue
+        ours = AttitudeController(cfg)
+        paper = PaperLaw(cfg.J, cfg.G, cfg.k_R, cfg.k_Omega, cfg.k_Delta, cfg.c, 8.0,
+                         [1.0, 0.0, 0.0], V, theta)
+        out = ours.step(R, w, 0.01)
+        u, psi = paper.step(R, w, 0.01)
+        assert np.allclose(out.u, u, rtol=1e-9, atol=1e-12) and out.psi == pytest.approx(psi)
+        assert np.allclose(ours.delta_bar, paper.delta_bar, atol=1e-14)
+        checked += 1
+    assert checked > 100
