@@ -10,7 +10,7 @@ import numpy as np
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.control import AttitudeController, SetpointRejected
-from geoctl_ros.core.gaps import GapBridge
+from geoctl_ros.core.gaps import GYRO, POSE, GapBridge
 from geoctl_ros.core.safety import (Stream, Supervisor, angular_velocity_problem, quaternion_problem)
 from geoctl_ros.core.stats import WindowStats
 
@@ -177,10 +177,10 @@ class ControlLoop:
         """Sentences for the gaps being ridden through (empty in normal flight)."""
         notes = []
         b = self.bridge
-        if b.attitude_source != 'pose':
+        if b.attitude_source != POSE:
             notes.append('pose gap: attitude %s (pose %.3f s old, failsafe at %.3f s)'
                          % (b.attitude_source, self.pose.age(now), self.pose.limit))
-        if b.rate_source != 'gyro':
+        if b.rate_source != GYRO:
             notes.append('angular velocity gap: rate %s (imu %.3f s old, failsafe at %.3f s)'
                          % (b.rate_source, self.rate.age(now), self.rate.limit))
         return notes
