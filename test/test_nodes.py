@@ -299,6 +299,9 @@ def test_sim_time_the_sim_drives_the_controllers_clock(ros):
     launch('controller', TESTBED, '-p', 'use_sim_time:=true')
     reply = mon.arm_when_ready()
     assert reply.success, reply.message
+    # measure only once this process receives the sim's streams (discovering a new participant
+    # can take one DDS announcement period, ~3 s, after the controller already flies on them)
+    mon.wait_for(lambda: clock_log and mon.log['true_pose'], 15.0, '/clock and the true pose')
     t0 = time.monotonic()
     mon.spin_for(8.0)
     clock = [(t, c) for t, c in clock_log if t >= t0]
