@@ -16,7 +16,6 @@ import glob
 import json
 import math
 import os
-import re
 import sys
 import time
 
@@ -24,6 +23,7 @@ import numpy as np
 
 from geoctl_ros.tools import scenario
 from geoctl_ros.core import so3
+from geoctl_ros.core.stats import aggregate
 from geoctl_ros.tools.rosenv import config_dir
 
 TABLE_HEAD = ('| scenario | min angle to each cone (half-angle), deg | final attitude error, deg '
@@ -55,18 +55,10 @@ def headless(out):
     return 0
 
 
-_NUMBERS = re.compile(r'mean ([\d.]+) std ([\d.]+) p99 ([\d.]+) max ([\d.]+)')
-
-
 def _diag_stats(diags, key):
-    """Aggregate the controller's windowed 'mean std max' figures of one diagnostics key."""
-    rows = [tuple(float(x) for x in m.groups()) for d in diags
-            for m in [_NUMBERS.match(d.get(key, ''))] if m]
-    if not rows:
-        return None
-    a = np.array(rows)
-    return {'mean_ms': float(a[:, 0].mean()), 'std_ms': float(np.sqrt((a[:, 1] ** 2).mean())),
-            'p99_ms': float(np.percentile(a[:, 2], 99)), 'max_ms': float(a[:, 3].max())}
+    """Aggregate the controller's windowed figures of one diagnostics key, ms."""
+    f = aggregate(d.get(key, '') for d in diags)
+    return None if f is None else {k + '_ms': v for k, v in f.items()}
 
 
 def fly(params_file, out, duration, monitor_factory=None, mavlink=None):

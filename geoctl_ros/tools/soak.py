@@ -40,6 +40,7 @@ import time
 
 import numpy as np
 
+from geoctl_ros.core.stats import aggregate
 from geoctl_ros.tools.rosenv import PROFILE_VAR, cli_env, config_dir, node_env
 from geoctl_ros.tools.soak_agents import CHURN_LOOP, CLI_LOOP, PARAMS_LOOP
 
@@ -213,17 +214,10 @@ class Session:
         return [p.stop() for p in self.procs]
 
 
-_WINDOW = re.compile(r'mean ([\d.]+) std ([\d.]+) p99 ([\d.]+) max ([\d.]+)')
-
-
 def _windows(diags, key):
     """(p99 over the windows' p99, max) of a controller diagnostics figure, ms."""
-    rows = [tuple(float(x) for x in m.groups()) for d in diags for m in [_WINDOW.match(d.get(key, ''))]
-            if m]
-    if not rows:
-        return float('nan'), float('nan')
-    a = np.array(rows)
-    return float(np.percentile(a[:, 2], 99)), float(a[:, 3].max())
+    f = aggregate(d.get(key, '') for d in diags)
+    return (float('nan'), float('nan')) if f is None else (f['p99'], f['max'])
 
 
 def _cones(params_file):
