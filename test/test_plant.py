@@ -8,6 +8,7 @@ from geoctl_ros.core import so3
 from geoctl_ros.core.mechanics import gravity_moment, pivot_inertia
 from geoctl_ros.params import LAB_INERTIA
 from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
+from geoctl_ros.sim.testbed import EscWatchdog
 
 J_LAB = np.array(LAB_INERTIA).reshape(3, 3)
 NO_DIST = Disturbance(np.zeros(3), np.zeros(3), 0.0)
@@ -82,3 +83,27 @@ def test_disturbance_follows_the_dissertation_pattern():
     s, c = math.sin(9 * t), math.cos(9 * t)
     assert np.allclose(d(t), [0.2 + 0.02 * s, 0.2 + 0.02 * c, 0.2 + 0.01 * (s + c)])
     assert np.allclose(Disturbance(np.ones(3), np.zeros(3), 0.0)(5.0), 1.0)
+
+
+def test_the_esc_timeout_counts_the_links_silence_not_the_simulators_own_stall():
+    esc = EscWatchdog(timeout=0.1, stall=0.05)
+    assert not esc.fresh(0.0)                       # never commanded: motors stopped
+    t = 0.0
+    for _ in range(20):                             # commands every 10 ms, ticks every 5 ms
+        esc.received(t)
+        assert esc.fresh(t) and esc.fresh(t + 0.005)
+        t += 0.01
+    # the simulator stalls 0.15 s (SIGSTOP): its first tick after it still drives the motors...
+    assert esc.fresh(t + 0.15)
+    # ...and the commands queued during the stall arrive: running on
+    esc.received(t + 0.151)
+    assert esc.fresh(t + 0.155)
+    # the controller really stops: the motors stop once the silence passes the timeout
+    assert esc.fresh(t + 0.25)
+    assert not esc.fresh(t + 0.2515)
+    # a stall that follows a silence already past the timeout does not restart the motors
+    assert not esc.fresh(t + 0.6)
+    # the controller gone while the simulator was stalled: one catch-up on the last command,
+    # then stopped at the next tick
+    esc.received(t + 0.7)
+    assert esc.fresh(t + 0.705) and esc.fresh(t + 1.5) and not esc.fresh(t + 1.505)

@@ -89,6 +89,7 @@ def test_short_gaps_are_ridden_through_and_a_long_one_fails_safe(tmp_path):
                        if t_from <= t < t_to)
         assert margin(t0, t_pause) > 0.0          # through the pose and imu gaps
         pause_margin = margin(t_pause, time.monotonic())
+        print('150 ms sim pause: min cone margin %.1f deg' % pause_margin)
         # a 2 s pause: the failsafe at the imu's ride-through limit, motors zero
         s.fault('pause', 2.0)
         mon.spin_for(0.5)

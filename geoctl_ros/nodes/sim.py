@@ -8,10 +8,9 @@ the wall clock times ``real_time_factor``: one timer, at the faster of the two s
 integrates as many steps as are due and publishes what is due.
 
 Commands older than ``command_timeout`` stop the motors (as the ESCs do when the I2C bus goes
-quiet); a malformed command message (wrong length, not finite, outside [0, 1]) is refused with a
+quiet; ``geoctl_ros.sim.testbed.EscWatchdog``, which does not count the sim's own stalls); a malformed command message (wrong length, not finite, outside [0, 1]) is refused with a
 warning and the previous one stays.
 """
-import math
 import sys
 import time
 
@@ -27,6 +26,7 @@ from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg, vector
 from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.params import SIM, airframe, testbed_sim
+from geoctl_ros.sim.testbed import EscWatchdog
 
 LATE = 0.05     # s behind real time before the sim warns
 
@@ -41,10 +41,11 @@ class SimNode(Node):
         self.h = 1.0 / v['integration_rate_hz']
         self.rtf = v['real_time_factor']
         self.command_timeout = v['command_timeout']
+        self.esc = EscWatchdog(self.command_timeout, LATE)
         self.publish_clock = v['publish_clock']
         self.commands = np.zeros(self.n_rotors, dtype=int)
         self.torque = np.zeros(3)
-        self.last_command_wall = -math.inf
+        self.ever_commanded = False
         self.commands_fresh = False
         self.wall0 = time.monotonic()
         self.pose_period = 1.0 / v['pose_rate_hz']
@@ -85,7 +86,8 @@ class SimNode(Node):
                                       throttle_duration_sec=1.0)
             return
         self.commands = np.rint(data * self.curve.command_max).astype(int)
-        self.last_command_wall = time.monotonic()
+        self.esc.received(time.monotonic())
+        self.ever_commanded = True
 
     def _on_wrench(self, msg):
         torque = np.array(vector(msg.wrench.torque))
@@ -94,24 +96,26 @@ class SimNode(Node):
                                       throttle_duration_sec=1.0)
             return
         self.torque = torque
-        self.last_command_wall = time.monotonic()
+        self.esc.received(time.monotonic())
+        self.ever_commanded = True
 
     def _stamp(self, t_sim):
         return time_msg(t_sim) if self.publish_clock else self.get_clock().now().to_msg()
 
     def _on_timer(self):
-        target = (time.monotonic() - self.wall0) * self.rtf
+        now = time.monotonic()
+        target = (now - self.wall0) * self.rtf
         plant = self.sim.plant
         behind = (target - plant.t) / self.rtf
         if behind > LATE:       # the process did not get the CPU (or was stopped): say so
             self.get_logger().warning('sim %.0f ms behind real time: its measurements come late'
                                       % (behind * 1e3), throttle_duration_sec=1.0)
-        fresh = time.monotonic() - self.last_command_wall < self.command_timeout
+        fresh = self.esc.fresh(now)
         if fresh != self.commands_fresh:
             self.commands_fresh = fresh
             if fresh:
                 self.get_logger().info('motor_commands received: motors running')
-            elif self.last_command_wall > -math.inf:
+            elif self.ever_commanded:
                 self.get_logger().warning('motor_commands stale (older than %.3f s): motors '
                                           'stopped' % self.command_timeout)
         command = (self.commands if fresh else np.zeros_like(self.commands)) if self.n_rotors \

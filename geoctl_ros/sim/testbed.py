@@ -43,6 +43,35 @@ class RotorActuator:
         return self.B_moment @ self.thrusts
 
 
+class EscWatchdog:
+    """The ESCs' command timeout: motors stop when no command has come for ``timeout`` seconds.
+
+    Real ESCs watch the bus, and the bus keeps running while a simulator is descheduled or
+    SIGSTOPped. A simulator that judged age by the wall clock after such a stall of its own would
+    stop the motors for the whole catch-up it integrates next (the controller kept commanding; the
+    simulator could not listen), an open-loop fall no vehicle would see. So the age is taken at the
+    last moment the simulator was running: a tick more than ``stall`` after the previous one means
+    the simulator itself stalled, and the command's age is judged as of that previous tick. Commands
+    that really stopped are still caught: at the tick after the stall (the first one after the
+    queued commands could arrive), the age is the wall clock's again.
+    """
+
+    def __init__(self, timeout, stall):
+        self.timeout, self.stall = timeout, stall
+        self.last_command = -math.inf
+        self.last_tick = None
+
+    def received(self, now):
+        self.last_command = now
+
+    def fresh(self, now):
+        """Whether the motors run for the integration due at ``now``; call once per tick."""
+        stalled = self.last_tick is not None and now - self.last_tick > self.stall
+        reference = self.last_tick if stalled else now
+        self.last_tick = now
+        return reference - self.last_command < self.timeout
+
+
 class TestbedSim:
     """Plant + actuation + sensors, integrated at a fixed step."""
 
