@@ -33,6 +33,8 @@ import math
 
 import numpy as np
 
+from geoctl_ros.core.so3 import matvec
+
 
 class AirframeError(ValueError):
     """A rotor layout that cannot produce every moment (with the reason)."""
@@ -71,11 +73,13 @@ def tilted_ring(count=6, arm_length=0.31, tilt_deg=15.0, first_azimuth_deg=0.0, 
 
 
 def effectiveness(geometry, rho):
-    """The 6 x n matrix mapping rotor thrusts to [force; moment about the pivot] (body frame)."""
-    arms = geometry.positions + np.asarray(rho, dtype=float)[None, :]      # from the pivot
+    """The 6 x n matrix mapping rotor thrusts to [force; moment about the pivot] (body frame);
+    a stack of them for a stack of centre-of-mass offsets rho (batch, 3)."""
+    arms = geometry.positions + np.asarray(rho, dtype=float)[..., None, :]    # from the pivot
     moments = (np.cross(arms, geometry.axes)
                - (geometry.spins * geometry.yaw_coefficient)[:, None] * geometry.axes)
-    return np.vstack((geometry.axes.T, moments.T))
+    forces = np.broadcast_to(geometry.axes.T, moments.shape[:-2] + geometry.axes.T.shape)
+    return np.concatenate((forces, np.swapaxes(moments, -1, -2)), axis=-2)
 
 
 @dataclass
@@ -114,7 +118,7 @@ def check(B, alive):
 
 @dataclass
 class Allocation:
-    """One allocation's result."""
+    """One allocation's result (for a batch of moments: each field with the batch axis first)."""
 
     thrusts: np.ndarray        # N, one per rotor (failed rotors: 0)
     moment: np.ndarray         # moment the thrusts produce about the pivot
@@ -153,54 +157,57 @@ class Allocator:
         self._thrusts = np.zeros(n)
 
     def allocate(self, moment, collective):
-        """Allocation for the desired moment (3,) about the pivot and collective thrust (N)."""
-        if not (np.all(np.isfinite(moment)) and math.isfinite(collective)):
-            f = np.full(len(self.alive), self.lo)
-            return self._result(f, moment, valid=False)
-        f_rp = self._p_rp @ moment[:2]
-        f_y = self._p_y * moment[2]
+        """Allocation for the desired moment (3,) about the pivot and collective thrust (N); a
+        stack of moments (batch, 3) gives one allocation per row."""
+        moment = np.asarray(moment, dtype=float)
+        valid = np.isfinite(moment).all(axis=-1) & math.isfinite(collective)
+        m = moment if np.all(valid) else np.where(np.asarray(valid)[..., None], moment, 0.0)
+        f_rp = matvec(self._p_rp, m[..., :2])
+        f_y = self._p_y * m[..., 2:]
         f = collective * self._d + f_rp + f_y
-        if f.min() >= self.lo and f.max() <= self.hi:
-            return self._result(f, moment, saturated=False)
-        s_rp = self._max_scale(np.zeros_like(f_rp), f_rp)
-        base = s_rp * f_rp
-        if s_rp >= 1.0:
-            base = base + self._max_scale(base, f_y) * f_y
-        t_lo, t_hi = self._t_interval(base)
-        t = min(max(collective, t_lo), t_hi)
-        f = np.clip(t * self._d + base, self.lo, self.hi)     # clip: round-off only
-        return self._result(f, moment, saturated=True)
+        met = (f.min(axis=-1) >= self.lo) & (f.max(axis=-1) <= self.hi)
+        if not np.all(met):
+            # roll and pitch scaled first, then yaw (only when roll and pitch are whole), then the
+            # collective thrust moved within what the rotors allow
+            s_rp = self._max_scale(np.zeros_like(f_rp), f_rp)
+            base = (f_rp.T * s_rp).T
+            s_y = np.where(s_rp >= 1.0, self._max_scale(base, f_y), 0.0)
+            base = base + (f_y.T * s_y).T
+            t_lo, t_hi = self._t_interval(base)
+            t = np.minimum(np.maximum(collective, t_lo), t_hi)
+            degraded = np.clip(np.multiply.outer(t, self._d) + base, self.lo, self.hi)  # round-off
+            f = np.where(np.asarray(met)[..., None], f, degraded)
+        if not np.all(valid):
+            f = np.where(np.asarray(valid)[..., None], f, self.lo)
+        return self._result(f, moment, saturated=~met | ~valid, valid=valid)
 
     def _t_interval(self, base):
         """The collective levels t with lo <= t d + base <= hi for every rotor."""
-        return (float(np.max((self.lo - base) * self._inv_d)),
-                float(np.min((self.hi - base) * self._inv_d)))
+        return (np.max((self.lo - base) * self._inv_d, axis=-1),
+                np.min((self.hi - base) * self._inv_d, axis=-1))
 
     def _max_scale(self, base, a):
         """Largest s in [0, 1] such that some t gives lo <= t d + base + s a <= hi per rotor.
 
         Per rotor, L_i - s A_i <= t <= H_i - s A_i; some t exists iff for every pair (i, j)
-        s (A_j - A_i) <= H_j - L_i.
+        s (A_j - A_i) <= H_j - L_i. (0 when base itself is infeasible.)
         """
         L = (self.lo - base) * self._inv_d
         H = (self.hi - base) * self._inv_d
         A = a * self._inv_d
-        D = A[None, :] - A[:, None]
-        N = H[None, :] - L[:, None]
-        if np.any(N < -1e-12):
-            return 0.0                                        # base itself infeasible
+        D = A[..., None, :] - A[..., :, None]
+        N = H[..., None, :] - L[..., :, None]
         limit = D > 1e-12
-        if not limit.any():
-            return 1.0
-        return float(min(1.0, max(0.0, np.min(N[limit] / D[limit]))))
+        ratio = np.where(limit, N / np.where(limit, D, 1.0), np.inf).min(axis=(-2, -1))
+        return np.where((N < -1e-12).any(axis=(-2, -1)), 0.0, np.clip(ratio, 0.0, 1.0))
 
-    def _result(self, f_alive, moment, saturated=True, valid=True):
-        thrusts = np.zeros(self.count)
-        thrusts[self.alive] = f_alive
-        wrench = self.B @ f_alive
-        req = np.asarray(moment, dtype=float) if valid else np.zeros(3)
-        return Allocation(thrusts=thrusts, moment=wrench[3:], collective=float(wrench[2]),
-                          moment_lost=req - wrench[3:], saturated=saturated, valid=valid)
+    def _result(self, f_alive, moment, saturated, valid):
+        thrusts = np.zeros(f_alive.shape[:-1] + (self.count,))
+        thrusts[..., self.alive] = f_alive
+        wrench = matvec(self.B, f_alive)
+        req = np.where(np.asarray(valid)[..., None], moment, 0.0)
+        return Allocation(thrusts=thrusts, moment=wrench[..., 3:], collective=wrench[..., 2],
+                          moment_lost=req - wrench[..., 3:], saturated=saturated, valid=valid)
 
 
 @dataclass(frozen=True)
@@ -254,15 +261,15 @@ class Mixer:
         self.allocator = allocator
         self.curve = curve
         self.collective_thrust = float(collective_thrust)
-        self._zero = np.zeros(allocator.count, dtype=int)
         self._dead = np.array([i for i in range(allocator.count) if i not in allocator.alive],
                               dtype=int)
 
     def mix(self, moment, armed=True):
-        """Motor commands for the moment; all zero when not armed."""
+        """Motor commands for the moment (or a stack of them); all zero when not armed."""
         allocation = self.allocator.allocate(moment, self.collective_thrust)
         if not armed:
-            return MotorOutput(self._zero.copy(), np.zeros(len(self._zero)), allocation)
+            zero = np.zeros_like(allocation.thrusts, dtype=int)
+            return MotorOutput(zero, np.zeros(zero.shape), allocation)
         commands = self.curve.command(allocation.thrusts)
-        commands[self._dead] = 0
+        commands[..., self._dead] = 0
         return MotorOutput(commands, self.curve.normalised(commands), allocation)

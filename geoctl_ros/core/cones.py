@@ -24,17 +24,22 @@ and points the sensor away from the axis by the shortest way (on the axis itself
 is undefined, along a fixed direction perpendicular to r). Nothing is ever inf or NaN, whatever R
 is, and evaluations report which cones are violated (g_i <= 0) and which are in the saturated band
 (g_i < g0_i), so callers can flag them.
+
+A batch of cone sets (one per run of a campaign, each with the same number of cones) is one
+ConeSet with axes (batch, n, 3) and half-angles (batch, n); it evaluates a stack of attitudes
+(batch, 3, 3) with the same formulas.
 """
 from dataclasses import dataclass
 
 import numpy as np
 
-from geoctl_ros.core.so3 import hat
+from geoctl_ros.core.so3 import hat, matvec
 
 
 @dataclass
 class ConeEval:
-    """The cone terms at one attitude; arrays have one entry (row) per cone."""
+    """The cone terms at one attitude; arrays have one entry (row) per cone (after the batch axis,
+    if any)."""
 
     s: np.ndarray          # r^T R^T v_i, the cosine of the angle between R r and v_i
     B: np.ndarray          # barrier values B_i >= 1
@@ -56,15 +61,19 @@ class ConeSet:
         sensor_axis: r, body frame (normalised here). axes: (n, 3) world-frame cone axes
         (normalised here). half_angles_rad: (n,) in (0, pi/2). alpha: barrier shape, > 0.
         floor_rad: angle outside the boundary below which the barrier is extended linearly.
+        A batch: axes (batch, n, 3) and half_angles_rad (batch, n).
         """
         r = np.asarray(sensor_axis, dtype=float)
         self.r = r / np.linalg.norm(r)
         # V @ (R @ self._r_cols): column 0 is s_i = r^T R^T v_i, columns 1-3 (R^T v_i) x r
         self._r_cols = np.column_stack((self.r, hat(self.r)))
-        V = np.asarray(axes, dtype=float).reshape(-1, 3)
-        self.V = V / np.linalg.norm(V, axis=1, keepdims=True) if len(V) else V
-        self.theta = np.asarray(half_angles_rad, dtype=float).reshape(-1)
-        self.names = list(names) if names is not None else [f'cone{i}' for i in range(len(V))]
+        V = np.asarray(axes, dtype=float)
+        V = V.reshape(-1, 3) if V.ndim < 3 else V
+        self.V = V / np.linalg.norm(V, axis=-1, keepdims=True) if V.size else V
+        theta = np.asarray(half_angles_rad, dtype=float)
+        self.theta = theta.reshape(-1) if theta.ndim < 2 else theta
+        n = self.theta.shape[-1]
+        self.names = list(names) if names is not None else [f'cone{i}' for i in range(n)]
         self.alpha = float(alpha)
         self.floor = float(floor_rad)
         self.cos_theta = np.cos(self.theta)
@@ -79,19 +88,19 @@ class ConeSet:
         self._r_perp = perp / np.linalg.norm(perp)  # fallback direction on a cone's axis
 
     def __len__(self):
-        return len(self.theta)
+        return self.theta.shape[-1]
 
     def evaluate(self, R):
         """Barrier values, gradients and flags at attitude R."""
         sc = self.V @ (R @ self._r_cols)
-        s, cross = sc[:, 0], sc[:, 1:]
+        s, cross = sc[..., 0], sc[..., 1:]
         g = self.cos_theta - s
         g_eff = np.maximum(g, self.g0)
         saturated = g < self.g0
         # log barrier at g_eff, plus the tangent-line extension below the floor (zero above it)
         B = (self._B_offset - np.log(g_eff) / self.alpha
              + np.maximum(self.g0 - g, 0.0) * self._inv_alpha_g0)
-        e_RB = cross * (-1.0 / (self.alpha * g_eff))[:, None]
+        e_RB = cross * (-1.0 / (self.alpha * g_eff))[..., None]
         violated = g <= 0.0
         if violated.any():
             e_RB[violated] = self._inside_field(cross[violated], violated)
@@ -99,14 +108,14 @@ class ConeSet:
 
     def _inside_field(self, cross, violated):
         """e_RB for cones the sensor is in: boundary magnitude, away from the axis."""
-        n = np.linalg.norm(cross, axis=1)
+        n = np.linalg.norm(cross, axis=-1)
         unit = np.where((n > 1e-12)[:, None], cross / np.maximum(n, 1e-12)[:, None],
                         self._r_perp[None, :])
         return -unit * self.e_RB_inside[violated][:, None]
 
     def angles_deg(self, R):
         """Angle between the sensor's world direction R r and each cone axis, degrees."""
-        return np.degrees(np.arccos(np.clip(self.V @ (R @ self.r), -1.0, 1.0)))
+        return np.degrees(np.arccos(np.clip(matvec(self.V, matvec(R, self.r)), -1.0, 1.0)))
 
     def margins_deg(self, R):
         """Cone margins (angle to axis minus half-angle, degrees) at attitude R."""

@@ -19,6 +19,12 @@ Discrete time: ``step`` computes u from the estimate Delta_bar_k and then advanc
 one explicit Euler step of the adaptive law over dt (the control period). The estimate is frozen
 while any cone's barrier is saturated (the sensor within the floor band or inside a cone, where the
 paper's assumptions do not hold) and optionally projected onto a ball so that it cannot wind up.
+
+Batches: with a batched ConeSet (one cone set per run) and stacks of set points, attitudes and
+rates (a leading batch axis), ``step`` advances every run at once with the same formulas; this is
+how the campaign (``geoctl_ros.tools.campaign``) flies a thousand manoeuvres. The gains, weights and
+model are shared by the batch. (``x.T`` on a stack of vectors puts the batch axis last, so
+``(x.T * a).T`` scales each run's vector by its own scalar and a single vector by a scalar.)
 """
 from dataclasses import dataclass, field
 import math
@@ -27,7 +33,7 @@ import numpy as np
 
 from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.core.mechanics import cog_regressor, first_moment, gravity_moment, pivot_inertia
-from geoctl_ros.core.so3 import cross, vee
+from geoctl_ros.core.so3 import cross, matvec, vee
 
 # Disturbance models: name -> number of estimated parameters (the columns of W).
 #   constant:      W = I,                     Delta = a constant moment (the paper's case)
@@ -84,14 +90,15 @@ class ControlOutput:
     violated: bool           # sensor on or inside a cone
     saturated: bool          # some barrier in its floor band (repulsion saturated)
     adapting: bool           # the estimate was advanced this step
+    # (in a batch, each field has the batch axis first: psi, violated, ... one per run)
 
 
 def attractive_error(R, R_d, G):
     """A (eq. 13) and e_RA (eq. 15) for the diagonal weights G (3,)."""
-    RdtR = R_d.T @ R
-    A = 0.5 * float(G @ (1.0 - np.diagonal(RdtR)))
+    RdtR = R_d.mT @ R
+    A = 0.5 * ((1.0 - np.diagonal(RdtR, 0, -2, -1)) @ G)
     M = G[:, None] * RdtR            # G R_d^T R; its transpose is R^T R_d G
-    return A, 0.5 * vee(M - M.T)
+    return A, 0.5 * vee(M - M.mT)
 
 
 def E_matrix(R, R_d, G):
@@ -104,8 +111,8 @@ def configuration_error(R, R_d, G, cones):
     """Psi, e_R, A, e_RA and the cone evaluation at R (Prop. 1 generalised to several cones)."""
     A, e_RA = attractive_error(R, R_d, G)
     ev = cones.evaluate(R)
-    scale = 1.0 + float(np.sum(ev.B - 1.0))
-    e_R = e_RA * scale + A * ev.e_RB.sum(axis=0)
+    scale = 1.0 + np.sum(ev.B - 1.0, axis=-1)
+    e_R = (e_RA.T * scale + ev.e_RB.sum(axis=-2).T * A).T
     return A * scale, e_R, A, e_RA, ev
 
 
@@ -169,10 +176,11 @@ class AttitudeController:
 
     # --- the hot path ----------------------------------------------------------------------------
     def regressor(self, R):
-        """W(R, Omega): 3 x n_params."""
+        """W(R, Omega): 3 x n_params (a stack of them for a batch)."""
         if self.config.disturbance_model == 'constant':
             return np.eye(3)
-        return np.hstack((np.eye(3), cog_regressor(R, self.config.gravity)))
+        Y = cog_regressor(R, self.config.gravity)
+        return np.concatenate((np.broadcast_to(np.eye(3), Y.shape), Y), axis=-1)
 
     def step(self, R, Omega, dt, adapt=True):
         """One control step at attitude R and body angular velocity Omega.
@@ -183,35 +191,39 @@ class AttitudeController:
         cfg = self.config
         J = cfg.J
         psi, e_R, _, _, ev = configuration_error(R, self.R_d, cfg.G, cfg.cones)
-        RtRd = R.T @ self.R_d
-        Omega_d = RtRd @ self.Omega_d
-        e_Omega = Omega - Omega_d
+        e_Omega = Omega
+        tracking = self.Omega_d.any() or self.dOmega_d.any()
+        if tracking:
+            RtRd = R.mT @ self.R_d
+            Omega_d = matvec(RtRd, self.Omega_d)
+            e_Omega = Omega - Omega_d
         W = self.regressor(R)
         delta_bar = self.delta_bar.copy()
-        u = -cfg.k_R * e_R - cfg.k_Omega * e_Omega + cross(Omega, J @ Omega) - W @ delta_bar
-        if self.Omega_d.any() or self.dOmega_d.any():
-            u -= J @ (cross(Omega, Omega_d) - RtRd @ self.dOmega_d)
+        u = (-cfg.k_R * e_R - cfg.k_Omega * e_Omega + cross(Omega, matvec(J, Omega))
+             - matvec(W, delta_bar))
+        if tracking:
+            u -= matvec(J, cross(Omega, Omega_d) - matvec(RtRd, self.dOmega_d))
         if cfg.gravity_compensation:
             u -= gravity_moment(R, cfg.m_rho, cfg.gravity)
-        saturated = bool(ev.saturated.any())
-        adapting = bool(adapt and cfg.adaptive and not saturated)
-        if adapting:
-            self.delta_bar += (dt * cfg.k_Delta) * (W.T @ (e_Omega + cfg.c * e_R))
+        saturated = ev.saturated.any(axis=-1)
+        adapting = adapt and cfg.adaptive and ~saturated
+        if np.any(adapting):
+            rate = (dt * cfg.k_Delta) * matvec(W.mT, e_Omega + cfg.c * e_R)
+            self.delta_bar += (rate.T * adapting).T
             self._project()
         return ControlOutput(u=u, e_R=e_R, e_Omega=e_Omega, psi=psi,
                              margins_deg=ev.margins_deg(cfg.cones.theta), delta_bar=delta_bar,
-                             violated=bool(ev.violated.any()), saturated=saturated,
+                             violated=ev.violated.any(axis=-1), saturated=saturated,
                              adapting=adapting)
 
     def _project(self):
         """Project each block of the estimate onto its ball (bounds of 0 mean unbounded)."""
         cfg = self.config
         for block, bound in ((slice(0, 3), cfg.delta_bar_max), (slice(3, 6), cfg.cog_estimate_max)):
-            part = self.delta_bar[block]
+            part = self.delta_bar[..., block]
             if bound > 0.0 and part.size:
-                n = float(np.linalg.norm(part))
-                if n > bound:
-                    part *= bound / n
+                n = np.linalg.norm(part, axis=-1)
+                part *= (bound / np.maximum(n, bound))[..., None]
 
 
 @dataclass

@@ -2,7 +2,8 @@
 
 The body turns about a spherical joint (the pivot). rho is the vector from the pivot to the centre
 of mass in the body frame; g_w is the gravity vector in the world frame (REP-103, z up:
-[0, 0, -9.81]).
+[0, 0, -9.81]). Every function also takes stacks (a leading batch axis: one testbed per run of a
+campaign) and works on each.
 """
 import numpy as np
 
@@ -12,14 +13,16 @@ from geoctl_ros.core.so3 import cross, hat
 def pivot_inertia(inertia_cm, mass, rho):
     """Inertia about the pivot (parallel-axis theorem): J_cm + m (|rho|^2 I - rho rho^T)."""
     rho = np.asarray(rho, dtype=float)
-    return np.asarray(inertia_cm, dtype=float) + mass * (float(rho @ rho) * np.eye(3)
-                                                          - np.outer(rho, rho))
+    m = np.asarray(mass, dtype=float)[..., None, None]
+    rr = np.einsum('...i,...i->...', rho, rho)[..., None, None]
+    return np.asarray(inertia_cm, dtype=float) + m * (rr * np.eye(3)
+                                                      - rho[..., :, None] * rho[..., None, :])
 
 
 def first_moment(mass, rho):
     """m rho, the mass times the pivot -> centre of mass vector: what the gravity moment (and the
     constant+cog estimate) is linear in."""
-    return mass * np.asarray(rho, dtype=float)
+    return np.asarray(mass, dtype=float)[..., None] * np.asarray(rho, dtype=float)
 
 
 def gravity_moment(R, m_rho, g_w):
@@ -28,9 +31,9 @@ def gravity_moment(R, m_rho, g_w):
     With the centre of mass above the pivot this moment tips the body further over (an
     inverted pendulum). It is linear in m_rho = m * rho: gravity_moment = cog_regressor(R, g_w) @ m_rho.
     """
-    return cross(m_rho, R.T @ g_w)
+    return cross(m_rho, np.vecmat(g_w, R))       # g_w^T R = (R^T g_w)^T
 
 
 def cog_regressor(R, g_w):
     """The 3x3 matrix Y with gravity_moment(R, m_rho, g_w) == Y @ m_rho, i.e. -hat(R^T g_w)."""
-    return -hat(R.T @ g_w)
+    return -hat(np.vecmat(g_w, R))

@@ -5,6 +5,11 @@ np.cross(x, y)`` and ``vee`` is the inverse of ``hat`` on skew-symmetric matrice
 takes and returns plain numpy arrays; none of them validates its input (that belongs at the
 boundary, see ``geoctl_ros.params`` and the nodes), but all stay accurate for rotation angles near
 0 and near pi.
+
+Batches: ``hat``, ``cross``, ``vee``, ``exp`` and ``matvec`` also take a stack of vectors (..., 3)
+or matrices (..., 3, 3) and work on each, so the campaign's batched simulation (many runs at once)
+uses the same formulas as a single run. (The trick: ``x.T[i]`` is component i of a single vector
+and the column of components i of a stack alike.)
 """
 import math
 
@@ -15,35 +20,62 @@ _I3 = np.eye(3)
 
 def hat(x):
     """The skew-symmetric matrix of x: ``hat(x) @ y == cross(x, y)``."""
-    return np.array([[0.0, -x[2], x[1]],
-                     [x[2], 0.0, -x[0]],
-                     [-x[1], x[0], 0.0]])
+    x = np.asarray(x, dtype=float)
+    if x.ndim == 1:
+        return np.array([[0.0, -x[2], x[1]],
+                         [x[2], 0.0, -x[0]],
+                         [-x[1], x[0], 0.0]])
+    H = np.zeros(x.shape + (3,))
+    H[..., 0, 1], H[..., 0, 2], H[..., 1, 2] = -x[..., 2], x[..., 1], -x[..., 0]
+    return H - np.swapaxes(H, -1, -2)
 
 
 def cross(a, b):
-    """Cross product of two 3-vectors (np.cross costs ~10x more for single vectors)."""
+    """Cross product of 3-vectors, or of stacks of them (np.cross costs ~10x more for single
+    vectors)."""
+    a, b = a.T, b.T
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
-                     a[0] * b[1] - a[1] * b[0]])
+                     a[0] * b[1] - a[1] * b[0]]).T
 
 
 def vee(M):
-    """Inverse of :func:`hat`: the vector of a skew-symmetric matrix."""
-    return np.array([M[2, 1], M[0, 2], M[1, 0]])
+    """Inverse of :func:`hat`: the vector of a skew-symmetric matrix (or of each of a stack)."""
+    M = M.T
+    return np.array([M[1, 2], M[2, 0], M[0, 1]]).T
+
+
+def matvec(M, v):
+    """M v for a matrix and a vector, or for each of a stack of them (broadcasting)."""
+    return np.matvec(M, v)
 
 
 def exp(w):
-    """Rotation matrix exp(hat(w)) (Rodrigues), accurate for small angles."""
-    theta2 = float(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
-    if theta2 < 1e-8:
-        # Taylor series: sin(t)/t and (1 - cos t)/t^2 to O(t^4); error < 1e-20.
-        a = 1.0 - theta2 / 6.0 + theta2 * theta2 / 120.0
-        b = 0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0
-    else:
+    """Rotation matrix exp(hat(w)) (Rodrigues), accurate for small angles; a stack (..., 3) gives a
+    stack of rotations."""
+    w = np.asarray(w, dtype=float)
+    if w.ndim == 1:
+        theta2 = float(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
         theta = math.sqrt(theta2)
-        a = math.sin(theta) / theta
-        b = (1.0 - math.cos(theta)) / theta2
+        a, b = _rodrigues(theta2 < 1e-8, theta2, theta, math.sin(theta), math.cos(theta))
+    else:
+        theta2 = np.einsum('...i,...i->...', w, w)
+        theta = np.sqrt(theta2)
+        a, b = _rodrigues(theta2 < 1e-8, theta2, theta, np.sin(theta), np.cos(theta))
+        a, b = a[..., None, None], b[..., None, None]
     W = hat(w)
     return _I3 + a * W + b * (W @ W)
+
+
+def _rodrigues(small, theta2, theta, sin, cos):
+    """sin(t)/t and (1 - cos t)/t^2, by their Taylor series to O(t^4) where t^2 < 1e-8 (error below
+    1e-20); scalars, or arrays entry by entry."""
+    taylor = (1.0 - theta2 / 6.0 + theta2 * theta2 / 120.0,
+              0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0)
+    if isinstance(small, (bool, np.bool_)):
+        return taylor if small else (sin / theta, (1.0 - cos) / theta2)
+    safe = np.where(small, 1.0, theta)
+    return (np.where(small, taylor[0], sin / safe),
+            np.where(small, taylor[1], (1.0 - cos) / (safe * safe)))
 
 
 def log(R):

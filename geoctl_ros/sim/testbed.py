@@ -10,25 +10,28 @@ Composes the rigid body about the pivot (``geoctl_ros.sim.plant``), the actuatio
 - sensors: attitude R exp(hat(n)), n ~ N(0, sigma_R^2 I) (motion capture), and angular velocity
   Omega + bias + N(0, sigma_w^2 I) (gyro).
 
-The scenario runner and the sim node both drive this class, so the physics exists once.
+The scenario runner and the sim node both drive this class, so the physics exists once; the
+campaign drives a batch of testbeds with the same classes (a leading batch axis on the plant's
+configuration and state and on the actuator's centre-of-mass offset).
 """
 import math
 
 import numpy as np
 
 from geoctl_ros.core import so3
+from geoctl_ros.core.so3 import matvec
 from geoctl_ros.core.airframe import effectiveness
 from geoctl_ros.sim.plant import Plant
 
 
 class RotorActuator:
-    """Commands -> thrusts (lagged) -> moment about the pivot."""
+    """Commands -> thrusts (lagged) -> moment about the pivot (rho (batch, 3): one per run)."""
 
     def __init__(self, geometry, rho, curve, time_constant, failed=()):
         self.curve = curve
-        self.B_moment = effectiveness(geometry, rho)[3:]
+        self.B_moment = effectiveness(geometry, rho)[..., 3:, :]
         self.time_constant = time_constant
-        self.thrusts = np.zeros(geometry.count)
+        self.thrusts = np.zeros(self.B_moment.shape[:-2] + (geometry.count,))
         self._alive = np.ones(geometry.count)
         for i in failed:
             self._alive[i - 1] = 0.0
@@ -40,7 +43,7 @@ class RotorActuator:
             self._h, self._blend = h, 1.0 - math.exp(-h / self.time_constant)
         target = self.curve.thrust(commands) * self._alive
         self.thrusts += self._blend * (target - self.thrusts)
-        return self.B_moment @ self.thrusts
+        return matvec(self.B_moment, self.thrusts)
 
 
 class EscWatchdog:
@@ -91,14 +94,16 @@ class TestbedSim:
         tau = command if self.actuator is None else self.actuator.moment(command, h)
         self.plant.step(tau, h)
 
-    def measure_attitude(self):
-        R = self.plant.R
+    def measure_attitude(self, R=None):
+        """Motion capture of the attitude now (or of R, a past one, for a delayed measurement)."""
+        R = self.plant.R if R is None else R
         if self.attitude_noise > 0.0:
             R = R @ so3.exp(self.rng.normal(0.0, self.attitude_noise, 3))
         return R
 
-    def measure_angular_velocity(self):
-        w = self.plant.Omega + self.gyro_bias
+    def measure_angular_velocity(self, Omega=None):
+        """The gyro's reading now (or of Omega, a past angular velocity)."""
+        w = (self.plant.Omega if Omega is None else Omega) + self.gyro_bias
         if self.gyro_noise > 0.0:
             w = w + self.rng.normal(0.0, self.gyro_noise, 3)
         return w
