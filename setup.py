@@ -31,6 +31,7 @@ setup(
             'sim = geoctl_ros.nodes.sim:main',
             'soak = geoctl_ros.tools.soak:main',
             'mavlink_bridge = geoctl_ros.nodes.mavlink_bridge:main',
+            'campaign = geoctl_ros.tools.campaign:main',
         ],
     },
 )

@@ -25,6 +25,13 @@ is undefined, along a fixed direction perpendicular to r). Nothing is ever inf o
 is, and evaluations report which cones are violated (g_i <= 0) and which are in the saturated band
 (g_i < g0_i), so callers can flag them.
 
+A guard (``guard_rad``, the ``cone_guard_deg`` parameter) puts the barrier on cones wider than the
+real ones by that angle: a sampled controller with latency sees the sensor a control period or two
+late, and at the testbed's speeds (up to about 3 rad/s, 1.7 deg per 10 ms period) that is enough to
+cross the floor band unseen (README, "Safety campaign"). Margins and violations are always reported
+against the real half-angles theta_i; the barrier, its floor band and the inside field use
+theta_i + guard.
+
 A batch of cone sets (one per run of a campaign, each with the same number of cones) is one
 ConeSet with axes (batch, n, 3) and half-angles (batch, n); it evaluates a stack of attitudes
 (batch, 3, 3) with the same formulas.
@@ -55,13 +62,15 @@ class ConeEval:
 class ConeSet:
     """Any number of forbidden cones (possibly none) for one body-fixed sensor axis."""
 
-    def __init__(self, sensor_axis, axes, half_angles_rad, alpha, floor_rad, names=None):
+    def __init__(self, sensor_axis, axes, half_angles_rad, alpha, floor_rad, names=None,
+                 guard_rad=0.0):
         """Build the set; inputs are assumed validated (see ``geoctl_ros.params``).
 
         sensor_axis: r, body frame (normalised here). axes: (n, 3) world-frame cone axes
         (normalised here). half_angles_rad: (n,) in (0, pi/2). alpha: barrier shape, > 0.
         floor_rad: angle outside the boundary below which the barrier is extended linearly.
-        A batch: axes (batch, n, 3) and half_angles_rad (batch, n).
+        A batch: axes (batch, n, 3) and half_angles_rad (batch, n). guard_rad: the barrier acts
+        on the half-angles plus this (see the module's docstring).
         """
         r = np.asarray(sensor_axis, dtype=float)
         self.r = r / np.linalg.norm(r)
@@ -76,13 +85,16 @@ class ConeSet:
         self.names = list(names) if names is not None else [f'cone{i}' for i in range(n)]
         self.alpha = float(alpha)
         self.floor = float(floor_rad)
-        self.cos_theta = np.cos(self.theta)
+        self.guard = float(guard_rad)
+        self.theta_b = self.theta + self.guard        # the half-angles the barrier acts on
+        self.cos_real = np.cos(self.theta)
+        self.cos_theta = np.cos(self.theta_b)
         self.log_scale = 1.0 + self.cos_theta
-        self.g0 = self.cos_theta - np.cos(self.theta + self.floor)   # floor gap, > 0
+        self.g0 = self.cos_theta - np.cos(self.theta_b + self.floor)   # floor gap, > 0
         self.B_floor = 1.0 - np.log(self.g0 / self.log_scale) / self.alpha
         self._B_offset = 1.0 + np.log(self.log_scale) / self.alpha
         self._inv_alpha_g0 = 1.0 / (self.alpha * self.g0)
-        self.e_RB_inside = np.sin(self.theta) / (self.alpha * self.g0)   # |e_RB,i| in cone i
+        self.e_RB_inside = np.sin(self.theta_b) / (self.alpha * self.g0)   # |e_RB,i| in cone i
         least = int(np.argmin(np.abs(self.r)))
         perp = np.cross(self.r, np.eye(3)[least])
         self._r_perp = perp / np.linalg.norm(perp)  # fallback direction on a cone's axis
@@ -101,17 +113,18 @@ class ConeSet:
         B = (self._B_offset - np.log(g_eff) / self.alpha
              + np.maximum(self.g0 - g, 0.0) * self._inv_alpha_g0)
         e_RB = cross * (-1.0 / (self.alpha * g_eff))[..., None]
-        violated = g <= 0.0
-        if violated.any():
-            e_RB[violated] = self._inside_field(cross[violated], violated)
+        inside = g <= 0.0                         # inside the barrier's (guarded) cone
+        if inside.any():
+            e_RB[inside] = self._inside_field(cross[inside], inside)
+        violated = inside if self.guard == 0.0 else s >= self.cos_real
         return ConeEval(s=s, B=B, e_RB=e_RB, violated=violated, saturated=saturated)
 
-    def _inside_field(self, cross, violated):
+    def _inside_field(self, cross, inside):
         """e_RB for cones the sensor is in: boundary magnitude, away from the axis."""
         n = np.linalg.norm(cross, axis=-1)
         unit = np.where((n > 1e-12)[:, None], cross / np.maximum(n, 1e-12)[:, None],
                         self._r_perp[None, :])
-        return -unit * self.e_RB_inside[violated][:, None]
+        return -unit * self.e_RB_inside[inside][:, None]
 
     def angles_deg(self, R):
         """Angle between the sensor's world direction R r and each cone axis, degrees."""

@@ -33,6 +33,7 @@ import numpy as np
 
 from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.core.mechanics import cog_regressor, first_moment, gravity_moment, pivot_inertia
+from geoctl_ros.core import so3
 from geoctl_ros.core.so3 import cross, matvec, vee
 
 # Disturbance models: name -> number of estimated parameters (the columns of W).
@@ -121,6 +122,7 @@ class AttitudeController:
 
     def __init__(self, config):
         self.config = config
+        self._J_inv = np.linalg.inv(config.J)
         self.delta_bar = np.zeros(config.n_params)
         self.R_d = np.eye(3)
         self.Omega_d = np.zeros(3)
@@ -135,7 +137,7 @@ class AttitudeController:
         if not len(cones):
             return None
         margins = cones.margins_deg(R_d)
-        floor_deg = math.degrees(cones.floor)
+        floor_deg = math.degrees(cones.floor + cones.guard)    # the barrier's band, guard included
         i = int(np.argmin(margins))
         if margins[i] < floor_deg:
             where = 'inside' if margins[i] < 0 else 'within %.2f deg of' % floor_deg
@@ -172,9 +174,29 @@ class AttitudeController:
         if config.n_params != len(self.delta_bar):
             self.delta_bar = np.zeros(config.n_params)
         self.config = config
+        self._J_inv = np.linalg.inv(config.J)
         self._project()
 
     # --- the hot path ----------------------------------------------------------------------------
+    def predict(self, R, Omega, age_R, age_Omega, moment):
+        """Delay compensation: the attitude and rate at the control tick from measurements age_R
+        and age_Omega seconds old (scalars, or one per run of a batch), given the moment the rotors
+        produce (the last allocation's).
+
+        The angular acceleration is the model's, J^-1 (moment + M_g(R) + W Delta_bar - Omega x J
+        Omega) (Delta_bar standing for the disturbance it estimates), held over the age:
+        Omega <- Omega + age_Omega Omega', R <- R exp(hat(Omega + age_R Omega' / 2) age_R). A
+        measurement 10 ms old on the testbed, with its 40 ms motor lag, otherwise costs the rate
+        loop most of its phase margin (README, "Safety campaign").
+        """
+        cfg = self.config
+        J = cfg.J
+        acc = matvec(self._J_inv, moment + gravity_moment(R, cfg.m_rho, cfg.gravity)
+                     + matvec(self.regressor(R), self.delta_bar) - cross(Omega, matvec(J, Omega)))
+        acc_R = (acc.T * age_R).T
+        Omega_now = Omega + (acc.T * age_Omega).T
+        return R @ so3.exp(((Omega + 0.5 * acc_R).T * age_R).T), Omega_now
+
     def regressor(self, R):
         """W(R, Omega): 3 x n_params (a stack of them for a batch)."""
         if self.config.disturbance_model == 'constant':
@@ -275,7 +297,7 @@ def gain_condition(config, margin_deg=5.0):
     eRA_bound = math.sqrt(psi / b1)
     cones = config.cones
     eRB_sum = F_sum = 0.0
-    for theta in cones.theta:
+    for theta in cones.theta_b:
         beta = math.cos(theta + math.radians(margin_deg))
         d = beta - math.cos(theta)
         # |e_RB| = sin(angle) / (alpha (cos theta - cos angle)); on the domain (angle >= theta +

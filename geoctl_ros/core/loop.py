@@ -56,6 +56,7 @@ class ControlLoop:
         self.Omega = None
         self.setpoint_note = None       # last set-point refusal, for diagnostics
         self.last_tick = None
+        self._moment = np.zeros(3)      # what the rotors were last told to produce
         self._schedule_index = -1
         # per diagnostics window: input ages at the ticks, armed ticks saturated / bridging
         self.pose_age = WindowStats()
@@ -154,12 +155,19 @@ class ControlLoop:
             tick = Tick(None, self.setup.mixer.mix(np.zeros(3), armed=False), armed, None)
         else:
             bridging = self.bridge.bridging
+            R, Omega = state
+            limit = self.setup.values['delay_compensation_max']
+            if limit > 0.0 and not bridging:          # (a bridged state is already propagated)
+                R, Omega = self.controller.predict(
+                    R, Omega, min(max(now - self.pose.last_stamp, 0.0), limit),
+                    min(max(now - self.rate.last_stamp, 0.0), limit), self._moment)
             # the estimate learns only from measurements, not from a bridged state
-            out = self.controller.step(state[0], state[1], dt, adapt=armed and not bridging)
+            out = self.controller.step(R, Omega, dt, adapt=armed and not bridging)
             if not np.all(np.isfinite(out.u)):      # a last line of defence: never publish it
                 self.disarm(NON_FINITE)
                 armed, out = False, None
             motors = self.setup.mixer.mix(np.zeros(3) if out is None else out.u, armed=armed)
+            self._moment = motors.allocation.moment if armed else np.zeros(3)
             tick = Tick(out, motors, armed, self.pose.last_stamp, bridging)
         if self.pose.last_receipt is not None:
             self.pose_age.add(self.pose.age(now))

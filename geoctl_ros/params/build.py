@@ -23,7 +23,8 @@ def cone_set(values):
     return ConeSet(values['sensor_axis'],
                    [values['cones.%s.axis' % n] for n in names] or np.zeros((0, 3)),
                    np.radians([values['cones.%s.half_angle_deg' % n] for n in names]),
-                   values['alpha'], math.radians(values['barrier_floor_deg']), names)
+                   values['alpha'], math.radians(values['barrier_floor_deg']), names,
+                   math.radians(values['cone_guard_deg']))
 
 
 def controller_config(values):

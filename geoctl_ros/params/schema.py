@@ -134,6 +134,15 @@ SCHEMA = [
        'subtract the modelled gravity moment of the centre-of-mass offset', CONTROLLER),
     _p('sensor_axis', 'double_array', [1.0, 0.0, 0.0], '-',
        'body-fixed sensor axis r (normalised)', CONTROLLER, length=3, check=_nonzero_vector),
+    _p('delay_compensation_max', 'double', 0.02, 's',
+       'measurements are predicted forward to the control tick by their age (tick time minus '
+       'stamp) up to this much, with the model and the last moment (0: off; set 0 if the stamps '
+       'do not come from this computer\'s clock)', CONTROLLER,
+       check=lambda v: None if 0.0 <= v <= 0.1 else 'must be in [0, 0.1]'),
+    _p('cone_guard_deg', 'double', 0.0, 'deg',
+       'the barrier acts on every cone widened by this (margins and violations are still those of '
+       'the real cones; set points must clear the widened cone)', CONTROLLER,
+       check=lambda v: None if 0.0 <= v <= 10.0 else 'must be in [0, 10]'),
     _p('barrier_floor_deg', 'double', 0.25, 'deg',
        'within this angle of a cone boundary the barrier is extended linearly (saturated)',
        CONTROLLER, check=_floor),
@@ -277,6 +286,9 @@ SCHEMA = [
     _p('duration', 'double', 20.0, 's', 'simulated time of a scenario run', SCENARIO,
        check=_positive),
     _p('title', 'string', '', '-', 'title for a scenario run\'s plots and summary', SCENARIO),
+    _p('latency', 'double', 0.0, 's', 'measurement latency of a scenario run: the controller sees '
+       'the state this long ago (a whole number of integration steps)', SCENARIO,
+       check=lambda v: None if 0.0 <= v <= 0.1 else 'must be in [0, 0.1]'),
 ]
 
 # Per-cone parameters; <name> is one of cones.names.

@@ -5,8 +5,13 @@ optionally ``scenario:`` sections; the parameters are those of ``geoctl_ros.para
 runs at ``rate_hz`` with a zero-order hold on its moment; the simulator integrates at
 ``integration_rate_hz`` (an integer multiple). Writes DIR/summary.json, DIR/history.csv (one row per
 control step) and PNG plots like the paper's figures.
+
+``scenario.latency`` delays the measurements: at each control step the controller sees the
+simulated state of ``latency`` seconds before (noise added to that state), as a motion-capture
+and IMU chain with that delay would deliver it.
 """
 import argparse
+import collections
 from dataclasses import dataclass
 import json
 import math
@@ -39,7 +44,13 @@ class Scenario:
 
 def load(path):
     """Load and validate a scenario file; raises ConfigError naming every bad parameter."""
-    sections = load_parameter_file(path)
+    name = os.path.splitext(os.path.basename(str(path)))[0]
+    return from_sections(load_parameter_file(path), name)
+
+
+def from_sections(sections, name):
+    """A validated Scenario from parameter-file sections ({'/**' or node: flat parameters}), as
+    ``load`` reads them from a file; raises ConfigError naming every bad parameter."""
     errors = []
     resolved = {}
     for node in (CONTROLLER, SIM, SCENARIO):
@@ -54,6 +65,10 @@ def load(path):
         raise ConfigError([('sim: integration_rate_hz', 'must be an integer multiple of the '
                             'controller rate_hz (%g / %g)' % (resolved[SIM]['integration_rate_hz'],
                                                               resolved[CONTROLLER]['rate_hz']))])
+    delay = resolved[SCENARIO]['latency'] * resolved[SIM]['integration_rate_hz']
+    if abs(delay - round(delay)) > 1e-6:
+        raise ConfigError([('scenario: latency', 'must be a whole number of integration steps '
+                            '(1 / %g s)' % resolved[SIM]['integration_rate_hz'])])
     for node, build in ((CONTROLLER, controller_setup), (SIM, testbed_sim)):
         try:
             build(resolved[node])
@@ -61,7 +76,6 @@ def load(path):
             errors += [('%s: %s' % (node, name), reason) for name, reason in e.errors]
     if errors:
         raise ConfigError(errors)
-    name = os.path.splitext(os.path.basename(str(path)))[0]
     return Scenario(name, resolved[CONTROLLER], resolved[SIM], resolved[SCENARIO])
 
 
@@ -112,11 +126,16 @@ def run(scenario, duration=None):
     plant = sim.plant
     min_angle = cones.angles_deg(plant.R)          # then after every integration step
     saturated_steps = 0
+    # the states of the last `delay` integration steps: the oldest is what the sensors report
+    delay = int(round(scenario.options['latency'] * scenario.sim['integration_rate_hz']))
+    past = collections.deque([(plant.R, plant.Omega)], maxlen=delay + 1)
     t0 = time.perf_counter()
     for k in range(steps):
         R, t = plant.R, plant.t
-        loop.offer_pose(so3.rot_to_quat(sim.measure_attitude()), t, t)
-        loop.offer_angular_velocity(sim.measure_angular_velocity(), t, t)
+        R_seen, Omega_seen = past[0]
+        stamp = max(t - delay * h, 0.0)
+        loop.offer_pose(so3.rot_to_quat(sim.measure_attitude(R_seen)), stamp, t)
+        loop.offer_angular_velocity(sim.measure_angular_velocity(Omega_seen), stamp, t)
         if k == 0:
             loop.arm(t)                  # armed from the start; the schedule runs from here
         tick = loop.tick(t, dt)
@@ -141,6 +160,7 @@ def run(scenario, duration=None):
         hist[k] = np.concatenate(row)
         for _ in range(n_sub):
             sim.step(command, h)
+            past.append((plant.R, plant.Omega))
             if len(cones):
                 min_angle = np.minimum(min_angle, cones.angles_deg(plant.R))
         if not np.all(np.isfinite(plant.Omega)):
