@@ -10,7 +10,9 @@ was measured on the 2-core development machine. Not a test: nothing here passes 
 Then, side by side in the same run (so that a busy machine slows both alike): the control step
 against ``paper_law.py``, a plain numpy transcription of the paper's law with a loop over cones,
 at 1, 4, 16 and 64 cones (after checking that both give the same moment), and the controller
-node's whole tick in-process (loop, mixing and its seven publishes, no subscribers matched).
+node's whole tick in-process (loop, mixing and its seven publishes, no subscribers matched), and
+the campaign's batched closed loop (``geoctl_ros.tools.batch``): its real-time factor per core for
+batches of 1 to 256 runs.
 """
 import json
 import os
@@ -127,6 +129,26 @@ def node_tick_us():
         rclpy.try_shutdown()
 
 
+def batched():
+    """Rows (runs in the batch, wall seconds per simulated second, real-time factor per core) of
+    the campaign's batched closed loop (testbed, rotors, 1 kHz integration, one cone)."""
+    from geoctl_ros.params import load_parameter_file
+    from geoctl_ros.tools import campaign, scenario
+    from geoctl_ros.tools.batch import run_batch
+    base = load_parameter_file(os.path.join(os.path.dirname(HERE), 'config', 'testbed.yaml'))
+    pool, i = [], 0
+    while len(pool) < 256:
+        sections = campaign.run_sections(base, 1, i, 1.0)
+        if len(sections['controller']['cones.names']) == 1:
+            pool.append(scenario.from_sections(sections, 'run_%d' % i))
+        i += 1
+    rows = []
+    for n in (1, 16, 64, 256):
+        wall = min(run_batch(pool[:n]).wall_s for _ in range(2))
+        rows.append((n, wall, n * 1.0 / wall))
+    return rows
+
+
 def main(argv):
     results = measure()
     if '--update-baseline' in argv:
@@ -151,6 +173,10 @@ def main(argv):
         print('%-8d %11.1f us %15.1f us %8.2f %14.1e' % (n, a, b, ratio, diff))
     print('64 cones / 4 cones (ours): %.2f' % (rows[3][1] / rows[1][1]))
     print('controller node tick (loop, mixing, 7 publishes, in-process): %.1f us' % tick)
+    print()
+    print('batched closed loop (campaign): runs, wall s per simulated s, real-time factor per core')
+    for n, wall, rtf in batched():
+        print('%6d %10.3f s %10.0f' % (n, wall, rtf))
     return 0
 
 

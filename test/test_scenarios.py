@@ -2,6 +2,7 @@
 import csv
 import json
 import math
+import multiprocessing
 import os
 
 import matplotlib.image
@@ -19,16 +20,24 @@ SUMMARY_KEYS = {'min_cone_angle_deg', 'cone_half_angle_deg', 'constraint_violate
                 'control_steps', 'wall_time_s'}
 
 
+def _run(args):
+    return scenario.main(args)
+
+
 @pytest.fixture(scope='module')
 def runs(tmp_path_factory):
-    """Run every shipped scenario once through the command-line entry point."""
+    """Run every shipped scenario once through the command-line entry point (one process per
+    core, as they are independent)."""
+    names = [f[:-len('.yaml')] for f in sorted(os.listdir(SCENARIOS))]
+    dirs = {name: tmp_path_factory.mktemp(name) for name in names}
+    jobs = [[os.path.join(SCENARIOS, name + '.yaml'), '--out', str(dirs[name])] for name in names]
+    with multiprocessing.get_context('fork').Pool(os.cpu_count() or 1) as pool:
+        codes = pool.map(_run, jobs, chunksize=1)
+    assert codes == [0] * len(names)
     out = {}
-    for f in sorted(os.listdir(SCENARIOS)):
-        name = f[:-len('.yaml')]
-        d = tmp_path_factory.mktemp(name)
-        assert scenario.main([os.path.join(SCENARIOS, f), '--out', str(d)]) == 0
-        with open(d / 'summary.json') as fh:
-            out[name] = (json.load(fh), d)
+    for name in names:
+        with open(dirs[name] / 'summary.json') as fh:
+            out[name] = (json.load(fh), dirs[name])
     return out
 
 
