@@ -181,7 +181,7 @@ class AttitudeController:
     def predict(self, R, Omega, age_R, age_Omega, moment):
         """Delay compensation: the attitude and rate at the control tick from measurements age_R
         and age_Omega seconds old (scalars, or one per run of a batch), given the moment the rotors
-        produce (the last allocation's).
+        produce (the last allocation's). Ages of 0 return the measurements unchanged.
 
         The angular acceleration is the model's, J^-1 (moment + M_g(R) + W Delta_bar - Omega x J
         Omega) (Delta_bar standing for the disturbance it estimates), held over the age:

@@ -156,11 +156,11 @@ class ControlLoop:
         else:
             bridging = self.bridge.bridging
             R, Omega = state
-            limit = self.setup.values['delay_compensation_max']
-            if limit > 0.0 and not bridging:          # (a bridged state is already propagated)
+            if not bridging:        # delay compensation (a bridged state is already propagated):
+                delay = self.setup.values['measurement_delay']   # by the onboard clock only
                 R, Omega = self.controller.predict(
-                    R, Omega, min(max(now - self.pose.last_stamp, 0.0), limit),
-                    min(max(now - self.rate.last_stamp, 0.0), limit), self._moment)
+                    R, Omega, delay + max(now - self.pose.last_receipt, 0.0),
+                    delay + max(now - self.rate.last_receipt, 0.0), self._moment)
             # the estimate learns only from measurements, not from a bridged state
             out = self.controller.step(R, Omega, dt, adapt=armed and not bridging)
             if not np.all(np.isfinite(out.u)):      # a last line of defence: never publish it

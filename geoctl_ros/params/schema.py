@@ -134,11 +134,11 @@ SCHEMA = [
        'subtract the modelled gravity moment of the centre-of-mass offset', CONTROLLER),
     _p('sensor_axis', 'double_array', [1.0, 0.0, 0.0], '-',
        'body-fixed sensor axis r (normalised)', CONTROLLER, length=3, check=_nonzero_vector),
-    _p('delay_compensation_max', 'double', 0.02, 's',
-       'measurements are predicted forward to the control tick by their age (tick time minus '
-       'stamp) up to this much, with the model and the last moment (0: off; set 0 if the stamps '
-       'do not come from this computer\'s clock)', CONTROLLER,
-       check=lambda v: None if 0.0 <= v <= 0.1 else 'must be in [0, 0.1]'),
+    _p('measurement_delay', 'double', 0.0, 's',
+       'latency of the pose and imu chain from capture to receipt; each tick predicts the '
+       'measurements forward by it plus their wait since receipt, with the model and the last '
+       'moment (see README, "Latency")', CONTROLLER,
+       check=lambda v: None if 0.0 <= v <= 0.05 else 'must be in [0, 0.05]'),
     _p('cone_guard_deg', 'double', 0.0, 'deg',
        'the barrier acts on every cone widened by this (margins and violations are still those of '
        'the real cones; set points must clear the widened cone)', CONTROLLER,

@@ -136,7 +136,7 @@ def run_batch(scenarios, progress=None):
     W_past = np.repeat(plant.Omega[None], ring, axis=0)
     runs = np.arange(n)
 
-    limit = cv['delay_compensation_max']
+    delay_model = cv['measurement_delay']      # what the controller assumes (the truth: latency)
     moment = np.zeros((n, 3))                  # the allocation's moment at the last step
     min_margin = cones.margins_deg(plant.R)
     margin_series = np.empty((steps, n))
@@ -150,9 +150,8 @@ def run_batch(scenarios, progress=None):
         R_seen = R_past[seen, runs] @ so3.exp(noise[0, k])
         W_seen = W_past[seen, runs] + gyro_bias + noise[1, k]
         max_rate = np.maximum(max_rate, np.linalg.norm(W_seen, axis=-1))
-        if limit > 0.0:                        # as ControlLoop.tick: by the measurements' age
-            age = np.minimum(np.minimum(delay, j) * h, limit)
-            R_seen, W_seen = controller.predict(R_seen, W_seen, age, age, moment)
+        # as ControlLoop.tick: predicted by the assumed delay (each sample is received at the tick)
+        R_seen, W_seen = controller.predict(R_seen, W_seen, delay_model, delay_model, moment)
         out = controller.step(R_seen, W_seen, dt)
         motors = mixer.mix(out.u)
         moment = motors.allocation.moment

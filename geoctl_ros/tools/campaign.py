@@ -276,6 +276,9 @@ def table(rows):
         'runs': len(rows),
         'violations': int(violations),
         'converged (error < %g deg at the end)' % CONVERGED_DEG: int(converged),
+        'final attitude error median / p95 [deg]': '%.1f / %.1f' % (
+            np.median([r['final_error_deg'] for r in rows]),
+            np.percentile([r['final_error_deg'] for r in rows], 95)),
         'closest approach min / p1 / p5 / median [deg]': '%.2f / %.2f / %.2f / %.2f' % (
             margins.min(), np.percentile(margins, 1), np.percentile(margins, 5),
             np.median(margins)),
