@@ -161,14 +161,15 @@ class Allocator:
         stack of moments (batch, 3) gives one allocation per row."""
         moment = np.asarray(moment, dtype=float)
         valid = np.isfinite(moment).all(axis=-1) & math.isfinite(collective)
-        m = moment if np.all(valid) else np.where(np.asarray(valid)[..., None], moment, 0.0)
-        f_rp = matvec(self._p_rp, m[..., :2])
-        f_y = self._p_y * m[..., 2:]
-        f = collective * self._d + f_rp + f_y
+        all_valid = bool(np.all(valid))
+        m = moment if all_valid else np.where(np.asarray(valid)[..., None], moment, 0.0)
+        f = collective * self._d + matvec(self._p_rp, m[..., :2]) + self._p_y * m[..., 2:]
         met = (f.min(axis=-1) >= self.lo) & (f.max(axis=-1) <= self.hi)
         if not np.all(met):
             # roll and pitch scaled first, then yaw (only when roll and pitch are whole), then the
             # collective thrust moved within what the rotors allow
+            f_rp = matvec(self._p_rp, m[..., :2])
+            f_y = self._p_y * m[..., 2:]
             s_rp = self._max_scale(np.zeros_like(f_rp), f_rp)
             base = (f_rp.T * s_rp).T
             s_y = np.where(s_rp >= 1.0, self._max_scale(base, f_y), 0.0)
@@ -177,8 +178,9 @@ class Allocator:
             t = np.minimum(np.maximum(collective, t_lo), t_hi)
             degraded = np.clip(np.multiply.outer(t, self._d) + base, self.lo, self.hi)  # round-off
             f = np.where(np.asarray(met)[..., None], f, degraded)
-        if not np.all(valid):
+        if not all_valid:
             f = np.where(np.asarray(valid)[..., None], f, self.lo)
+            moment = np.where(np.asarray(valid)[..., None], moment, 0.0)
         return self._result(f, moment, saturated=~met | ~valid, valid=valid)
 
     def _t_interval(self, base):
@@ -202,12 +204,15 @@ class Allocator:
         return np.where((N < -1e-12).any(axis=(-2, -1)), 0.0, np.clip(ratio, 0.0, 1.0))
 
     def _result(self, f_alive, moment, saturated, valid):
-        thrusts = np.zeros(f_alive.shape[:-1] + (self.count,))
-        thrusts[..., self.alive] = f_alive
+        """The Allocation of the alive rotors' thrusts; moment is the request (0 where invalid)."""
+        if len(self.alive) == self.count:
+            thrusts = f_alive
+        else:
+            thrusts = np.zeros(f_alive.shape[:-1] + (self.count,))
+            thrusts[..., self.alive] = f_alive
         wrench = matvec(self.B, f_alive)
-        req = np.where(np.asarray(valid)[..., None], moment, 0.0)
         return Allocation(thrusts=thrusts, moment=wrench[..., 3:], collective=wrench[..., 2],
-                          moment_lost=req - wrench[..., 3:], saturated=saturated, valid=valid)
+                          moment_lost=moment - wrench[..., 3:], saturated=saturated, valid=valid)
 
 
 @dataclass(frozen=True)
