@@ -160,7 +160,7 @@ class ControlLoop:
                 delay = self.setup.values['measurement_delay']   # by the onboard clock only
                 R, Omega = self.controller.predict(
                     R, Omega, delay + max(now - self.pose.last_receipt, 0.0),
-                    delay + max(now - self.rate.last_receipt, 0.0), self._moment)
+                    delay + max(now - self.rate.last_receipt, 0.0), self._moment, dt)
             # the estimate learns only from measurements, not from a bridged state
             out = self.controller.step(R, Omega, dt, adapt=armed and not bridging)
             if not np.all(np.isfinite(out.u)):      # a last line of defence: never publish it

@@ -151,7 +151,7 @@ def run_batch(scenarios, progress=None):
         W_seen = W_past[seen, runs] + gyro_bias + noise[1, k]
         max_rate = np.maximum(max_rate, np.linalg.norm(W_seen, axis=-1))
         # as ControlLoop.tick: predicted by the assumed delay (each sample is received at the tick)
-        R_seen, W_seen = controller.predict(R_seen, W_seen, delay_model, delay_model, moment)
+        R_seen, W_seen = controller.predict(R_seen, W_seen, delay_model, delay_model, moment, dt)
         out = controller.step(R_seen, W_seen, dt)
         motors = mixer.mix(out.u)
         moment = motors.allocation.moment
