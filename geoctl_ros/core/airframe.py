@@ -163,13 +163,13 @@ class Allocator:
         valid = np.isfinite(moment).all(axis=-1) & math.isfinite(collective)
         all_valid = bool(np.all(valid))
         m = moment if all_valid else np.where(np.asarray(valid)[..., None], moment, 0.0)
-        f = collective * self._d + matvec(self._p_rp, m[..., :2]) + self._p_y * m[..., 2:]
+        f_rp = matvec(self._p_rp, m[..., :2])
+        f_y = self._p_y * m[..., 2:]
+        f = collective * self._d + f_rp + f_y
         met = (f.min(axis=-1) >= self.lo) & (f.max(axis=-1) <= self.hi)
         if not np.all(met):
             # roll and pitch scaled first, then yaw (only when roll and pitch are whole), then the
             # collective thrust moved within what the rotors allow
-            f_rp = matvec(self._p_rp, m[..., :2])
-            f_y = self._p_y * m[..., 2:]
             s_rp = self._max_scale(np.zeros_like(f_rp), f_rp)
             base = (f_rp.T * s_rp).T
             s_y = np.where(s_rp >= 1.0, self._max_scale(base, f_y), 0.0)

@@ -25,7 +25,8 @@ import numpy as np
 from geoctl_ros.core import so3
 from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.core.control import AttitudeController
-from geoctl_ros.params import CONTROLLER, SIM, airframe, controller_setup, setpoint_rotation
+from geoctl_ros.params import (CONTROLLER, SIM, airframe, cone_set, controller_setup,
+                               setpoint_rotation)
 from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
 from geoctl_ros.sim.testbed import RotorActuator
 
@@ -93,7 +94,7 @@ def run_batch(scenarios, progress=None):
         return np.array([getattr(s, node)[key] for s in scenarios], dtype=float)
 
     shared = setup.config.cones
-    per_run = [controller_setup(s.controller).config.cones for s in scenarios]
+    per_run = [cone_set(s.controller) for s in scenarios]
     cones = ConeSet(shared.r, np.array([c.V for c in per_run]).reshape(n, len(names), 3),
                     np.array([c.theta for c in per_run]).reshape(n, len(names)),
                     shared.alpha, shared.floor, names, shared.guard)

@@ -45,7 +45,8 @@ import numpy as np
 import yaml
 
 from geoctl_ros.core import so3
-from geoctl_ros.params import ConfigError, load_parameter_file
+from geoctl_ros.params import (CONTROLLER, SIM, ConfigError, load_parameter_file, node_overrides,
+                               resolve)
 from geoctl_ros.tools.rosenv import config_dir
 
 CONVERGED_DEG = 5.0                # attitude error at the end below which a run has converged
@@ -143,7 +144,6 @@ def _floats(a):
 
 def run_sections(base, seed, index, duration=20.0, disturbance_max=DISTURBANCE_MAX):
     """The scenario file's sections ({'/**' or node: flat parameters}) of run index."""
-    from geoctl_ros.params import CONTROLLER, SIM, resolve, node_overrides
     nominal_c = resolve(CONTROLLER, node_overrides(base, CONTROLLER))
     nominal_s = resolve(SIM, node_overrides(base, SIM))
     m = draw_manoeuvre(seed, index, nominal_c['sensor_axis'])
