@@ -9,7 +9,8 @@ from geoctl_ros.core import so3
 from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.core.mechanics import gravity_moment
 from geoctl_ros.core.control import (AttitudeController, ControllerConfig, E_matrix, SetpointRejected,
-                                attractive_error, configuration_error, gain_condition)
+                                attractive_error, configuration_error, gain_condition,
+                                linear_terms)
 from geoctl_ros.sim.plant import Disturbance, PlantConfig, Plant
 
 rng = np.random.default_rng(7)
@@ -365,3 +366,41 @@ def test_the_control_step_equals_a_plain_transcription_of_the_paper():
         assert np.allclose(ours.delta_bar, paper.delta_bar, atol=1e-14)
         checked += 1
     assert checked > 100
+
+
+def test_the_linear_map_of_the_step_reproduces_the_formulas_single_and_batched():
+    """The step reads A, e_RA, every cone's terms and M_g from one precomputed matrix: they are
+    affine in R, so at any attitude the map must give what the formulas give, and a batch of
+    runs (each with its own cones and set point) must step as each run alone does."""
+    cones = four_cones()
+    cfg = config(cones, cog_offset=np.array([0.01, -0.02, 0.1]), mass=1.3)
+    ctrl = AttitudeController(cfg)
+    ctrl.set_setpoint(so3.axis_angle([0.3, -0.2, 1.0], 0.5))
+    for R in random_attitudes(20):
+        assert np.allclose(ctrl._linear(R), linear_terms(R, ctrl.R_d, cfg), rtol=0, atol=1e-14)
+    n = 5
+    V = rng.normal(size=(n, 4, 3))
+    theta = np.radians(rng.uniform(10.0, 30.0, size=(n, 4)))
+    R_d = np.array([so3.exp(rng.normal(size=3)) for _ in range(n)])
+    batch = AttitudeController(config(ConeSet([1, 0, 0], V, theta, 15.0, math.radians(0.25)),
+                                      cog_offset=cfg.cog_offset, mass=1.3))
+    batch.R_d = R_d
+    batch.delta_bar = np.zeros((n, 3))
+    singles = []
+    for k in range(n):
+        one = AttitudeController(config(ConeSet([1, 0, 0], V[k], theta[k], 15.0,
+                                                math.radians(0.25)),
+                                        cog_offset=cfg.cog_offset, mass=1.3))
+        one.R_d = R_d[k]
+        singles.append(one)
+    for _ in range(5):
+        R = np.array(random_attitudes(n))
+        w = rng.normal(size=(n, 3))
+        out = batch.step(R, w, 0.01)
+        for k, one in enumerate(singles):
+            o = one.step(R[k], w[k], 0.01)
+            assert np.allclose(out.u[k], o.u, rtol=1e-12, atol=1e-12)
+            assert out.psi[k] == pytest.approx(o.psi, rel=1e-12)
+            assert np.allclose(out.margins_deg[k], o.margins_deg, atol=1e-9)
+            assert out.violated[k] == o.violated and out.saturated[k] == o.saturated
+            assert np.allclose(batch.delta_bar[k], one.delta_bar, atol=1e-15)

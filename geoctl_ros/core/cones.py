@@ -36,27 +36,50 @@ A batch of cone sets (one per run of a campaign, each with the same number of co
 ConeSet with axes (batch, n, 3) and half-angles (batch, n); it evaluates a stack of attitudes
 (batch, 3, 3) with the same formulas.
 """
-from dataclasses import dataclass
-
 import numpy as np
 
 from geoctl_ros.core.so3 import hat, matvec
 
 
-@dataclass
+def any_flag(flags):
+    """flags.any() for an array of flags; a single numpy bool as it is (ten times cheaper)."""
+    return flags if flags.ndim == 0 else flags.any()
+
+
 class ConeEval:
     """The cone terms at one attitude; arrays have one entry (row) per cone (after the batch axis,
-    if any)."""
+    if any).
 
-    s: np.ndarray          # r^T R^T v_i, the cosine of the angle between R r and v_i
-    B: np.ndarray          # barrier values B_i >= 1
-    e_RB: np.ndarray       # (n, 3) gradients of B_i in the body frame
-    violated: np.ndarray   # bool: sensor on or inside cone i
-    saturated: np.ndarray  # bool: within the floor band (barrier extended linearly)
+    s: r^T R^T v_i, the cosine of the angle between R r and v_i. B: barrier values B_i >= 1.
+    e_RB: (n, 3) gradients of B_i in the body frame, weight_i ((R^T v_i) x r) outside the cones
+    (formed when asked; the control step needs only their sum, ``e_RB_sum``). violated: sensor on
+    or inside cone i. saturated: within the floor band (barrier extended linearly).
+    any_saturated: saturated.any(axis=-1), one flag per run of a batch.
+    """
 
-    def margins_deg(self, half_angles_rad):
+    __slots__ = ('s', 'B', 'cross', 'weight', 'violated', 'saturated', 'any_saturated', '_e_RB')
+
+    def __init__(self, s, B, cross, weight, violated, saturated, any_saturated, e_RB=None):
+        self.s, self.B, self.cross, self.weight = s, B, cross, weight
+        self.violated, self.saturated, self.any_saturated = violated, saturated, any_saturated
+        self._e_RB = e_RB
+
+    @property
+    def e_RB(self):
+        if self._e_RB is None:
+            self._e_RB = self.cross * self.weight[..., None]
+        return self._e_RB
+
+    @property
+    def e_RB_sum(self):
+        """sum_i e_RB,i (per run of a batch)."""
+        if self._e_RB is None:
+            return np.vecmat(self.weight, self.cross)
+        return self._e_RB.sum(axis=-2)
+
+    def margins_deg(self, half_angles_deg):
         """Angle between R r and v_i minus theta_i, degrees (negative inside the cone)."""
-        return np.degrees(np.arccos(np.clip(self.s, -1.0, 1.0)) - half_angles_rad)
+        return np.degrees(np.arccos(np.clip(self.s, -1.0, 1.0))) - half_angles_deg
 
 
 class ConeSet:
@@ -93,7 +116,9 @@ class ConeSet:
         self.g0 = self.cos_theta - np.cos(self.theta_b + self.floor)   # floor gap, > 0
         self.B_floor = 1.0 - np.log(self.g0 / self.log_scale) / self.alpha
         self._B_offset = 1.0 + np.log(self.log_scale) / self.alpha
+        self._inv_alpha = 1.0 / self.alpha
         self._inv_alpha_g0 = 1.0 / (self.alpha * self.g0)
+        self.theta_deg = np.degrees(self.theta)
         self.e_RB_inside = np.sin(self.theta_b) / (self.alpha * self.g0)   # |e_RB,i| in cone i
         least = int(np.argmin(np.abs(self.r)))
         perp = np.cross(self.r, np.eye(3)[least])
@@ -102,22 +127,36 @@ class ConeSet:
     def __len__(self):
         return self.theta.shape[-1]
 
+    def terms(self, R):
+        """(n, 4) per cone: s_i = r^T R^T v_i, then (R^T v_i) x r; both linear in R (the control
+        step evaluates them as part of one precomputed linear map, see ``core.control``)."""
+        return self.V @ (R @ self._r_cols)
+
     def evaluate(self, R):
         """Barrier values, gradients and flags at attitude R."""
-        sc = self.V @ (R @ self._r_cols)
+        return self.evaluate_terms(self.terms(R))
+
+    def evaluate_terms(self, sc):
+        """Barrier values, gradients and flags from ``terms(R)``."""
         s, cross = sc[..., 0], sc[..., 1:]
         g = self.cos_theta - s
-        g_eff = np.maximum(g, self.g0)
         saturated = g < self.g0
+        any_saturated = saturated.any(axis=-1)
+        if not any_flag(any_saturated):
+            # the usual case: the paper's barrier, nothing to flag
+            return ConeEval(s, self._B_offset - np.log(g) * self._inv_alpha, cross,
+                            -self._inv_alpha / g, saturated, saturated, any_saturated)
+        g_eff = np.maximum(g, self.g0)
         # log barrier at g_eff, plus the tangent-line extension below the floor (zero above it)
-        B = (self._B_offset - np.log(g_eff) / self.alpha
-             + np.maximum(self.g0 - g, 0.0) * self._inv_alpha_g0)
-        e_RB = cross * (-1.0 / (self.alpha * g_eff))[..., None]
+        B = (self._B_offset - np.log(g_eff) * self._inv_alpha
+             + (g_eff - g) * self._inv_alpha_g0)       # g_eff - g = max(g0 - g, 0)
+        weight = -self._inv_alpha / g_eff
+        e_RB = cross * weight[..., None]
         inside = g <= 0.0                         # inside the barrier's (guarded) cone
         if inside.any():
             e_RB[inside] = self._inside_field(cross[inside], inside)
         violated = inside if self.guard == 0.0 else s >= self.cos_real
-        return ConeEval(s=s, B=B, e_RB=e_RB, violated=violated, saturated=saturated)
+        return ConeEval(s, B, cross, weight, violated, saturated, any_saturated, e_RB)
 
     def _inside_field(self, cross, inside):
         """e_RB for cones the sensor is in: boundary magnitude, away from the axis."""
@@ -132,7 +171,7 @@ class ConeSet:
 
     def margins_deg(self, R):
         """Cone margins (angle to axis minus half-angle, degrees) at attitude R."""
-        return self.angles_deg(R) - np.degrees(self.theta)
+        return self.angles_deg(R) - self.theta_deg
 
     def F(self, R):
         """The paper's F(R) (eq. 28) for each cone, (n, 3, 3): d/dt e_RB,i = F_i Omega.

@@ -28,10 +28,11 @@ model are shared by the batch. (``x.T`` on a stack of vectors puts the batch axi
 """
 from dataclasses import dataclass, field
 import math
+from typing import NamedTuple
 
 import numpy as np
 
-from geoctl_ros.core.cones import ConeSet
+from geoctl_ros.core.cones import ConeSet, any_flag
 from geoctl_ros.core.mechanics import cog_regressor, first_moment, gravity_moment, pivot_inertia
 from geoctl_ros.core import so3
 from geoctl_ros.core.so3 import cross, matvec, vee
@@ -79,20 +80,26 @@ class ControllerConfig:
         return DISTURBANCE_MODELS[self.disturbance_model]
 
 
-@dataclass
-class ControlOutput:
+class ControlOutput(NamedTuple):
     """One control step's results."""
 
     u: np.ndarray            # control moment about the pivot, body frame, N m
     e_R: np.ndarray
     e_Omega: np.ndarray
     psi: float
-    margins_deg: np.ndarray  # per cone: angle to axis minus half-angle
     delta_bar: np.ndarray    # estimate used for this u
     violated: bool           # sensor on or inside a cone
     saturated: bool          # some barrier in its floor band (repulsion saturated)
     adapting: bool           # the estimate was advanced this step
+    cones: object = None     # the ConeEval the step used
+    half_angles_deg: np.ndarray = None
     # (in a batch, each field has the batch axis first: psi, violated, ... one per run)
+
+    @property
+    def margins_deg(self):
+        """Per cone: angle between the sensor and the cone's axis minus its half-angle, degrees
+        (computed when asked: the node publishes the motor commands first)."""
+        return self.cones.margins_deg(self.half_angles_deg)
 
 
 def attractive_error(R, R_d, G):
@@ -113,22 +120,71 @@ def configuration_error(R, R_d, G, cones):
     """Psi, e_R, A, e_RA and the cone evaluation at R (Prop. 1 generalised to several cones)."""
     A, e_RA = attractive_error(R, R_d, G)
     ev = cones.evaluate(R)
-    scale = 1.0 + np.sum(ev.B - 1.0, axis=-1)
-    e_R = (e_RA.T * scale + ev.e_RB.sum(axis=-2).T * A).T
-    return A * scale, e_R, A, e_RA, ev
+    psi, e_R = with_cones(A[..., None], e_RA, ev)
+    return psi, e_R, A, e_RA, ev
+
+
+def with_cones(A, e_RA, ev):
+    """Psi = A (1 + sum_i (B_i - 1)) and e_R = e_RA (1 + sum_i (B_i - 1)) + A sum_i e_RB,i from
+    A (with a trailing axis of 1), e_RA and the cones' evaluation."""
+    scale = (1.0 - ev.B.shape[-1]) + ev.B.sum(axis=-1, keepdims=True)
+    return (A * scale)[..., 0], e_RA * scale + A * ev.e_RB_sum
+
+
+_BASIS = np.eye(9).reshape(9, 3, 3)       # the unit matrices E_jk
+
+
+def linear_terms(R, R_d, config):
+    """The parts of the law that are affine in R, side by side (..., 5 + 4 n): A, e_RA (3), for
+    each cone s_i and (R^T v_i) x r (``ConeSet.terms``), and the gravity moment M_g (3)."""
+    A, e_RA = attractive_error(R, R_d, config.G)
+    sc = config.cones.terms(R)
+    M_g = gravity_moment(R, config.m_rho, config.gravity)
+    parts = [A[..., None], e_RA, sc.reshape(sc.shape[:-2] + (-1,)), M_g]
+    batch = np.broadcast_shapes(*(p.shape[:-1] for p in parts))
+    return np.concatenate([np.broadcast_to(p, batch + p.shape[-1:]) for p in parts], axis=-1)
+
+
+class LinearMap:
+    """``linear_terms`` as one matrix product, ``L vec(R) + y0``: exact, since the terms are affine
+    in R, and built at configuration time (a new set point or configuration) by evaluating
+    ``linear_terms`` itself on the basis E_jk, so each formula still lives in one place. The hot
+    path then gets A, e_RA, every cone's terms and M_g from one small matrix-vector product
+    instead of a dozen numpy calls (README, "Benchmarks")."""
+
+    def __init__(self, R_d, config):
+        lead = np.broadcast_shapes(R_d.shape[:-2], config.cones.V.shape[:-2])     # the batch
+        self.y0 = linear_terms(np.zeros((3, 3)), R_d, config)
+        basis = _BASIS.reshape((9,) + (1,) * len(lead) + (3, 3))
+        self.L = np.ascontiguousarray(np.moveaxis(linear_terms(basis, R_d, config) - self.y0, 0, -1))
+        self.n_cones = len(config.cones)
+
+    def __call__(self, R):
+        """y = linear_terms(R, R_d, config), to rounding."""
+        return matvec(self.L, R.reshape(R.shape[:-2] + (9,))) + self.y0
 
 
 class AttitudeController:
     """The controller's state (estimate, set point) and its pure-math step."""
 
     def __init__(self, config):
-        self.config = config
-        self._J_inv = np.linalg.inv(config.J)
+        self._set_config(config)
         self._acc_slow = 0.0              # slow part of the model's acceleration (see predict)
         self.delta_bar = np.zeros(config.n_params)
         self.R_d = np.eye(3)
         self.Omega_d = np.zeros(3)
         self.dOmega_d = np.zeros(3)
+        self._tracking = False      # Omega_d or its derivative nonzero
+
+    @property
+    def R_d(self):
+        """The desired attitude (a stack of them for a batch); setting it rebuilds the linear map."""
+        return self._R_d
+
+    @R_d.setter
+    def R_d(self, R_d):
+        self._R_d = R_d
+        self._linear = LinearMap(R_d, self.config)
 
     # --- configuration-time operations -------------------------------------------------------
     def setpoint_problem(self, R_d, cones=None):
@@ -159,6 +215,7 @@ class AttitudeController:
         self.R_d = R_d.copy()
         self.Omega_d = np.zeros(3) if Omega_d is None else np.asarray(Omega_d, dtype=float).copy()
         self.dOmega_d = np.zeros(3) if dOmega_d is None else np.asarray(dOmega_d, dtype=float).copy()
+        self._tracking = bool(self.Omega_d.any() or self.dOmega_d.any())
 
     def reset_adaptation(self):
         """Zero the disturbance estimate."""
@@ -175,8 +232,8 @@ class AttitudeController:
             raise SetpointRejected('current ' + problem)
         if config.n_params != len(self.delta_bar):
             self.delta_bar = np.zeros(config.n_params)
-        self.config = config
-        self._J_inv = np.linalg.inv(config.J)
+        self._set_config(config)
+        self.R_d = self._R_d
         self._project()
 
     # --- the hot path ----------------------------------------------------------------------------
@@ -197,9 +254,10 @@ class AttitudeController:
         loop most of its phase margin (README, "Safety campaign").
         """
         cfg = self.config
-        J = cfg.J
+        W = self.regressor(R)
         acc = matvec(self._J_inv, moment + gravity_moment(R, cfg.m_rho, cfg.gravity)
-                     + matvec(self.regressor(R), self.delta_bar) - cross(Omega, matvec(J, Omega)))
+                     + (self.delta_bar if W is None else matvec(W, self.delta_bar))
+                     - cross(Omega, matvec(cfg.J, Omega)))
         self._acc_slow = self._acc_slow + (acc - self._acc_slow) * (dt / (PREDICT_SLOW_S + dt))
         acc = acc - self._acc_slow
         acc_R = (acc.T * age_R).T
@@ -207,9 +265,10 @@ class AttitudeController:
         return R @ so3.exp(((Omega + 0.5 * acc_R).T * age_R).T), Omega_now
 
     def regressor(self, R):
-        """W(R, Omega): 3 x n_params (a stack of them for a batch)."""
+        """W(R, Omega): 3 x n_params (a stack of them for a batch); None for the constant model,
+        where W = I."""
         if self.config.disturbance_model == 'constant':
-            return np.eye(3)
+            return None
         Y = cog_regressor(R, self.config.gravity)
         return np.concatenate((np.broadcast_to(np.eye(3), Y.shape), Y), axis=-1)
 
@@ -220,41 +279,53 @@ class AttitudeController:
         (e.g. while disarmed).
         """
         cfg = self.config
-        J = cfg.J
-        psi, e_R, _, _, ev = configuration_error(R, self.R_d, cfg.G, cfg.cones)
+        y = self._linear(R)                     # A, e_RA, the cones' terms, M_g (linear_terms)
+        A, e_RA = y[..., 0:1], y[..., 1:4]
+        n = self._linear.n_cones
+        ev = cfg.cones.evaluate_terms(y[..., 4:4 + 4 * n].reshape(y.shape[:-1] + (n, 4)))
+        psi, e_R = with_cones(A, e_RA, ev)
         e_Omega = Omega
-        tracking = self.Omega_d.any() or self.dOmega_d.any()
+        tracking = self._tracking
         if tracking:
             RtRd = R.mT @ self.R_d
             Omega_d = matvec(RtRd, self.Omega_d)
             e_Omega = Omega - Omega_d
         W = self.regressor(R)
         delta_bar = self.delta_bar.copy()
-        u = (-cfg.k_R * e_R - cfg.k_Omega * e_Omega + cross(Omega, matvec(J, Omega))
-             - matvec(W, delta_bar))
+        u = cross(Omega, matvec(cfg.J, Omega)) - cfg.k_R * e_R - cfg.k_Omega * e_Omega
+        u -= delta_bar if W is None else matvec(W, delta_bar)
         if tracking:
-            u -= matvec(J, cross(Omega, Omega_d) - matvec(RtRd, self.dOmega_d))
+            u -= matvec(cfg.J, cross(Omega, Omega_d) - matvec(RtRd, self.dOmega_d))
         if cfg.gravity_compensation:
-            u -= gravity_moment(R, cfg.m_rho, cfg.gravity)
-        saturated = ev.saturated.any(axis=-1)
-        adapting = adapt and cfg.adaptive and ~saturated
-        if np.any(adapting):
-            rate = (dt * cfg.k_Delta) * matvec(W.mT, e_Omega + cfg.c * e_R)
-            self.delta_bar += (rate.T * adapting).T
+            u -= y[..., -3:]
+        saturated = ev.any_saturated
+        adapting = adapt and cfg.adaptive and ~saturated      # a flag per run
+        if adapting is not False and any_flag(adapting):
+            v = e_Omega + cfg.c * e_R
+            rate = (dt * cfg.k_Delta) * (v if W is None else matvec(W.mT, v))
+            if rate.ndim > 1:                   # a batch: only the runs that adapt
+                rate *= adapting[..., None]
+            self.delta_bar += rate
             self._project()
-        return ControlOutput(u=u, e_R=e_R, e_Omega=e_Omega, psi=psi,
-                             margins_deg=ev.margins_deg(cfg.cones.theta), delta_bar=delta_bar,
-                             violated=ev.violated.any(axis=-1), saturated=saturated,
-                             adapting=adapting)
+        # violated implies saturated (the floor band lies outside every cone)
+        violated = ev.violated.any(axis=-1) if any_flag(saturated) else saturated
+        return ControlOutput(u, e_R, e_Omega, psi, delta_bar, violated, saturated,
+                             adapting, ev, cfg.cones.theta_deg)
 
     def _project(self):
         """Project each block of the estimate onto its ball (bounds of 0 mean unbounded)."""
-        cfg = self.config
-        for block, bound in ((slice(0, 3), cfg.delta_bar_max), (slice(3, 6), cfg.cog_estimate_max)):
+        for block, bound in self._balls:
             part = self.delta_bar[..., block]
-            if bound > 0.0 and part.size:
-                n = np.linalg.norm(part, axis=-1)
-                part *= (bound / np.maximum(n, bound))[..., None]
+            n2 = np.vecdot(part, part)
+            if any_flag(n2 > bound * bound):
+                part *= (bound / np.maximum(np.sqrt(n2), bound))[..., None]
+
+    def _set_config(self, config):
+        self.config = config
+        self._J_inv = np.linalg.inv(config.J)
+        self._balls = [(block, bound) for block, bound in ((slice(0, 3), config.delta_bar_max),
+                                                           (slice(3, 6), config.cog_estimate_max))
+                       if bound > 0.0 and block.start < config.n_params]
 
 
 @dataclass
