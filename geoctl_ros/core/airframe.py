@@ -33,6 +33,7 @@ import math
 
 import numpy as np
 
+from geoctl_ros.core.flags import all_flag
 from geoctl_ros.core.so3 import matvec
 
 
@@ -149,6 +150,7 @@ class Allocator:
         self.B4 = self.B[2:]                                  # rows F_z, M_x, M_y, M_z
         P = np.linalg.pinv(self.B4)                           # n_alive x 4, minimum norm
         self._d, self._p_rp, self._p_y = P[:, 0], P[:, 1:3], P[:, 3]
+        self._p_moment = np.ascontiguousarray(P[:, 1:])
         if np.any(self._d <= 1e-9):
             raise AirframeError('collective thrust would need rotor(s) %s to push the other way'
                                 % [self.alive[i] + 1 for i in np.nonzero(self._d <= 1e-9)[0]])
@@ -161,13 +163,13 @@ class Allocator:
         stack of moments (batch, 3) gives one allocation per row."""
         moment = np.asarray(moment, dtype=float)
         valid = np.isfinite(moment).all(axis=-1) & math.isfinite(collective)
-        all_valid = bool(np.all(valid))
+        all_valid = all_flag(valid)
         m = moment if all_valid else np.where(np.asarray(valid)[..., None], moment, 0.0)
-        f_rp = matvec(self._p_rp, m[..., :2])
-        f_y = self._p_y * m[..., 2:]
-        f = collective * self._d + f_rp + f_y
+        f = collective * self._d + matvec(self._p_moment, m)
         met = (f.min(axis=-1) >= self.lo) & (f.max(axis=-1) <= self.hi)
-        if not np.all(met):
+        if not all_flag(met):
+            f_rp = matvec(self._p_rp, m[..., :2])
+            f_y = self._p_y * m[..., 2:]
             # roll and pitch scaled first, then yaw (only when roll and pitch are whole), then the
             # collective thrust moved within what the rotors allow
             s_rp = self._max_scale(np.zeros_like(f_rp), f_rp)
@@ -231,14 +233,23 @@ class ThrustCurve:
         x = self.voltage_scale * np.asarray(command, dtype=float)
         return np.maximum(self.a * x * x + self.b * x + self.c, 0.0)
 
+    def __post_init__(self):
+        # command(f) = ceil(x / voltage_scale) with x the root of a x^2 + b x + c = f, i.e.
+        # ceil(sqrt(b^2 - 4 a c + 4 a f) / (2 a vs) - b / (2 a vs)), constants folded once
+        k = 1.0 / (2.0 * self.a * self.voltage_scale)
+        for name, value in (('_disc0', self.b * self.b - 4.0 * self.a * self.c),
+                            ('_four_a', 4.0 * self.a), ('_k', k),
+                            ('_k0', -self.b * k - 1e-9), ('_zero_up_to', np.maximum(self.c, 0.0))):
+            object.__setattr__(self, name, value)
+
     def command(self, thrust):
         """Smallest integer command whose thrust is at least the requested one (the lab's ceil),
         clipped to 0..command_max; negative thrust counts as 0, and a request that command 0
         already meets (the curve is clipped at 0 N) gives 0."""
         f = np.maximum(np.asarray(thrust, dtype=float), 0.0)
-        x = (-self.b + np.sqrt(self.b * self.b - 4.0 * self.a * (self.c - f))) / (2.0 * self.a)
-        cmd = np.clip(np.ceil(x / self.voltage_scale - 1e-9), 0, self.command_max).astype(int)
-        cmd[f <= np.maximum(self.c, 0.0)] = 0
+        x = np.sqrt(self._disc0 + self._four_a * f) * self._k + self._k0     # x / vs, less 1e-9
+        cmd = np.minimum(np.maximum(np.ceil(x), 0.0), self.command_max).astype(int)
+        cmd[f <= self._zero_up_to] = 0
         return cmd
 
     def max_thrust(self):
@@ -276,5 +287,6 @@ class Mixer:
             zero = np.zeros_like(allocation.thrusts, dtype=int)
             return MotorOutput(zero, np.zeros(zero.shape), allocation)
         commands = self.curve.command(allocation.thrusts)
-        commands[..., self._dead] = 0
+        if len(self._dead):
+            commands[..., self._dead] = 0
         return MotorOutput(commands, self.curve.normalised(commands), allocation)

@@ -38,12 +38,8 @@ ConeSet with axes (batch, n, 3) and half-angles (batch, n); it evaluates a stack
 """
 import numpy as np
 
+from geoctl_ros.core.flags import any_flag
 from geoctl_ros.core.so3 import hat, matvec
-
-
-def any_flag(flags):
-    """flags.any() for an array of flags; a single numpy bool as it is (ten times cheaper)."""
-    return flags if flags.ndim == 0 else flags.any()
 
 
 class ConeEval:

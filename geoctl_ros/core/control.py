@@ -32,7 +32,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from geoctl_ros.core.cones import ConeSet, any_flag
+from geoctl_ros.core.cones import ConeSet
+from geoctl_ros.core.flags import any_flag
 from geoctl_ros.core.mechanics import cog_regressor, first_moment, gravity_moment, pivot_inertia
 from geoctl_ros.core import so3
 from geoctl_ros.core.so3 import cross, matvec, vee
