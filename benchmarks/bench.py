@@ -9,14 +9,17 @@ was measured on the 2-core development machine. Not a test: nothing here passes 
 
 Then, side by side in the same run (so that a busy machine slows both alike): the control step
 against ``paper_law.py``, a plain numpy transcription of the paper's law with a loop over cones,
-at 1, 4, 16 and 64 cones (after checking that both give the same moment), and the controller
-node's whole tick in-process (loop, mixing and its seven publishes, no subscribers matched), and
-the campaign's batched closed loop (``geoctl_ros.tools.batch``): its real-time factor per core for
-batches of 1 to 256 runs.
+at 1, 4, 16 and 64 cones (after checking that both give the same moment); the controller node's
+tick in-process (imu callback to motor command published, and the whole callback with the
+monitoring topics after it; p50, p99, max); the campaign's batched closed loop
+(``geoctl_ros.tools.batch``): its real-time factor per core for batches of 1 to 256 runs; and
+input-to-command latency over DDS against a bare relay node (``latency.py``; ``--no-latency``
+skips it).
 """
 import json
 import os
 import sys
+import time
 import timeit
 
 import numpy as np
@@ -98,34 +101,57 @@ def side_by_side():
     return rows, node_tick_us()
 
 
-def node_tick_us():
-    """The controller node's tick in this process: rclpy on the loopback profile."""
+def node_tick_us(samples=3000):
+    """The controller node's tick in this process (rclpy on the loopback profile, no subscribers
+    matched), with ``step_on: imu`` as a flight would run it: a pose, then an imu sample whose
+    callback runs the step. Returns (us from the start of the imu callback to the motor command
+    published, us for the whole callback with the monitoring topics), each as (p50, p99, max)."""
     from geoctl_ros.tools.rosenv import use_node_env
     use_node_env()
     import rclpy
+    from rclpy.parameter import Parameter
     from geoctl_ros.nodes.controller import ControllerNode
     rclpy.init()
     try:
-        node = ControllerNode()
+        testbed = os.path.join(os.path.dirname(HERE), 'config', 'testbed.yaml')
+        node = ControllerNode(cli_args=['--ros-args', '--params-file', testbed],
+                              parameter_overrides=[Parameter('step_on', value='imu')])
         from geometry_msgs.msg import PoseStamped
         from sensor_msgs.msg import Imu
         from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg
         pose, imu = PoseStamped(), Imu()
-        set_quaternion(pose.pose.orientation, so3.rot_to_quat(so3.axis_angle([0.2, 0.1, 1.0], 0.4)))
-        set_vector(imu.angular_velocity, (0.1, -0.2, 0.3))
-        t = [0.0]
+        # the testbed flying its first set point: 5 deg off it, turning at 0.1 rad/s
+        R_d0 = node.loop.setup.schedule.rotations[0]
+        set_quaternion(pose.pose.orientation,
+                       so3.rot_to_quat(R_d0 @ so3.axis_angle([0.2, 0.1, 1.0], np.radians(5.0))))
+        set_vector(imu.angular_velocity, (0.05, -0.05, 0.07))
+        publisher, published = node.pub_motors, [0.0]
 
-        def tick():              # a pose and an imu message in, one tick out (as the executor)
+        class Timed:                  # the motor publisher, noting when its publish returns
+            topic_name = publisher.topic_name
+
+            def publish(self, msg):
+                publisher.publish(msg)
+                published[0] = time.perf_counter()
+        node.pub_motors = Timed()
+        t = [0.0]
+        to_motors, whole = [], []
+        for k in range(samples + 1):
             t[0] += 0.01
             pose.header.stamp = imu.header.stamp = time_msg(t[0])
             node._on_pose(pose)
+            t0 = time.perf_counter()
             node._on_imu(imu)
-            node._on_tick()
-        tick()
-        node.loop.arm(node._now())
-        us = per_call_us(tick, 500)
+            t1 = time.perf_counter()
+            if k == 0:
+                assert node.loop.arm(node._now()).ok
+                continue
+            to_motors.append(published[0] - t0)
+            whole.append(t1 - t0)
+        node.pub_motors = publisher
         node.destroy_node()
-        return us
+        return tuple(tuple(1e6 * np.percentile(v, q) for q in (50, 99, 100))
+                     for v in (to_motors, whole))
     finally:
         rclpy.try_shutdown()
 
@@ -173,11 +199,19 @@ def main(argv):
     for n, a, b, ratio, diff in rows:
         print('%-8d %11.1f us %15.1f us %8.2f %14.1e' % (n, a, b, ratio, diff))
     print('64 cones / 4 cones (ours): %.2f' % (rows[3][1] / rows[1][1]))
-    print('controller node tick (loop, mixing, 7 publishes, in-process): %.1f us' % tick)
+    print()
+    print('controller node, in-process, step_on: imu    p50 us   p99 us   max us')
+    for label, (p50, p99, top) in zip(('imu callback -> motor command published',
+                                       'whole callback (+ 6 monitoring topics)'), tick):
+        print('%-42s %8.0f %8.0f %8.0f' % (label, p50, p99, top))
     print()
     print('batched closed loop (campaign): runs, wall s per simulated s, real-time factor per core')
     for n, wall, rtf in batched():
         print('%6d %10.3f s %10.0f' % (n, wall, rtf))
+    if '--no-latency' not in argv:
+        import latency
+        print()
+        print(latency.table(latency.measure(10.0)))
     return 0
 
 

@@ -17,6 +17,7 @@ class FakeInputs(Monitor):
         self.pub_pose = self.create_publisher(PoseStamped, 'pose', qos.SENSOR)
         self.pub_imu = self.create_publisher(Imu, 'imu', qos.SENSOR)
         self.pub_setpoint = self.create_publisher(QuaternionStamped, 'attitude_setpoint', qos.EVENT)
+        self.fed = 0          # pose and imu pairs fed so far
 
     def feed(self, q=(0.0, 0.0, 0.0, 1.0), w=(0.0, 0.0, 0.0), rate_hz=100.0):
         """Publish pose and imu at rate_hz with fresh stamps until stop_feed(); q and w can be
@@ -28,6 +29,7 @@ class FakeInputs(Monitor):
         stamp = self.get_clock().now().to_msg()
         self.publish_pose(self.feed_q, stamp)
         self.publish_imu(self.feed_w, stamp)
+        self.fed += 1
 
     def stop_feed(self):
         self.destroy_timer(self._feed_timer)

@@ -318,3 +318,26 @@ def test_sim_time_the_sim_drives_the_controllers_clock(ros):
                for t, v in mon.log['true_pose'] if t >= t0) > 0.0
     assert mon.last_diagnostic()['armed'] == 'True'
     published_values_are_finite(mon)
+
+
+def test_step_on_imu_steps_on_every_sample_and_the_timer_still_fails_safe(ros):
+    """step_on: imu (the least input-to-command latency, see benchmarks/latency.py): fed at
+    200 Hz, twice rate_hz, the controller publishes a command for every sample, not 100 a
+    second; when the samples stop the 100 Hz timer stands in and the failsafe still comes."""
+    mon, launch = ros
+    launch('controller', TESTBED, *FED, '-p', 'step_on:=imu')
+    wait_for_controller(mon)
+    mon.feed(LEVEL_YAW90, rate_hz=200.0)
+    mon.spin_for(0.5)
+    assert mon.arm(True).success
+    sent0, t0 = mon.fed, time.monotonic()
+    mon.spin_for(2.0)
+    sent, commands = mon.fed - sent0, len(mon.since('motors', t0))
+    assert sent > 250, sent                                   # the feeder kept up (> 125 Hz)
+    assert commands > 0.8 * sent and commands > 1.2 * 100 * 2.0, (commands, sent)
+    mon.stop_feed()
+    t_drop = time.monotonic()
+    mon.wait_for(lambda: zero_commands(mon), 2.0, 'zero commands after the drop-out')
+    assert time.monotonic() - t_drop < 0.25 + 0.5
+    mon.wait_for(lambda: mon.last_diagnostic()['level'] == ERROR, 2.0, 'an ERROR diagnostic')
+    assert 'stale' in mon.last_diagnostic()['message']

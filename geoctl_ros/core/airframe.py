@@ -178,7 +178,8 @@ class Allocator:
             base = base + (f_y.T * s_y).T
             t_lo, t_hi = self._t_interval(base)
             t = np.minimum(np.maximum(collective, t_lo), t_hi)
-            degraded = np.clip(np.multiply.outer(t, self._d) + base, self.lo, self.hi)  # round-off
+            degraded = np.minimum(np.maximum(np.multiply.outer(t, self._d) + base, self.lo),
+                                  self.hi)                                        # round-off
             f = np.where(np.asarray(met)[..., None], f, degraded)
         if not all_valid:
             f = np.where(np.asarray(valid)[..., None], f, self.lo)
@@ -201,9 +202,9 @@ class Allocator:
         A = a * self._inv_d
         D = A[..., None, :] - A[..., :, None]
         N = H[..., None, :] - L[..., :, None]
-        limit = D > 1e-12
-        ratio = np.where(limit, N / np.where(limit, D, 1.0), np.inf).min(axis=(-2, -1))
-        return np.where((N < -1e-12).any(axis=(-2, -1)), 0.0, np.clip(ratio, 0.0, 1.0))
+        ratio = np.divide(N, D, out=np.full(D.shape, np.inf), where=D > 1e-12).min(axis=(-2, -1))
+        return np.where((N < -1e-12).any(axis=(-2, -1)), 0.0,
+                        np.minimum(np.maximum(ratio, 0.0), 1.0))
 
     def _result(self, f_alive, moment, saturated, valid):
         """The Allocation of the alive rotors' thrusts; moment is the request (0 where invalid)."""

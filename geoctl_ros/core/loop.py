@@ -163,7 +163,7 @@ class ControlLoop:
                     delay + max(now - self.rate.last_receipt, 0.0), self._moment, dt)
             # the estimate learns only from measurements, not from a bridged state
             out = self.controller.step(R, Omega, dt, adapt=armed and not bridging)
-            if not np.all(np.isfinite(out.u)):      # a last line of defence: never publish it
+            if not np.isfinite(out.u).all():        # a last line of defence: never publish it
                 self.disarm(NON_FINITE)
                 armed, out = False, None
             motors = self.setup.mixer.mix(np.zeros(3) if out is None else out.u, armed=armed)

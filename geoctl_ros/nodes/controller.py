@@ -92,7 +92,7 @@ class ControllerNode(Node):
         self._compute_stats = WindowStats()
         self._latency_stats = WindowStats()
         self._last_state = None
-        self.create_timer(self.period, self._on_tick, clock=self.clock_)
+        self.create_timer(self.period, self._on_timer, clock=self.clock_)
         self.create_timer(DIAGNOSTICS_PERIOD, self._end_window, clock=self.clock_)
         self.get_logger().info('controller ready at %g Hz (%s clock), %d cone(s), disarmed'
                                % (setup.values['rate_hz'], 'ROS' if sim_time else 'steady',
@@ -107,18 +107,24 @@ class ControllerNode(Node):
 
     # --- inputs ------------------------------------------------------------------------------
     def _on_pose(self, msg):
+        now = self._now()
         problem = self.loop.offer_pose(quaternion(msg.pose.orientation),
-                                       stamp_seconds(msg.header.stamp), self._now())
+                                       stamp_seconds(msg.header.stamp), now)
         if problem:
             self.get_logger().warning('pose refused: ' + problem, throttle_duration_sec=1.0)
         else:
             self._pose_stamp_msg = msg.header.stamp
+            if self.loop.setup.values['step_on'] == 'pose':
+                self._tick(now)
 
     def _on_imu(self, msg):
+        now = self._now()
         problem = self.loop.offer_angular_velocity(vector(msg.angular_velocity),
-                                                   stamp_seconds(msg.header.stamp), self._now())
+                                                   stamp_seconds(msg.header.stamp), now)
         if problem:
             self.get_logger().warning('imu refused: ' + problem, throttle_duration_sec=1.0)
+        elif self.loop.setup.values['step_on'] == 'imu':
+            self._tick(now)
 
     def _on_setpoint(self, msg):
         problem = self.loop.request_setpoint(quaternion(msg.quaternion))
@@ -168,17 +174,31 @@ class ControllerNode(Node):
             self.get_logger().info('parameters applied: %s' % ', '.join(sorted(changed)))
 
     # --- the control tick --------------------------------------------------------------------
-    def _on_tick(self):
-        t0 = time.perf_counter()
+    def _on_timer(self):
+        """The rate_hz timer: a step, unless samples start the steps (step_on) and one did within
+        the last 1.5 periods; then the timer only stands in when they stop."""
         now = self._now()
+        if (self.loop.setup.values['step_on'] == 'timer' or self._last_tick is None
+                or now - self._last_tick >= 1.5 * self.period):
+            self._tick(now)
+
+    def _tick(self, now):
+        """One control step at now: the motor command is published first, then the monitoring
+        topics."""
+        t0 = time.perf_counter()
+        dt = self.period
         if self._last_tick is not None:
-            self._period_stats.add(now - self._last_tick)
+            since = now - self._last_tick
+            self._period_stats.add(since)
+            if self.loop.setup.values['step_on'] != 'timer':   # steps as the samples come
+                dt = min(max(since, 0.0), 2.0 * self.period)
         self._last_tick = now
-        tick = self.loop.tick(now, self.period)
+        tick = self.loop.tick(now, dt)
         out = tick.control
         m = self._msgs
         m['motors'].data = tick.motors.normalised.tolist()
         self.pub_motors.publish(m['motors'])
+        self._compute_stats.add(time.perf_counter() - t0)
         if tick.armed and self.loop.pose.last_receipt is not None:
             self._latency_stats.add(self._now() - self.loop.pose.last_receipt)
         if out is not None:
@@ -200,7 +220,6 @@ class ControllerNode(Node):
             self.pub_dbar.publish(m['dbar'])
             m['margins'].data = out.margins_deg.tolist()
             self.pub_margins.publish(m['margins'])
-        self._compute_stats.add(time.perf_counter() - t0)
         R_d = self.loop.controller.R_d
         if R_d is not self._published_R_d:      # a new set point (set_setpoint copies)
             self._published_R_d = R_d
@@ -226,7 +245,7 @@ class ControllerNode(Node):
         st = self.loop.status(self._now(), self._other_commanders())
         values = dict(st.values)
         values['loop period [ms]'] = self._period_stats.summary()
-        values['step compute [ms]'] = self._compute_stats.summary()
+        values['tick to motor command [ms]'] = self._compute_stats.summary()
         values['pose-to-command latency [ms]'] = self._latency_stats.summary()
         status = DiagnosticStatus(level=bytes([st.level]), name=STATUS_NAME,
                                   hardware_id='hexrotor', message=st.message,

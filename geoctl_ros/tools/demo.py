@@ -118,7 +118,7 @@ def fly(params_file, out, duration, monitor_factory=None, mavlink=None):
         else None,
         'final_attitude_error_deg': float(err[-1]),
         'loop_period': _diag_stats(diags, 'loop period [ms]'),
-        'step_compute': _diag_stats(diags, 'step compute [ms]'),
+        'step_compute': _diag_stats(diags, 'tick to motor command [ms]'),
         'pose_to_command_latency': _diag_stats(diags, 'pose-to-command latency [ms]'),
         'commands_seen_by_subscriber': {'count': int(len(cmd_times)),
                                         'rate_hz': float(1e3 / gaps.mean()),
@@ -194,7 +194,7 @@ def main(argv=None):
         print('  control loop           %.2f Hz, period std %.3f ms, max %.2f ms'
               % (1e3 / lp['mean_ms'], lp['std_ms'], lp['max_ms']))
     if s['step_compute']:
-        print('  tick compute           mean %.3f ms, max %.3f ms'
+        print('  tick to motor command  mean %.3f ms, max %.3f ms'
               % (s['step_compute']['mean_ms'], s['step_compute']['max_ms']))
     if lat:
         print('  pose-to-command        mean %.2f ms, max %.2f ms (pose receipt to publish)'
