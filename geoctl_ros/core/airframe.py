@@ -272,22 +272,57 @@ class MotorOutput:
 
 
 class Mixer:
-    """Moment about the pivot -> six motor commands: allocation, then the thrust curve."""
+    """Moment about the pivot -> six motor commands: allocation, then the thrust curve.
 
-    def __init__(self, allocator, curve, collective_thrust):
+    With ``lag`` (the motors' thrust time constant, s; 0 for none) the mixer compensates the
+    motors' first-order lag: it keeps a model of the thrust each rotor is producing (from the
+    commands it sent, held over each step, discretised exactly) and commands the thrust that
+    brings the model to the allocated thrust by the next step, f_cmd = (f - a f_model) / (1 - a)
+    with a = exp(-dt / lag), within what the motor can do (the thrust curve's 0..command_max).
+    Without it, the 40 ms lag of the lab's motors costs the attitude loop about 50 deg of phase
+    at the barrier's stiffness near a cone; in the campaign that let a sensor starting in a
+    narrow corridor between two cones bounce between them into one (README, "Safety campaign").
+    A batch of moments keeps one model per run.
+    """
+
+    def __init__(self, allocator, curve, collective_thrust, lag=0.0):
         self.allocator = allocator
         self.curve = curve
         self.collective_thrust = float(collective_thrust)
+        self.lag = float(lag)
         self._dead = np.array([i for i in range(allocator.count) if i not in allocator.alive],
                               dtype=int)
+        self._f_max = curve.max_thrust()
+        self.modelled_thrusts = None     # the lag model's thrusts (None: motors at rest)
+        self._dt = self._a = None
 
-    def mix(self, moment, armed=True):
-        """Motor commands for the moment (or a stack of them); all zero when not armed."""
+    def adopt_state(self, other):
+        """Carry the lag model over from the mixer this one replaces (a run-time reconfiguration)."""
+        if other.modelled_thrusts is not None:
+            self.modelled_thrusts = other.modelled_thrusts.copy()
+
+    def mix(self, moment, armed=True, dt=None):
+        """Motor commands for the moment (or a stack of them); all zero when not armed. dt: the
+        time until the next step (needed for the lag compensation)."""
         allocation = self.allocator.allocate(moment, self.collective_thrust)
+        thrusts = allocation.thrusts
+        compensate = self.lag > 0.0 and dt is not None and dt > 0.0
+        if compensate and dt != self._dt:
+            self._dt, self._a = dt, math.exp(-dt / self.lag)
         if not armed:
-            zero = np.zeros_like(allocation.thrusts, dtype=int)
+            zero = np.zeros_like(thrusts, dtype=int)
+            if compensate and self.modelled_thrusts is not None:
+                self.modelled_thrusts = self._a * self.modelled_thrusts      # spinning down
             return MotorOutput(zero, np.zeros(zero.shape), allocation)
-        commands = self.curve.command(allocation.thrusts)
+        if compensate:
+            model = self.modelled_thrusts
+            if model is None or model.shape != thrusts.shape:
+                model = np.zeros_like(thrusts)
+            a = self._a
+            thrusts = np.minimum(np.maximum((thrusts - a * model) / (1.0 - a), 0.0), self._f_max)
+        commands = self.curve.command(thrusts)
         if len(self._dead):
             commands[..., self._dead] = 0
+        if compensate:
+            self.modelled_thrusts = a * model + (1.0 - a) * self.curve.thrust(commands)
         return MotorOutput(commands, self.curve.normalised(commands), allocation)

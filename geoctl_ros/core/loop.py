@@ -129,6 +129,7 @@ class ControlLoop:
             self.controller.reconfigure(setup.config)
         except SetpointRejected as e:
             return str(e)
+        setup.mixer.adopt_state(self.setup.mixer)
         self.setup = setup
         v = setup.values
         self.pose.timeout, self.pose.ride_through = v['pose_timeout'], v['pose_ride_through']
@@ -152,7 +153,7 @@ class ControlLoop:
                 self._schedule_index = i
         state = self.bridge.update(now, self.pose.fresh(now), self.rate.fresh(now))
         if state is None:
-            tick = Tick(None, self.setup.mixer.mix(np.zeros(3), armed=False), armed, None)
+            tick = Tick(None, self.setup.mixer.mix(np.zeros(3), armed=False, dt=dt), armed, None)
         else:
             bridging = self.bridge.bridging
             R, Omega = state
@@ -166,7 +167,8 @@ class ControlLoop:
             if not np.isfinite(out.u).all():        # a last line of defence: never publish it
                 self.disarm(NON_FINITE)
                 armed, out = False, None
-            motors = self.setup.mixer.mix(np.zeros(3) if out is None else out.u, armed=armed)
+            motors = self.setup.mixer.mix(np.zeros(3) if out is None else out.u, armed=armed,
+                                          dt=dt)
             self._moment = motors.allocation.moment if armed else np.zeros(3)
             tick = Tick(out, motors, armed, self.pose.last_stamp, bridging)
         if self.pose.last_receipt is not None:

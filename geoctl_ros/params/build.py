@@ -154,7 +154,7 @@ def mixer(values):
         raise ConfigError([('rotors', str(e))]) from None
     collective = values['collective_thrust'] or values['mass'] * float(
         np.linalg.norm(values['gravity']))
-    return Mixer(allocator, curve, collective)
+    return Mixer(allocator, curve, collective, values['motor_lag_compensation'])
 
 
 def testbed_sim(values):

@@ -143,6 +143,11 @@ SCHEMA = [
        'the barrier acts on every cone widened by this (margins and violations are still those of '
        'the real cones; set points must clear the widened cone)', CONTROLLER,
        check=lambda v: None if 0.0 <= v <= 10.0 else 'must be in [0, 10]'),
+    _p('motor_lag_compensation', 'double', 0.0, 's',
+       'the motors\' thrust time constant the mixer compensates (commands the thrust that brings '
+       'a model of the lagged rotors to the allocated thrust by the next step; README, "Safety '
+       'campaign"); 0 = none', CONTROLLER,
+       check=lambda v: None if 0.0 <= v <= 0.5 else 'must be in [0, 0.5]'),
     _p('barrier_floor_deg', 'double', 0.25, 'deg',
        'within this angle of a cone boundary the barrier is extended linearly (saturated)',
        CONTROLLER, check=_floor),

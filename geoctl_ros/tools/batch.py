@@ -154,7 +154,7 @@ def run_batch(scenarios, progress=None):
         # as ControlLoop.tick: predicted by the assumed delay (each sample is received at the tick)
         R_seen, W_seen = controller.predict(R_seen, W_seen, delay_model, delay_model, moment, dt)
         out = controller.step(R_seen, W_seen, dt)
-        motors = mixer.mix(out.u)
+        motors = mixer.mix(out.u, dt=dt)
         moment = motors.allocation.moment
         saturated += motors.allocation.saturated
         margin_series[k] = cones.margins_deg(plant.R).min(axis=-1)
