@@ -231,7 +231,7 @@ def test_lag_compensation_brings_the_lagged_rotors_to_the_allocation_by_the_next
             for _ in range(10):
                 produced = act.moment(out.commands, h)
         missing[lag] = np.linalg.norm(produced - out.allocation.moment) / np.linalg.norm(step)
-    assert missing[0.04] < 0.05, missing      # within command rounding of the allocation
+    assert missing[0.04] < 0.1, missing       # within command rounding (a count is ~2 %)
     assert missing[0.0] > 0.7, missing        # most of the step still to come
     mixer = params.mixer(resolve(CONTROLLER, {'motor_lag_compensation': 0.04}))
     out = mixer.mix(np.array([0.3, 0.1, 0.0]), armed=False, dt=dt)
