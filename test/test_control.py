@@ -404,3 +404,46 @@ def test_the_linear_map_of_the_step_reproduces_the_formulas_single_and_batched()
             assert np.allclose(out.margins_deg[k], o.margins_deg, atol=1e-9)
             assert out.violated[k] == o.violated and out.saturated[k] == o.saturated
             assert np.allclose(batch.delta_bar[k], one.delta_bar, atol=1e-15)
+
+
+def test_a_set_point_too_close_to_hold_against_the_unmodelled_moment_is_refused():
+    """unmodelled_moment_max: near the goal the barrier's repulsion k_R A e_RB is at most
+    holding_moment (A is small there); a set point whose cone cannot hold the bound is refused
+    with the clearance it needs, and at that clearance it is accepted. Flown against an unlearnt
+    0.05 N m towards the cone from a goal 1 deg clear, the sensor is pushed into the cone (the
+    campaign's creep class); from the needed clearance it is held out. (The check is
+    conservative: it counts the barrier's repulsion only, not the attractive pull, which also
+    points away from the cone here; from 3 deg the sensor is already held out.)"""
+    from geoctl_ros.core.control import holding_clearance_deg, holding_moment
+    cones = one_cone(theta_deg=20.0)
+    cfg = config(cones, unmodelled_moment_max=0.05, adaptive=False)
+    axis = np.array([1.0, 1.0, 0.0]) / math.sqrt(2.0)
+
+    def goal(clearance_deg):           # the sensor (body x) clearance_deg outside the cone
+        return so3.axis_angle([0, 0, 1], math.pi / 4 - math.radians(20.0 + clearance_deg))
+
+    need = holding_clearance_deg(cfg, cones, 0.05)[0]
+    assert 3.0 < need < 30.0
+    assert holding_moment(cfg, cones, goal(need))[0] == pytest.approx(0.05, rel=1e-6)
+    ctrl = AttitudeController(cfg)
+    problem = ctrl.setpoint_problem(goal(need - 0.5))
+    assert problem and 'cone' in problem and '%.1f deg is needed' % need in problem
+    assert ctrl.setpoint_problem(goal(need + 0.5)) is None
+
+    def fly(clearance_deg):
+        """Closest approach (deg) over 5 s at goal(clearance) against 0.05 N m turning the
+        sensor towards the cone, not learnt (adaptive off)."""
+        c = AttitudeController(config(cones, adaptive=False))
+        c.set_setpoint(goal(clearance_deg))
+        R, w, dt, closest = c.R_d.copy(), np.zeros(3), 0.002, 90.0
+        for _ in range(2500):
+            towards = np.cross(R @ [1.0, 0.0, 0.0], axis)     # turns the sensor to the cone
+            d = R.T @ (0.05 * towards / np.linalg.norm(towards))
+            u = c.step(R, w, dt).u
+            dw = np.linalg.solve(cfg.J, u + d - np.cross(w, cfg.J @ w))
+            w = w + dt * dw
+            R = R @ so3.exp(w * dt)
+            closest = min(closest, float(cones.margins_deg(R)[0]))
+        return closest
+    assert fly(1.0) < 0.0                   # pushed into the cone
+    assert fly(need) > 0.0                  # held outside

@@ -67,6 +67,7 @@ class ControllerConfig:
     gravity_compensation: bool = True
     disturbance_model: str = 'constant'
     delta_bar_max: float = 0.0       # bound on |constant estimate| (N m); 0 = none
+    unmodelled_moment_max: float = 0.0   # what a set point must be held against (N m); 0 = none
     cog_estimate_max: float = 0.0    # bound on |m rho estimate| (kg m); 0 = none
     J: np.ndarray = field(init=False, repr=False)        # inertia about the pivot
     m_rho: np.ndarray = field(init=False, repr=False)    # mass times pivot -> centre of mass
@@ -165,6 +166,33 @@ class LinearMap:
         return matvec(self.L, R.reshape(R.shape[:-2] + (9,))) + self.y0
 
 
+def holding_moment(config, cones, R_d):
+    """Per cone: the largest moment its barrier can oppose near the cone, with the set point R_d.
+
+    The repulsion k_R A e_RB,i is largest in the floor band (and inside, where it keeps the band's
+    magnitude): k_R A sin(theta_i) / (alpha g0_i). It is proportional to the attitude error A,
+    so it is weakest near the goal: where the sensor meets the (guarded) cone, the body has turned
+    at least the set point's clearance c_i from that cone away from R_d, and A is then at least
+    (1 - cos c_i) (g_a + g_b) / 2 (g_a, g_b the two smallest weights). An unlearnt moment larger
+    than this (a disturbance, an error in the model of gravity, before the adaptive estimate has
+    caught up) holds the sensor in the cone: the campaign's creep class (README, "Safety
+    campaign")."""
+    if not len(cones):
+        return np.zeros(0)
+    c = np.maximum(np.radians(cones.margins_deg(R_d)) - cones.guard, 0.0)
+    h = float(np.sum(np.sort(np.asarray(config.G, dtype=float))[:2]))
+    A_min = 0.5 * (1.0 - np.cos(c)) * h
+    return config.k_R * A_min * np.sin(cones.theta_b) / (cones.alpha * cones.g0)
+
+
+def holding_clearance_deg(config, cones, moment):
+    """Per cone: the set point's clearance (degrees from the real cone) at which
+    ``holding_moment`` equals moment."""
+    h = float(np.sum(np.sort(np.asarray(config.G, dtype=float))[:2]))
+    x = 2.0 * moment * cones.alpha * cones.g0 / (config.k_R * h * np.sin(cones.theta_b))
+    return np.degrees(np.arccos(np.clip(1.0 - x, -1.0, 1.0)) + cones.guard)
+
+
 class AttitudeController:
     """The controller's state (estimate, set point) and its pure-math step."""
 
@@ -204,6 +232,15 @@ class AttitudeController:
                     'half-angle %.2f deg)' % (where, cones.names[i],
                                               margins[i] + math.degrees(cones.theta[i]),
                                               math.degrees(cones.theta[i])))
+        moment = self.config.unmodelled_moment_max
+        if moment > 0.0:
+            held = holding_moment(self.config, cones, R_d)
+            i = int(np.argmin(held - moment))
+            if held[i] < moment:
+                need = holding_clearance_deg(self.config, cones, moment)[i]
+                return ('setpoint is %.2f deg clear of cone %r; against unmodelled_moment_max = '
+                        '%.3g N m its barrier holds only %.3g N m near the goal, %.1f deg is '
+                        'needed' % (margins[i], cones.names[i], moment, held[i], need))
         return None
 
     def set_setpoint(self, R_d, Omega_d=None, dOmega_d=None):

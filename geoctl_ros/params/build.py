@@ -35,7 +35,8 @@ def controller_config(values):
         mass=values['mass'], cog_offset=values['cog_offset'], gravity=values['gravity'],
         adaptive=values['adaptive'], gravity_compensation=values['gravity_compensation'],
         disturbance_model=values['disturbance_model'], delta_bar_max=values['delta_bar_max'],
-        cog_estimate_max=values['cog_estimate_max'])
+        cog_estimate_max=values['cog_estimate_max'],
+        unmodelled_moment_max=values['unmodelled_moment_max'])
 
 
 def setpoint_rotation(values):

@@ -148,6 +148,10 @@ SCHEMA = [
        'a model of the lagged rotors to the allocated thrust by the next step; README, "Safety '
        'campaign"); 0 = none', CONTROLLER,
        check=lambda v: None if 0.0 <= v <= 0.5 else 'must be in [0, 0.5]'),
+    _p('unmodelled_moment_max', 'double', 0.0, 'N m',
+       'the moment the controller may have to hold without having learnt it (disturbance plus '
+       'model errors); set points whose cones\' barriers cannot hold it near the goal are refused '
+       '(README, "Safety campaign"); 0 = no check', CONTROLLER, check=_nonnegative),
     _p('barrier_floor_deg', 'double', 0.25, 'deg',
        'within this angle of a cone boundary the barrier is extended linearly (saturated)',
        CONTROLLER, check=_floor),

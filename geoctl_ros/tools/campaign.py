@@ -45,8 +45,9 @@ import numpy as np
 import yaml
 
 from geoctl_ros.core import so3
-from geoctl_ros.params import (CONTROLLER, SIM, ConfigError, load_parameter_file, node_overrides,
-                               resolve)
+from geoctl_ros.core.control import AttitudeController
+from geoctl_ros.params import (CONTROLLER, SIM, ConfigError, cone_set, controller_config,
+                               load_parameter_file, node_overrides, resolve)
 from geoctl_ros.tools.rosenv import config_dir
 
 CONVERGED_DEG = 5.0                # attitude error at the end below which a run has converged
@@ -58,6 +59,7 @@ TILT_DEG = 40.0                    # the body's z axis within this of vertical a
 TWIST_DEG = 15.0                   # turn about the sensor axis from the most upright attitude
 CONE_ELEVATION_DEG = 20.0          # cone axes within this of the horizon
 DISTURBANCE_MAX = 0.05             # N m, largest constant disturbance (see the README)
+MODEL_ERROR = 0.2                  # true mass, inertia stretch and centre of mass within +-20 %
 
 
 def _unit(v):
@@ -93,14 +95,15 @@ def _attitude(rng, r, d):
     TILT_DEG (the joint's range)."""
     base = _aligning(r, d)
     twists = np.radians(np.arange(-180.0, 180.0, 2.0))
-    tilts = [_angle_deg(so3.exp(d * tw) @ base @ UP, UP) for tw in twists]
-    twist = twists[int(np.argmin(tilts))] + math.radians(rng.uniform(-TWIST_DEG, TWIST_DEG))
+    ups = so3.exp(d * twists[:, None]) @ (base @ UP)            # body z for each twist
+    twist = twists[int(np.argmax(ups[:, 2]))] + math.radians(rng.uniform(-TWIST_DEG, TWIST_DEG))
     R = so3.exp(d * twist) @ base
     return R if _angle_deg(R @ UP, UP) <= TILT_DEG else None
 
 
-def draw_manoeuvre(seed, index, sensor_axis):
-    """The random part of run index of campaign seed: a dict of per-run values."""
+def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None):
+    """The random part of run index of campaign seed: a dict of per-run values. goal_ok(cones,
+    R_d) (cones as [(axis, half-angle deg)]), if given, must accept the goal (else redrawn)."""
     rng = np.random.default_rng([seed, index])
     r = _unit(np.asarray(sensor_axis, dtype=float))
     while True:
@@ -123,7 +126,8 @@ def draw_manoeuvre(seed, index, sensor_axis):
         if min(_angle_deg(p, v0) for p in arc) >= theta[0]:
             continue                                    # the straight way misses the cone
         R0, R_d = _attitude(rng, r, d0), _attitude(rng, r, d1)
-        if R0 is not None and R_d is not None:
+        if R0 is not None and R_d is not None and (
+                goal_ok is None or goal_ok(list(zip(axes, theta)), R_d)):
             break
     direction = _unit(rng.normal(size=3))
     return {
@@ -131,9 +135,9 @@ def draw_manoeuvre(seed, index, sensor_axis):
         'R0': R0, 'R_d': R_d,
         'latency_ms': int(rng.integers(0, 11)),
         'disturbance': direction * rng.uniform(0.0, 1.0),      # times --disturbance-max
-        'mass_factor': rng.uniform(0.8, 1.2),
-        'inertia_factors': rng.uniform(0.8, 1.2, 3),
-        'cog_factor': rng.uniform(0.8, 1.2),
+        'mass_factor': rng.uniform(1.0 - MODEL_ERROR, 1.0 + MODEL_ERROR),
+        'inertia_factors': rng.uniform(1.0 - MODEL_ERROR, 1.0 + MODEL_ERROR, 3),
+        'cog_factor': rng.uniform(1.0 - MODEL_ERROR, 1.0 + MODEL_ERROR),
         'noise_seed': int(rng.integers(0, 2 ** 31)),
     }
 
@@ -142,13 +146,34 @@ def _floats(a):
     return [float(x) for x in np.ravel(a)]
 
 
+def unmodelled_moment(nominal_sim, disturbance_max=DISTURBANCE_MAX):
+    """The most the campaign's runs ask the controller to hold before learning it (N m): the
+    largest disturbance plus the gravity moment of the largest error in m rho (mass and
+    centre-of-mass height each off by 20 %: 1.2^2 - 1 = 44 %) at the largest tilt at the goal."""
+    m_rho = nominal_sim['mass'] * float(np.linalg.norm(nominal_sim['cog_offset']))
+    return float(disturbance_max + ((1.0 + MODEL_ERROR) ** 2 - 1.0) * m_rho
+                 * float(np.linalg.norm(nominal_sim['gravity'])) * math.sin(math.radians(TILT_DEG)))
+
+
 def run_sections(base, seed, index, duration=20.0, disturbance_max=DISTURBANCE_MAX):
     """The scenario file's sections ({'/**' or node: flat parameters}) of run index."""
     nominal_c = resolve(CONTROLLER, node_overrides(base, CONTROLLER))
     nominal_s = resolve(SIM, node_overrides(base, SIM))
-    m = draw_manoeuvre(seed, index, nominal_c['sensor_axis'])
+    unmodelled = unmodelled_moment(nominal_s, disturbance_max)
+    probe = AttitudeController(controller_config(dict(nominal_c,
+                                                      unmodelled_moment_max=unmodelled)))
+
+    def goal_ok(cones, R_d):                    # the controller's own set-point check
+        values = dict(nominal_c, **{'cones.names': ['c%d' % i for i in range(len(cones))]})
+        for i, (axis, half_angle) in enumerate(cones):
+            values['cones.c%d.axis' % i] = axis
+            values['cones.c%d.half_angle_deg' % i] = half_angle
+        return probe.setpoint_problem(R_d, cone_set(values)) is None
+
+    m = draw_manoeuvre(seed, index, nominal_c['sensor_axis'], goal_ok)
     controller = {k: v for k, v in base.get('controller', {}).items()
                   if not k.startswith(('cones.', 'setpoint'))}
+    controller['unmodelled_moment_max'] = unmodelled
     names = ['c%d' % (i + 1) for i in range(len(m['cones']))]
     controller['cones.names'] = names
     for name, (axis, half_angle) in zip(names, m['cones']):
