@@ -278,7 +278,8 @@ class Mixer:
     motors' first-order lag: it keeps a model of the thrust each rotor is producing (from the
     commands it sent, held over each step, discretised exactly) and commands the thrust that
     brings the model to the allocated thrust by the next step, f_cmd = (f - a f_model) / (1 - a)
-    with a = exp(-dt / lag), within what the motor can do (the thrust curve's 0..command_max).
+    with a = exp(-dt / lag), within the allocator's thrust_min..thrust_max (the motors keep
+    spinning, and keep their headroom).
     Without it, the 40 ms lag of the lab's motors costs the attitude loop about 50 deg of phase
     at the barrier's stiffness near a cone; in the campaign that let a sensor starting in a
     narrow corridor between two cones bounce between them into one (README, "Safety campaign").
@@ -292,7 +293,6 @@ class Mixer:
         self.lag = float(lag)
         self._dead = np.array([i for i in range(allocator.count) if i not in allocator.alive],
                               dtype=int)
-        self._f_max = curve.max_thrust()
         self.modelled_thrusts = None     # the lag model's thrusts (None: motors at rest)
         self._dt = self._a = None
 
@@ -319,7 +319,8 @@ class Mixer:
             if model is None or model.shape != thrusts.shape:
                 model = np.zeros_like(thrusts)
             a = self._a
-            thrusts = np.minimum(np.maximum((thrusts - a * model) / (1.0 - a), 0.0), self._f_max)
+            thrusts = np.minimum(np.maximum((thrusts - a * model) / (1.0 - a), self.allocator.lo),
+                                 self.allocator.hi)
         commands = self.curve.command(thrusts)
         if len(self._dead):
             commands[..., self._dead] = 0
