@@ -15,19 +15,21 @@ on how many others there are):
 - the manoeuvre: the sensor starts 5-30 deg outside the first cone (uniform, at a uniform azimuth
   round its axis) and its goal is 5-30 deg outside the same cone on the far side (azimuth 150-210
   deg away), so the straight way crosses the cone and the controller must go round; start and goal
-  are at least 5 deg clear of every cone. About the sensor axis, start and goal attitudes are the
-  most upright ones turned by up to +-15 deg, and the body's z axis is within 40 deg of vertical
-  (the joint's range; redrawn otherwise);
+  are at least 5 deg clear of every cone, and the goal is one the controller accepts with
+  ``unmodelled_moment_max`` set to what the errors below can add up to (``unmodelled_moment``,
+  0.40 N m for the testbed; redrawn otherwise). About the sensor axis, start and goal attitudes
+  are the most upright ones turned by up to +-15 deg, and the body's z axis is within 40 deg of
+  vertical (the joint's range; redrawn otherwise);
 - the testbed (``config/testbed.yaml``): its gains, rotors, thrust curve, 40 ms motor lag and
   saturation, motion-capture (0.1 deg) and gyro (0.005 rad/s) noise, 100 Hz control, 1 kHz
   integration, 20 s;
 - per run: measurement latency 0-10 ms (whole ms, uniform); a constant disturbance of uniform
-  direction and magnitude 0-0.5 N m (with the centre-of-mass error below the estimate sees at most
-  about 0.75 N m, within the adaptive bound delta_bar_max = 1 N m); the true mass off by up to
-  +-20 %; the true inertia's mass distribution stretched by up to +-20 % along each body axis
-  (second moment E = tr(J)/2 I - J -> S E S, S = diag(sqrt(f)), f uniform 0.8-1.2; J = tr(E) I - E
-  stays a physical inertia); the true centre-of-mass offset off by up to 20 % of its length along
-  each axis.
+  direction and magnitude up to 0.05 N m (``--disturbance-max``; with the gravity moment of the
+  errors below the estimate sees at most 0.40 N m, within its bound delta_bar_max = 1 N m); the
+  true mass off by up to +-20 %; the true inertia's mass distribution stretched by up to +-20 %
+  along each body axis (second moment E = tr(J)/2 I - J -> S E S, S = diag(sqrt(f)), f uniform
+  0.8-1.2; J = tr(E) I - E stays a physical inertia); the true centre-of-mass offset scaled by
+  0.8-1.2.
 
 Per run: the closest approach to each cone (after every 1 ms integration step), whether the sensor
 touched a cone (a violation), convergence (attitude error below 5 deg at the end), and the time the
