@@ -67,8 +67,8 @@ class ControllerConfig:
     gravity_compensation: bool = True
     disturbance_model: str = 'constant'
     delta_bar_max: float = 0.0       # bound on |constant estimate| (N m); 0 = none
-    unmodelled_moment_max: float = 0.0   # what a set point must be held against (N m); 0 = none
     cog_estimate_max: float = 0.0    # bound on |m rho estimate| (kg m); 0 = none
+    unmodelled_moment_max: float = 0.0   # what a set point must be held against (N m); 0 = none
     J: np.ndarray = field(init=False, repr=False)        # inertia about the pivot
     m_rho: np.ndarray = field(init=False, repr=False)    # mass times pivot -> centre of mass
 
@@ -166,6 +166,13 @@ class LinearMap:
         return matvec(self.L, R.reshape(R.shape[:-2] + (9,))) + self.y0
 
 
+def smallest_pair_sum(G):
+    """min_{i != j} (g_i + g_j): the least A can grow per (1 - cos) of a rotation's angle,
+    A = (1 - cos phi) (tr G - n^T G n) / 2 (the paper's h_1)."""
+    g = np.sort(np.asarray(G, dtype=float))
+    return float(g[0] + g[1])
+
+
 def holding_moment(config, cones, R_d):
     """Per cone: the largest moment its barrier can oppose near the cone, with the set point R_d.
 
@@ -180,16 +187,15 @@ def holding_moment(config, cones, R_d):
     if not len(cones):
         return np.zeros(0)
     c = np.maximum(np.radians(cones.margins_deg(R_d)) - cones.guard, 0.0)
-    h = float(np.sum(np.sort(np.asarray(config.G, dtype=float))[:2]))
-    A_min = 0.5 * (1.0 - np.cos(c)) * h
+    A_min = 0.5 * (1.0 - np.cos(c)) * smallest_pair_sum(config.G)
     return config.k_R * A_min * np.sin(cones.theta_b) / (cones.alpha * cones.g0)
 
 
 def holding_clearance_deg(config, cones, moment):
     """Per cone: the set point's clearance (degrees from the real cone) at which
     ``holding_moment`` equals moment."""
-    h = float(np.sum(np.sort(np.asarray(config.G, dtype=float))[:2]))
-    x = 2.0 * moment * cones.alpha * cones.g0 / (config.k_R * h * np.sin(cones.theta_b))
+    x = (2.0 * moment * cones.alpha * cones.g0
+         / (config.k_R * smallest_pair_sum(config.G) * np.sin(cones.theta_b)))
     return np.degrees(np.arccos(np.clip(1.0 - x, -1.0, 1.0)) + cones.guard)
 
 
@@ -403,7 +409,7 @@ def gain_condition(config, margin_deg=5.0):
     """
     g = np.asarray(config.G, dtype=float)
     pairs = [(0, 1), (1, 2), (2, 0)]
-    h1 = min(g[i] + g[j] for i, j in pairs)
+    h1 = smallest_pair_sum(g)
     # |e_RA|^2 <= A / b1. The paper's Prop. 1 (v) prints b1 = h1 / (h2 + h3) with the minima of
     # (g_i - g_j)^2 and (g_i + g_j)^2; that is not a bound (for G = diag(0.9, 1.1, 1.0), sampled
     # |e_RA|^2 / A reaches 2.099 > 1/b1 = 1.905). With the maxima, as the dissertation's n1, it is.
