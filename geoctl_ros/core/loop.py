@@ -20,6 +20,14 @@ NEAR_CONE_DEG = 2.0           # a cone margin below this is reported (WARN)
 NON_FINITE = 'failsafe: non-finite control output'
 
 
+def step_period(since, period):
+    """The dt of a step started by a sample (``step_on``): the time since the last step, within
+    half to twice the control period. A burst of samples must not make a step of almost no time:
+    the mixer's lag compensation would then command the extreme thrust, and the motors would hold
+    it for the whole wait until the next sample."""
+    return min(max(since, 0.5 * period), 2.0 * period)
+
+
 @dataclass
 class Tick:
     """One control tick's results for the node to publish."""

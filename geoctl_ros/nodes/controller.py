@@ -18,7 +18,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.control import gain_condition
-from geoctl_ros.core.loop import ControlLoop
+from geoctl_ros.core.loop import ControlLoop, step_period
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.conversions import (quaternion, set_quaternion, set_vector, stamp_seconds,
                                           vector)
@@ -196,7 +196,7 @@ class ControllerNode(Node):
             since = now - self._last_tick
             self._period_stats.add(since)
             if self.loop.setup.values['step_on'] != 'timer':   # steps as the samples come
-                dt = min(max(since, 0.0), 2.0 * self.period)
+                dt = step_period(since, self.period)
         self._last_tick = now
         tick = self.loop.tick(now, dt)
         out = tick.control

@@ -164,8 +164,9 @@ SCHEMA = [
     _p('rate_hz', 'double', 100.0, 'Hz', 'control rate', CONTROLLER, check=_rate),
     _p('step_on', 'string', 'timer', '-',
        'what starts a control step: the rate_hz timer, or each accepted imu or pose sample (the '
-       'least latency; the timer then steps only when no sample came for 1.5 periods, so stale '
-       'inputs still fail safe)', CONTROLLER, choices=('timer', 'imu', 'pose')),
+       'least latency; set rate_hz to that sample rate: the timer then steps only when no sample '
+       'came for 1.5 periods, so stale inputs still fail safe)', CONTROLLER,
+       choices=('timer', 'imu', 'pose')),
     _p('pose_timeout', 'double', 0.1, 's', 'pose older than this (by receipt) is stale',
        CONTROLLER, check=_positive),
     _p('imu_timeout', 'double', 0.05, 's', 'angular velocity older than this is stale',
