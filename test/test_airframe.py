@@ -236,3 +236,6 @@ def test_lag_compensation_brings_the_lagged_rotors_to_the_allocation_by_the_next
     mixer = params.mixer(resolve(CONTROLLER, {'motor_lag_compensation': 0.04}))
     out = mixer.mix(np.array([0.3, 0.1, 0.0]), armed=False, dt=dt)
     assert not out.commands.any()             # disarmed is still zero
+    plain = params.mixer(resolve(CONTROLLER, {}))
+    first = mixer.mix(step, dt=dt).commands   # arming: no kick from rest to the thrust limits
+    assert np.array_equal(first, plain.mix(step).commands)

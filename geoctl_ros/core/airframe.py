@@ -283,7 +283,8 @@ class Mixer:
     Without it, the 40 ms lag of the lab's motors costs the attitude loop about 50 deg of phase
     at the barrier's stiffness near a cone; in the campaign that let a sensor starting in a
     narrow corridor between two cones bounce between them into one (README, "Safety campaign").
-    A batch of moments keeps one model per run.
+    A batch of moments keeps one model per run. The model starts at the first armed step's own
+    allocation (no kick at arming) and is dropped when disarmed.
     """
 
     def __init__(self, allocator, curve, collective_thrust, lag=0.0):
@@ -311,13 +312,14 @@ class Mixer:
             self._dt, self._a = dt, math.exp(-dt / self.lag)
         if not armed:
             zero = np.zeros_like(thrusts, dtype=int)
-            if compensate and self.modelled_thrusts is not None:
-                self.modelled_thrusts = self._a * self.modelled_thrusts      # spinning down
+            self.modelled_thrusts = None
             return MotorOutput(zero, np.zeros(zero.shape), allocation)
         if compensate:
             model = self.modelled_thrusts
             if model is None or model.shape != thrusts.shape:
-                model = np.zeros_like(thrusts)
+                # arming: no kick to spin the motors up (a motor starting from rest does not
+                # follow the first-order lag anyway); compensation from the next step
+                model = thrusts
             a = self._a
             thrusts = np.minimum(np.maximum((thrusts - a * model) / (1.0 - a), self.allocator.lo),
                                  self.allocator.hi)
