@@ -42,6 +42,11 @@ from geoctl_ros.core.flags import any_flag
 from geoctl_ros.core.so3 import hat, matvec
 
 
+def angle_deg(s):
+    """The angle (degrees) whose cosine is s = r^T R^T v_i (clipped to [-1, 1] against round-off)."""
+    return np.degrees(np.arccos(np.clip(s, -1.0, 1.0)))
+
+
 class ConeEval:
     """The cone terms at one attitude; arrays have one entry (row) per cone (after the batch axis,
     if any).
@@ -75,7 +80,7 @@ class ConeEval:
 
     def margins_deg(self, half_angles_deg):
         """Angle between R r and v_i minus theta_i, degrees (negative inside the cone)."""
-        return np.degrees(np.arccos(np.clip(self.s, -1.0, 1.0))) - half_angles_deg
+        return angle_deg(self.s) - half_angles_deg
 
 
 class ConeSet:
@@ -163,7 +168,7 @@ class ConeSet:
 
     def angles_deg(self, R):
         """Angle between the sensor's world direction R r and each cone axis, degrees."""
-        return np.degrees(np.arccos(np.clip(matvec(self.V, matvec(R, self.r)), -1.0, 1.0)))
+        return angle_deg(matvec(self.V, matvec(R, self.r)))
 
     def margins_deg(self, R):
         """Cone margins (angle to axis minus half-angle, degrees) at attitude R."""
