@@ -273,7 +273,9 @@ def fly(sections_by_index, jobs=2, report=None):
             if report:
                 report(len(out), time.monotonic() - t0)
         return out
-    ctx = multiprocessing.get_context('fork')
+    # a fork server, not a fork of the caller: a caller with threads (rclpy's, in a test run)
+    # can hold a lock at the moment of a fork, and the forked worker then deadlocks on it
+    ctx = multiprocessing.get_context('forkserver')
     counter = ctx.Value('d', 0.0)
     with ctx.Pool(jobs, initializer=_init_worker, initargs=(counter,)) as pool:
         pending = pool.map_async(_fly, batches, chunksize=1)
