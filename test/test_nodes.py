@@ -75,6 +75,8 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros):
     launch('sim')
     launch('controller')
     mon.wait_for(mon.controller_has_inputs, 30.0, 'the sim and the controller')
+    # the diagnostics can reach this monitor before its motor_commands subscription is matched
+    mon.wait_for(lambda: mon.last('motors') is not None, 10.0, 'a first motor command')
     assert zero_commands(mon)                                  # disarmed at start-up
     assert mon.last_diagnostic()['armed'] == 'False'
     reply = mon.arm_when_ready()
