@@ -239,3 +239,30 @@ def test_lag_compensation_brings_the_lagged_rotors_to_the_allocation_by_the_next
     plain = params.mixer(resolve(CONTROLLER, {}))
     first = mixer.mix(step, dt=dt).commands   # arming: no kick from rest to the thrust limits
     assert np.array_equal(first, plain.mix(step).commands)
+
+
+def test_lag_compensation_follows_the_real_holds_of_a_late_loop():
+    """The control steps come 50 ms apart instead of 10 (a busy machine). The first late hold
+    overshoots: its command was designed for 10 ms. Told the real holds, the mixer's model knows
+    it and corrects at the next step, and from then on designs for 50 ms holds: the rotors land on
+    the allocation at each step. Not told (its model assumes 10 ms), it keeps overshooting for
+    steps."""
+    dt, h = 0.01, 1e-3
+    step = np.array([0.3, -0.2, 0.1])
+    missing = {}
+    for told in (False, True):
+        mixer = params.mixer(resolve(CONTROLLER, {'motor_lag_compensation': 0.04}))
+        act = RotorActuator(tilted_ring(), RHO, mixer.curve, time_constant=0.04)
+        held, missing[told] = None, []
+        for k in range(110):                   # 1 s on time at rest, then the step, late
+            out = mixer.mix(step if k >= 100 else np.zeros(3), dt=dt, held=held if told else None)
+            hold = 50 if k >= 100 else 10
+            for _ in range(hold):
+                produced = act.moment(out.commands, h)
+            held = hold * h
+            if k >= 100:
+                missing[told].append(np.linalg.norm(produced - out.allocation.moment)
+                                     / np.linalg.norm(step))
+    assert missing[True][0] > 1.0 and missing[False][0] > 1.0     # the first late hold: overshoot
+    assert max(missing[True][1:]) < 0.05, missing[True]           # corrected at the next step
+    assert missing[False][1] > 0.5 and missing[False][2] > 0.15, missing[False]

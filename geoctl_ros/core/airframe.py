@@ -274,18 +274,29 @@ class MotorOutput:
 class Mixer:
     """Moment about the pivot -> six motor commands: allocation, then the thrust curve.
 
-    With ``lag`` (the motors' thrust time constant, s; 0 for none) the mixer compensates the
-    motors' first-order lag: it keeps a model of the thrust each rotor is producing (from the
-    commands it sent, held over each step, discretised exactly) and commands the thrust that
-    brings the model to the allocated thrust by the next step, f_cmd = (f - a f_model) / (1 - a)
-    with a = exp(-dt / lag), within the allocator's thrust_min..thrust_max (the motors keep
-    spinning, and keep their headroom).
+    With ``lag`` (the motors' thrust time constant tau, s; 0 for none) the mixer compensates the
+    motors' first-order lag. It keeps a model of the thrust each rotor is producing, advanced
+    exactly over the time each command was really held, and commands the thrust that brings the
+    model to the allocated thrust at the end of a hold of H:
+    f_cmd = (f - a f_model) / (1 - a), a = exp(-H / tau), within the allocator's
+    thrust_min..thrust_max (the motors keep spinning, and keep their headroom).
+
+    H is the expected hold (the control period) unless the loop has been late: then it is the
+    longest recent hold, returning to the period over about ``HOLD_MEMORY`` seconds. A command
+    designed for a 10 ms hold is 4.5 times the thrust change on the testbed; held 50 ms it would
+    overshoot 3.3 times, and a loop that stays that late diverges (a live run went 9 deg into a
+    cone that way). Designed for the longest hold, every hold up to it only brings the rotors
+    part of the way, never past the allocation; one late step after a quiet spell overshoots
+    once, and the model, advanced by the real hold, corrects it at the next step.
+
     Without it, the 40 ms lag of the lab's motors costs the attitude loop about 50 deg of phase
     at the barrier's stiffness near a cone; in the campaign that let a sensor starting in a
     narrow corridor between two cones bounce between them into one (README, "Safety campaign").
     A batch of moments keeps one model per run. The model starts at the first armed step's own
     allocation (no kick at arming) and is dropped when disarmed.
     """
+
+    HOLD_MEMORY = 1.0     # s: how long a late step keeps the compensation designed for its hold
 
     def __init__(self, allocator, curve, collective_thrust, lag=0.0):
         self.allocator = allocator
@@ -294,38 +305,52 @@ class Mixer:
         self.lag = float(lag)
         self._dead = np.array([i for i in range(allocator.count) if i not in allocator.alive],
                               dtype=int)
-        self.modelled_thrusts = None     # the lag model's thrusts (None: motors at rest)
-        self._dt = self._a = None
+        self.modelled_thrusts = None     # the lag model's thrusts at the last command (None: at rest)
+        self.sent_thrusts = None         # the thrusts the last command asked for
+        self.design_hold = None          # H of the last command (s)
 
     def adopt_state(self, other):
         """Carry the lag model over from the mixer this one replaces (a run-time reconfiguration)."""
         if other.modelled_thrusts is not None:
             self.modelled_thrusts = other.modelled_thrusts.copy()
+            self.sent_thrusts = other.sent_thrusts.copy()
+            self.design_hold = other.design_hold
 
-    def mix(self, moment, armed=True, dt=None):
-        """Motor commands for the moment (or a stack of them); all zero when not armed. dt: the
-        time until the next step (needed for the lag compensation)."""
+    def mix(self, moment, armed=True, dt=None, held=None):
+        """Motor commands for the moment (or a stack of them); all zero when not armed.
+
+        dt: how long this command is expected to be held (the control period); held: how long the
+        previous command really was (the time since the last step; dt when not given). Both are
+        needed for the lag compensation only."""
         allocation = self.allocator.allocate(moment, self.collective_thrust)
         thrusts = allocation.thrusts
-        compensate = self.lag > 0.0 and dt is not None and dt > 0.0
-        if compensate and dt != self._dt:
-            self._dt, self._a = dt, math.exp(-dt / self.lag)
         if not armed:
             zero = np.zeros_like(thrusts, dtype=int)
-            self.modelled_thrusts = None
+            self.modelled_thrusts = self.sent_thrusts = self.design_hold = None
             return MotorOutput(zero, np.zeros(zero.shape), allocation)
+        compensate = self.lag > 0.0 and dt is not None and dt > 0.0
         if compensate:
             model = self.modelled_thrusts
             if model is None or model.shape != thrusts.shape:
                 # arming: no kick to spin the motors up (a motor starting from rest does not
                 # follow the first-order lag anyway); compensation from the next step
-                model = thrusts
-            a = self._a
+                model, hold = thrusts, dt
+            else:
+                held = dt if held is None else max(held, 0.0)
+                sent = self.sent_thrusts
+                model = sent + math.exp(-held / self.lag) * (model - sent)
+                hold = max(dt, held)
+                if self.design_hold > hold:       # a late step not long ago: back to dt slowly
+                    hold = max(hold, dt + (self.design_hold - dt) * math.exp(
+                        -held / self.HOLD_MEMORY))
+            a = math.exp(-hold / self.lag)
             thrusts = np.minimum(np.maximum((thrusts - a * model) / (1.0 - a), self.allocator.lo),
                                  self.allocator.hi)
         commands = self.curve.command(thrusts)
         if len(self._dead):
             commands[..., self._dead] = 0
         if compensate:
-            self.modelled_thrusts = a * model + (1.0 - a) * self.curve.thrust(commands)
+            self.modelled_thrusts = model
+            self.sent_thrusts = self.curve.thrust(commands)
+            self.design_hold = hold
         return MotorOutput(commands, self.curve.normalised(commands), allocation)

@@ -64,6 +64,7 @@ class ControlLoop:
         self.Omega = None
         self.setpoint_note = None       # last set-point refusal, for diagnostics
         self.last_tick = None
+        self._last_now = None           # the time of the last tick
         self._moment = np.zeros(3)      # what the rotors were last told to produce
         self._schedule_index = -1
         # per diagnostics window: input ages at the ticks, armed ticks saturated / bridging
@@ -151,8 +152,12 @@ class ControlLoop:
 
     # --- the control tick --------------------------------------------------------------------
     def tick(self, now, dt):
-        """One control step at time now (the node's clock); dt is the control period."""
+        """One control step at time now (the node's clock); dt is the control period (the time
+        the step's command is expected to be held)."""
         armed = self.supervisor.check(now)
+        # how long the last command was held (the lag compensation's model needs the real time)
+        held = None if self._last_now is None else now - self._last_now
+        self._last_now = now
         schedule = self.setup.schedule
         if armed and len(schedule):
             i = schedule.index_at(now - self.supervisor.armed_since)
@@ -176,7 +181,7 @@ class ControlLoop:
                 self.disarm(NON_FINITE)
                 armed, out = False, None
             motors = self.setup.mixer.mix(np.zeros(3) if out is None else out.u, armed=armed,
-                                          dt=dt)
+                                          dt=dt, held=held)
             self._moment = motors.allocation.moment if armed else np.zeros(3)
             tick = Tick(out, motors, armed, self.pose.last_stamp, bridging)
         if self.pose.last_receipt is not None:

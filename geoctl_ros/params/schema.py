@@ -303,6 +303,10 @@ SCHEMA = [
     _p('latency', 'double', 0.0, 's', 'measurement latency of a scenario run: the controller sees '
        'the state this long ago (a whole number of integration steps)', SCENARIO,
        check=lambda v: None if 0.0 <= v <= 0.1 else 'must be in [0, 0.1]'),
+    _p('tick_jitter', 'double', 0.0, 's', 'lateness of a scenario run\'s control steps: each comes a '
+       'random 0..tick_jitter (uniform, whole integration steps, seeded by noise.seed) more than '
+       'a period after the one before, as on a busy machine; a command is held until the next', SCENARIO,
+       check=lambda v: None if 0.0 <= v <= 0.2 else 'must be in [0, 0.2]'),
 ]
 
 # Per-cone parameters; <name> is one of cones.names.

@@ -110,6 +110,8 @@ def run_batch(scenarios, progress=None):
                                                       np.zeros(3), 0.0)),
                   np.array([so3.quat_to_rot(s.sim['initial_attitude']) for s in scenarios]),
                   stack('sim', 'initial_angular_velocity'))
+    if any(s.options['tick_jitter'] > 0.0 for s in scenarios):
+        raise ValueError('run_batch flies on-time control steps only (scenario: tick_jitter)')
     if sv['disturbance.amplitude'].any():
         raise ValueError('run_batch flies constant disturbances only')
     geometry, curve, failed = airframe(sv)

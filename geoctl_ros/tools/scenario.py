@@ -8,7 +8,8 @@ control step) and PNG plots like the paper's figures.
 
 ``scenario.latency`` delays the measurements: at each control step the controller sees the
 simulated state of ``latency`` seconds before (noise added to that state), as a motion-capture
-and IMU chain with that delay would deliver it.
+and IMU chain with that delay would deliver it. ``scenario.tick_jitter`` makes the control steps
+late, as a busy machine's timer does: each command is held until the next step comes.
 """
 import argparse
 import collections
@@ -79,6 +80,19 @@ def from_sections(sections, name):
     return Scenario(name, resolved[CONTROLLER], resolved[SIM], resolved[SCENARIO])
 
 
+def hold_steps(steps, n_sub, jitter, seed):
+    """How many integration steps each control step's command is held, for a run of ``steps``
+    periods of n_sub integration steps: n_sub each, or with jitter (in integration steps, > 0)
+    n_sub plus a uniform random whole number in 0..jitter, as on a machine too busy to run the
+    loop on time: the steps come late, one after the other, and fewer fit in the run. From a
+    stream of its own of ``seed``, so the noise is the same with and without it."""
+    if jitter <= 0.0:
+        return np.full(steps, n_sub)
+    holds = n_sub + np.random.default_rng([seed, 1]).integers(0, int(round(jitter)) + 1, steps)
+    starts = np.cumsum(holds) - holds
+    return holds[starts < steps * n_sub]
+
+
 @dataclass
 class Result:
     scenario: Scenario
@@ -106,7 +120,10 @@ def run(scenario, duration=None):
     n_sub = int(round(scenario.sim['integration_rate_hz'] / rate))
     dt, h = 1.0 / rate, 1.0 / (rate * n_sub)
     duration = scenario.options['duration'] if duration is None else duration
-    steps = int(round(duration * rate))
+    # each command is held until the next step: a period, or longer with scenario.tick_jitter
+    holds = hold_steps(int(round(duration * rate)), n_sub, scenario.options['tick_jitter'] / h,
+                       scenario.sim['noise.seed'])
+    steps = len(holds)
     cones = ccfg.cones
     names = cones.names
     n_dbar = ccfg.n_params
@@ -158,7 +175,7 @@ def run(scenario, duration=None):
         else:
             command = out.u
         hist[k] = np.concatenate(row)
-        for _ in range(n_sub):
+        for _ in range(holds[k]):
             sim.step(command, h)
             past.append((plant.R, plant.Omega))
             if len(cones):
