@@ -33,6 +33,10 @@ def hat(x):
 def cross(a, b):
     """Cross product of 3-vectors, or of stacks of them (np.cross costs ~10x more for single
     vectors)."""
+    if a.ndim == 1 and b.ndim == 1:      # one pair: float arithmetic beats array indexing
+        a0, a1, a2 = a.tolist()
+        b0, b1, b2 = b.tolist()
+        return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
     a, b = a.T, b.T
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
                      a[0] * b[1] - a[1] * b[0]]).T
@@ -53,10 +57,15 @@ def exp(w):
     """Rotation matrix exp(hat(w)) (Rodrigues), accurate for small angles; a stack (..., 3) gives a
     stack of rotations."""
     w = np.asarray(w, dtype=float)
-    if w.ndim == 1:
-        theta2 = float(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    if w.ndim == 1:       # one rotation, in floats: I + a hat(w) + b (w w^T - |w|^2 I)
+        x, y, z = w.tolist()
+        theta2 = x * x + y * y + z * z
         theta = math.sqrt(theta2)
         a, b = _rodrigues(theta2 < 1e-8, theta2, theta, math.sin(theta), math.cos(theta))
+        bxy, bxz, byz, ax, ay, az = b * x * y, b * x * z, b * y * z, a * x, a * y, a * z
+        return np.array([[1.0 - b * (y * y + z * z), bxy - az, bxz + ay],
+                         [bxy + az, 1.0 - b * (x * x + z * z), byz - ax],
+                         [bxz - ay, byz + ax, 1.0 - b * (x * x + y * y)]])
     else:
         theta2 = np.einsum('...i,...i->...', w, w)
         theta = np.sqrt(theta2)

@@ -39,8 +39,11 @@ class Disturbance:
     amplitude: np.ndarray
     frequency: float  # rad/s
 
+    def __post_init__(self):
+        object.__setattr__(self, '_varying', bool(np.any(self.amplitude)))
+
     def __call__(self, t):
-        if not self.amplitude.any():
+        if not self._varying:
             return self.constant
         s, c = math.sin(self.frequency * t), math.cos(self.frequency * t)
         return self.constant + self.amplitude * np.array([s, c, 0.5 * (s + c)])  # (not batched)
