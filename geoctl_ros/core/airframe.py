@@ -353,4 +353,6 @@ class Mixer:
             self.modelled_thrusts = model
             self.sent_thrusts = self.curve.thrust(commands)
             self.design_hold = hold
+        elif self.modelled_thrusts is not None:     # compensation turned off: a stale model
+            self.modelled_thrusts = self.sent_thrusts = self.design_hold = None   # is not kept
         return MotorOutput(commands, self.curve.normalised(commands), allocation)
