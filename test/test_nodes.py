@@ -338,14 +338,17 @@ def test_step_on_imu_steps_on_every_sample_and_the_timer_still_fails_safe(ros):
     sent0, t0 = mon.fed, time.monotonic()
     mon.spin_for(2.0)
     sent, commands = mon.fed - sent0, len(mon.since('motors', t0))
+    t1 = time.monotonic()
     assert sent > 250, sent                                   # the feeder kept up (> 125 Hz)
     assert commands > 0.5 * sent, (commands, sent)            # and the commands came back
-    windows = [d for t, d in mon.log['diagnostics'] if t > t0]     # 0.5 s each, armed
+    # the controller's 0.5 s windows (diagnostics published between them on events are skipped)
+    diags = [(t, d) for t, d in mon.log['diagnostics'] if t0 < t <= t1]
     pairs = [(int(b['ticks']), int(b['imu accepted/refused'].split('/')[0])
-              - int(a['imu accepted/refused'].split('/')[0])) for a, b in zip(windows, windows[1:])]
-    assert len(pairs) >= 2, pairs
+              - int(a['imu accepted/refused'].split('/')[0]))
+             for (ta, a), (tb, b) in zip(diags, diags[1:]) if tb - ta > 0.4]
+    assert len([p for p in pairs if p[1] > 1.2 * 50]) >= 2, pairs      # samples came fast
     for ticks, accepted in pairs:     # a step per sample (and the timer's where one was late)
-        assert ticks >= accepted - 2 and ticks > 1.2 * 50, pairs        # the timer: 50 a window
+        assert ticks >= accepted - 2, pairs                             # the timer: 50 a window
     mon.stop_feed()
     t_drop = time.monotonic()
     mon.wait_for(lambda: zero_commands(mon), 2.0, 'zero commands after the drop-out')
