@@ -39,7 +39,7 @@ ConeSet with axes (batch, n, 3) and half-angles (batch, n); it evaluates a stack
 import numpy as np
 
 from geoctl_ros.core.flags import any_flag
-from geoctl_ros.core.so3 import hat, matvec
+from geoctl_ros.core.so3 import hat, matvec, vecmat
 
 
 def angle_deg(s):
@@ -75,7 +75,7 @@ class ConeEval:
     def e_RB_sum(self):
         """sum_i e_RB,i (per run of a batch)."""
         if self._e_RB is None:
-            return np.vecmat(self.weight, self.cross)
+            return vecmat(self.weight, self.cross)
         return self._e_RB.sum(axis=-2)
 
     def margins_deg(self, half_angles_deg):

@@ -36,7 +36,7 @@ from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.core.flags import any_flag
 from geoctl_ros.core.mechanics import cog_regressor, first_moment, gravity_moment, pivot_inertia
 from geoctl_ros.core import so3
-from geoctl_ros.core.so3 import cross, matvec, vee
+from geoctl_ros.core.so3 import cross, matvec, transpose, vee
 
 # Disturbance models: name -> number of estimated parameters (the columns of W).
 #   constant:      W = I,                     Delta = a constant moment (the paper's case)
@@ -106,10 +106,10 @@ class ControlOutput(NamedTuple):
 
 def attractive_error(R, R_d, G):
     """A (eq. 13) and e_RA (eq. 15) for the diagonal weights G (3,)."""
-    RdtR = R_d.mT @ R
+    RdtR = transpose(R_d) @ R
     A = 0.5 * ((1.0 - np.diagonal(RdtR, 0, -2, -1)) @ G)
     M = G[:, None] * RdtR            # G R_d^T R; its transpose is R^T R_d G
-    return A, 0.5 * vee(M - M.mT)
+    return A, 0.5 * vee(M - transpose(M))
 
 
 def E_matrix(R, R_d, G):
@@ -331,7 +331,7 @@ class AttitudeController:
         e_Omega = Omega
         tracking = self._tracking
         if tracking:
-            RtRd = R.mT @ self.R_d
+            RtRd = transpose(R) @ self.R_d
             Omega_d = matvec(RtRd, self.Omega_d)
             e_Omega = Omega - Omega_d
         W = self.regressor(R)
@@ -346,7 +346,7 @@ class AttitudeController:
         adapting = adapt and cfg.adaptive and ~saturated      # a flag per run
         if adapting is not False and any_flag(adapting):
             v = e_Omega + cfg.c * e_R
-            rate = (dt * cfg.k_Delta) * (v if W is None else matvec(W.mT, v))
+            rate = (dt * cfg.k_Delta) * (v if W is None else matvec(transpose(W), v))
             if rate.ndim > 1:                   # a batch: only the runs that adapt
                 rate *= adapting[..., None]
             self.delta_bar += rate
@@ -360,7 +360,7 @@ class AttitudeController:
         """Project each block of the estimate onto its ball (bounds of 0 mean unbounded)."""
         for block, bound in self._balls:
             part = self.delta_bar[..., block]
-            n2 = np.vecdot(part, part)
+            n2 = so3.dot(part, part)
             if any_flag(n2 > bound * bound):
                 part *= (bound / np.maximum(np.sqrt(n2), bound))[..., None]
 

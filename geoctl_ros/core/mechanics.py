@@ -7,7 +7,7 @@ campaign) and works on each.
 """
 import numpy as np
 
-from geoctl_ros.core.so3 import cross, hat
+from geoctl_ros.core.so3 import cross, hat, vecmat
 
 
 def pivot_inertia(inertia_cm, mass, rho):
@@ -31,9 +31,9 @@ def gravity_moment(R, m_rho, g_w):
     With the centre of mass above the pivot this moment tips the body further over (an
     inverted pendulum). It is linear in m_rho = m * rho: gravity_moment = cog_regressor(R, g_w) @ m_rho.
     """
-    return cross(m_rho, np.vecmat(g_w, R))       # g_w^T R = (R^T g_w)^T
+    return cross(m_rho, vecmat(g_w, R))       # g_w^T R = (R^T g_w)^T
 
 
 def cog_regressor(R, g_w):
     """The 3x3 matrix Y with gravity_moment(R, m_rho, g_w) == Y @ m_rho, i.e. -hat(R^T g_w)."""
-    return -hat(np.vecmat(g_w, R))
+    return -hat(vecmat(g_w, R))

@@ -6,10 +6,14 @@ takes and returns plain numpy arrays; none of them validates its input (that bel
 boundary, see ``geoctl_ros.params`` and the nodes), but all stay accurate for rotation angles near
 0 and near pi.
 
-Batches: ``hat``, ``cross``, ``vee``, ``exp`` and ``matvec`` also take a stack of vectors (..., 3)
-or matrices (..., 3, 3) and work on each, so the campaign's batched simulation (many runs at once)
-uses the same formulas as a single run. (The trick: ``x.T[i]`` is component i of a single vector
-and the column of components i of a stack alike.)
+Batches: ``hat``, ``cross``, ``vee``, ``exp``, ``matvec``, ``vecmat``, ``dot`` and ``transpose``
+also take a stack of vectors (..., 3) or matrices (..., 3, 3) and work on each, so the campaign's
+batched simulation (many runs at once) uses the same formulas as a single run. (The trick:
+``x.T[i]`` is component i of a single vector and the column of components i of a stack alike.)
+
+numpy 1.26 and 2.x alike: Ubuntu 24.04 (the vehicle's stack) ships numpy 1.26, which has neither
+``ndarray.mT`` nor ``np.matvec``/``np.vecmat``/``np.vecdot``; the batched products here are those
+of the package, and ``test_package.py`` fails on any numpy name 1.26 lacks.
 """
 import math
 
@@ -50,7 +54,28 @@ def vee(M):
 
 def matvec(M, v):
     """M v for a matrix and a vector, or for each of a stack of them (broadcasting)."""
-    return np.matvec(M, v)
+    if v.ndim == 1:                      # one vector: M @ v, for one M or each of a stack
+        return M @ v
+    if M.ndim == 2:                      # one matrix, a stack of vectors: (M v_k)^T = v_k^T M^T
+        return v @ M.T
+    return np.einsum('...ij,...j->...i', M, v)
+
+
+def vecmat(v, M):
+    """v^T M (= M^T v) for a vector and a matrix, or for each of a stack of them."""
+    if v.ndim == 1 or M.ndim == 2:       # matmul broadcasts a 1-D side, or one matrix
+        return v @ M
+    return np.einsum('...j,...ji->...i', v, M)
+
+
+def dot(a, b):
+    """a . b for two vectors, or for each pair of two stacks of them."""
+    return np.einsum('...i,...i->...', a, b)
+
+
+def transpose(M):
+    """M^T for a matrix, or for each of a stack of them (a view)."""
+    return M.swapaxes(-1, -2)
 
 
 def exp(w):

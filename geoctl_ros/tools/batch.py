@@ -169,7 +169,7 @@ def run_batch(scenarios, progress=None):
         if progress is not None and (k + 1) % 100 == 0:
             progress((k + 1) / steps)
     final = controller.step(plant.R, plant.Omega, dt, adapt=False)
-    RdtR = controller.R_d.mT @ plant.R
+    RdtR = so3.transpose(controller.R_d) @ plant.R
     cos_err = np.clip(0.5 * (np.trace(RdtR, axis1=-2, axis2=-1) - 1.0), -1.0, 1.0)
     return BatchResult(
         names=[s.name for s in scenarios], min_margin_deg=min_margin,
