@@ -67,3 +67,28 @@ def test_project_returns_nearest_rotation():
     assert np.linalg.norm(P - R) < 2e-3
     reflected = np.diag([1.0, 1.0, -1.0])
     assert np.linalg.det(so3.project(reflected)) == pytest.approx(1.0)
+
+
+def test_batched_products_are_the_single_ones_bit_for_bit_and_what_they_say():
+    """A batch of runs must fly exactly as the runs one by one (the campaign's replays and its
+    agreement with the scenario runner rest on it): each stacked product rounds as the single one
+    does, and each is the product its name says (against an explicit sum)."""
+    rng = np.random.default_rng(5)
+    Ms, vs, ws = rng.normal(size=(64, 3, 3)), rng.normal(size=(64, 3)), rng.normal(size=(64, 3))
+    M, v = Ms[0], vs[0]
+    explicit = np.array([[sum(Mk[i, j] * vk[j] for j in range(3)) for i in range(3)]
+                         for Mk, vk in zip(Ms, vs)])
+    cases = [
+        (so3.matvec(Ms, vs), [so3.matvec(a, b) for a, b in zip(Ms, vs)], explicit),
+        (so3.matvec(M, vs), [so3.matvec(M, b) for b in vs], vs @ M.T),
+        (so3.matvec(Ms, v), [so3.matvec(a, v) for a in Ms], Ms @ v),
+        (so3.vecmat(vs, Ms), [so3.vecmat(b, a) for a, b in zip(Ms, vs)],
+         np.array([Mk.T @ vk for Mk, vk in zip(Ms, vs)])),
+        (so3.vecmat(vs, M), [so3.vecmat(b, M) for b in vs], vs @ M),
+        (so3.vecmat(v, Ms), [so3.vecmat(v, a) for a in Ms], np.array([Mk.T @ v for Mk in Ms])),
+        (so3.dot(vs, ws), [so3.dot(a, b) for a, b in zip(vs, ws)], (vs * ws).sum(axis=1)),
+        (so3.transpose(Ms), [so3.transpose(a) for a in Ms], np.array([Mk.T for Mk in Ms])),
+    ]
+    for batched, singles, meant in cases:
+        assert np.array_equal(batched, np.array(singles))
+        np.testing.assert_allclose(batched, meant, rtol=0, atol=1e-14)
