@@ -11,6 +11,8 @@ from geoctl_ros.core.airframe import (AirframeError, Allocator, RotorGeometry, T
 from geoctl_ros.params import CONTROLLER, ConfigError, resolve
 from geoctl_ros.sim.testbed import RotorActuator
 
+pytestmark = pytest.mark.odroid
+
 RHO = np.array([0.0, 0.0, 0.1])
 LAB_CURVE = ThrustCurve(np.full(6, 6.0252e-5), np.full(6, 8.4086e-3), np.full(6, -2.5194e-2),
                         1.1261, 240)

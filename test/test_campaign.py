@@ -10,6 +10,8 @@ from geoctl_ros.params import load_parameter_file
 from geoctl_ros.tools import campaign, scenario
 from geoctl_ros.tools.batch import run_batch
 
+pytestmark = pytest.mark.odroid
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TESTBED = os.path.join(ROOT, 'config', 'testbed.yaml')
 

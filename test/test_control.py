@@ -13,6 +13,8 @@ from geoctl_ros.core.control import (AttitudeController, ControllerConfig, E_mat
                                 linear_terms)
 from geoctl_ros.sim.plant import Disturbance, PlantConfig, Plant
 
+pytestmark = pytest.mark.odroid
+
 rng = np.random.default_rng(7)
 G = np.array([0.9, 1.1, 1.0])
 J_PAPER = np.array([[5.57e-3, 6.17e-5, -2.50e-5], [6.17e-5, 5.57e-3, 1.00e-5],

@@ -9,6 +9,8 @@ from geoctl_ros.core import so3
 from geoctl_ros.core.loop import ERROR, NON_FINITE, OK, WARN, ControlLoop
 from geoctl_ros.params import CONTROLLER, ConfigError, controller_setup, resolve
 
+pytestmark = pytest.mark.odroid
+
 YAW90 = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))
 CONE = {'cones.names': ['obstacle'], 'cones.obstacle.axis': [1.0, 1.0, 0.0],
         'cones.obstacle.half_angle_deg': 12.0}

@@ -16,6 +16,8 @@ from geoctl_ros.mavlink.params import BY_ID, TABLE, to_mavlink, to_ros  # noqa: 
 from geoctl_ros.mavlink.vehicle import Vehicle  # noqa: E402
 from geoctl_ros.params import BY_NAME  # noqa: E402
 
+pytestmark = pytest.mark.odroid
+
 
 def yaw(deg):
     return so3.axis_angle([0, 0, 1], math.radians(deg))

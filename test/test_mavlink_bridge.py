@@ -22,6 +22,8 @@ from geoctl_ros.tools.processes import NodeProcess  # noqa: E402
 from geoctl_ros.tools.rosenv import config_dir  # noqa: E402
 from support import FakeInputs  # noqa: E402
 
+pytestmark = pytest.mark.dds
+
 TESTBED = os.path.join(config_dir(), 'testbed.yaml')
 SYSID = 7
 

@@ -15,6 +15,8 @@ from geoctl_ros.params import cone_set, controller_setup, load_parameter_file, n
 from geoctl_ros.tools.processes import NodeProcess  # noqa: E402
 from support import FakeInputs  # noqa: E402
 
+pytestmark = pytest.mark.dds
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TESTBED = os.path.join(ROOT, 'config', 'testbed.yaml')
 LEVEL_YAW90 = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))     # the testbed's start attitude
@@ -70,6 +72,7 @@ def zero_commands(mon):
     return mon.last('motors') is not None and not any(mon.last('motors'))
 
 
+@pytest.mark.odroid          # the one flight over DDS on the vehicle's stack too
 def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros):
     mon, launch = ros
     launch('sim')

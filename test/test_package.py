@@ -14,6 +14,8 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.odroid
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PKG = os.path.join(ROOT, 'geoctl_ros')
 LAYERS = ['core', 'sim', 'params', 'mavlink', 'nodes', 'tools']      # lowest first

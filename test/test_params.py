@@ -9,6 +9,8 @@ import pytest
 from geoctl_ros import params
 from geoctl_ros.params import CONTROLLER, SIM, ConfigError, resolve
 
+pytestmark = pytest.mark.odroid
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 ONE_CONE = {'cones.names': ['sun'], 'cones.sun.axis': [1.0, 1.0, 0.0],

@@ -10,6 +10,8 @@ from geoctl_ros.params import LAB_INERTIA
 from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
 from geoctl_ros.sim.testbed import EscWatchdog
 
+pytestmark = pytest.mark.odroid
+
 J_LAB = np.array(LAB_INERTIA).reshape(3, 3)
 NO_DIST = Disturbance(np.zeros(3), np.zeros(3), 0.0)
 G_W = np.array([0.0, 0.0, -9.81])

@@ -10,6 +10,8 @@ import pytest
 
 from geoctl_ros.tools import scenario
 
+pytestmark = pytest.mark.odroid
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENARIOS = os.path.join(ROOT, 'config', 'scenarios')
 FIGURES = ['attitude_error.png', 'psi.png', 'cone_angles.png', 'disturbance.png',

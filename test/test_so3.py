@@ -6,6 +6,8 @@ import pytest
 
 from geoctl_ros.core import so3
 
+pytestmark = pytest.mark.odroid
+
 rng = np.random.default_rng(42)
 
 

@@ -21,6 +21,8 @@ from geoctl_ros.tools.rosenv import cli_env, config_dir  # noqa: E402
 from geoctl_ros.tools.processes import NodeProcess, process_sockets  # noqa: E402
 from geoctl_ros.tools.soak import Session, command_gaps  # noqa: E402
 
+pytestmark = pytest.mark.dds
+
 TESTBED = os.path.join(config_dir(), 'testbed.yaml')
 ROS2 = shutil.which('ros2', path=os.path.dirname(sys.executable)) or shutil.which('ros2')
 needs_ros2 = pytest.mark.skipif(ROS2 is None, reason='no `ros2` command: install it from '
