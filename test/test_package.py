@@ -7,6 +7,7 @@ without it: they parse, and every executable, parameter file and remapping they 
 import ast
 import os
 import re
+import shutil
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -94,21 +95,74 @@ def test_launch_files_name_only_what_exists(name):
     assert "('share/' + PACKAGE + '/launch'" in open(os.path.join(ROOT, 'setup.py')).read()
 
 
-def test_package_xml_declares_what_the_code_imports():
-    deps = set(re.findall(r'<exec_depend>([\w-]+)</exec_depend>',
-                          open(os.path.join(ROOT, 'package.xml')).read()))
-    imported = set()
-    for dirpath, _, files in os.walk(PKG):
+# what `rosdep install` resolves for each import that is not a ROS package of the same name
+# (keys from rosdistro's rosdep/python.yaml; pymavlink has no Ubuntu package, its key is pip's)
+ROSDEP_KEYS = {'numpy': 'python3-numpy', 'yaml': 'python3-yaml',
+               'matplotlib': 'python3-matplotlib', 'pymavlink': 'python3-pymavlink-pip',
+               'pytest': 'python3-pytest'}
+ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python', 'std_msgs',
+                'geometry_msgs', 'sensor_msgs', 'std_srvs', 'diagnostic_msgs', 'rosgraph_msgs'}
+
+
+def _third_party_imports(top):
+    found = set()
+    for dirpath, _, files in os.walk(os.path.join(ROOT, top)):
         for f in files:
             if f.endswith('.py'):
-                imported |= {m.split('.')[0] for m in _imports(os.path.join(dirpath, f))}
-    ros = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python', 'std_msgs',
-           'geometry_msgs', 'sensor_msgs', 'std_srvs', 'diagnostic_msgs', 'rosgraph_msgs'}
-    assert (imported & ros) <= deps, (imported & ros) - deps
-    assert {'python3-numpy', 'python3-yaml', 'python3-matplotlib'} <= deps
+                found |= {m.split('.')[0] for m in _imports(os.path.join(dirpath, f))}
+    local = {f[:-3] for d in ('test', 'benchmarks') for f in os.listdir(os.path.join(ROOT, d))
+             if f.endswith('.py')}                      # the tests' own helpers
+    return found - set(sys.stdlib_module_names) - local - {'geoctl_ros'}
+
+
+def test_package_xml_declares_what_the_code_imports():
+    """Every import of the package (exec_depend) and of its tests (test_depend) is declared
+    with the key a lab's `rosdep install` resolves on Ubuntu 24.04."""
+    xml = open(os.path.join(ROOT, 'package.xml')).read()
+    exec_deps = set(re.findall(r'<exec_depend>([\w-]+)</exec_depend>', xml))
+    test_deps = set(re.findall(r'<test_depend>([\w-]+)</test_depend>', xml)) | exec_deps
+    for top, declared in (('geoctl_ros', exec_deps), ('test', test_deps)):
+        imported = _third_party_imports(top)
+        unknown = imported - ROS_PACKAGES - set(ROSDEP_KEYS)
+        assert not unknown, '%s imports %s: add its rosdep key here and to package.xml' % (
+            top, sorted(unknown))
+        keys = {ROSDEP_KEYS.get(m, m) for m in imported}
+        assert keys <= declared, '%s: package.xml lacks %s' % (top, sorted(keys - declared))
     assert os.path.isfile(os.path.join(ROOT, 'LICENSE'))
     assert 'BSD 3-Clause' in open(os.path.join(ROOT, 'LICENSE')).read()
 
+
+@pytest.mark.skipif(not os.path.exists(os.path.join(os.path.dirname(sys.executable), 'colcon')),
+                    reason='no colcon in this stack (requirements-odroid.txt has it)')
+def test_colcon_builds_installs_and_tests_the_package_as_on_the_vehicle(tmp_path):
+    """The apt path's last two steps, in a workspace of its own: `colcon build` installs every
+    console script where `ros2 run` looks and the files the launch files name, and `colcon
+    test` runs the package's pytest suite (one module of it here)."""
+    ws = tmp_path / 'ws'
+    skip = shutil.ignore_patterns('.venv*', 'build', 'install', 'log', '.git', '__pycache__', 'out')
+    shutil.copytree(ROOT, ws / 'src' / 'geoctl_ros', ignore=skip)
+    env = dict(os.environ, PATH=os.path.dirname(sys.executable) + os.pathsep + os.environ['PATH'])
+
+    def colcon(*args):
+        r = subprocess.run(['colcon'] + list(args), cwd=ws, env=env, capture_output=True,
+                           text=True, timeout=300)
+        assert r.returncode == 0, r.stdout + r.stderr
+        return r.stdout
+    colcon('build', '--packages-select', 'geoctl_ros')
+    prefix = ws / 'install' / 'geoctl_ros'
+    assert set(os.listdir(prefix / 'lib' / 'geoctl_ros')) >= _console_scripts()
+    share = prefix / 'share' / 'geoctl_ros'
+    for f in ('package.xml', 'config/testbed.yaml', 'config/dds/fastdds_loopback.xml',
+              'launch/testbed.launch.xml', 'launch/sil.launch.xml'):
+        assert (share / f).is_file(), f
+    assert (prefix / 'share' / 'ament_index' / 'resource_index' / 'packages' / 'geoctl_ros').is_file()
+    r = subprocess.run([str(prefix / 'lib' / 'geoctl_ros' / 'scenario'), '--help'], env=env,
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and 'usage' in r.stdout, r.stderr
+    colcon('test', '--packages-select', 'geoctl_ros', '--pytest-args', 'test/test_so3.py')
+    summary = colcon('test-result', '--all')
+    m = re.search(r'(\d+) tests, 0 errors, 0 failures', summary)
+    assert m and int(m.group(1)) >= 5, summary
 
 NUMPY_1_26 = os.path.join(ROOT, 'test', 'data', 'numpy-1.26.txt')
 
