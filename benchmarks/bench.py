@@ -2,6 +2,8 @@
 
     ./run shell benchmarks/bench.py                   # print figures and the ratio to the baseline
     ./run shell benchmarks/bench.py --update-baseline # record this machine's figures as the baseline
+    ./run shell benchmarks/bench.py --against REV     # this tree against a git revision, same run
+    ./run --odroid shell benchmarks/bench.py ...      # the same on the vehicle's stack
 
 Figures are microseconds per call (the fastest of several repeats). The control tick must fit in the
 control period with room to spare on the ODROID (10 ms at 100 Hz, 2 ms at 500 Hz); the baseline
@@ -177,7 +179,69 @@ def batched():
     return rows
 
 
+def figures():
+    """The figures that can be set side by side across trees and stacks: name -> microseconds
+    (for the batched loop, microseconds of wall time per simulated second per run)."""
+    out = measure()
+    rows, tick = side_by_side()
+    for n, a, _, _, _ in rows:
+        out['control step vs transcription, %d cones' % n] = a
+    for label, (p50, p99, _) in zip(('node tick to motor command', 'node tick, whole'), tick):
+        out[label + ' p50'], out[label + ' p99'] = p50, p99
+    for n, wall, _ in batched():
+        out['batched loop, %d runs, per run-second' % n] = 1e6 * wall / n
+    return out
+
+
+def against(rev, rounds=3):
+    """This tree against git revision `rev`, on this interpreter, alternating rounds (A B A B ..)
+    in fresh processes so that a busy machine slows both alike; the fastest round of each."""
+    import subprocess
+    import tempfile
+    root = os.path.dirname(HERE)
+    with tempfile.TemporaryDirectory() as tmp:
+        archive = subprocess.run(['git', 'archive', rev, 'geoctl_ros', 'config'], cwd=root,
+                                 capture_output=True, check=True).stdout
+        subprocess.run(['tar', '-x', '-C', tmp], input=archive, check=True)
+        trees = {rev: tmp, 'this tree': root}
+        best, failed = {}, {}
+        for _ in range(rounds):
+            for label, tree in trees.items():
+                if label in failed:
+                    continue
+                env = dict(os.environ, PYTHONPATH=tree)   # ahead of the editable install
+                r = subprocess.run([sys.executable, os.path.abspath(__file__), '--json'],
+                                   env=env, capture_output=True, text=True)
+                if r.returncode != 0:
+                    failed[label] = (r.stderr.strip().splitlines() or ['exit %d' % r.returncode])[-1]
+                    continue
+                got = json.loads(r.stdout.strip().splitlines()[-1])
+                assert got.pop('tree') == tree, 'ran %s, not %s' % (got, tree)
+                for k, v in got.items():
+                    best.setdefault(label, {})[k] = min(v, best.get(label, {}).get(k, v))
+    import numpy
+    print('%s (Python %s, numpy %s): fastest of %d alternating rounds, us'
+          % (rev, sys.version.split()[0], numpy.__version__, rounds))
+    for label, why in failed.items():
+        print('%s: fails: %s' % (label, why))
+    mine, theirs = best.get('this tree', {}), best.get(rev, {})
+    print('%-46s %10s %10s %7s' % ('figure', rev[:10], 'this tree', 'ratio'))
+    for k, v in mine.items():
+        old = theirs.get(k)
+        print('%-46s %10s %10.1f %7s' % (k, '%.1f' % old if old else '-', v,
+                                          '%.2f' % (v / old) if old else '-'))
+    return 0
+
+
 def main(argv):
+    if '--json' in argv:
+        import geoctl_ros
+        out = figures()
+        out['tree'] = os.path.dirname(os.path.dirname(os.path.abspath(geoctl_ros.__file__)))
+        print(json.dumps(out))
+        return 0
+    if '--against' in argv:
+        return against(argv[argv.index('--against') + 1])
     results = measure()
     if '--update-baseline' in argv:
         with open(BASELINE, 'w') as f:
