@@ -2,7 +2,7 @@
 
     ./run shell benchmarks/bench.py                   # print figures and the ratio to the baseline
     ./run shell benchmarks/bench.py --update-baseline # record this machine's figures as the baseline
-    ./run shell benchmarks/bench.py --against REV     # this tree against a git revision, same run
+    ./run shell benchmarks/bench.py --against REV [--rounds 3]  # this tree against a revision
     ./run --odroid shell benchmarks/bench.py ...      # the same on the vehicle's stack
 
 Figures are microseconds per call (the fastest of several repeats). The control tick must fit in the
@@ -241,7 +241,8 @@ def main(argv):
         print(json.dumps(out))
         return 0
     if '--against' in argv:
-        return against(argv[argv.index('--against') + 1])
+        rounds = int(argv[argv.index('--rounds') + 1]) if '--rounds' in argv else 3
+        return against(argv[argv.index('--against') + 1], rounds)
     results = measure()
     if '--update-baseline' in argv:
         with open(BASELINE, 'w') as f:
