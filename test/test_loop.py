@@ -39,6 +39,24 @@ def test_disarmed_until_armed_with_fresh_inputs():
     assert tick.armed and np.all(tick.motors.commands > 0)
 
 
+def test_a_loop_nobody_configured_refuses_every_arm_until_the_opt_in():
+    why = 'no configuration given: started without a parameter file'
+    loop = ControlLoop(controller_setup(resolve(CONTROLLER, CONE)), unconfigured=why)
+    for t in (1.0, 2.0):
+        feed(loop, t)
+        refused = loop.arm(t)                     # fresh inputs, and still no
+        assert not refused.ok and why in refused.message
+        tick = loop.tick(t, 0.01)
+        assert not tick.armed and not tick.motors.commands.any()
+    st = loop.status(2.0)
+    assert st.level == WARN and why in st.message
+    # the opt-in, set at run time
+    assert loop.reconfigure(controller_setup(resolve(
+        CONTROLLER, dict(CONE, allow_default_configuration=True)))) is None
+    feed(loop, 3.0)
+    assert loop.arm(3.0).ok and loop.tick(3.0, 0.01).motors.commands.all()
+
+
 def test_without_ride_through_a_stale_input_disarms_at_its_timeout_and_stays_disarmed():
     loop = make_loop(imu_timeout=0.05, pose_timeout=0.1, imu_ride_through=0.0,
                      pose_ride_through=0.0)

@@ -268,6 +268,34 @@ def test_a_bad_parameter_file_stops_the_node_with_the_reason(ros, tmp_path):
     assert 'k_Omega: must be > 0' in out and 'G: weights must be distinct' in out
 
 
+def test_a_parameter_file_that_does_not_exist_stops_the_node_naming_it(ros, tmp_path):
+    _, launch = ros
+    p = launch('controller', tmp_path / 'missing.yaml')
+    assert p.proc.wait(30) == 2
+    out = p.output()
+    assert 'controller: cannot start' in out and 'missing.yaml' in out
+    assert 'Traceback' not in out
+
+
+def test_without_a_parameter_file_every_arm_is_refused_until_the_opt_in(ros):
+    mon, launch = ros
+    launch('controller', None)             # as `ros2 run geoctl_ros controller`, nothing given
+    wait_for_controller(mon)
+    mon.feed(LEVEL_YAW90)
+    mon.wait_for(mon.controller_has_inputs, 10.0, 'fresh inputs at the controller')
+    reply = mon.arm(True)
+    assert not reply.success and 'no configuration given' in reply.message, reply.message
+    mon.spin_for(0.6)                      # a diagnostics window
+    diag = mon.last_diagnostic()
+    assert diag['level'] == WARN and 'no configuration given' in diag['message']
+    assert zero_commands(mon) and diag['armed'] == 'False'
+    assert mon.set_parameter('allow_default_configuration', True).successful
+    reply = mon.arm_when_ready()
+    assert reply.success, reply.message
+    mon.wait_for(lambda: not zero_commands(mon), 2.0, 'the motors running on the defaults')
+    assert mon.arm(False).success
+
+
 def test_sim_refuses_garbage_motor_commands(ros):
     mon, launch = ros
     sim = launch('sim')

@@ -51,8 +51,11 @@ class Status:
 class ControlLoop:
     """State and decisions of the controller node."""
 
-    def __init__(self, setup):
+    def __init__(self, setup, unconfigured=None):
+        """unconfigured: None, or why the node has no configuration anyone gave (it then
+        refuses every arm request with that reason)."""
         self.setup = setup
+        self.unconfigured = unconfigured
         self.controller = AttitudeController(setup.config)
         self.controller.set_setpoint(setup.setpoint)
         v = setup.values
@@ -118,7 +121,7 @@ class ControlLoop:
     # --- commands ----------------------------------------------------------------------------
     def arm(self, now, extra_problem=None):
         """Arm unless an input is stale or extra_problem (a sentence from the caller) says no."""
-        result = self.supervisor.arm(now, extra_problem)
+        result = self.supervisor.arm(now, self.unconfigured or extra_problem)
         if result.ok:
             self._schedule_index = -1
         return result
@@ -148,6 +151,8 @@ class ControlLoop:
             self.controller.set_setpoint(setup.setpoint)
         if schedule_changed:
             self._schedule_index = -1
+        if v['allow_default_configuration']:      # the opt-in, given at run time
+            self.unconfigured = None
         return None
 
     # --- the control tick --------------------------------------------------------------------
@@ -215,6 +220,8 @@ class ControlLoop:
         sup = self.supervisor
         if not sup.armed:
             (errors if sup.reason.startswith('failsafe') else warnings).append(sup.reason)
+            if self.unconfigured:
+                warnings.append(self.unconfigured)
             stale = sup.input_problem(now)
             if stale:
                 warnings.append(stale)

@@ -37,13 +37,25 @@ def build(values):
 
 
 class ControllerNode(Node):
+    def _unconfigured(self, setup):
+        """Why this node flies nothing it was given, or None: no parameter file and no override
+        reached it (a launch file's missing params_file only warns and passes none)."""
+        given = set(self._parameter_overrides) - {'use_sim_time', 'allow_default_configuration'}
+        if given or setup.values['allow_default_configuration']:
+            return None
+        return ('no configuration given: started without a parameter file, so every arm '
+                'request is refused (give --params-file FILE, or -p '
+                'allow_default_configuration:=true to fly the built-in defaults deliberately)')
+
     def __init__(self, **kwargs):
         super().__init__('controller', allow_undeclared_parameters=True, **kwargs)
         errors = ros_params.declare(self, CONTROLLER)
         if errors:
             raise ConfigError(errors)
         setup = build(ros_params.values(self, CONTROLLER))
-        self.loop = ControlLoop(setup)
+        self.loop = ControlLoop(setup, self._unconfigured(setup))
+        if self.loop.unconfigured:
+            self.get_logger().warning(self.loop.unconfigured)
         unnamed = ros_params.unnamed_cones(self)
         if unnamed:
             self.get_logger().warning('cone(s) %s are defined but not in cones.names: not in '

@@ -1,7 +1,9 @@
 """Running a node: events executor, clean stop on SIGINT/SIGTERM, exit code 2 for bad parameters."""
 import signal
+import sys
 
 import rclpy
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.signals import SignalHandlerOptions
 
 from geoctl_ros.params import ConfigError
@@ -25,7 +27,12 @@ def spin(node_class, name, args=None):
     stop = _StopFlag()
     signal.signal(signal.SIGINT, stop)
     signal.signal(signal.SIGTERM, stop)
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except RCLError as e:         # e.g. a --params-file that does not exist or does not parse
+        reason = str(e).split(', at ')[0].replace('failed to initialize rcl: ', '')
+        sys.stderr.write('%s: cannot start: %s\n' % (name, reason))
+        return 2
     try:
         node = node_class()
     except ConfigError as e:

@@ -162,6 +162,10 @@ SCHEMA = [
        'desired attitude R_d as a quaternion (x, y, z, w), world frame', CONTROLLER, length=4,
        check=_unit_quaternion),
     _p('rate_hz', 'double', 100.0, 'Hz', 'control rate', CONTROLLER, check=_rate),
+    _p('allow_default_configuration', 'bool', False, '-',
+       'arm even when started with no parameter file and no override, on these built-in '
+       'defaults (no cones): for deliberate bench use only; otherwise every arm request is '
+       'refused', CONTROLLER),
     _p('step_on', 'string', 'timer', '-',
        'what starts a control step: the rate_hz timer, or each accepted imu or pose sample (the '
        'least latency; set rate_hz to that sample rate: the timer then steps only when no sample '
