@@ -83,12 +83,14 @@ def test_launch_files_name_only_what_exists(name):
     for node in nodes:
         assert node.get('pkg') == 'geoctl_ros'
         assert node.get('exec') in _console_scripts(), node.get('exec')
-        for param in node.iter('param'):
-            src = param.get('from')
-            m = re.fullmatch(r'\$\(var (\w+)\)', src)
-            src = args[m.group(1)] if m else src
-            path = src.replace('$(find-pkg-share geoctl_ros)', ROOT)
-            assert os.path.isfile(path), src
+        # the parameter file is passed as --params-file (a missing one then stops the node)
+        assert not list(node.iter('param')), 'a param element only warns on a missing file'
+        src = re.fullmatch(r'--params-file (.+)', node.get('ros_args')).group(1)
+        m = re.fullmatch(r'\$\(var (\w+)\)', src)
+        src = args[m.group(1)] if m else src
+        path = src.replace('$(find-pkg-share geoctl_ros)', ROOT)
+        assert os.path.isfile(path), src
+        assert node.get('on_exit') == 'shutdown'           # a node that stops ends the launch
         for remap in node.iter('remap'):
             assert remap.get('from') in subscribed[node.get('exec')], remap.get('from')
     # installed where ros2 launch looks for them
