@@ -1,5 +1,6 @@
 """The MAVLink bridge over UDP on 127.0.0.1: a pymavlink ground station and a fake autopilot against
 the real sim, controller and bridge processes (the sim in the loop)."""
+import hashlib
 import math
 import os
 import socket
@@ -237,3 +238,101 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     assert ctl['armed'] == 'True'                 # the flight went on through all of it
     assert loop_period_max_ms(ctl) < STALL_MS, ctl['loop period [ms]']
     back.conn.close()
+
+
+PASSPHRASE = 'lab passphrase'
+KEY = hashlib.sha256(PASSPHRASE.encode()).digest()          # as ground stations derive it
+
+
+def key_file(tmp_path, mode=0o600):
+    f = tmp_path / 'mavlink.key'
+    f.write_text(PASSPHRASE + '\n')
+    f.chmod(mode)
+    return str(f)
+
+
+def test_a_key_file_others_can_read_stops_the_bridge(tmp_path):
+    p = NodeProcess('mavlink_bridge', None, ('-p', 'mavlink.signing_key_file:=%s'
+                                             % key_file(tmp_path, 0o644)), log_dir=tmp_path)
+    try:
+        assert p.proc.wait(30) == 2
+        assert 'readable or writable by group or others' in p.output()
+    finally:
+        p.stop()
+
+
+def test_with_a_key_only_the_station_holding_it_reads_sets_arms_and_disarms(tmp_path):
+    gcs_port = free_udp_port()
+    gcs = Endpoint('udpin:127.0.0.1:%d' % gcs_port, 255, 190)
+    gcs.conn.setup_signing(KEY, sign_outgoing=True)         # it also refuses unsigned frames
+    procs = [NodeProcess('sim', TESTBED, log_dir=tmp_path),
+             NodeProcess('controller', TESTBED, log_dir=tmp_path),
+             NodeProcess('mavlink_bridge', None, (
+                 '-p', 'mavlink.url:=udpout:127.0.0.1:%d' % gcs_port,
+                 '-p', 'mavlink.system_id:=%d' % SYSID,
+                 '-p', 'mavlink.signing_key_file:=%s' % key_file(tmp_path)), log_dir=tmp_path)]
+    rclpy.init()
+    mon = FakeInputs()
+    stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        g = gcs.conn.mav
+        gcs.wait(lambda m: m.get_type() == 'HEARTBEAT' and is_ours(m), 40.0, 'a signed heartbeat')
+        bridge = next(iter(gcs.conn.clients))               # the bridge's address
+        g.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        mon.wait_for(mon.controller_has_inputs, 30.0, 'the controller to receive the sim')
+        t0 = time.monotonic()
+        g.param_request_list_send(SYSID, 1)
+        gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE' and m.param_index == len(TABLE) - 1,
+                 5.0, 'the whole parameter list')
+        assert len({p.param_id for p in gcs.since(t0, 'PARAM_VALUE')}) == len(TABLE)
+        t0 = time.monotonic()
+        g.param_set_send(SYSID, 1, b'GC_K_R', 0.5, mav.MAV_PARAM_TYPE_REAL32)
+        p = gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE' and m.param_id == 'GC_K_R', 5.0,
+                     'the new k_R', mon, since=t0)
+        assert p.param_value == pytest.approx(0.5)
+        captured = g.command_long_encode(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0,
+                                         0, 0, 0, 0).pack(g)      # an arm, as a sniffer sees it
+        t0 = time.monotonic()
+        gcs.conn.write(captured)
+        assert gcs.wait(lambda m: m.get_type() == 'COMMAND_ACK' and
+                        m.result != mav.MAV_RESULT_IN_PROGRESS, 10.0, 'the arm answer', mon,
+                        since=t0).result == mav.MAV_RESULT_ACCEPTED
+        mon.wait_for(lambda: mon.last_diagnostic()['armed'] == 'True', 3.0, 'armed')
+        t0 = time.monotonic()
+        g.command_long_send(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 0, 0, 0, 0, 0, 0)
+        mon.wait_for(lambda: mon.last_diagnostic()['armed'] == 'False', 5.0, 'disarmed')
+        # what a stranger on the link tries, from its own address: each must leave it disarmed
+        unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+        guess = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+        guess.signing.secret_key = hashlib.sha256(b'guess').digest()
+        guess.signing.sign_outgoing, guess.signing.link_id = True, g.signing.link_id
+        guess.signing.timestamp = g.signing.timestamp + 24 * 3600 * 100_000   # a day ahead
+        for frame in (unsigned.command_long_encode(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM,
+                                                   0, 1, 0, 0, 0, 0, 0, 0).pack(unsigned),
+                      unsigned.param_set_encode(SYSID, 1, b'GC_K_R', 0.9,
+                                                mav.MAV_PARAM_TYPE_REAL32).pack(unsigned),
+                      captured,                                          # the replay
+                      guess.command_long_encode(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM,
+                                                0, 1, 0, 0, 0, 0, 0, 0).pack(guess)):
+            stranger.sendto(frame, bridge)
+        mon.spin_for(1.5)
+        assert mon.last_diagnostic()['armed'] == 'False'
+        # the genuine station is not locked out by the forged frame from the future
+        t0 = time.monotonic()
+        g.param_request_read_send(SYSID, 1, b'GC_K_R', -1)
+        p = gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE', 5.0, 'a parameter read', mon,
+                     since=t0)
+        assert p.param_value == pytest.approx(0.5)                    # the stranger's 0.9 not
+        mon.spin_for(1.2)
+        diag = [d for _, d in mon.log['other diagnostics'] if 'signing' in d][-1]
+        assert diag['signing'] == 'on (link id 0)'
+        assert int(diag['refused unsigned']) == 2 and int(diag['refused replayed']) == 1
+        assert int(diag['refused bad signature']) == 1
+        assert 'from' in diag['last refused']
+    finally:
+        stranger.close()
+        mon.destroy_node()
+        rclpy.try_shutdown()
+        for p in procs:
+            p.stop()
+        gcs.conn.close()

@@ -1,6 +1,8 @@
-"""The bridge's MAVLink link against bad input, over real UDP on 127.0.0.1: a pymavlink ground
-station sends garbage of each kind, then a command, and must get its answer (no ROS: the link
-thread and the vehicle's answers are what the bridge node runs)."""
+"""The bridge's MAVLink link over real UDP on 127.0.0.1 against bad input and strangers: a
+pymavlink ground station sends garbage of each kind, then a command, and must get its answer; with
+a signing key, only a station with the key is answered (no ROS: the link thread and the vehicle's
+answers are what the bridge node runs)."""
+import hashlib
 import os
 import random
 import socket
@@ -14,6 +16,7 @@ from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v10 import common as mav1  # noqa: E402
 from pymavlink.dialects.v20 import common as mav  # noqa: E402
 
+from geoctl_ros.mavlink import signing  # noqa: E402
 from geoctl_ros.mavlink.link import Link, encoder  # noqa: E402
 from geoctl_ros.mavlink.vehicle import Vehicle  # noqa: E402
 
@@ -30,8 +33,9 @@ def free_udp_port():
 class Bridge:
     """The bridge's MAVLink half: a Link, and a thread that answers with the Vehicle."""
 
-    def __init__(self, port):
-        self.link = Link('udpin:127.0.0.1:%d' % port, 7, mav.MAV_COMP_ID_AUTOPILOT1)
+    def __init__(self, port, key=None):
+        self.link = Link('udpin:127.0.0.1:%d' % port, 7, mav.MAV_COMP_ID_AUTOPILOT1,
+                         signing=None if key is None else (key, 0, signing.now_timestamp()))
         self.vehicle = Vehicle(encoder(7, mav.MAV_COMP_ID_AUTOPILOT1), 7)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._serve, daemon=True)
@@ -122,3 +126,51 @@ def test_after_bad_input_the_next_command_is_answered_within_a_second(pair, kind
         kind, ANSWER_WITHIN, misses, TRIES, bridge.link.counts)
     if kind != 'MAVLink 1 frames':
         assert bridge.link.counts['bad data'] > 0
+
+
+KEY = hashlib.sha256(b'lab passphrase').digest()
+
+
+def ground_station(port, key=None, system=255):
+    gcs = mavutil.mavlink_connection('udpout:127.0.0.1:%d' % port, source_system=system,
+                                     source_component=190, dialect='common')
+    if key is not None:
+        gcs.setup_signing(key, sign_outgoing=True)      # and refuses unsigned frames itself
+    return gcs
+
+
+def test_with_a_key_only_a_station_holding_it_is_answered():
+    port = free_udp_port()
+    bridge = Bridge(port, KEY)
+    genuine = ground_station(port, KEY)
+    strangers = [ground_station(port), ground_station(port, hashlib.sha256(b'guess').digest())]
+    try:
+        sent = command(genuine)                 # signed by the station's signer, as captured
+        genuine.write(sent)
+        assert answer(genuine, 5.0) is not None           # the answer was signed: it took it
+        for s in strangers:                               # unsigned, and a wrong key
+            s.write(command(s))
+            assert answer(s, 1.0) is None
+        genuine.write(sent)                               # a replay of the captured command
+        day = 24 * 3600 * 100_000                          # a forged frame from the future
+        forger = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+        forger.signing.secret_key = hashlib.sha256(b'guess').digest()
+        forger.signing.sign_outgoing, forger.signing.link_id = True, genuine.mav.signing.link_id
+        forger.signing.timestamp = signing.now_timestamp() + day
+        genuine.write(command_with(forger))
+        time.sleep(0.3)
+        assert answer(genuine, 0.5) is None               # neither was answered
+        genuine.write(command(genuine))                   # and the station is not locked out
+        assert answer(genuine, 2.0) is not None
+        refused = [why for why, kind, _ in bridge.link.refusals]
+        assert refused == ['unsigned', 'bad signature', 'replayed', 'bad signature']
+        assert all(addr[0] == '127.0.0.1' for _, _, addr in bridge.link.refusals)
+        assert bridge.link.counts['refused'] == 4
+    finally:
+        for s in strangers + [genuine]:
+            s.close()
+        bridge.close()
+
+
+def command_with(m):
+    return m.command_long_encode(7, 1, mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, 0).pack(m)

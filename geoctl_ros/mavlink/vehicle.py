@@ -209,6 +209,9 @@ class Vehicle:
             if i is None:
                 return [('send', self.statustext('unknown parameter %s' % msg.param_id))]
             return [('set', TABLE[i][0], float(msg.param_value), i)]
+        if kind == 'SETUP_SIGNING':       # the key is the vehicle's file, never set over the link
+            return [('send', self.statustext('SETUP_SIGNING refused: the signing key comes from '
+                                             'the vehicle\'s key file only'))]
         if kind == 'MISSION_REQUEST_LIST':
             return [('send', self.mav.mission_count_encode(msg.get_srcSystem(),
                                                            msg.get_srcComponent(), 0,

@@ -22,7 +22,7 @@ from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool
 
 from geoctl_ros.core import so3
-from geoctl_ros.mavlink import frames
+from geoctl_ros.mavlink import frames, signing
 from geoctl_ros.mavlink.link import Link, encoder
 from geoctl_ros.mavlink.params import BY_ROS, TABLE, to_ros
 from geoctl_ros.mavlink.vehicle import Vehicle, m_const
@@ -30,9 +30,12 @@ from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
 from geoctl_ros.nodes.conversions import python_value, quaternion, set_vector, vector
 from geoctl_ros.nodes.runtime import spin
-from geoctl_ros.params import MAVLINK
+from geoctl_ros.params import MAVLINK, ConfigError
 
 GCS_TIMEOUT = 3.0          # s without a ground-station heartbeat: "no ground station"
+TIMESTAMP_LEAD = 10 * 100_000   # signing units saved ahead of the last sent (10 s of clock):
+                                # a crash between two saves cannot make a restart reuse one
+UNSIGNED_WARNING = 'MAVLink unsigned: anyone on the link can arm the vehicle'
 PARAM_REFRESH = 5.0        # s between reads of the controller's parameters
 STATUSTEXT_LEN = 50
 
@@ -64,7 +67,19 @@ class MavlinkBridge(Node):
         self.sysid = v['mavlink.system_id']
         self.vehicle = Vehicle(encoder(self.sysid, m_const('MAV_COMP_ID_AUTOPILOT1')), self.sysid,
                                _version(), _git_hash())
-        self.link = Link(v['mavlink.url'], self.sysid, m_const('MAV_COMP_ID_AUTOPILOT1'))
+        keyed = self._signing_store(v)         # before the link: a bad key file stops us first
+        self.timestamps, self.link_id = None, v['mavlink.signing_link_id']
+        signed = None
+        if keyed is not None:
+            self.timestamps, key = keyed
+            signed = (key, self.link_id, self.timestamps.start())
+        self.link = Link(v['mavlink.url'], self.sysid, m_const('MAV_COMP_ID_AUTOPILOT1'),
+                         signing=signed)
+        if signed is not None:
+            self._save_timestamp()
+        else:
+            self.get_logger().warning(UNSIGNED_WARNING + ' (set mavlink.signing_key_file)')
+        self._refusals_logged = 0
         self.autopilot = (Link(v['mavlink.autopilot_url'], self.sysid,
                                m_const('MAV_COMP_ID_ONBOARD_COMPUTER'))
                           if v['mavlink.autopilot_url'] else None)
@@ -118,10 +133,42 @@ class MavlinkBridge(Node):
         self.create_timer(0.5, lambda: None if self._params_loaded else self._read_params())
         self.create_timer(PARAM_REFRESH, self._read_params)
         self.create_timer(1.0, self._publish_diagnostics)
+        self.create_timer(1.0, self._log_refusals)
         self._read_params()
         self.get_logger().info('mavlink_bridge: system %d component 1 on %s%s' % (
             self.sysid, v['mavlink.url'],
             ', autopilot IMU from ' + v['mavlink.autopilot_url'] if self.autopilot else ''))
+
+    # --- signing -----------------------------------------------------------------------------
+    def _signing_store(self, v):
+        """(TimestampStore, key) when a key file is set, else None; a key file that cannot be
+        used stops the node (exit 2) with the reason."""
+        path = v['mavlink.signing_key_file']
+        if not path:
+            return None
+        try:
+            key = signing.load_key(path)
+        except signing.SigningKeyError as e:
+            raise ConfigError([('mavlink.signing_key_file', str(e))]) from None
+        return (signing.TimestampStore(v['mavlink.signing_timestamp_file'] or path + '.timestamp'),
+                key)
+
+    def _save_timestamp(self):
+        if self.timestamps is not None:
+            try:
+                self.timestamps.save(self.link.signing_timestamp + TIMESTAMP_LEAD)
+            except OSError as e:
+                self.get_logger().error('signing timestamp not saved: %s' % e)
+
+    def _log_refusals(self):
+        """At most one line a second: how many were refused since, the latest and its sender."""
+        n = self.link.counts['refused']
+        if n > self._refusals_logged and self.link.refusals:
+            why, kind, sender = self.link.refusals[-1]
+            self.get_logger().warning('refused %d MAVLink message(s) without a valid signature; '
+                                      'latest: %s %s from %s' % (n - self._refusals_logged, why,
+                                                                 kind, sender))
+            self._refusals_logged = n
 
     # --- from the controller -----------------------------------------------------------------
     def _on_diagnostics(self, msg):
@@ -283,6 +330,16 @@ class MavlinkBridge(Node):
         values.update({'link ' + k: str(n) for k, n in self.link.counts.items()})
         values.update({k: str(n) for k, n in self.counts.items()})
         warnings = []
+        if self.link.verifier is None:
+            warnings.append(UNSIGNED_WARNING)
+            values['signing'] = 'off'
+        else:
+            values['signing'] = 'on (link id %d)' % self.link_id
+            values.update({'refused ' + k: str(n) for k, n in self.link.verifier.refused.items()})
+            if self.link.refusals:
+                why, kind, sender = self.link.refusals[-1]
+                values['last refused'] = '%s %s from %s' % (why, kind, sender)
+            self._save_timestamp()
         if gcs_age is None or gcs_age > GCS_TIMEOUT:
             warnings.append('no ground station heartbeat')
         if self.link.counts['bad data']:
@@ -303,6 +360,7 @@ class MavlinkBridge(Node):
 
     def on_shutdown(self):
         self.link.close()
+        self._save_timestamp()
         if self.autopilot is not None:
             self.autopilot.close()
 

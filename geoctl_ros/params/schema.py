@@ -281,6 +281,15 @@ SCHEMA = [
     _p('mavlink.url', 'string', 'udpout:127.0.0.1:14550', '-',
        'ground-station link, as pymavlink takes it (udpout:HOST:PORT, udpin:IP:PORT, tcp:HOST:PORT, '
        'DEVICE,BAUD)', MAVLINK),
+    _p('mavlink.signing_key_file', 'string', '', '-',
+       'MAVLink 2 signing key file: 64 hex digits (the key), or a passphrase (the key is its '
+       'SHA-256, as ground stations derive it); refused when group or others may read it. Empty: '
+       'no signing, and anyone on the link can arm the vehicle', MAVLINK),
+    _p('mavlink.signing_link_id', 'integer', 0, '-', 'link id in the signatures the bridge sends',
+       MAVLINK, check=lambda v: None if 0 <= v <= 255 else 'must be 0..255'),
+    _p('mavlink.signing_timestamp_file', 'string', '', '-',
+       'where the outgoing signing timestamp is kept across restarts (empty: the key file '
+       'followed by .timestamp)', MAVLINK),
     _p('mavlink.system_id', 'integer', 1, '-', 'MAVLink system id of the vehicle (component 1)',
        MAVLINK, check=lambda v: None if 1 <= v <= 255 else 'must be 1..255'),
     _p('mavlink.controller', 'string', 'controller', '-', 'name of the controller node to bridge',
