@@ -90,7 +90,7 @@ def test_launch_files_name_only_what_exists(name):
         src = args[m.group(1)] if m else src
         path = src.replace('$(find-pkg-share geoctl_ros)', ROOT)
         assert os.path.isfile(path), src
-        assert node.get('on_exit') == 'shutdown'           # a node that stops ends the launch
+        assert node.get('exec_name') == node.get('exec')    # labelled so under a prefix too
         for remap in node.iter('remap'):
             assert remap.get('from') in subscribed[node.get('exec')], remap.get('from')
     # installed where ros2 launch looks for them
@@ -103,7 +103,8 @@ ROSDEP_KEYS = {'numpy': 'python3-numpy', 'yaml': 'python3-yaml',
                'matplotlib': 'python3-matplotlib', 'pymavlink': 'python3-pymavlink-pip',
                'pytest': 'python3-pytest'}
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python', 'std_msgs',
-                'geometry_msgs', 'sensor_msgs', 'std_srvs', 'diagnostic_msgs', 'rosgraph_msgs'}
+                'geometry_msgs', 'sensor_msgs', 'std_srvs', 'diagnostic_msgs', 'rosgraph_msgs',
+                'launch_ros'}
 
 
 def _third_party_imports(top):

@@ -1,0 +1,183 @@
+"""The shipped launch files with the real `ros2 launch` (ROS 2 Jazzy's launch, launch_ros and
+ros2launch, installed by ./run from ../shared/wheels/launch), on the package as colcon installs
+it, as a lab runs them: sil.launch.xml flies the testbed on the loopback profile, a missing
+params_file stops the launch naming it, and testbed.launch.xml's remaps and prefix reach the
+controller, whose output keeps its name."""
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+from geometry_msgs.msg import PoseStamped  # noqa: E402
+from sensor_msgs.msg import Imu  # noqa: E402
+
+from geoctl_ros.core import so3  # noqa: E402
+from geoctl_ros.nodes import qos  # noqa: E402
+from geoctl_ros.nodes.conversions import set_quaternion, set_vector  # noqa: E402
+from geoctl_ros.params import cone_set, load_parameter_file, node_overrides, resolve  # noqa: E402
+from geoctl_ros.tools.processes import process_sockets  # noqa: E402
+from support import FakeInputs  # noqa: E402
+
+pytestmark = pytest.mark.dds
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BIN = os.path.dirname(sys.executable)
+LEVEL_YAW90 = (0.0, 0.0, 0.7071067811865476, 0.7071067811865476)
+
+try:
+    import launch_ros  # noqa: F401
+    HAVE_LAUNCH = shutil.which('colcon', path=BIN) is not None
+except ImportError:
+    HAVE_LAUNCH = False
+needs_launch = pytest.mark.skipif(
+    not HAVE_LAUNCH, reason='no `ros2 launch`: install it from ../shared/wheels/launch (./run '
+    'does when the folder exists, on Python 3.11)')
+
+
+@pytest.fixture(scope='module')
+def installed(tmp_path_factory):
+    """The package built and installed by colcon in a workspace of its own, and the environment
+    `ros2 launch` needs to find it (the loopback profile comes from conftest)."""
+    ws = tmp_path_factory.mktemp('ws')
+    skip = shutil.ignore_patterns('.venv*', 'build', 'install', 'log', '.git', '__pycache__', 'out')
+    shutil.copytree(ROOT, ws / 'src' / 'geoctl_ros', ignore=skip)
+    env = dict(os.environ, PATH=BIN + os.pathsep + os.environ['PATH'])
+    r = subprocess.run(['colcon', 'build', '--packages-select', 'geoctl_ros'], cwd=ws, env=env,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    prefix = ws / 'install' / 'geoctl_ros'
+    env['AMENT_PREFIX_PATH'] = os.pathsep.join([str(prefix), sys.prefix])
+    env['PYTHONUNBUFFERED'] = '1'
+    return env, prefix
+
+
+class Launch:
+    """`ros2 launch geoctl_ros FILE args...` in a process group of its own."""
+
+    def __init__(self, env, log, *args):
+        self.log = open(log, 'w+')
+        self.proc = subprocess.Popen([os.path.join(BIN, 'ros2'), 'launch', 'geoctl_ros'] +
+                                     list(args), env=env, stdout=self.log,
+                                     stderr=subprocess.STDOUT, start_new_session=True)
+
+    def output(self):
+        if not self.log.closed:
+            self.log.flush()
+        with open(self.log.name) as fh:
+            return fh.read()
+
+    def children(self):
+        """The pids of the node processes launch started (the direct children of ros2 launch)."""
+        r = subprocess.run(['pgrep', '-P', str(self.proc.pid)], capture_output=True, text=True)
+        return [int(p) for p in r.stdout.split()]
+
+    def stop(self):
+        if self.proc.poll() is None:
+            os.killpg(self.proc.pid, signal.SIGINT)             # as Ctrl-C in a terminal
+            try:
+                self.proc.wait(15)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+                self.proc.wait(5)
+        self.log.close()
+
+
+@pytest.fixture
+def ros():
+    rclpy.init()
+    mon = FakeInputs()
+    try:
+        yield mon
+    finally:
+        mon.destroy_node()
+        rclpy.try_shutdown()
+
+
+@needs_launch
+def test_sil_launch_flies_the_testbed_on_loopback_and_keeps_the_cone(installed, ros, tmp_path):
+    env, prefix = installed
+    mon = ros
+    launch = Launch(env, tmp_path / 'launch.log', 'sil.launch.xml')
+    try:
+        mon.wait_for(mon.controller_has_inputs, 40.0, 'the launched sim and controller')
+        pids = launch.children()
+        assert len(pids) == 2
+        for pid in pids:                              # the shipped profile: loopback UDP only
+            socks = process_sockets(pid)
+            assert socks and all(ip == '127.0.0.1' for _, ip, _, _ in socks), socks
+            with open('/proc/%d/environ' % pid, 'rb') as fh:
+                environ = fh.read().split(b'\0')
+            assert b'FASTRTPS_DEFAULT_PROFILES_FILE=%s' % str(
+                prefix / 'share' / 'geoctl_ros' / 'config' / 'dds' / 'fastdds_loopback.xml'
+            ).encode() in environ
+        reply = mon.arm_when_ready()
+        assert reply.success, reply.message
+        t0 = time.monotonic()
+        mon.spin_for(8.0)
+        assert mon.last_diagnostic()['armed'] == 'True'
+        values = resolve('controller', node_overrides(
+            load_parameter_file(os.path.join(ROOT, 'config', 'testbed.yaml')), 'controller'))
+        cones = cone_set(values)
+        margins = [cones.margins_deg(so3.quat_to_rot(q))[0]
+                   for t, (_, q) in mon.log['true_pose'] if t >= t0]
+        assert len(margins) > 100 and min(margins) > 0.0, min(margins)
+        assert mon.arm(False).success
+    finally:
+        launch.stop()
+    out = launch.output()
+    assert '[sim-1]' in out and '[controller-2]' in out, out[-2000:]
+
+
+@needs_launch
+def test_a_params_file_that_does_not_exist_stops_the_launch_naming_it(installed, tmp_path):
+    env, _ = installed
+    missing = str(tmp_path / 'nonexistent.yaml')
+    launch = Launch(env, tmp_path / 'launch.log', 'sil.launch.xml', 'params_file:=' + missing)
+    try:
+        ended = launch.proc.wait(60)                    # by itself, once both nodes stopped
+    finally:
+        launch.stop()
+    out = launch.output()
+    assert ended is not None
+    for node in ('sim', 'controller'):
+        assert "%s: cannot start: Couldn't parse params file: '--params-file %s'" % (
+            node, missing) in out, out[-2000:]
+    assert 'ready' not in out                         # no node came up on its defaults
+
+
+@needs_launch
+def test_testbed_launch_remaps_and_prefix_reach_the_controller(installed, ros, tmp_path):
+    env, _ = installed
+    mon = ros
+    launch = Launch(env, tmp_path / 'launch.log', 'testbed.launch.xml',
+                    'pose_topic:=/mocap/body/pose', 'imu_topic:=/board/imu',
+                    'prefix:=nice -n 3')
+    pub_pose = mon.create_publisher(PoseStamped, '/mocap/body/pose', qos.SENSOR)
+    pub_imu = mon.create_publisher(Imu, '/board/imu', qos.SENSOR)
+
+    def feed():
+        now = mon.get_clock().now().to_msg()
+        p, i = PoseStamped(), Imu()
+        p.header.stamp = i.header.stamp = now
+        set_quaternion(p.pose.orientation, LEVEL_YAW90)
+        set_vector(i.angular_velocity, (0.0, 0.0, 0.0))
+        pub_pose.publish(p)
+        pub_imu.publish(i)
+    timer = mon.create_timer(0.01, feed)
+    try:
+        # only the remapped topics feed it: the plain pose and imu carry nothing here
+        mon.wait_for(mon.controller_has_inputs, 40.0, 'the controller fed on the remapped topics')
+        [pid] = launch.children()
+        assert os.getpriority(os.PRIO_PROCESS, pid) == 3               # the prefix: nice -n 3
+        with open('/proc/%d/cmdline' % pid, 'rb') as fh:
+            assert b'controller' in fh.read()
+    finally:
+        mon.destroy_timer(timer)
+        launch.stop()
+    out = launch.output()
+    assert '[controller-1]' in out and '[nice-1]' not in out, out[-2000:]
