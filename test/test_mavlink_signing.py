@@ -14,14 +14,15 @@ from geoctl_ros.mavlink.signing import SigningKeyError, TimestampStore, Verifier
 pytestmark = pytest.mark.odroid
 
 KEY = hashlib.sha256(b'lab passphrase').digest()
-NOW = signing.now_timestamp()
 
 
-def station(key=KEY, timestamp=NOW, link_id=1, system=255):
-    """A ground station's encoder, signing as pymavlink does (mavutil's setup_signing)."""
+def station(key=KEY, timestamp=None, link_id=1, system=255):
+    """A ground station's encoder, signing as pymavlink does (mavutil's setup_signing: the
+    timestamp starts at the clock)."""
     m = mav.MAVLink(None, srcSystem=system, srcComponent=190)
     m.signing.secret_key, m.signing.sign_outgoing = key, key is not None
-    m.signing.link_id, m.signing.timestamp = link_id, timestamp
+    m.signing.link_id = link_id
+    m.signing.timestamp = signing.now_timestamp() if timestamp is None else timestamp
     return m
 
 
@@ -49,12 +50,13 @@ def test_a_forged_frame_from_the_future_never_locks_the_stream_out():
     v, gcs = Verifier(KEY), station()
     assert v.check(arm_frame(gcs)) is None
     day = 24 * 3600 * 100_000
-    forged = arm_frame(station(key=hashlib.sha256(b'guess').digest(), timestamp=NOW + day))
+    forged = arm_frame(station(key=hashlib.sha256(b'guess').digest(),
+                               timestamp=signing.now_timestamp() + day))
     assert v.check(forged) == 'bad signature'
     assert v.check(arm_frame(gcs)) is None                   # the genuine station goes on
     # pymavlink's own check, as it is: the forged frame moves the stream's timestamp first, and
     # the genuine station's next frame is then refused as a replay (why Verifier exists)
-    parser, gcs2 = mav.MAVLink(None), station(timestamp=NOW + 10)
+    parser, gcs2 = mav.MAVLink(None), station(timestamp=signing.now_timestamp() + 10)
     parser.signing.secret_key = KEY
     parser.parse_buffer(arm_frame(gcs2))
     assert parser.signing.goodsig_count == 1
@@ -65,11 +67,12 @@ def test_a_forged_frame_from_the_future_never_locks_the_stream_out():
 
 
 def test_streams_are_per_system_component_and_link_and_a_new_one_must_be_recent():
-    v = Verifier(KEY, clock=lambda: NOW)
-    a, b = station(link_id=1), station(link_id=2, timestamp=NOW - 100)
+    now = signing.now_timestamp()
+    v = Verifier(KEY, clock=lambda: now)
+    a, b = station(link_id=1, timestamp=now), station(link_id=2, timestamp=now - 100)
     assert v.check(arm_frame(a)) is None
     assert v.check(arm_frame(b)) is None                     # its own stream: older is fine
-    stale = station(link_id=3, timestamp=NOW - signing.NEW_STREAM_SLACK - 1)
+    stale = station(link_id=3, timestamp=now - signing.NEW_STREAM_SLACK - 1)
     assert v.check(arm_frame(stale)) == 'too old'
     assert set(v.streams) == {(255, 190, 1), (255, 190, 2)}
 
