@@ -4,6 +4,7 @@ it, as a lab runs them: sil.launch.xml flies the testbed on the loopback profile
 params_file stops the launch naming it, and testbed.launch.xml's remaps and prefix reach the
 controller, whose output keeps its name."""
 import os
+import pathlib
 import shutil
 import signal
 import subprocess
@@ -22,11 +23,10 @@ from geoctl_ros.nodes.conversions import set_quaternion, set_vector  # noqa: E40
 from geoctl_ros.params import cone_set, load_parameter_file, node_overrides, resolve  # noqa: E402
 from geoctl_ros.tools.processes import process_sockets  # noqa: E402
 from support import FakeInputs  # noqa: E402
+from workspace import BIN, ROOT, Workspace  # noqa: E402
 
 pytestmark = pytest.mark.dds
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-BIN = os.path.dirname(sys.executable)
 LEVEL_YAW90 = (0.0, 0.0, 0.7071067811865476, 0.7071067811865476)
 
 try:
@@ -43,14 +43,9 @@ needs_launch = pytest.mark.skipif(
 def installed(tmp_path_factory):
     """The package built and installed by colcon in a workspace of its own, and the environment
     `ros2 launch` needs to find it (the loopback profile comes from conftest)."""
-    ws = tmp_path_factory.mktemp('ws')
-    skip = shutil.ignore_patterns('.venv*', 'build', 'install', 'log', '.git', '__pycache__', 'out')
-    shutil.copytree(ROOT, ws / 'src' / 'geoctl_ros', ignore=skip)
-    env = dict(os.environ, PATH=BIN + os.pathsep + os.environ['PATH'])
-    r = subprocess.run(['colcon', 'build', '--packages-select', 'geoctl_ros'], cwd=ws, env=env,
-                       capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0, r.stdout + r.stderr
-    prefix = ws / 'install' / 'geoctl_ros'
+    ws = Workspace(str(tmp_path_factory.mktemp('ws')))
+    ws.colcon('build', '--packages-select', 'geoctl_ros')
+    env, prefix = ws.env, pathlib.Path(ws.prefix)
     env['AMENT_PREFIX_PATH'] = os.pathsep.join([str(prefix), sys.prefix])
     env['PYTHONUNBUFFERED'] = '1'
     return env, prefix

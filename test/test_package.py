@@ -1,11 +1,12 @@
 """The package as a maintainer and a lab receive it: layers that import without ROS, launch files
 that name only what exists, and the packaging metadata.
 
-``ros2 launch`` is not installable here, so the launch files are checked for what can be checked
-without it: they parse, and every executable, parameter file and remapping they name exists.
+The launch files are checked here for what needs no launcher (they parse, and every executable,
+parameter file and remapping they name exists); ``test_launch.py`` runs them with ``ros2 launch``.
 """
 import ast
 import os
+import pathlib
 import re
 import shutil
 import subprocess
@@ -135,30 +136,24 @@ def test_package_xml_declares_what_the_code_imports():
     assert 'BSD 3-Clause' in open(os.path.join(ROOT, 'LICENSE')).read()
 
 
-@pytest.mark.skipif(not os.path.exists(os.path.join(os.path.dirname(sys.executable), 'colcon')),
+@pytest.mark.skipif(shutil.which('colcon', path=os.path.dirname(sys.executable)) is None,
                     reason='no colcon in this stack (requirements-odroid.txt has it)')
 def test_colcon_builds_installs_and_tests_the_package_as_on_the_vehicle(tmp_path):
     """The apt path's last two steps, in a workspace of its own: `colcon build` installs every
     console script where `ros2 run` looks and the files the launch files name, and `colcon
     test` runs the package's pytest suite (one module of it here)."""
-    ws = tmp_path / 'ws'
-    skip = shutil.ignore_patterns('.venv*', 'build', 'install', 'log', '.git', '__pycache__', 'out')
-    shutil.copytree(ROOT, ws / 'src' / 'geoctl_ros', ignore=skip)
-    env = dict(os.environ, PATH=os.path.dirname(sys.executable) + os.pathsep + os.environ['PATH'])
-
-    def colcon(*args):
-        r = subprocess.run(['colcon'] + list(args), cwd=ws, env=env, capture_output=True,
-                           text=True, timeout=300)
-        assert r.returncode == 0, r.stdout + r.stderr
-        return r.stdout
+    from workspace import Workspace
+    ws = Workspace(str(tmp_path / 'ws'))
+    colcon, env = ws.colcon, ws.env
     colcon('build', '--packages-select', 'geoctl_ros')
-    prefix = ws / 'install' / 'geoctl_ros'
+    prefix = pathlib.Path(ws.prefix)
     assert set(os.listdir(prefix / 'lib' / 'geoctl_ros')) >= _console_scripts()
     share = prefix / 'share' / 'geoctl_ros'
     for f in ('package.xml', 'config/testbed.yaml', 'config/dds/fastdds_loopback.xml',
               'launch/testbed.launch.xml', 'launch/sil.launch.xml'):
         assert (share / f).is_file(), f
-    assert (prefix / 'share' / 'ament_index' / 'resource_index' / 'packages' / 'geoctl_ros').is_file()
+    index = prefix / 'share' / 'ament_index' / 'resource_index' / 'packages' / 'geoctl_ros'
+    assert index.is_file()
     r = subprocess.run([str(prefix / 'lib' / 'geoctl_ros' / 'scenario'), '--help'], env=env,
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and 'usage' in r.stdout, r.stderr
