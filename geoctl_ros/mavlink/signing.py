@@ -43,8 +43,8 @@ def load_key(path):
     except OSError as e:
         raise SigningKeyError('%s: %s' % (path, e.strerror)) from None
     if st.st_mode & (stat.S_IRWXG | stat.S_IRWXO):
-        raise SigningKeyError('%s: readable or writable by group or others (mode %03o): chmod 600 it'
-                        % (path, stat.S_IMODE(st.st_mode)))
+        raise SigningKeyError('%s: readable or writable by group or others (mode %03o): '
+                              'chmod 600 it' % (path, stat.S_IMODE(st.st_mode)))
     text = data.decode('utf-8', 'replace').strip()
     if re.fullmatch(r'[0-9a-fA-F]{64}', text):
         return bytes.fromhex(text)
