@@ -67,16 +67,15 @@ class MavlinkBridge(Node):
         self.sysid = v['mavlink.system_id']
         self.vehicle = Vehicle(encoder(self.sysid, m_const('MAV_COMP_ID_AUTOPILOT1')), self.sysid,
                                _version(), _git_hash())
-        keyed = self._signing_store(v)         # before the link: a bad key file stops us first
-        self.timestamps, self.link_id = None, v['mavlink.signing_link_id']
-        signed = None
-        if keyed is not None:
-            self.timestamps, key = keyed
-            signed = (key, self.link_id, self.timestamps.start())
+        # the key before the link: a key file that cannot be used stops the node first
+        self.timestamps, key = self._signing_key(v)
+        self.link_id = v['mavlink.signing_link_id']
         self.link = Link(v['mavlink.url'], self.sysid, m_const('MAV_COMP_ID_AUTOPILOT1'),
-                         signing=signed)
-        if signed is not None:
+                         signing=None if key is None else
+                         (key, self.link_id, self.timestamps.start()))
+        if key is not None:
             self._save_timestamp()
+            self.create_timer(1.0, self._save_timestamp)
         else:
             self.get_logger().warning(UNSIGNED_WARNING + ' (set mavlink.signing_key_file)')
         self._refusals_logged = 0
@@ -140,12 +139,12 @@ class MavlinkBridge(Node):
             ', autopilot IMU from ' + v['mavlink.autopilot_url'] if self.autopilot else ''))
 
     # --- signing -----------------------------------------------------------------------------
-    def _signing_store(self, v):
-        """(TimestampStore, key) when a key file is set, else None; a key file that cannot be
-        used stops the node (exit 2) with the reason."""
+    def _signing_key(self, v):
+        """(TimestampStore, key) when a key file is set, else (None, None); a key file that
+        cannot be used stops the node (exit 2) with the reason."""
         path = v['mavlink.signing_key_file']
         if not path:
-            return None
+            return None, None
         try:
             key = signing.load_key(path)
         except signing.SigningKeyError as e:
@@ -339,7 +338,6 @@ class MavlinkBridge(Node):
             if self.link.refusals:
                 why, kind, sender = self.link.refusals[-1]
                 values['last refused'] = '%s %s from %s' % (why, kind, sender)
-            self._save_timestamp()
         if gcs_age is None or gcs_age > GCS_TIMEOUT:
             warnings.append('no ground station heartbeat')
         if self.link.counts['bad data']:
