@@ -1,12 +1,12 @@
 """Benchmarks of the hot paths, printed against benchmarks/baseline.json.
 
     ./run shell benchmarks/bench.py                   # print figures and the ratio to the baseline
-    ./run shell benchmarks/bench.py --update-baseline # record this machine's figures as the baseline
+    ./run shell benchmarks/bench.py --update-baseline  # this machine's figures as the baseline
     ./run shell benchmarks/bench.py --against REV [--rounds 3]  # this tree against a revision
     ./run --odroid shell benchmarks/bench.py ...      # the same on the vehicle's stack
 
-Figures are microseconds per call (the fastest of several repeats). The control tick must fit in the
-control period with room to spare on the ODROID (10 ms at 100 Hz, 2 ms at 500 Hz); the baseline
+Figures are microseconds per call (the fastest of several repeats). The control tick must fit in
+the control period with room to spare on the ODROID (10 ms at 100 Hz, 2 ms at 500 Hz); the baseline
 was measured on the 2-core development machine. Not a test: nothing here passes or fails.
 
 Then, side by side in the same run (so that a busy machine slows both alike): the control step
@@ -20,15 +20,37 @@ skips it).
 """
 import json
 import os
+import subprocess
 import sys
+import tempfile
 import time
 import timeit
 
+from geometry_msgs.msg import PoseStamped
+import latency
+import numpy
 import numpy as np
+from paper_law import PaperLaw
+import rclpy
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import Imu
 
+import geoctl_ros
 from geoctl_ros.core import so3
 from geoctl_ros.core.loop import ControlLoop
-from geoctl_ros.params import CONTROLLER, SIM, controller_setup, resolve, testbed_sim
+from geoctl_ros.nodes.controller import ControllerNode
+from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg
+from geoctl_ros.params import (
+    CONTROLLER,
+    SIM,
+    controller_setup,
+    load_parameter_file,
+    resolve,
+    testbed_sim,
+)
+from geoctl_ros.tools import campaign, scenario
+from geoctl_ros.tools.batch import run_batch
+from geoctl_ros.tools.rosenv import use_node_env
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 BASELINE = os.path.join(HERE, 'baseline.json')
@@ -48,7 +70,8 @@ def cones(n):
 
 def per_call_us(fn, number, repeat=5):
     """The fastest of `repeat` timings of `number` calls: on a shared machine the other processes
-    only ever add time, so the minimum is the figure that measures the code."""
+    only ever add time, so the minimum is the figure that measures the code.
+    """
     return 1e6 * min(timeit.repeat(fn, number=number, repeat=repeat)) / number
 
 
@@ -80,7 +103,6 @@ def measure():
 
 def side_by_side():
     """(rows of n cones, ours us, transcription us, ratio, max |u difference|), node tick us."""
-    from paper_law import PaperLaw
     R = so3.axis_angle([0.2, 0.1, 1.0], 0.4)
     w = np.array([0.1, -0.2, 0.3])
     rows = []
@@ -107,20 +129,16 @@ def node_tick_us(samples=3000):
     """The controller node's tick in this process (rclpy on the loopback profile, no subscribers
     matched), with ``step_on: imu`` as a flight would run it: a pose, then an imu sample whose
     callback runs the step. Returns (us from the start of the imu callback to the motor command
-    published, us for the whole callback with the monitoring topics), each as (p50, p99, max)."""
-    from geoctl_ros.tools.rosenv import use_node_env
+    published, us for the whole callback with the monitoring topics), each as (p50, p99, max).
+    """
     use_node_env()
-    import rclpy
-    from rclpy.parameter import Parameter
-    from geoctl_ros.nodes.controller import ControllerNode
+
     rclpy.init()
     try:
         testbed = os.path.join(os.path.dirname(HERE), 'config', 'testbed.yaml')
         node = ControllerNode(cli_args=['--ros-args', '--params-file', testbed],
                               parameter_overrides=[Parameter('step_on', value='imu')])
-        from geometry_msgs.msg import PoseStamped
-        from sensor_msgs.msg import Imu
-        from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg
+
         pose, imu = PoseStamped(), Imu()
         # the testbed flying its first set point: 5 deg off it, turning at 0.1 rad/s
         R_d0 = node.loop.setup.schedule.rotations[0]
@@ -161,10 +179,8 @@ def node_tick_us(samples=3000):
 
 def batched():
     """Rows (runs in the batch, wall seconds per simulated second, real-time factor per core) of
-    the campaign's batched closed loop (testbed, rotors, 1 kHz integration, one cone)."""
-    from geoctl_ros.params import load_parameter_file
-    from geoctl_ros.tools import campaign, scenario
-    from geoctl_ros.tools.batch import run_batch
+    the campaign's batched closed loop (testbed, rotors, 1 kHz integration, one cone).
+    """
     base = load_parameter_file(os.path.join(os.path.dirname(HERE), 'config', 'testbed.yaml'))
     pool, i = [], 0
     while len(pool) < 256:
@@ -181,7 +197,8 @@ def batched():
 
 def figures():
     """The figures that can be set side by side across trees and stacks: name -> microseconds
-    (for the batched loop, microseconds of wall time per simulated second per run)."""
+    (for the batched loop, microseconds of wall time per simulated second per run).
+    """
     out = measure()
     rows, tick = side_by_side()
     for n, a, _, _, _ in rows:
@@ -195,9 +212,8 @@ def figures():
 
 def against(rev, rounds=3):
     """This tree against git revision `rev`, on this interpreter, alternating rounds (A B A B ..)
-    in fresh processes so that a busy machine slows both alike; the fastest round of each."""
-    import subprocess
-    import tempfile
+    in fresh processes so that a busy machine slows both alike; the fastest round of each.
+    """
     root = os.path.dirname(HERE)
     with tempfile.TemporaryDirectory() as tmp:
         archive = subprocess.run(['git', 'archive', rev, 'geoctl_ros', 'config'], cwd=root,
@@ -213,13 +229,13 @@ def against(rev, rounds=3):
                 r = subprocess.run([sys.executable, os.path.abspath(__file__), '--json'],
                                    env=env, capture_output=True, text=True)
                 if r.returncode != 0:
-                    failed[label] = (r.stderr.strip().splitlines() or ['exit %d' % r.returncode])[-1]
+                    lines = r.stderr.strip().splitlines() or ['exit %d' % r.returncode]
+                    failed[label] = lines[-1]
                     continue
                 got = json.loads(r.stdout.strip().splitlines()[-1])
                 assert got.pop('tree') == tree, 'ran %s, not %s' % (got, tree)
                 for k, v in got.items():
                     best.setdefault(label, {})[k] = min(v, best.get(label, {}).get(k, v))
-    import numpy
     print('%s (Python %s, numpy %s): fastest of %d alternating rounds, us'
           % (rev, sys.version.split()[0], numpy.__version__, rounds))
     for label, why in failed.items():
@@ -235,7 +251,6 @@ def against(rev, rounds=3):
 
 def main(argv):
     if '--json' in argv:
-        import geoctl_ros
         out = figures()
         out['tree'] = os.path.dirname(os.path.dirname(os.path.abspath(geoctl_ros.__file__)))
         print(json.dumps(out))
@@ -271,11 +286,11 @@ def main(argv):
                                        'whole callback (+ 6 monitoring topics)'), tick):
         print('%-42s %8.0f %8.0f %8.0f' % (label, p50, p99, top))
     print()
-    print('batched closed loop (campaign): runs, wall s per simulated s, real-time factor per core')
+    print('batched closed loop (campaign): runs, wall s per simulated s, '
+          'real-time factor per core')
     for n, wall, rtf in batched():
         print('%6d %10.3f s %10.0f' % (n, wall, rtf))
     if '--no-latency' not in argv:
-        import latency
         print()
         print(latency.table(latency.measure(10.0)))
     return 0

@@ -14,31 +14,30 @@ difference is what the controller adds. Prints p50, p99 and max in milliseconds.
 import argparse
 import math
 import os
+import subprocess
 import sys
 import time
 
+from geometry_msgs.msg import PoseStamped
 import numpy as np
+import rclpy
+from rclpy.node import Node
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import SetBool
+
+from geoctl_ros.nodes import qos
+from geoctl_ros.nodes.conversions import set_quaternion, time_msg
+from geoctl_ros.tools.processes import NodeProcess
+from geoctl_ros.tools.rosenv import node_env, use_node_env
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
-sys.path.insert(0, ROOT)
-from geoctl_ros.tools.rosenv import node_env, use_node_env  # noqa: E402
+
 
 
 def measure(seconds=10.0, rate=100.0, log_dir='/tmp/geoctl_latency'):
     """{'relay', 'controller'}: arrays of ms, over `seconds` each."""
     use_node_env()
-    import rclpy
-    from geometry_msgs.msg import PoseStamped
-    from rclpy.node import Node
-    from sensor_msgs.msg import Imu
-    from std_msgs.msg import Float64MultiArray
-    from std_srvs.srv import SetBool
-
-    from geoctl_ros.nodes import qos
-    from geoctl_ros.nodes.conversions import set_quaternion, time_msg
-    from geoctl_ros.tools.processes import NodeProcess
-    import subprocess
 
     class Prober(Node):
         def __init__(self):
@@ -88,7 +87,8 @@ def measure(seconds=10.0, rate=100.0, log_dir='/tmp/geoctl_latency'):
         relay.send_signal(2)
         relay.wait(10)
         arm = node.create_client(SetBool, '/controller/arm')
-        ctrl = NodeProcess('controller', os.path.join(ROOT, 'config', 'testbed.yaml'),
+        testbed = os.path.join(os.path.dirname(HERE), 'config', 'testbed.yaml')
+        ctrl = NodeProcess('controller', testbed,
                            ['-p', 'step_on:=imu'], log_dir=log_dir)
         procs.append(ctrl)
         spin(node, executor, 3.0)

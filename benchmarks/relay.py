@@ -1,17 +1,16 @@
 """A bare relay node, the floor of input-to-command latency (issue 10): it subscribes to ``imu`` as
 the controller does (same QoS, same executor) and publishes a Float64MultiArray of six values on
 ``relay/motor_commands`` (the controller's command QoS) for each sample, carrying the sample's
-stamp, with no work in between. Started by ``latency.py``; not part of the package."""
-import os
+stamp, with no work in between. Started by ``latency.py``; not part of the package.
+"""
 import sys
 
 from rclpy.node import Node
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from geoctl_ros.nodes import qos  # noqa: E402
-from geoctl_ros.nodes.runtime import spin  # noqa: E402
+from geoctl_ros.nodes import qos
+from geoctl_ros.nodes.runtime import spin
 
 
 class Relay(Node):

@@ -1,5 +1,6 @@
 """Test support (not installed): a monitor that also plays the motion capture, the IMU, an
-operator's set points and a rival controller."""
+operator's set points and a rival controller.
+"""
 from geometry_msgs.msg import PoseStamped, QuaternionStamped
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
@@ -16,12 +17,14 @@ class FakeInputs(Monitor):
         super().__init__(*args, **kwargs)
         self.pub_pose = self.create_publisher(PoseStamped, 'pose', qos.SENSOR)
         self.pub_imu = self.create_publisher(Imu, 'imu', qos.SENSOR)
-        self.pub_setpoint = self.create_publisher(QuaternionStamped, 'attitude_setpoint', qos.EVENT)
+        self.pub_setpoint = self.create_publisher(QuaternionStamped, 'attitude_setpoint',
+                                                  qos.EVENT)
         self.fed = 0          # pose and imu pairs fed so far
 
     def feed(self, q=(0.0, 0.0, 0.0, 1.0), w=(0.0, 0.0, 0.0), rate_hz=100.0):
         """Publish pose and imu at rate_hz with fresh stamps until stop_feed(); q and w can be
-        changed on the fly through self.feed_q / self.feed_w."""
+        changed on the fly through self.feed_q / self.feed_w.
+        """
         self.feed_q, self.feed_w = tuple(q), tuple(w)
         self._feed_timer = self.create_timer(1.0 / rate_hz, self._feed_tick)
 
@@ -54,7 +57,8 @@ class FakeInputs(Monitor):
 
     def publish_commands(self, data):
         """Publish on motor_commands as if this were a controller (created on first use: while
-        it exists, the real controller refuses to arm)."""
+        it exists, the real controller refuses to arm).
+        """
         if not hasattr(self, 'pub_commands'):
             self.pub_commands = self.create_publisher(Float64MultiArray, 'motor_commands',
                                                       qos.COMMAND)

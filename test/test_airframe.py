@@ -1,13 +1,20 @@
 """Hexrotor actuation: effectiveness against a hand computation, allocation within limits and by
-priority, the thrust curve, dead and missing rotors, and the simulated rotors."""
+priority, the thrust curve, dead and missing rotors, and the simulated rotors.
+"""
 import math
 
 import numpy as np
 import pytest
 
 from geoctl_ros import params
-from geoctl_ros.core.airframe import (AirframeError, Allocator, RotorGeometry, ThrustCurve,
-                                      effectiveness, tilted_ring)
+from geoctl_ros.core.airframe import (
+    AirframeError,
+    Allocator,
+    RotorGeometry,
+    ThrustCurve,
+    effectiveness,
+    tilted_ring,
+)
 from geoctl_ros.params import CONTROLLER, ConfigError, resolve
 from geoctl_ros.sim.testbed import RotorActuator
 
@@ -43,7 +50,8 @@ def lab_allocator(**kw):
 
 def test_allocation_from_a_hand_written_matrix():
     """A flat quad in plus layout, B written out: thrust 1 per rotor along z; roll from rotors 2
-    and 4 (y = +-0.2), pitch from 1 and 3 (x = +-0.2), yaw +-0.1 by spin."""
+    and 4 (y = +-0.2), pitch from 1 and 3 (x = +-0.2), yaw +-0.1 by spin.
+    """
     B = np.array([[0, 0, 0, 0], [0, 0, 0, 0], [1, 1, 1, 1],
                   [0, 0.2, 0, -0.2], [-0.2, 0, 0.2, 0], [-0.1, 0.1, -0.1, 0.1]], dtype=float)
     al = Allocator(B, 0.0, 10.0)
@@ -221,7 +229,8 @@ def test_simulated_rotors_lag_and_push_about_the_pivot():
 def test_lag_compensation_brings_the_lagged_rotors_to_the_allocation_by_the_next_step():
     """motor_lag_compensation: through the simulated rotors' 40 ms lag (integrated at 1 kHz), a
     step in the moment is produced by the end of the 10 ms control step; without it the rotors
-    cover only 1 - exp(-0.25) = 22 % of the way."""
+    cover only 1 - exp(-0.25) = 22 % of the way.
+    """
     dt, h = 0.01, 1e-3
     step = np.array([0.3, -0.2, 0.1])
     missing = {}
@@ -248,7 +257,8 @@ def test_lag_compensation_follows_the_real_holds_of_a_late_loop():
     overshoots: its command was designed for 10 ms. Told the real holds, the mixer's model knows
     it and corrects at the next step, and from then on designs for 50 ms holds: the rotors land on
     the allocation at each step. Not told (its model assumes 10 ms), it keeps overshooting for
-    steps."""
+    steps.
+    """
     dt, h = 0.01, 1e-3
     step = np.array([0.3, -0.2, 0.1])
     missing = {}

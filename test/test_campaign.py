@@ -1,5 +1,6 @@
 """The safety campaign: batched runs equal single runs, the worst runs replay exactly, and a
-50-manoeuvre campaign of the testbed keeps every cone."""
+50-manoeuvre campaign of the testbed keeps every cone.
+"""
 import csv
 import os
 
@@ -35,7 +36,8 @@ def test_the_distribution_is_what_the_readme_says():
                 assert np.degrees(np.arccos(d @ np.array(v))) >= theta + 5.0
         for a in range(len(axes)):                             # a way round every pair
             for b in range(a):
-                gap = np.degrees(np.arccos(axes[a] @ axes[b])) - m['cones'][a][1] - m['cones'][b][1]
+                gap = (np.degrees(np.arccos(axes[a] @ axes[b]))
+                       - m['cones'][a][1] - m['cones'][b][1])
                 assert gap >= 10.0
         for R in (m['R0'], m['R_d']):                          # within the joint's range
             assert np.degrees(np.arccos(R[2, 2])) <= campaign.TILT_DEG + 1e-9
@@ -62,7 +64,8 @@ def test_a_batch_flies_each_run_as_the_scenario_runner_does():
                       for n in single['min_cone_angle_deg'])
         # the same formulas; only rounding differs (the node's quaternion round trip, math.sin
         # against np.sin): agreement to a micro-degree after 4 s of closed loop
-        assert abs(batch.min_margin_deg[p].min() - closest) < 1e-6, (closest, batch.min_margin_deg[p])
+        assert abs(batch.min_margin_deg[p].min() - closest) < 1e-6, (
+            closest, batch.min_margin_deg[p])
         assert abs(batch.final_error_deg[p] - single['final_attitude_error_deg']) < 1e-6
         assert batch.saturated_s[p] == pytest.approx(single['saturated_fraction'] * 4.0)
 

@@ -1,17 +1,28 @@
 """The control law against the paper: gradients by finite differences, error dynamics along the
-flow, Lyapunov decrease in closed loop, and the safety behaviour the paper does not give."""
+flow, Lyapunov decrease in closed loop, and the safety behaviour the paper does not give.
+"""
 import math
 
 import numpy as np
+from paper_law import PaperLaw
 import pytest
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.cones import ConeSet
+from geoctl_ros.core.control import (
+    AttitudeController,
+    ControllerConfig,
+    E_matrix,
+    SetpointRejected,
+    attractive_error,
+    configuration_error,
+    gain_condition,
+    holding_clearance_deg,
+    holding_moment,
+    linear_terms,
+)
 from geoctl_ros.core.mechanics import gravity_moment
-from geoctl_ros.core.control import (AttitudeController, ControllerConfig, E_matrix, SetpointRejected,
-                                attractive_error, configuration_error, gain_condition,
-                                linear_terms)
-from geoctl_ros.sim.plant import Disturbance, PlantConfig, Plant
+from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
 
 pytestmark = pytest.mark.odroid
 
@@ -100,7 +111,7 @@ def test_barrier_matches_the_paper_formula_outside_the_floor():
     assert cones.margins_deg(R)[0] == pytest.approx(35.0 - 12.0)
 
 
-# --- Prop. 2: error dynamics along the flow --------------------------------------------------------
+# --- Prop. 2: error dynamics along the flow -----------------------------------------------------
 def test_E_and_F_match_finite_differences_along_the_flow():
     cones = one_cone()
     n = 0
@@ -117,7 +128,7 @@ def test_E_and_F_match_finite_differences_along_the_flow():
     assert n > 20
 
 
-# --- Prop. 3: closed loop without disturbance --------------------------------------------------------
+# --- Prop. 3: closed loop without disturbance ---------------------------------------------------
 def closed_loop(cfg, R0, rate_hz, seconds, disturbance=None, sub=1, setpoint=None):
     """Run controller (ZOH at rate_hz) and plant; yields (controller output, plant) per step."""
     plant = Plant(PlantConfig(cfg.inertia, cfg.mass, cfg.cog_offset, cfg.gravity,
@@ -175,7 +186,7 @@ def test_tracking_a_rotating_setpoint_converges():
     assert np.linalg.norm(out.e_Omega) < 1e-3
 
 
-# --- Prop. 5: adaptation ------------------------------------------------------------------------------
+# --- Prop. 5: adaptation -----------------------------------------------------------------------
 def test_adaptive_estimate_converges_to_constant_disturbance():
     cfg = config(four_cones())
     dist = Disturbance(np.array([0.2, 0.2, 0.2]), np.zeros(3), 0.0)
@@ -225,8 +236,9 @@ def test_gain_bound_of_eq_40_matches_a_hand_computation():
     |E| <= 3 / sqrt(2) = 2.1213; |e_RA| <= sqrt(1.9 / 0.42697) = 2.1095;
     beta = cos 35 = 0.81915, d = beta - cos 30 = -0.046880;
     |e_RB| <= sin 35 / (8 * 0.046880) = 1.5294;
-    |F| <= ((beta^2 + 1) d^2 + 1 + beta^2 (beta^2 - 2)) / (alpha^2 d^4) = 0.11190 / 3.0909e-4 = 362.0;
-    H = 1.9 * 2.1213 + 2 * 2.1095 * 1.5294 + 1.9 * 362.0 = 698.3."""
+    |F| <= ((beta^2 + 1) d^2 + 1 + beta^2 (beta^2 - 2)) / (alpha^2 d^4) = 0.11190 / 3.0909e-4 =
+    362.0; H = 1.9 * 2.1213 + 2 * 2.1095 * 1.5294 + 1.9 * 362.0 = 698.3.
+    """
     cones = ConeSet([1, 0, 0], [[0.0, 0.0, -1.0]], np.radians([30.0]), 8.0, np.radians(0.25))
     cfg = config(cones, k_R=0.4, k_Omega=0.7, c=0.1)
     check = gain_condition(cfg, margin_deg=5.0)
@@ -238,7 +250,8 @@ def test_gain_bound_of_eq_40_matches_a_hand_computation():
 
 def test_the_gain_check_bounds_hold_where_sampled():
     """|e_RA|^2 <= A / b1 (the b1 the check uses) and |e_RB| <= its bound on the domain, at
-    random attitudes: the bounds of Prop. 1 and 4 are bounds."""
+    random attitudes: the bounds of Prop. 1 and 4 are bounds.
+    """
     G = np.array([0.9, 1.1, 1.0])
     b1 = 1.9 / (0.2 ** 2 + 2.1 ** 2)
     theta, margin, alpha = math.radians(30.0), math.radians(5.0), 8.0
@@ -264,7 +277,7 @@ def test_gain_check_reports_numbers():
     assert 'VIOLATES' in bad.message() and '%.4g' % bad.c_max_paper in bad.message()
 
 
-# --- safety: cones crossed between samples, bad set points -----------------------------------------
+# --- safety: cones crossed between samples, bad set points --------------------------------------
 def test_on_or_inside_a_cone_the_output_is_finite_flagged_and_repulsive():
     cones = one_cone()
     ctrl = AttitudeController(config(cones))
@@ -318,7 +331,8 @@ def test_reconfigure_refuses_cones_that_contain_the_current_setpoint():
 def test_gravity_moment_is_cancelled_and_cog_model_estimates_the_offset():
     """A wrong mass leaves an uncompensated gravity moment; the constant+cog model learns it.
     Held tilted (R_d 0.3 rad about x), where that moment is not zero: the learnt W Delta_bar
-    equals the true uncompensated moment (m rho true - m rho modelled) x R^T g."""
+    equals the true uncompensated moment (m rho true - m rho modelled) x R^T g.
+    """
     true_rho = np.array([0.0, 0.0, 0.1])
     cones = ConeSet([1, 0, 0], np.zeros((0, 3)), [], 8.0, 0.01)
     cfg = config(cones, k_R=0.4, k_Omega=0.7, k_Delta=0.5, c=0.5, mass=1.26 * 0.8,
@@ -343,12 +357,8 @@ def test_gravity_moment_is_cancelled_and_cog_model_estimates_the_offset():
 
 def test_the_control_step_equals_a_plain_transcription_of_the_paper():
     """benchmarks/paper_law.py, written from the paper with a loop over cones, independently:
-    the same moment and Psi at random attitudes outside the cones' floor bands."""
-    import os
-    import sys
-    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                                    'benchmarks'))
-    from paper_law import PaperLaw
+    the same moment and Psi at random attitudes outside the cones' floor bands.
+    """
     V = rng.normal(size=(5, 3))
     theta = np.radians([10.0, 15.0, 20.0, 25.0, 12.0])
     cones = ConeSet([1.0, 0.0, 0.0], V, theta, 8.0, math.radians(0.25))
@@ -373,7 +383,8 @@ def test_the_control_step_equals_a_plain_transcription_of_the_paper():
 def test_the_linear_map_of_the_step_reproduces_the_formulas_single_and_batched():
     """The step reads A, e_RA, every cone's terms and M_g from one precomputed matrix: they are
     affine in R, so at any attitude the map must give what the formulas give, and a batch of
-    runs (each with its own cones and set point) must step as each run alone does."""
+    runs (each with its own cones and set point) must step as each run alone does.
+    """
     cones = four_cones()
     cfg = config(cones, cog_offset=np.array([0.01, -0.02, 0.1]), mass=1.3)
     ctrl = AttitudeController(cfg)
@@ -415,8 +426,8 @@ def test_a_set_point_too_close_to_hold_against_the_unmodelled_moment_is_refused(
     0.05 N m towards the cone from a goal 1 deg clear, the sensor is pushed into the cone (the
     campaign's creep class); from the needed clearance it is held out. (The check is
     conservative: it counts the barrier's repulsion only, not the attractive pull, which also
-    points away from the cone here; from 3 deg the sensor is already held out.)"""
-    from geoctl_ros.core.control import holding_clearance_deg, holding_moment
+    points away from the cone here; from 3 deg the sensor is already held out.)
+    """
     cones = one_cone(theta_deg=20.0)
     cfg = config(cones, unmodelled_moment_max=0.05, adaptive=False)
     axis = np.array([1.0, 1.0, 0.0]) / math.sqrt(2.0)
@@ -434,7 +445,8 @@ def test_a_set_point_too_close_to_hold_against_the_unmodelled_moment_is_refused(
 
     def fly(clearance_deg):
         """Closest approach (deg) over 5 s at goal(clearance) against 0.05 N m turning the
-        sensor towards the cone, not learnt (adaptive off)."""
+        sensor towards the cone, not learnt (adaptive off).
+        """
         c = AttitudeController(config(cones, adaptive=False))
         c.set_setpoint(goal(clearance_deg))
         R, w, dt, closest = c.R_d.copy(), np.zeros(3), 0.002, 90.0

@@ -2,7 +2,8 @@
 ros2launch, installed by ./run from ../shared/wheels/launch), on the package as colcon installs
 it, as a lab runs them: sil.launch.xml flies the testbed on the loopback profile, a missing
 params_file stops the launch naming it, and testbed.launch.xml's remaps and prefix reach the
-controller, whose output keeps its name."""
+controller, whose output keeps its name.
+"""
 import os
 import pathlib
 import shutil
@@ -11,19 +12,18 @@ import subprocess
 import sys
 import time
 
+from geometry_msgs.msg import PoseStamped
 import pytest
+import rclpy
+from sensor_msgs.msg import Imu
+from support import FakeInputs
+from workspace import BIN, ROOT, Workspace
 
-rclpy = pytest.importorskip('rclpy')
-from geometry_msgs.msg import PoseStamped  # noqa: E402
-from sensor_msgs.msg import Imu  # noqa: E402
-
-from geoctl_ros.core import so3  # noqa: E402
-from geoctl_ros.nodes import qos  # noqa: E402
-from geoctl_ros.nodes.conversions import set_quaternion, set_vector  # noqa: E402
-from geoctl_ros.params import cone_set, load_parameter_file, node_overrides, resolve  # noqa: E402
-from geoctl_ros.tools.processes import process_sockets  # noqa: E402
-from support import FakeInputs  # noqa: E402
-from workspace import BIN, ROOT, Workspace  # noqa: E402
+from geoctl_ros.core import so3
+from geoctl_ros.nodes import qos
+from geoctl_ros.nodes.conversions import set_quaternion, set_vector
+from geoctl_ros.params import cone_set, load_parameter_file, node_overrides, resolve
+from geoctl_ros.tools.processes import process_sockets
 
 pytestmark = pytest.mark.dds
 
@@ -42,7 +42,8 @@ needs_launch = pytest.mark.skipif(
 @pytest.fixture(scope='module')
 def installed(tmp_path_factory):
     """The package built and installed by colcon in a workspace of its own, and the environment
-    `ros2 launch` needs to find it (the loopback profile comes from conftest)."""
+    `ros2 launch` needs to find it (the loopback profile comes from conftest).
+    """
     ws = Workspace(str(tmp_path_factory.mktemp('ws')))
     ws.colcon('build', '--packages-select', 'geoctl_ros')
     env, prefix = ws.env, pathlib.Path(ws.prefix)
@@ -114,7 +115,7 @@ def test_sil_launch_flies_the_testbed_on_loopback_and_keeps_the_cone(installed, 
         assert reply.success, reply.message
         t0 = time.monotonic()
         mon.spin_for(8.0)
-        assert mon.last_diagnostic()['armed'] == 'True'
+        assert mon.last_diagnostic().figures.armed
         values = resolve('controller', node_overrides(
             load_parameter_file(os.path.join(ROOT, 'config', 'testbed.yaml')), 'controller'))
         cones = cone_set(values)

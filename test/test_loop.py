@@ -1,12 +1,14 @@
 """The controller node's decisions without ROS: input checks, arming, failsafe, set points,
-schedule, adaptation only while armed."""
+schedule, adaptation only while armed.
+"""
 import math
 
 import numpy as np
 import pytest
 
 from geoctl_ros.core import so3
-from geoctl_ros.core.loop import ERROR, NON_FINITE, OK, WARN, ControlLoop
+from geoctl_ros.core.diagnostics import ERROR, OK, WARN
+from geoctl_ros.core.loop import NON_FINITE, ControlLoop, step_period
 from geoctl_ros.params import CONTROLLER, ConfigError, controller_setup, resolve
 
 pytestmark = pytest.mark.odroid
@@ -157,7 +159,8 @@ def spinning(t):
 
 def fly_spinning(loop, t_end, pose_until=np.inf, imu_until=np.inf, dt=0.005):
     """Feed poses and gyro of the spinning body every dt (each stream until its cut-off) and
-    tick every 2 dt; returns the last tick."""
+    tick every 2 dt; returns the last tick.
+    """
     tick = None
     for k in range(int(round(t_end / dt)) + 1):
         t = k * dt
@@ -246,7 +249,8 @@ def test_a_gap_and_its_length_are_counted_when_it_ends():
     loop.offer_pose(so3.rot_to_quat(spinning(0.45)), 0.45, 0.45)
     tick = loop.tick(0.45, 0.01)
     assert not tick.bridging
-    assert loop.status(0.45).values['pose gaps ridden through'] == '1 (longest 0.250 s)'
+    gaps = loop.status(0.45).figures.pose_gaps
+    assert gaps.count == 1 and gaps.longest == pytest.approx(0.25)
 
 
 def test_a_non_finite_control_output_disarms_and_publishes_zero(monkeypatch):
@@ -277,11 +281,11 @@ def test_diagnostics_levels_and_fixed_windows():
         loop.tick(0.01 * k, 0.01)
     st = loop.status(0.04)
     assert st.level == OK and st.message == 'armed, all inputs fresh'
-    assert st.values['ticks'] == '5'
+    assert st.figures.ticks == 5
     loop.status(0.04)                                          # an event publish: same window
-    assert loop.status(0.04).values['ticks'] == '5'
+    assert loop.status(0.04).figures.ticks == 5
     loop.end_window()
-    assert loop.status(0.04).values['ticks'] == '0'
+    assert loop.status(0.04).figures.ticks == 0
     # near a cone: the set point close to the obstacle, the attitude at it
     near = so3.axis_angle([0, 0, 1], math.radians(45.0 - 13.0))
     loop.request_setpoint(so3.rot_to_quat(near))
@@ -297,8 +301,8 @@ def test_a_burst_of_samples_does_not_make_the_lag_compensation_command_extreme_t
     ones. Even given the raw 0.1 ms they do: the mixer designs its lead for the longest recent
     hold (10 ms here), not for this step's dt. Designed for 0.1 ms it would divide the thrust
     change by 1 - exp(-0.1 ms / 40 ms) and command the rotors' limits (141 counts of change, an
-    earlier version), which the motors would then hold until the next sample."""
-    from geoctl_ros.core.loop import step_period
+    earlier version), which the motors would then hold until the next sample.
+    """
     assert step_period(1e-4, 0.01) == 0.005 and step_period(0.012, 0.01) == 0.012
     assert step_period(0.5, 0.01) == 0.02
     spread = {}

@@ -1,5 +1,6 @@
 """MAVLink without a network: frames against known rotations, the parameter-id table, and what the
-vehicle sends and answers (pymavlink's encoder and parser, no socket)."""
+vehicle sends and answers (pymavlink's encoder and parser, no socket).
+"""
 import math
 import os
 
@@ -10,6 +11,7 @@ os.environ['MAVLINK20'] = '1'
 from pymavlink.dialects.v20 import common as mav  # noqa: E402
 
 from geoctl_ros.core import so3  # noqa: E402
+from geoctl_ros.core.diagnostics import ERROR, OK, WARN, Figures, Status
 from geoctl_ros.mavlink import frames  # noqa: E402
 from geoctl_ros.mavlink.link import encoder  # noqa: E402
 from geoctl_ros.mavlink.params import BY_ID, TABLE, to_mavlink, to_ros  # noqa: E402
@@ -81,12 +83,13 @@ def test_heartbeat_identity_and_state():
     assert hb.get_srcSystem() == 7 and hb.get_srcComponent() == mav.MAV_COMP_ID_AUTOPILOT1
     assert hb.type == mav.MAV_TYPE_HEXAROTOR and hb.autopilot == mav.MAV_AUTOPILOT_GENERIC
     assert hb.system_status == mav.MAV_STATE_BOOT
-    v.view.diagnostics = {'armed': 'False', 'state': 'disarmed at start-up', 'level': 1}
+    v.view.diagnostics = Status(WARN, '', Figures(armed=False, state='disarmed at start-up'))
     assert parse(v.heartbeat()).system_status == mav.MAV_STATE_STANDBY
-    v.view.diagnostics = {'armed': 'True', 'state': 'armed', 'level': 0}
+    v.view.diagnostics = Status(OK, '', Figures(armed=True, state='armed'))
     hb = parse(v.heartbeat())
-    assert hb.system_status == mav.MAV_STATE_ACTIVE and hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED
-    v.view.diagnostics = {'armed': 'False', 'state': 'failsafe: pose lost', 'level': 2}
+    assert hb.system_status == mav.MAV_STATE_ACTIVE
+    assert hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED
+    v.view.diagnostics = Status(ERROR, '', Figures(armed=False, state='failsafe: pose lost'))
     hb = parse(v.heartbeat())
     assert hb.system_status == mav.MAV_STATE_CRITICAL
     assert not hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED

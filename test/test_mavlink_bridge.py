@@ -1,5 +1,6 @@
-"""The MAVLink bridge over UDP on 127.0.0.1: a pymavlink ground station and a fake autopilot against
-the real sim, controller and bridge processes (the sim in the loop)."""
+"""The MAVLink bridge over UDP on 127.0.0.1: a pymavlink ground station and a fake autopilot
+against the real sim, controller and bridge processes (the sim in the loop).
+"""
 import hashlib
 import math
 import os
@@ -8,20 +9,20 @@ import time
 
 import numpy as np
 import pytest
+import rclpy
 
-rclpy = pytest.importorskip('rclpy')
 os.environ['MAVLINK20'] = '1'
-from pymavlink import mavutil  # noqa: E402
-from pymavlink.dialects.v20 import common as mav  # noqa: E402
-from sensor_msgs.msg import Imu  # noqa: E402
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mav
+from sensor_msgs.msg import Imu
+from support import FakeInputs
 
-from geoctl_ros.core import so3  # noqa: E402
-from geoctl_ros.mavlink import frames  # noqa: E402
-from geoctl_ros.mavlink.params import TABLE  # noqa: E402
-from geoctl_ros.nodes import qos  # noqa: E402
-from geoctl_ros.tools.processes import NodeProcess  # noqa: E402
-from geoctl_ros.tools.rosenv import config_dir  # noqa: E402
-from support import FakeInputs  # noqa: E402
+from geoctl_ros.core import so3
+from geoctl_ros.mavlink import frames
+from geoctl_ros.mavlink.params import TABLE
+from geoctl_ros.nodes import qos
+from geoctl_ros.tools.processes import NodeProcess
+from geoctl_ros.tools.rosenv import config_dir
 
 pytestmark = pytest.mark.dds
 
@@ -37,7 +38,7 @@ STALL_MS = 100.0
 
 def loop_period_max_ms(diagnostic):
     """The largest loop period of the controller's last diagnostics window, ms."""
-    return float(diagnostic['loop period [ms]'].split('max ')[1])
+    return 1e3 * diagnostic.figures.loop_period.max
 
 
 def free_udp_port():
@@ -109,7 +110,9 @@ def rig(tmp_path):
 
 
 def arm(gcs, mon):
-    """Send MAV_CMD_COMPONENT_ARM_DISARM (arm) as a ground station; the final COMMAND_ACK result."""
+    """Send MAV_CMD_COMPONENT_ARM_DISARM (arm) as a ground station; the final COMMAND_ACK
+    result.
+    """
     t0 = time.monotonic()
     gcs.conn.mav.command_long_send(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0,
                                    0, 0)
@@ -168,7 +171,7 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     hb = gcs.wait(lambda m: m.get_type() == 'HEARTBEAT' and is_ours(m) and
                   m.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED, 3.0, 'an armed heartbeat')
     assert hb.system_status == mav.MAV_STATE_ACTIVE
-    mon.wait_for(lambda: mon.last_diagnostic()['armed'] == 'True', 3.0, 'the controller armed')
+    mon.wait_for(lambda: mon.last_diagnostic().figures.armed, 3.0, 'the controller armed')
     # parameters through the controller's own validation
     t0 = time.monotonic()
     g.param_set_send(SYSID, 1, b'GC_K_R', 0.5, mav.MAV_PARAM_TYPE_REAL32)
@@ -196,8 +199,8 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     diag = [d for _, d in mon.log['other diagnostics'] if 'link bad data' in d]
     assert diag and int(diag[-1]['link bad data']) > 0
     ctl = mon.last_diagnostic()
-    assert ctl['armed'] == 'True'
-    assert loop_period_max_ms(ctl) < STALL_MS, ctl['loop period [ms]']
+    assert ctl.figures.armed
+    assert loop_period_max_ms(ctl) < STALL_MS, ctl.figures.loop_period
     # a fake autopilot as IMU: HIGHRES_IMU in FRD comes out on imu in FLU
     ap = Endpoint('udpout:127.0.0.1:%d' % ap_port, 1, 1)
     for _ in range(30):
@@ -223,7 +226,7 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     gcs.conn.close()
     mon.spin_for(4.5)
     lost = [d for _, d in mon.log['other diagnostics'] if d.get('link') is not None][-1]
-    assert 'no ground station heartbeat' in lost['message']
+    assert 'no ground station heartbeat' in lost.message
     back = Endpoint('udpin:127.0.0.1:%d' % port, 255, 190)
     t0 = time.monotonic()
     back.wait(lambda m: m.get_type() == 'HEARTBEAT' and is_ours(m), 5.0, 'heartbeats again',
@@ -235,8 +238,8 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     assert p.param_id == 'GC_K_R' and p.param_value == pytest.approx(0.5)
     mon.spin_for(1.2)
     ctl = mon.last_diagnostic()
-    assert ctl['armed'] == 'True'                 # the flight went on through all of it
-    assert loop_period_max_ms(ctl) < STALL_MS, ctl['loop period [ms]']
+    assert ctl.figures.armed                 # the flight went on through all of it
+    assert loop_period_max_ms(ctl) < STALL_MS, ctl.figures.loop_period
     back.conn.close()
 
 
@@ -297,10 +300,10 @@ def test_with_a_key_only_the_station_holding_it_reads_sets_arms_and_disarms(tmp_
         assert gcs.wait(lambda m: m.get_type() == 'COMMAND_ACK' and
                         m.result != mav.MAV_RESULT_IN_PROGRESS, 10.0, 'the arm answer', mon,
                         since=t0).result == mav.MAV_RESULT_ACCEPTED
-        mon.wait_for(lambda: mon.last_diagnostic()['armed'] == 'True', 3.0, 'armed')
+        mon.wait_for(lambda: mon.last_diagnostic().figures.armed, 3.0, 'armed')
         t0 = time.monotonic()
         g.command_long_send(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 0, 0, 0, 0, 0, 0)
-        mon.wait_for(lambda: mon.last_diagnostic()['armed'] == 'False', 5.0, 'disarmed')
+        mon.wait_for(lambda: mon.last_diagnostic().figures.armed is False, 5.0, 'disarmed')
         # what a stranger on the link tries, from its own address: each must leave it disarmed
         unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
         guess = mav.MAVLink(None, srcSystem=255, srcComponent=190)
@@ -320,7 +323,7 @@ def test_with_a_key_only_the_station_holding_it_reads_sets_arms_and_disarms(tmp_
                                                 0, 1, 0, 0, 0, 0, 0, 0).pack(guess)):
             stranger.sendto(frame, bridge)
         mon.spin_for(1.5)
-        assert mon.last_diagnostic()['armed'] == 'False'
+        assert mon.last_diagnostic().figures.armed is False
         # the genuine station is not locked out by the forged frame from the future
         t0 = time.monotonic()
         g.param_request_read_send(SYSID, 1, b'GC_K_R', -1)

@@ -1,7 +1,8 @@
 """The bridge's MAVLink link over real UDP on 127.0.0.1 against bad input and strangers: a
 pymavlink ground station sends garbage of each kind, then a command, and must get its answer; with
 a signing key, only a station with the key is answered (no ROS: the link thread and the vehicle's
-answers are what the bridge node runs)."""
+answers are what the bridge node runs).
+"""
 import hashlib
 import os
 import random
@@ -68,7 +69,8 @@ def pair():
 
 def command(gcs):
     """A COMMAND_LONG the vehicle answers (UNSUPPORTED), as wire bytes. None of the garbage holds
-    one that parses, so each answer belongs to the command of its try."""
+    one that parses, so each answer belongs to the command of its try.
+    """
     return gcs.mav.command_long_encode(7, 1, mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0,
                                        0).pack(gcs.mav)
 

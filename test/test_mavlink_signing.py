@@ -1,5 +1,6 @@
 """MAVLink 2 signing, checked against pymavlink's own signer (the ground station's side): the key
-file, genuine, unsigned, wrongly signed, replayed and forged frames, and the outgoing timestamp."""
+file, genuine, unsigned, wrongly signed, replayed and forged frames, and the outgoing timestamp.
+"""
 import hashlib
 import os
 
@@ -18,7 +19,8 @@ KEY = hashlib.sha256(b'lab passphrase').digest()
 
 def station(key=KEY, timestamp=None, link_id=1, system=255):
     """A ground station's encoder, signing as pymavlink does (mavutil's setup_signing: the
-    timestamp starts at the clock)."""
+    timestamp starts at the clock).
+    """
     m = mav.MAVLink(None, srcSystem=system, srcComponent=190)
     m.signing.secret_key, m.signing.sign_outgoing = key, key is not None
     m.signing.link_id = link_id

@@ -1,26 +1,35 @@
 """The ROS nodes over real DDS (loopback, a domain of this test run's own): the installed console
-scripts run as separate processes, and a monitor node in this process checks what they publish."""
+scripts run as separate processes, and a monitor node in this process checks what they publish.
+"""
 import math
 import os
 import time
 
 import numpy as np
 import pytest
+import rclpy
+from rosgraph_msgs.msg import Clock
+from support import FakeInputs
 
-rclpy = pytest.importorskip('rclpy')
-
-from geoctl_ros.core import so3  # noqa: E402
-from geoctl_ros.params import cone_set, controller_setup, load_parameter_file, node_overrides, \
-    resolve  # noqa: E402
-from geoctl_ros.tools.processes import NodeProcess  # noqa: E402
-from support import FakeInputs  # noqa: E402
+from geoctl_ros.core import so3
+from geoctl_ros.core.diagnostics import ERROR, OK, WARN
+from geoctl_ros.nodes import qos
+from geoctl_ros.nodes.conversions import stamp_seconds
+from geoctl_ros.params import (
+    cone_set,
+    controller_setup,
+    load_parameter_file,
+    node_overrides,
+    resolve,
+)
+from geoctl_ros.tools.processes import NodeProcess
 
 pytestmark = pytest.mark.dds
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TESTBED = os.path.join(ROOT, 'config', 'testbed.yaml')
 LEVEL_YAW90 = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))     # the testbed's start attitude
-OK, WARN, ERROR = 0, 1, 2
+
 # When this process feeds the inputs, its (Python, single-threaded) publisher can stall for tens of
 # milliseconds under load; generous timeouts keep those tests about what they test. The drop-out
 # test checks that the failsafe still comes within them.
@@ -81,7 +90,7 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros):
     # the diagnostics can reach this monitor before its motor_commands subscription is matched
     mon.wait_for(lambda: mon.last('motors') is not None, 10.0, 'a first motor command')
     assert zero_commands(mon)                                  # disarmed at start-up
-    assert mon.last_diagnostic()['armed'] == 'False'
+    assert mon.last_diagnostic().figures.armed is False
     reply = mon.arm_when_ready()
     assert reply.success, reply.message
     t0 = time.monotonic()
@@ -102,8 +111,8 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros):
     # (the first few may be zeros published just before the arm took effect)
     assert np.all((cmds[10:] >= 21 / 240 - 1e-9) & (cmds[10:] < 1.0)), cmds[10:].min()
     diag = mon.last_diagnostic()
-    assert diag['level'] == OK and diag['armed'] == 'True'
-    assert diag['pose accepted/refused'].endswith('/0')
+    assert diag.level == OK and diag.figures.armed
+    assert diag.figures.pose_counts.refused == 0
     published_values_are_finite(mon)
     assert mon.arm(False).success
     mon.wait_for(lambda: zero_commands(mon), 2.0, 'zero commands after disarming')
@@ -118,7 +127,7 @@ def test_arming_needs_fresh_inputs_and_disarming_zeroes_the_motors(ros):
     reply = mon.arm(True)
     assert not reply.success and 'no pose received yet' in reply.message
     diag = mon.last_diagnostic()
-    assert diag['level'] == WARN and 'disarmed' in diag['message']
+    assert diag.level == WARN and 'disarmed' in diag.message
     mon.feed(LEVEL_YAW90)
     mon.spin_for(0.5)
     reply = mon.arm(True)
@@ -148,9 +157,10 @@ def test_input_dropout_fails_safe_to_zero_and_disarms(ros):
     t_drop = time.monotonic()
     mon.wait_for(lambda: zero_commands(mon), 2.0, 'zero commands after the drop-out')
     assert time.monotonic() - t_drop < 0.25 + 0.5              # the timeout, plus slack
-    mon.wait_for(lambda: mon.last_diagnostic()['level'] == ERROR, 2.0, 'an ERROR diagnostic')
+    mon.wait_for(lambda: mon.last_diagnostic().level == ERROR, 2.0, 'an ERROR diagnostic')
     diag = mon.last_diagnostic()
-    assert diag['armed'] == 'False' and 'failsafe' in diag['message'] and 'stale' in diag['message']
+    assert diag.figures.armed is False
+    assert 'failsafe' in diag.message and 'stale' in diag.message
     mon.feed(LEVEL_YAW90)                                     # data back: stays disarmed
     mon.spin_for(0.5)
     assert zero_commands(mon)
@@ -170,13 +180,13 @@ def test_nan_and_garbage_inputs_are_refused_and_never_reach_a_topic(ros):
     for w in [(math.nan, 0.0, 0.0), (500.0, 0.0, 0.0)]:
         mon.publish_imu(w)
         mon.spin_for(0.05)
-    mon.wait_for(lambda: mon.last_diagnostic()['pose accepted/refused'].endswith('/5')
-                 and mon.last_diagnostic()['imu accepted/refused'].endswith('/2'), 3.0,
+    mon.wait_for(lambda: mon.last_diagnostic().figures.pose_counts.refused == 5
+                 and mon.last_diagnostic().figures.imu_counts.refused == 2, 3.0,
                  'the refusals to show in the diagnostics')
-    refusals = ' '.join(d['message'] for _, d in mon.log['diagnostics'])
+    refusals = ' '.join(d.message for _, d in mon.log['diagnostics'])
     for reason in ('not finite', 'not unit length', 'not newer than', 'max_angular_velocity'):
         assert reason in refusals
-    assert mon.last_diagnostic()['armed'] == 'True'          # the good stream went on
+    assert mon.last_diagnostic().figures.armed          # the good stream went on
     published_values_are_finite(mon)
 
 
@@ -209,7 +219,7 @@ def test_parameters_change_at_run_time_and_bad_ones_are_refused(ros):
     assert mon.set_parameter('cones.south.axis', [0.0, -1.0, 0.0]).successful
     assert mon.set_parameter('cones.south.half_angle_deg', 10.0).successful
     refused = mon.set_parameter('cones.names', ['obstacle', 'south'])
-    assert not refused.successful and "the current setpoint" in refused.reason
+    assert not refused.successful and 'the current setpoint' in refused.reason
     # the controller kept running throughout
     n = len(mon.log['motors'])
     mon.spin_for(0.3)
@@ -222,9 +232,9 @@ def test_setpoint_inside_a_cone_is_rejected(ros):
     e_before = mon.last('eR')
     inside = so3.rot_to_quat(so3.axis_angle([0, 0, 1], math.radians(45.0)))
     mon.publish_setpoint(inside)
-    mon.wait_for(lambda: 'setpoint rejected' in mon.last_diagnostic()['message'], 2.0,
+    mon.wait_for(lambda: 'setpoint rejected' in mon.last_diagnostic().message, 2.0,
                  'the rejection in the diagnostics')
-    assert "inside cone 'obstacle'" in mon.last_diagnostic()['message']
+    assert "inside cone 'obstacle'" in mon.last_diagnostic().message
     mon.spin_for(0.3)
     assert np.allclose(mon.last('eR'), e_before, atol=1e-3)   # the old set point stays
     fine = so3.rot_to_quat(so3.axis_angle([0, 0, 1], math.radians(80.0)))
@@ -245,7 +255,7 @@ def test_controller_restart_comes_back_disarmed_and_the_sim_stops_its_motors(ros
     mon.wait_for(lambda: 'motors stopped' in sim.output(), 5.0, 'the sim to stop its motors')
     launch('controller')
     # (messages the old one sent just before it died may still arrive: tell them apart by state)
-    mon.wait_for(lambda: mon.last_diagnostic()['state'] == 'disarmed at start-up', 30.0,
+    mon.wait_for(lambda: mon.last_diagnostic().figures.state == 'disarmed at start-up', 30.0,
                  'the restarted controller')
     t_new = time.monotonic()
     mon.wait_for(mon.controller_has_inputs, 10.0, 'the restarted controller to receive the sim')
@@ -253,7 +263,7 @@ def test_controller_restart_comes_back_disarmed_and_the_sim_stops_its_motors(ros
     # the restarted controller comes up disarmed and sends only zeros
     new_commands = [c for t, c in mon.log['motors'] if t > t_new]
     assert new_commands and all(not any(c) for c in new_commands)
-    assert mon.last_diagnostic()['armed'] == 'False'
+    assert mon.last_diagnostic().figures.armed is False
     reply = mon.arm_when_ready()
     assert reply.success, reply.message
 
@@ -287,8 +297,8 @@ def test_without_a_parameter_file_every_arm_is_refused_until_the_opt_in(ros):
     assert not reply.success and 'no configuration given' in reply.message, reply.message
     mon.spin_for(0.6)                      # a diagnostics window
     diag = mon.last_diagnostic()
-    assert diag['level'] == WARN and 'no configuration given' in diag['message']
-    assert zero_commands(mon) and diag['armed'] == 'False'
+    assert diag.level == WARN and 'no configuration given' in diag.message
+    assert zero_commands(mon) and diag.figures.armed is False
     assert mon.set_parameter('allow_default_configuration', True).successful
     reply = mon.arm_when_ready()
     assert reply.success, reply.message
@@ -318,16 +328,13 @@ def test_arming_is_refused_while_another_node_commands_the_motors(ros):
     mon.spin_for(1.0)
     reply = mon.arm(True)
     assert not reply.success and 'other publisher(s) on /motor_commands' in reply.message
-    mon.wait_for(lambda: 'another controller' in mon.last_diagnostic()['message'], 2.0,
+    mon.wait_for(lambda: 'another controller' in mon.last_diagnostic().message, 2.0,
                  'the warning in the diagnostics')
 
 
 def test_sim_time_the_sim_drives_the_controllers_clock(ros):
     """use_sim_time: the sim publishes /clock and the controller's timer and timeouts follow it."""
     mon, launch = ros
-    from rosgraph_msgs.msg import Clock
-    from geoctl_ros.nodes import qos
-    from geoctl_ros.nodes.conversions import stamp_seconds
     clock_log = []
     mon.create_subscription(Clock, '/clock', lambda m: clock_log.append(
         (time.monotonic(), stamp_seconds(m.clock))), qos.EVENT)
@@ -349,7 +356,7 @@ def test_sim_time_the_sim_drives_the_controllers_clock(ros):
     cones = cone_set(values)
     assert min(cones.margins_deg(so3.quat_to_rot(v[1]))[0]
                for t, v in mon.log['true_pose'] if t >= t0) > 0.0
-    assert mon.last_diagnostic()['armed'] == 'True'
+    assert mon.last_diagnostic().figures.armed
     published_values_are_finite(mon)
 
 
@@ -359,7 +366,8 @@ def test_step_on_imu_steps_on_every_sample_and_the_timer_still_fails_safe(ros):
     accepts, not 100 times a second; when the samples stop the 100 Hz timer stands in and the
     failsafe still comes. Counted by the controller itself (its diagnostics windows): the sensor
     and command topics keep only the newest message, so on a busy machine this process may miss
-    some of either. (With step_on: timer the windows hold 50 ticks for about 100 samples.)"""
+    some of either. (With step_on: timer the windows hold 50 ticks for about 100 samples.)
+    """
     mon, launch = ros
     launch('controller', TESTBED, *FED, '-p', 'step_on:=imu')
     wait_for_controller(mon)
@@ -374,8 +382,7 @@ def test_step_on_imu_steps_on_every_sample_and_the_timer_still_fails_safe(ros):
     assert commands > 0.5 * sent, (commands, sent)            # and the commands came back
     # the controller's 0.5 s windows (diagnostics published between them on events are skipped)
     diags = [(t, d) for t, d in mon.log['diagnostics'] if t0 < t <= t1]
-    pairs = [(int(b['ticks']), int(b['imu accepted/refused'].split('/')[0])
-              - int(a['imu accepted/refused'].split('/')[0]))
+    pairs = [(b.figures.ticks, b.figures.imu_counts.accepted - a.figures.imu_counts.accepted)
              for (ta, a), (tb, b) in zip(diags, diags[1:]) if tb - ta > 0.4]
     assert len([p for p in pairs if p[1] > 1.2 * 50]) >= 2, pairs      # samples came fast
     for ticks, accepted in pairs:     # a step per sample (and the timer's where one was late)
@@ -384,5 +391,5 @@ def test_step_on_imu_steps_on_every_sample_and_the_timer_still_fails_safe(ros):
     t_drop = time.monotonic()
     mon.wait_for(lambda: zero_commands(mon), 2.0, 'zero commands after the drop-out')
     assert time.monotonic() - t_drop < 0.25 + 0.5
-    mon.wait_for(lambda: mon.last_diagnostic()['level'] == ERROR, 2.0, 'an ERROR diagnostic')
-    assert 'stale' in mon.last_diagnostic()['message']
+    mon.wait_for(lambda: mon.last_diagnostic().level == ERROR, 2.0, 'an ERROR diagnostic')
+    assert 'stale' in mon.last_diagnostic().message

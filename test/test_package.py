@@ -14,7 +14,9 @@ import sys
 import xml.etree.ElementTree as ET
 
 import numpy as np
+import numpy_api
 import pytest
+from workspace import Workspace
 
 pytestmark = pytest.mark.odroid
 
@@ -121,7 +123,8 @@ def _third_party_imports(top):
 
 def test_package_xml_declares_what_the_code_imports():
     """Every import of the package (exec_depend) and of its tests (test_depend) is declared
-    with the key a lab's `rosdep install` resolves on Ubuntu 24.04."""
+    with the key a lab's `rosdep install` resolves on Ubuntu 24.04.
+    """
     xml = open(os.path.join(ROOT, 'package.xml')).read()
     exec_deps = set(re.findall(r'<exec_depend>([\w-]+)</exec_depend>', xml))
     test_deps = set(re.findall(r'<test_depend>([\w-]+)</test_depend>', xml)) | exec_deps
@@ -141,8 +144,8 @@ def test_package_xml_declares_what_the_code_imports():
 def test_colcon_builds_installs_and_tests_the_package_as_on_the_vehicle(tmp_path):
     """The apt path's last two steps, in a workspace of its own: `colcon build` installs every
     console script where `ros2 run` looks and the files the launch files name, and `colcon
-    test` runs the package's pytest suite (one module of it here)."""
-    from workspace import Workspace
+    test` runs the package's pytest suite (one module of it here).
+    """
     ws = Workspace(str(tmp_path / 'ws'))
     colcon, env = ws.colcon, ws.env
     colcon('build', '--packages-select', 'geoctl_ros')
@@ -172,8 +175,8 @@ def _numpy_1_26():
 
 def test_the_code_uses_nothing_that_numpy_1_26_lacks():
     """The vehicle's numpy (Ubuntu 24.04: 1.26.4) has every numpy name the package, its tests
-    and benchmarks use; a miss is named with its file and line, not found deep in a flight."""
-    import numpy_api
+    and benchmarks use; a miss is named with its file and line, not found deep in a flight.
+    """
     have = _numpy_1_26()
     newer = {n[len('ndarray.'):] for n in numpy_api.names() if n.startswith('ndarray.')} - {
         n[len('ndarray.'):] for n in have if n.startswith('ndarray.')}
@@ -192,7 +195,6 @@ def test_the_code_uses_nothing_that_numpy_1_26_lacks():
 
 
 def test_the_numpy_check_finds_what_1_26_lacks_and_only_that():
-    import numpy_api
     source = ('import numpy as np\n'
               'from numpy import linalg as la\n'
               'a = np.eye(3)\n'
@@ -205,6 +207,36 @@ def test_the_numpy_check_finds_what_1_26_lacks_and_only_that():
 
 @pytest.mark.skipif(not np.__version__.startswith('1.26.'), reason='needs numpy 1.26 itself')
 def test_the_committed_numpy_1_26_names_are_numpy_1_26s():
-    import numpy_api
     assert set(numpy_api.names()) == _numpy_1_26(), 'regenerate: python test/numpy_api.py > %s' % (
         os.path.relpath(NUMPY_1_26, ROOT))
+
+
+def _ruff():
+    ruff = shutil.which('ruff', path=os.path.dirname(sys.executable))
+    if ruff is None:
+        pytest.skip('ruff is installed on the development stack only (requirements.txt)')
+    return ruff
+
+
+def test_every_file_of_the_tree_is_clean_under_the_linter():
+    """ruff with ruff.toml (ament_flake8's rules and pep257's) over the package, tests, benchmarks
+    and launch files' Python; a new violation fails here with its file, line and rule.
+    """
+    r = subprocess.run([_ruff(), 'check', '--no-cache', '--output-format', 'concise', '.'],
+                       cwd=ROOT, capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_the_linter_finds_what_the_rules_forbid():
+    planted = ('"""A module."""\n'
+               'import os\n\n\n'
+               'def f():\n'
+               '    import sys\n'
+               '    return "%s" % sys.argv\n\n\n'
+               'X = 1  # ' + 'x' * 100 + '\n')
+    r = subprocess.run([_ruff(), 'check', '--no-cache', '--output-format', 'concise',
+                        '--stdin-filename', os.path.join(ROOT, 'geoctl_ros', 'planted.py'), '-'],
+                       cwd=ROOT, input=planted, capture_output=True, text=True)
+    assert r.returncode == 1
+    found = set(re.findall(r'\b([A-Z]+[0-9]+)\b', r.stdout))
+    assert {'F401', 'PLC0415', 'Q000', 'E501'} <= found, r.stdout

@@ -1,5 +1,6 @@
 """The parameter schema: defaults, ROS-strict types, one clear error per bad parameter, YAML files,
-and the README table generated from the schema."""
+and the README table generated from the schema.
+"""
 import os
 import re
 
@@ -8,6 +9,8 @@ import pytest
 
 from geoctl_ros import params
 from geoctl_ros.params import CONTROLLER, SIM, ConfigError, resolve
+from geoctl_ros.params import readme as readme_table
+from geoctl_ros.tools import scenario
 
 pytestmark = pytest.mark.odroid
 
@@ -93,7 +96,7 @@ def test_every_problem_is_reported_at_once():
 
 def test_parameter_file_sections_and_nesting(tmp_path):
     path = tmp_path / 'p.yaml'
-    path.write_text('''
+    path.write_text("""
 /**:
   ros__parameters:
     mass: 2.0
@@ -108,7 +111,7 @@ sim:
   ros__parameters:
     disturbance:
       constant: [0.1, 0.0, 0.0]
-''')
+""")
     sections = params.load_parameter_file(path)
     ctrl = resolve(CONTROLLER, params.node_overrides(sections, CONTROLLER))
     sim = resolve(SIM, params.node_overrides(sections, SIM))
@@ -129,7 +132,6 @@ def test_malformed_parameter_files_are_refused(tmp_path):
 
 
 def test_shipped_configs_are_valid():
-    from geoctl_ros.tools import scenario
     folder = os.path.join(ROOT, 'config', 'scenarios')
     files = sorted(f for f in os.listdir(folder) if f.endswith('.yaml'))
     assert len(files) >= 5
@@ -139,7 +141,6 @@ def test_shipped_configs_are_valid():
 
 def test_readme_parameter_table_is_in_sync_with_the_schema():
     """A documentation snapshot (it keeps the README true), not a correctness test."""
-    from geoctl_ros.params import readme as readme_table
     with open(os.path.join(ROOT, 'README.md')) as f:
         readme = f.read()
     m = re.search(r'<!-- params:begin -->\n(.*?)\n<!-- params:end -->', readme, re.S)

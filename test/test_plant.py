@@ -64,8 +64,8 @@ def test_centre_of_mass_above_the_pivot_falls_over():
 
 
 def test_centre_of_mass_below_the_pivot_swings_with_the_pendulum_period():
-    l, m = 0.1, 1.26
-    plant = Plant(PlantConfig(J_LAB, m, np.array([0.0, 0.0, -l]), G_W, NO_DIST),
+    length, m = 0.1, 1.26
+    plant = Plant(PlantConfig(J_LAB, m, np.array([0.0, 0.0, -length]), G_W, NO_DIST),
                   so3.axis_angle([1, 0, 0], math.radians(2.0)))
     roll, t = [], []
     for _ in range(4000):
@@ -75,7 +75,8 @@ def test_centre_of_mass_below_the_pivot_swings_with_the_pendulum_period():
     roll, t = np.array(roll), np.array(t)
     up = np.nonzero((roll[:-1] < 0) & (roll[1:] >= 0))[0]
     period = np.mean(np.diff(t[up]))
-    expected = 2 * math.pi * math.sqrt(pivot_inertia(J_LAB, m, [0, 0, -l])[0, 0] / (m * 9.81 * l))
+    J_pivot = pivot_inertia(J_LAB, m, [0, 0, -length])
+    expected = 2 * math.pi * math.sqrt(J_pivot[0, 0] / (m * 9.81 * length))
     assert period == pytest.approx(expected, rel=2e-3)
 
 

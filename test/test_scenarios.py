@@ -4,11 +4,13 @@ import json
 import math
 import multiprocessing
 import os
+import re
 
 import matplotlib.image
 import pytest
 
 from geoctl_ros.tools import scenario
+from geoctl_ros.tools.demo import table_row
 
 pytestmark = pytest.mark.odroid
 
@@ -31,7 +33,8 @@ def runs(tmp_path_factory):
     """Run every shipped scenario once through the command-line entry point (one process per
     core, as they are independent). The workers come from a fork server, not a fork of this
     process: earlier tests leave DDS threads here, and a fork taken while one of them holds a
-    lock deadlocks the child (seen once: a worker blocked on a futex for minutes)."""
+    lock deadlocks the child (seen once: a worker blocked on a futex for minutes).
+    """
     names = [f[:-len('.yaml')] for f in sorted(os.listdir(SCENARIOS))]
     dirs = {name: tmp_path_factory.mktemp(name) for name in names}
     jobs = [[os.path.join(SCENARIOS, name + '.yaml'), '--out', str(dirs[name])] for name in names]
@@ -57,7 +60,7 @@ def test_every_run_writes_summary_history_and_figures(runs):
         for cone in summary['cone_half_angle_deg']:
             assert 'angle_' + cone in rows[0]
             assert min(float(r['angle_' + cone]) for r in rows) >= (
-                summary["min_cone_angle_deg"][cone] - 1e-6)
+                summary['min_cone_angle_deg'][cone] - 1e-6)
         for fig in FIGURES:
             img = matplotlib.image.imread(d / fig)
             assert img.shape[0] > 300 and img.shape[1] > 300 and img.std() > 0.01, (name, fig)
@@ -117,13 +120,13 @@ def test_duration_option_and_errors(tmp_path, capsys):
     err = capsys.readouterr().err
     assert 'controller: k_R: must be > 0' in err and 'controller: alpha: expected a double' in err
     inside = tmp_path / 'inside.yaml'
-    inside.write_text('''controller:
+    inside.write_text("""controller:
   ros__parameters:
     setpoint: [0.0, 0.0, 0.3826834323650898, 0.9238795325112867]
     cones:
       names: [obstacle]
       obstacle: {axis: [1.0, 1.0, 0.0], half_angle_deg: 12.0}
-''')
+""")
     assert scenario.main([str(inside), '--out', str(tmp_path / 'y')]) == 2
     assert "inside cone 'obstacle'" in capsys.readouterr().err
     assert not os.path.exists(tmp_path / 'y')
@@ -136,8 +139,6 @@ def test_duration_option_and_errors(tmp_path, capsys):
 
 def test_readme_results_table_matches_the_runs(runs):
     """The README's table of what each scenario gives is what the runs give (wall time aside)."""
-    import re
-    from geoctl_ros.tools.demo import table_row
     with open(os.path.join(ROOT, 'README.md')) as fh:
         readme = fh.read()
     number = re.compile(r'-?\d+(?:\.\d+)?(?:e[-+]?\d+)?')
@@ -199,7 +200,8 @@ def test_a_late_loop_keeps_the_lag_compensated_testbed_steady():
     the real holds and its lead is designed for the longest recent one, so the testbed flies as on
     time. A model that assumed every command was held 10 ms drove the rotors 3.3 times past the
     allocation at each 50 ms hold: saturated half the time, 9.8 rad/s (one live CI run went
-    9 deg into the cone that way)."""
+    9 deg into the cone that way).
+    """
     s = scenario.load(os.path.join(ROOT, 'config', 'testbed.yaml'))
     s.controller['motor_lag_compensation'] = 0.04
     s.options.update(tick_jitter=0.045, duration=20.0)

@@ -74,7 +74,8 @@ def test_project_returns_nearest_rotation():
 def test_batched_products_are_the_single_ones_bit_for_bit_and_what_they_say():
     """A batch of runs must fly exactly as the runs one by one (the campaign's replays and its
     agreement with the scenario runner rest on it): each stacked product rounds as the single one
-    does, and each is the product its name says (against an explicit sum)."""
+    does, and each is the product its name says (against an explicit sum).
+    """
     rng = np.random.default_rng(5)
     Ms, vs, ws = rng.normal(size=(64, 3, 3)), rng.normal(size=(64, 3)), rng.normal(size=(64, 3))
     M, v = Ms[0], vs[0]

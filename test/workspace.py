@@ -1,5 +1,6 @@
 """Test support (not installed): this package in a colcon workspace of its own, as a lab builds
-it (`colcon build` in ~/ws with the package in src/)."""
+it (`colcon build` in ~/ws with the package in src/).
+"""
 import os
 import shutil
 import subprocess

@@ -44,7 +44,8 @@ class AirframeError(ValueError):
 @dataclass(frozen=True)
 class RotorGeometry:
     """Per-rotor geometry (n rotors): positions (n, 3) from the centre of mass, unit axes (n, 3),
-    spins (n,) of +-1, and the yaw-reaction coefficient (m)."""
+    spins (n,) of +-1, and the yaw-reaction coefficient (m).
+    """
 
     positions: np.ndarray
     axes: np.ndarray
@@ -75,7 +76,8 @@ def tilted_ring(count=6, arm_length=0.31, tilt_deg=15.0, first_azimuth_deg=0.0, 
 
 def effectiveness(geometry, rho):
     """The 6 x n matrix mapping rotor thrusts to [force; moment about the pivot] (body frame);
-    a stack of them for a stack of centre-of-mass offsets rho (batch, 3)."""
+    a stack of them for a stack of centre-of-mass offsets rho (batch, 3).
+    """
     arms = geometry.positions + np.asarray(rho, dtype=float)[..., None, :]    # from the pivot
     moments = (np.cross(arms, geometry.axes)
                - (geometry.spins * geometry.yaw_coefficient)[:, None] * geometry.axes)
@@ -96,7 +98,8 @@ class AirframeHealth:
 
 def check(B, alive):
     """Check an effectiveness matrix (6 x n_alive); raises AirframeError when a moment cannot be
-    produced, returns AirframeHealth with warnings for what is merely degraded."""
+    produced, returns AirframeHealth with warnings for what is merely degraded.
+    """
     rank = int(np.linalg.matrix_rank(B))
     moment_rank = int(np.linalg.matrix_rank(B[3:]))
     if moment_rank < 3:
@@ -134,7 +137,8 @@ class Allocator:
 
     It knows rotors only through their effectiveness matrix B (6 x n: thrusts -> [force; moment
     about the pivot], from ``effectiveness`` or written by hand), as PX4's control allocation
-    receives its matrix from the airframe's ActuatorEffectiveness."""
+    receives its matrix from the airframe's ActuatorEffectiveness.
+    """
 
     def __init__(self, B, thrust_min, thrust_max, failed=()):
         B = np.asarray(B, dtype=float)
@@ -160,7 +164,8 @@ class Allocator:
 
     def allocate(self, moment, collective):
         """Allocation for the desired moment (3,) about the pivot and collective thrust (N); a
-        stack of moments (batch, 3) gives one allocation per row."""
+        stack of moments (batch, 3) gives one allocation per row.
+        """
         moment = np.asarray(moment, dtype=float)
         valid = np.isfinite(moment).all(axis=-1) & math.isfinite(collective)
         all_valid = all_flag(valid)
@@ -221,7 +226,8 @@ class Allocator:
 @dataclass(frozen=True)
 class ThrustCurve:
     """Per-motor quadratic thrust curve f = a x^2 + b x + c, x = voltage_scale * command, with an
-    integer command in 0..command_max (the lab's BL-Ctrl 2.0 fit by default)."""
+    integer command in 0..command_max (the lab's BL-Ctrl 2.0 fit by default).
+    """
 
     a: np.ndarray
     b: np.ndarray
@@ -246,7 +252,8 @@ class ThrustCurve:
     def command(self, thrust):
         """Smallest integer command whose thrust is at least the requested one (the lab's ceil),
         clipped to 0..command_max; negative thrust counts as 0, and a request that command 0
-        already meets (the curve is clipped at 0 N) gives 0."""
+        already meets (the curve is clipped at 0 N) gives 0.
+        """
         f = np.maximum(np.asarray(thrust, dtype=float), 0.0)
         x = np.sqrt(self._disc0 + self._four_a * f) * self._k + self._k0     # x / vs, less 1e-9
         cmd = np.minimum(np.maximum(np.ceil(x), 0.0), self.command_max).astype(int)
@@ -305,12 +312,15 @@ class Mixer:
         self.lag = float(lag)
         self._dead = np.array([i for i in range(allocator.count) if i not in allocator.alive],
                               dtype=int)
-        self.modelled_thrusts = None     # the lag model's thrusts at the last command (None: at rest)
+        # the lag model's thrusts at the last command (None: at rest)
+        self.modelled_thrusts = None
         self.sent_thrusts = None         # the thrusts the last command asked for
         self.design_hold = None          # H of the last command (s)
 
     def adopt_state(self, other):
-        """Carry the lag model over from the mixer this one replaces (a run-time reconfiguration)."""
+        """Carry the lag model over from the mixer this one replaces (a run-time
+        reconfiguration).
+        """
         if other.modelled_thrusts is not None:
             self.modelled_thrusts = other.modelled_thrusts.copy()
             self.sent_thrusts = other.sent_thrusts.copy()
@@ -321,7 +331,8 @@ class Mixer:
 
         dt: how long this command is expected to be held (the control period); held: how long the
         previous command really was (the time since the last step; dt when not given). Both are
-        needed for the lag compensation only."""
+        needed for the lag compensation only.
+        """
         allocation = self.allocator.allocate(moment, self.collective_thrust)
         thrusts = allocation.thrusts
         if not armed:

@@ -43,7 +43,9 @@ from geoctl_ros.core.so3 import hat, matvec, vecmat
 
 
 def angle_deg(s):
-    """The angle (degrees) whose cosine is s = r^T R^T v_i (clipped to [-1, 1] against round-off)."""
+    """The angle (degrees) whose cosine is s = r^T R^T v_i (clipped to [-1, 1] against
+    round-off).
+    """
     return np.degrees(np.arccos(np.clip(s, -1.0, 1.0)))
 
 
@@ -130,7 +132,8 @@ class ConeSet:
 
     def terms(self, R):
         """(n, 4) per cone: s_i = r^T R^T v_i, then (R^T v_i) x r; both linear in R (the control
-        step evaluates them as part of one precomputed linear map, see ``core.control``)."""
+        step evaluates them as part of one precomputed linear map, see ``core.control``).
+        """
         return self.V @ (R @ self._r_cols)
 
     def evaluate(self, R):
@@ -175,7 +178,7 @@ class ConeSet:
         return self.angles_deg(R) - self.theta_deg
 
     def F(self, R):
-        """The paper's F(R) (eq. 28) for each cone, (n, 3, 3): d/dt e_RB,i = F_i Omega.
+        """The paper's F (eq. 28) at R for each cone, (n, 3, 3): d/dt e_RB,i = F_i Omega.
 
         Valid outside the floor band, where the barrier is the paper's; used by tests and the gain
         check, not by the control step.
@@ -187,5 +190,6 @@ class ConeSet:
             RTv = R.T @ v
             d = float(r @ RTv) - self.cos_theta[i]        # s - cos(theta)
             term = np.outer(R.T @ (hat(v) @ (R @ r)), v @ R @ r_hat)
-            out[i] = (float(v @ R @ r) * np.eye(3) - np.outer(RTv, r) + term / d) / (self.alpha * d)
+            out[i] = ((float(v @ R @ r) * np.eye(3) - np.outer(RTv, r) + term / d)
+                      / (self.alpha * d))
         return out

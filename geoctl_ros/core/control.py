@@ -7,13 +7,14 @@ Notation follows the paper and ../shared/design/control-law.md:
     Psi   = A (1 + sum_i (B_i - 1))                         configuration error, several cones
     e_R   = e_RA (1 + sum_i (B_i - 1)) + A sum_i e_RB,i     its gradient
     e_Omega = Omega - R^T R_d Omega_d                       (= Omega when stabilising)
-    u     = -k_R e_R - k_Omega e_Omega + Omega x J Omega - W Delta_bar - M_g  [+ tracking feed-forward]
+    u     = -k_R e_R - k_Omega e_Omega + Omega x J Omega - W Delta_bar - M_g
+            [+ the tracking feed-forward]
     Delta_bar' = k_Delta W^T (e_Omega + c e_R)                adaptive law (eq. 39)
 
-J is the inertia about the pivot, M_g the gravity moment of the centre of mass offset rho (both from
-``geoctl_ros.core.mechanics``). The tracking feed-forward -J (Omega x R^T R_d Omega_d - R^T R_d Omega_d')
-is the standard one of Lee's geometric tracking controller; the paper's stability proof covers
-Omega_d = 0 only.
+J is the inertia about the pivot, M_g the gravity moment of the centre of mass offset rho (both
+from ``geoctl_ros.core.mechanics``). The tracking feed-forward
+-J (Omega x R^T R_d Omega_d - R^T R_d Omega_d') is the standard one of Lee's geometric tracking
+controller; the paper's stability proof covers Omega_d = 0 only.
 
 Discrete time: ``step`` computes u from the estimate Delta_bar_k and then advances the estimate by
 one explicit Euler step of the adaptive law over dt (the control period). The estimate is frozen
@@ -22,8 +23,8 @@ paper's assumptions do not hold) and optionally projected onto a ball so that it
 
 Batches: with a batched ConeSet (one cone set per run) and stacks of set points, attitudes and
 rates (a leading batch axis), ``step`` advances every run at once with the same formulas; this is
-how the campaign (``geoctl_ros.tools.campaign``) flies a thousand manoeuvres. The gains, weights and
-model are shared by the batch. (``x.T`` on a stack of vectors puts the batch axis last, so
+how the campaign (``geoctl_ros.tools.campaign``) flies a thousand manoeuvres. The gains, weights
+and model are shared by the batch. (``x.T`` on a stack of vectors puts the batch axis last, so
 ``(x.T * a).T`` scales each run's vector by its own scalar and a single vector by a scalar.)
 """
 from dataclasses import dataclass, field
@@ -32,10 +33,10 @@ from typing import NamedTuple
 
 import numpy as np
 
+from geoctl_ros.core import so3
 from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.core.flags import any_flag
 from geoctl_ros.core.mechanics import cog_regressor, first_moment, gravity_moment, pivot_inertia
-from geoctl_ros.core import so3
 from geoctl_ros.core.so3 import cross, matvec, transpose, vee
 
 # Disturbance models: name -> number of estimated parameters (the columns of W).
@@ -100,7 +101,8 @@ class ControlOutput(NamedTuple):
     @property
     def margins_deg(self):
         """Per cone: angle between the sensor and the cone's axis minus its half-angle, degrees
-        (computed when asked: the node publishes the motor commands first)."""
+        (computed when asked: the node publishes the motor commands first).
+        """
         return self.cones.margins_deg(self.half_angles_deg)
 
 
@@ -128,7 +130,8 @@ def configuration_error(R, R_d, G, cones):
 
 def with_cones(A, e_RA, ev):
     """Psi = A (1 + sum_i (B_i - 1)) and e_R = e_RA (1 + sum_i (B_i - 1)) + A sum_i e_RB,i from
-    A (with a trailing axis of 1), e_RA and the cones' evaluation."""
+    A (with a trailing axis of 1), e_RA and the cones' evaluation.
+    """
     scale = (1.0 - ev.B.shape[-1]) + ev.B.sum(axis=-1, keepdims=True)
     return (A * scale)[..., 0], e_RA * scale + A * ev.e_RB_sum
 
@@ -138,7 +141,8 @@ _BASIS = np.eye(9).reshape(9, 3, 3)       # the unit matrices E_jk
 
 def linear_terms(R, R_d, config):
     """The parts of the law that are affine in R, side by side (..., 5 + 4 n): A, e_RA (3), for
-    each cone s_i and (R^T v_i) x r (``ConeSet.terms``), and the gravity moment M_g (3)."""
+    each cone s_i and (R^T v_i) x r (``ConeSet.terms``), and the gravity moment M_g (3).
+    """
     A, e_RA = attractive_error(R, R_d, config.G)
     sc = config.cones.terms(R)
     M_g = gravity_moment(R, config.m_rho, config.gravity)
@@ -152,23 +156,26 @@ class LinearMap:
     in R, and built at configuration time (a new set point or configuration) by evaluating
     ``linear_terms`` itself on the basis E_jk, so each formula still lives in one place. The hot
     path then gets A, e_RA, every cone's terms and M_g from one small matrix-vector product
-    instead of a dozen numpy calls (README, "Benchmarks")."""
+    instead of a dozen numpy calls (README, "Benchmarks").
+    """
 
     def __init__(self, R_d, config):
         lead = np.broadcast_shapes(R_d.shape[:-2], config.cones.V.shape[:-2])     # the batch
         self.y0 = linear_terms(np.zeros((3, 3)), R_d, config)
         basis = _BASIS.reshape((9,) + (1,) * len(lead) + (3, 3))
-        self.L = np.ascontiguousarray(np.moveaxis(linear_terms(basis, R_d, config) - self.y0, 0, -1))
+        terms = linear_terms(basis, R_d, config) - self.y0
+        self.L = np.ascontiguousarray(np.moveaxis(terms, 0, -1))
         self.n_cones = len(config.cones)
 
     def __call__(self, R):
-        """y = linear_terms(R, R_d, config), to rounding."""
+        """The terms y = linear_terms(R, R_d, config), to rounding."""
         return matvec(self.L, R.reshape(R.shape[:-2] + (9,))) + self.y0
 
 
 def smallest_pair_sum(G):
     """min_{i != j} (g_i + g_j): the least A can grow per (1 - cos) of a rotation's angle,
-    A = (1 - cos phi) (tr G - n^T G n) / 2 (the paper's h_1)."""
+    A = (1 - cos phi) (tr G - n^T G n) / 2 (the paper's h_1).
+    """
     g = np.sort(np.asarray(G, dtype=float))
     return float(g[0] + g[1])
 
@@ -183,7 +190,8 @@ def holding_moment(config, cones, R_d):
     (1 - cos c_i) (g_a + g_b) / 2 (g_a, g_b the two smallest weights). An unlearnt moment larger
     than this (a disturbance, an error in the model of gravity, before the adaptive estimate has
     caught up) holds the sensor in the cone: the campaign's creep class (README, "Safety
-    campaign")."""
+    campaign").
+    """
     if not len(cones):
         return np.zeros(0)
     c = np.maximum(np.radians(cones.margins_deg(R_d)) - cones.guard, 0.0)
@@ -193,7 +201,8 @@ def holding_moment(config, cones, R_d):
 
 def holding_clearance_deg(config, cones, moment):
     """Per cone: the set point's clearance (degrees from the real cone) at which
-    ``holding_moment`` equals moment."""
+    ``holding_moment`` equals moment.
+    """
     x = (2.0 * moment * cones.alpha * cones.g0
          / (config.k_R * smallest_pair_sum(config.G) * np.sin(cones.theta_b)))
     return np.degrees(np.arccos(np.clip(1.0 - x, -1.0, 1.0)) + cones.guard)
@@ -213,7 +222,9 @@ class AttitudeController:
 
     @property
     def R_d(self):
-        """The desired attitude (a stack of them for a batch); setting it rebuilds the linear map."""
+        """The desired attitude (a stack of them for a batch); setting it rebuilds the linear
+        map.
+        """
         return self._R_d
 
     @R_d.setter
@@ -251,14 +262,16 @@ class AttitudeController:
 
     def set_setpoint(self, R_d, Omega_d=None, dOmega_d=None):
         """Set the desired attitude (and optionally its angular velocity and acceleration, body
-        frame of R_d). Raises SetpointRejected with the reason; the old set point then stays."""
+        frame of R_d). Raises SetpointRejected with the reason; the old set point then stays.
+        """
         R_d = np.asarray(R_d, dtype=float)
         problem = self.setpoint_problem(R_d)
         if problem:
             raise SetpointRejected(problem)
         self.R_d = R_d.copy()
         self.Omega_d = np.zeros(3) if Omega_d is None else np.asarray(Omega_d, dtype=float).copy()
-        self.dOmega_d = np.zeros(3) if dOmega_d is None else np.asarray(dOmega_d, dtype=float).copy()
+        self.dOmega_d = (np.zeros(3) if dOmega_d is None
+                         else np.asarray(dOmega_d, dtype=float).copy())
         self._tracking = bool(self.Omega_d.any() or self.dOmega_d.any())
 
     def reset_adaptation(self):
@@ -288,14 +301,14 @@ class AttitudeController:
 
         The angular acceleration is the model's, J^-1 (moment + M_g(R) + W Delta_bar - Omega x J
         Omega) (Delta_bar standing for the disturbance it estimates), less its own slow part
-        (low-pass, time constant PREDICT_SLOW_S; dt is the time since the last call), held over
-        the age: Omega <- Omega + age_Omega Omega', R <- R exp(hat(Omega + age_R Omega' / 2) age_R).
+        (low-pass, time constant PREDICT_SLOW_S; dt is the time since the last call), held over the
+        age: Omega <- Omega + age_Omega Omega', R <- R exp(hat(Omega + age_R Omega' / 2) age_R).
         The slow part is what the model gets wrong at rest: there the true acceleration is zero
         while the model's is J^-1 times the moment not yet learnt (k_R e_R of the steady error);
         predicting with it would soften the attitude loop (the demo's final error went from 5.5 to
-        15 deg). The fast part, which the delay turns into lost damping, is kept. A
-        measurement 10 ms old on the testbed, with its 40 ms motor lag, otherwise costs the rate
-        loop most of its phase margin (README, "Safety campaign").
+        15 deg). The fast part, which the delay turns into lost damping, is kept. A measurement 10
+        ms old on the testbed, with its 40 ms motor lag, otherwise costs the rate loop most of its
+        phase margin (README, "Safety campaign").
         """
         cfg = self.config
         W = self.regressor(R)
@@ -310,7 +323,8 @@ class AttitudeController:
 
     def regressor(self, R):
         """W(R, Omega): 3 x n_params (a stack of them for a batch); None for the constant model,
-        where W = I."""
+        where W = I.
+        """
         if self.config.disturbance_model == 'constant':
             return None
         Y = cog_regressor(R, self.config.gravity)
@@ -432,7 +446,8 @@ def gain_condition(config, margin_deg=5.0):
     H = c_B * E_bound + 2.0 * eRA_bound * eRB_sum + c_A * F_sum
     eig = np.linalg.eigvalsh(config.J)
     lam_m, lam_M = float(eig[0]), float(eig[-1])
-    c_paper = 4.0 * config.k_R * config.k_Omega / (config.k_Omega ** 2 + 4.0 * config.k_R * lam_M * H)
+    c_paper = (4.0 * config.k_R * config.k_Omega
+               / (config.k_Omega ** 2 + 4.0 * config.k_R * lam_M * H))
     c_diss = math.sqrt(2.0 * lam_m * config.k_R * n1 / lam_M ** 2)
     return GainCheck(c=config.c, c_max_paper=c_paper, c_max_dissertation=c_diss, H=H,
                      psi_max=psi, margin_deg=margin_deg)

@@ -1,9 +1,11 @@
-"""Riding through short input gaps: the attitude and rate the controller uses when a stream is late.
+"""Riding through short input gaps: the attitude and rate the controller uses when a stream is
+late.
 
 Motion capture comes over WiFi and the IMU over a serial link; either can go quiet for a few
 hundred milliseconds (a busy DDS participant, a WiFi retry, a scheduler hiccup) while the vehicle
 is perfectly flyable. Dropping the motors then is the worse choice on a joint with the centre of
-mass above the pivot. So, while a stream is stale but not yet lost (``geoctl_ros.core.safety.Stream``):
+mass above the pivot. So, while a stream is stale but not yet lost
+(``geoctl_ros.core.safety.Stream``):
 
 - **pose gap** (gyro fresh): the attitude is propagated from the last pose with the gyro,
   R <- R exp(hat(Omega) dt) at every control tick (the rate held over the tick). Its error grows
@@ -61,7 +63,8 @@ class GapBridge:
 
     def pose_rate(self):
         """Body rate from the newest pose and the one closest to rate_window before it, or None
-        when no such pair exists (fewer than two poses, or none within 3 windows)."""
+        when no such pair exists (fewer than two poses, or none within 3 windows).
+        """
         if self._head < 0:
             return None
         t1 = self._t[self._head]
@@ -74,7 +77,8 @@ class GapBridge:
 
     def update(self, now, pose_fresh, gyro_fresh):
         """The (R, Omega) to use at time now, given which streams are fresh; None before the first
-        pose and the first rate (gyro or poses)."""
+        pose and the first rate (gyro or poses).
+        """
         if gyro_fresh and self._w_meas is not None:
             self.Omega, self.rate_source = self._w_meas, GYRO
         else:

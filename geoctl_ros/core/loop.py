@@ -10,12 +10,11 @@ import numpy as np
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.control import AttitudeController, SetpointRejected
+from geoctl_ros.core.diagnostics import ERROR, FAILSAFE, OK, WARN, Counts, Figures, Gaps, Status
 from geoctl_ros.core.gaps import GYRO, POSE, GapBridge
-from geoctl_ros.core.safety import (Stream, Supervisor, angular_velocity_problem, quaternion_problem)
+from geoctl_ros.core.safety import Stream, Supervisor, angular_velocity_problem, quaternion_problem
 from geoctl_ros.core.stats import WindowStats
 
-# Diagnostics levels (the values of diagnostic_msgs/DiagnosticStatus).
-OK, WARN, ERROR = 0, 1, 2
 NEAR_CONE_DEG = 2.0           # a cone margin below this is reported (WARN)
 NON_FINITE = 'failsafe: non-finite control output'
 
@@ -24,7 +23,8 @@ def step_period(since, period):
     """The dt of a step started by a sample (``step_on``): the time since the last step, within
     half to twice the control period. A burst of samples must not make a step of almost no time:
     the mixer's lag compensation would then command the extreme thrust, and the motors would hold
-    it for the whole wait until the next sample."""
+    it for the whole wait until the next sample.
+    """
     return min(max(since, 0.5 * period), 2.0 * period)
 
 
@@ -39,21 +39,13 @@ class Tick:
     bridging: bool = False    # a gap is being ridden through (see geoctl_ros.core.gaps)
 
 
-@dataclass
-class Status:
-    """What the diagnostics say: level (OK/WARN/ERROR), one message, and key/value figures."""
-
-    level: int
-    message: str
-    values: dict
-
-
 class ControlLoop:
     """State and decisions of the controller node."""
 
     def __init__(self, setup, unconfigured=None):
         """unconfigured: None, or why the node has no configuration anyone gave (it then
-        refuses every arm request with that reason)."""
+        refuses every arm request with that reason).
+        """
         self.setup = setup
         self.unconfigured = unconfigured
         self.controller = AttitudeController(setup.config)
@@ -136,7 +128,8 @@ class ControlLoop:
         """Adopt a new setup (validated by params.controller_setup); None, or why not.
 
         The set point parameter is applied only when it changed, so that a gain change does not
-        undo a set point that came in on the topic."""
+        undo a set point that came in on the topic.
+        """
         try:
             self.controller.reconfigure(setup.config)
         except SetpointRejected as e:
@@ -158,7 +151,8 @@ class ControlLoop:
     # --- the control tick --------------------------------------------------------------------
     def tick(self, now, dt):
         """One control step at time now (the node's clock); dt is the control period (the time
-        the step's command is expected to be held)."""
+        the step's command is expected to be held).
+        """
         armed = self.supervisor.check(now)
         # how long the last command was held (the lag compensation's model needs the real time)
         held = None if self._last_now is None else now - self._last_now
@@ -215,11 +209,12 @@ class ControlLoop:
 
     def status(self, now, other_commanders=None):
         """The diagnostics: level, message and figures. other_commanders is the node's sentence
-        when another node publishes the motor commands (an error while armed)."""
+        when another node publishes the motor commands (an error while armed).
+        """
         errors, warnings = [], []
         sup = self.supervisor
         if not sup.armed:
-            (errors if sup.reason.startswith('failsafe') else warnings).append(sup.reason)
+            (errors if sup.reason.startswith(FAILSAFE) else warnings).append(sup.reason)
             if self.unconfigured:
                 warnings.append(self.unconfigured)
             stale = sup.input_problem(now)
@@ -247,33 +242,28 @@ class ControlLoop:
                 warnings.append('near cone %r (margin %.2f deg)' % (name, out.margins_deg[i]))
         w = self._window
         if w['saturated']:
-            warnings.append('allocation saturated in %d of %d ticks' % (w['saturated'], w['ticks']))
+            warnings.append('allocation saturated in %d of %d ticks'
+                            % (w['saturated'], w['ticks']))
         if self.setpoint_note:
             warnings.append(self.setpoint_note)
         if other_commanders:
             (errors if sup.armed else warnings).append(other_commanders)
         level = ERROR if errors else WARN if warnings else OK
-        values = {
-            'armed': str(sup.armed), 'state': sup.reason,
-            'pose age [s]': '%.4f' % self.pose.age(now),
-            'imu age [s]': '%.4f' % self.rate.age(now),
-            'pose accepted/refused': '%d/%d' % (self.pose.accepted, self.pose.refused),
-            'imu accepted/refused': '%d/%d' % (self.rate.accepted, self.rate.refused),
-            'pose age at tick [ms]': self.pose_age.summary(),
-            'imu age at tick [ms]': self.rate_age.summary(),
-            'pose gaps ridden through': '%d (longest %.3f s)' % tuple(self.gaps['pose']),
-            'imu gaps ridden through': '%d (longest %.3f s)' % tuple(
-                self.gaps['angular velocity']),
-            'ticks bridging a gap': str(w['bridging']),
-            'ticks': str(w['ticks']),
-        }
-        if out is not None:
-            values['Psi'] = '%.6g' % out.psi
-            values['min cone margin [deg]'] = ('%.3f' % float(np.min(out.margins_deg))
-                                               if len(out.margins_deg) else 'no cones')
-            values['motor commands'] = ' '.join(str(c) for c in tick.motors.commands)
+        margin = None
+        if out is not None and len(out.margins_deg):
+            margin = float(np.min(out.margins_deg))
+        figures = Figures(
+            armed=sup.armed, state=sup.reason,
+            pose_age=self.pose.age(now), imu_age=self.rate.age(now),
+            pose_counts=Counts(self.pose.accepted, self.pose.refused),
+            imu_counts=Counts(self.rate.accepted, self.rate.refused),
+            pose_age_at_tick=self.pose_age.window(), imu_age_at_tick=self.rate_age.window(),
+            pose_gaps=Gaps(*self.gaps['pose']), imu_gaps=Gaps(*self.gaps['angular velocity']),
+            ticks_bridging=w['bridging'], ticks=w['ticks'],
+            psi=None if out is None else float(out.psi), min_cone_margin_deg=margin,
+            motor_commands=None if out is None else tuple(int(c) for c in tick.motors.commands))
         message = '; '.join(errors + warnings) or 'armed, all inputs fresh'
-        return Status(level, message, values)
+        return Status(level, message, figures)
 
     def end_window(self):
         """Start a new diagnostics window (the node calls this on its fixed period)."""

@@ -21,15 +21,16 @@ def pivot_inertia(inertia_cm, mass, rho):
 
 def first_moment(mass, rho):
     """m rho, the mass times the pivot -> centre of mass vector: what the gravity moment (and the
-    constant+cog estimate) is linear in."""
+    constant+cog estimate) is linear in.
+    """
     return np.asarray(mass, dtype=float)[..., None] * np.asarray(rho, dtype=float)
 
 
 def gravity_moment(R, m_rho, g_w):
     """Moment of gravity about the pivot in the body frame: (m rho) x (R^T g_w).
 
-    With the centre of mass above the pivot this moment tips the body further over (an
-    inverted pendulum). It is linear in m_rho = m * rho: gravity_moment = cog_regressor(R, g_w) @ m_rho.
+    With the centre of mass above the pivot this moment tips the body further over (an inverted
+    pendulum). It is linear in m_rho = m * rho: gravity_moment = cog_regressor(R, g_w) @ m_rho.
     """
     return cross(m_rho, vecmat(g_w, R))       # g_w^T R = (R^T g_w)^T
 

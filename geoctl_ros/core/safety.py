@@ -9,8 +9,9 @@ Rules (the README's "Safety behaviour" section says the same to users):
   less than its timeout ago. Receipt time is used because the motion-capture host's clock need not
   agree with the onboard one; stamps are used only for ordering.
 - A stale stream is not yet lost: up to its ride-through limit (``pose_ride_through``,
-  ``imu_ride_through``) the control loop bridges the gap (``geoctl_ros.core.loop``: attitude propagated
-  with the gyro, rates from successive poses) and reports it. Past the limit the stream is lost.
+  ``imu_ride_through``) the control loop bridges the gap (``geoctl_ros.core.loop``: attitude
+  propagated with the gyro, rates from successive poses) and reports it. Past the limit the stream
+  is lost.
 - Arming is refused unless pose and angular velocity are both fresh. While armed, if either is
   lost the supervisor disarms (failsafe) and says why. Motor commands are zero unless armed.
 """
@@ -46,7 +47,8 @@ class Stream:
     """Freshness, ordering and refusal counts of one input stream.
 
     timeout: older than this (by receipt), the stream is stale. ride_through: older than this, it
-    is lost (0: lost as soon as it is stale)."""
+    is lost (0: lost as soon as it is stale).
+    """
 
     def __init__(self, name, timeout, ride_through=0.0):
         self.name = name
@@ -100,7 +102,8 @@ class Stream:
 
     def loss(self, now):
         """A sentence if the stream is lost (older than its limit, or never received), else
-        None."""
+        None.
+        """
         if self.last_receipt is None:
             return 'no %s received yet' % self.name
         if self.age(now) >= self.limit:

@@ -36,7 +36,8 @@ def hat(x):
 
 def cross(a, b):
     """Cross product of 3-vectors, or of stacks of them (np.cross costs ~10x more for single
-    vectors)."""
+    vectors).
+    """
     if a.ndim == 1 and b.ndim == 1:      # one pair: float arithmetic beats array indexing
         a0, a1, a2 = a.tolist()
         b0, b1, b2 = b.tolist()
@@ -58,7 +59,8 @@ def matvec(M, v):
     A stack goes through matmul with an explicit axis, which rounds each product exactly as
     ``M @ v`` does for a single pair: a batched run then stays bit for bit on its single run
     (einsum sums in another order, and a chaotic stretch of flight turns that into 1e-3 deg in
-    4 s)."""
+    4 s).
+    """
     if v.ndim == 1:                      # one vector: M @ v, for one M or each of a stack
         return M @ v
     return (M @ v[..., None])[..., 0]
@@ -84,8 +86,9 @@ def transpose(M):
 
 
 def exp(w):
-    """Rotation matrix exp(hat(w)) (Rodrigues), accurate for small angles; a stack (..., 3) gives a
-    stack of rotations."""
+    """The rotation matrix exp of hat(w) (Rodrigues), accurate for small angles; a stack (..., 3)
+    gives a stack of rotations.
+    """
     w = np.asarray(w, dtype=float)
     if w.ndim == 1:       # one rotation, in floats: I + a hat(w) + b (w w^T - |w|^2 I)
         x, y, z = w.tolist()
@@ -107,7 +110,8 @@ def exp(w):
 
 def _rodrigues(small, theta2, theta, sin, cos):
     """sin(t)/t and (1 - cos t)/t^2, by their Taylor series to O(t^4) where t^2 < 1e-8 (error below
-    1e-20); scalars, or arrays entry by entry."""
+    1e-20); scalars, or arrays entry by entry.
+    """
     taylor = (1.0 - theta2 / 6.0 + theta2 * theta2 / 120.0,
               0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0)
     if isinstance(small, (bool, np.bool_)):

@@ -19,8 +19,8 @@ With a signing key (``signing=``) every outgoing message is signed and every inc
 (``geoctl_ros.mavlink.signing.Verifier``); refusals are counted and the latest kept, with the
 sender's address, in ``refusals``.
 """
-import os
 import collections
+import os
 import queue
 import socket
 import threading
@@ -49,7 +49,8 @@ class Link:
 
     def __init__(self, url, system_id, component_id, capacity=1000, signing=None):
         """signing: None, or (key, link id, first outgoing timestamp): then every frame is
-        checked and signed from the first on."""
+        checked and signed from the first on.
+        """
         self.url = url
         self.conn = mavutil.mavlink_connection(url, source_system=system_id,
                                                source_component=component_id, dialect=DIALECT,
@@ -137,7 +138,8 @@ class Link:
 
     def _read(self, conn):
         """The messages that arrived within 10 ms: every waiting datagram's (up to
-        DATAGRAMS_PER_READ), or the next of a stream; without those refused for their signature."""
+        DATAGRAMS_PER_READ), or the next of a stream; without those refused for their signature.
+        """
         if not self._datagrams:
             msg = conn.recv_match(blocking=True, timeout=0.01)
             self._sender = self.url

@@ -4,6 +4,8 @@ Only scalars are offered (a ground station's parameter editor edits numbers); ar
 the cones stay ROS-only. Booleans travel as INT32 0/1. Every PARAM_SET is applied through the
 controller's own ``set_parameters`` service, so it is validated exactly as ``ros2 param set`` is.
 """
+from geoctl_ros.params.schema import BY_NAME
+
 # (ROS name, MAVLink id, MAVLink type: 'REAL32' or 'INT32')
 TABLE = [
     ('k_R', 'GC_K_R', 'REAL32'),
@@ -43,7 +45,6 @@ def to_ros(name, value):
             break
     else:
         raise KeyError(name)
-    from geoctl_ros.params.schema import BY_NAME
     kind = BY_NAME[name].type
     if kind == 'bool':
         return bool(round(value))

@@ -35,7 +35,8 @@ class SigningKeyError(ValueError):
 def load_key(path):
     """The 32-byte key of a key file: 64 hex digits are the key itself; anything else is a
     passphrase (its first line, stripped), whose SHA-256 is the key, as QGroundControl and
-    MAVProxy derive it. Refused when group or others may read or write the file."""
+    MAVProxy derive it. Refused when group or others may read or write the file.
+    """
     try:
         st = os.stat(path)
         with open(path, 'rb') as fh:
@@ -75,7 +76,8 @@ class Verifier:
 
     def check(self, frame):
         """None if frame (the whole wire bytes of one message) is signed with the key and new;
-        else why not (and counted)."""
+        else why not (and counted).
+        """
         frame = bytes(frame)
         if len(frame) < 10 + SIGNATURE_LEN or frame[0] != 0xFD or not frame[2] & SIGNED:
             return self._refuse('unsigned')
@@ -102,7 +104,8 @@ class Verifier:
 
 class TimestampStore:
     """The outgoing timestamp across restarts: it never goes backwards (the spec asks it to be
-    saved and restored, since the clock may be behind after a restart)."""
+    saved and restored, since the clock may be behind after a restart).
+    """
 
     def __init__(self, path):
         self.path = path

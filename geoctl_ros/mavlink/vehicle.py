@@ -1,12 +1,13 @@
-"""The testbed as a MAVLink vehicle, without ROS and without I/O: what to send, what a message asks.
+"""The testbed as a MAVLink vehicle, without ROS and without I/O: what to send, what a message
+asks.
 
 A ground station makes a vehicle of heartbeats from component 1 (MAV_COMP_ID_AUTOPILOT1) with a
-vehicle type, and on connecting asks for AUTOPILOT_VERSION, the parameter list and the mission list.
-This class answers those from the controller's state, which the bridge node feeds in (attitude,
-set point, motor commands, the controller's diagnostics, parameter values). Messages are built with
-pymavlink's encoder (``mav`` is a ``MAVLink`` object of the common dialect, MAVLink 2); sending
-them, and carrying out what ``handle`` asks of the controller (arm, set a parameter), is the
-bridge's job.
+vehicle type, and on connecting asks for AUTOPILOT_VERSION, the parameter list and the mission
+list. This class answers those from the controller's state, which the bridge node feeds in
+(attitude, set point, motor commands, the controller's diagnostics, parameter values). Messages are
+built with pymavlink's encoder (``mav`` is a ``MAVLink`` object of the common dialect, MAVLink 2);
+sending them, and carrying out what ``handle`` asks of the controller (arm, set a parameter), is
+the bridge's job.
 
 Identity: MAV_TYPE_HEXAROTOR, MAV_AUTOPILOT_GENERIC (it is neither PX4 nor ArduPilot). Heartbeat
 base_mode carries the armed flag; system_status is STANDBY (disarmed), ACTIVE (armed) or CRITICAL
@@ -16,7 +17,9 @@ from dataclasses import dataclass, field
 import math
 
 import numpy as np
+from pymavlink.dialects.v20 import common
 
+from geoctl_ros.core.diagnostics import ERROR, Status
 from geoctl_ros.mavlink import frames
 from geoctl_ros.mavlink.params import BY_ID, TABLE, to_mavlink
 
@@ -39,7 +42,7 @@ class ControllerView:
     psi: float = math.nan
     margins: list = field(default_factory=list)
     dbar: list = field(default_factory=list)
-    diagnostics: dict = None             # the controller's last diagnostics (key -> value)
+    diagnostics: Status = None           # the controller's last diagnostics (typed figures)
     params: dict = field(default_factory=dict)     # ROS name -> value
 
 
@@ -58,12 +61,12 @@ class Vehicle:
     @property
     def armed(self):
         d = self.view.diagnostics
-        return bool(d) and d.get('armed') == 'True'
+        return d is not None and d.figures.armed
 
     @property
     def failsafe(self):
         d = self.view.diagnostics
-        return bool(d) and d.get('state', '').startswith('failsafe')
+        return d is not None and d.figures.failsafe
 
     def system_status(self):
         if self.view.diagnostics is None:
@@ -88,8 +91,9 @@ class Vehicle:
 
     def sys_status(self):
         """Sensors present/enabled/healthy: gyro (imu), attitude (motion capture, as AHRS),
-        attitude stabilisation and rate control (the controller), motor outputs."""
-        d = self.view.diagnostics or {}
+        attitude stabilisation and rate control (the controller), motor outputs.
+        """
+        d = self.view.diagnostics
         gyro, ahrs = m_const('MAV_SYS_STATUS_SENSOR_3D_GYRO'), m_const('MAV_SYS_STATUS_AHRS')
         stab = (m_const('MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION')
                 | m_const('MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL'))
@@ -98,11 +102,11 @@ class Vehicle:
         enabled = gyro | ahrs | (stab | motors if self.armed else 0)
         health = 0
         p = self.view.params
-        if _fresh(d, 'imu age [s]', p.get('imu_timeout', 0.05)):
+        if d is not None and d.figures.imu_age < float(p.get('imu_timeout', 0.05)):
             health |= gyro
-        if _fresh(d, 'pose age [s]', p.get('pose_timeout', 0.1)):
+        if d is not None and d.figures.pose_age < float(p.get('pose_timeout', 0.1)):
             health |= ahrs
-        if d and d.get('level') != 2:
+        if d is not None and d.level != ERROR:
             health |= stab | motors
         return self.mav.sys_status_encode(present, enabled, health, 0, 0xFFFF, -1, -1,
                                           0, 0, 0, 0, 0, 0)
@@ -138,7 +142,8 @@ class Vehicle:
 
     def internals(self, now):
         """Psi and the smallest cone margin as NAMED_VALUE_FLOAT; every margin and the estimate as
-        DEBUG_FLOAT_ARRAY."""
+        DEBUG_FLOAT_ARRAY.
+        """
         v, t = self.view, self._boot_ms(now)
         out = []
         if not math.isnan(v.psi):
@@ -177,7 +182,8 @@ class Vehicle:
 
     def param_index(self, param_id, index):
         """The table index a PARAM_REQUEST_READ or PARAM_SET names (by id, or by index when the
-        id is empty), or None."""
+        id is empty), or None.
+        """
         pid = param_id.rstrip('\x00') if isinstance(param_id, str) else param_id
         if pid:
             if pid not in BY_ID:
@@ -192,7 +198,8 @@ class Vehicle:
 
     def handle(self, msg):
         """What an incoming message asks: a list of ('send', message) and ('arm', bool, command)
-        / ('set', ros_name, mavlink value, index) actions. Anything not for us: ('ignored', why)."""
+        / ('set', ros_name, mavlink value, index) actions. Anything not for us: ('ignored', why).
+        """
         kind = msg.get_type()
         if not self.for_us(msg):
             return [('ignored', 'for system %d' % msg.target_system)]
@@ -211,7 +218,7 @@ class Vehicle:
             return [('set', TABLE[i][0], float(msg.param_value), i)]
         if kind == 'SETUP_SIGNING':       # the key is the vehicle's file, never set over the link
             return [('send', self.statustext('SETUP_SIGNING refused: the signing key comes from '
-                                             'the vehicle\'s key file only'))]
+                                             "the vehicle's key file only"))]
         if kind == 'MISSION_REQUEST_LIST':
             return [('send', self.mav.mission_count_encode(msg.get_srcSystem(),
                                                            msg.get_srcComponent(), 0,
@@ -237,14 +244,6 @@ class Vehicle:
         return self.mav.command_ack_encode(command, m_const(result))
 
 
-def _fresh(d, key, timeout):
-    try:
-        return float(d[key]) < float(timeout)
-    except (KeyError, ValueError):
-        return False
-
-
 def m_const(name):
     """A constant of the common dialect by name (MAV_TYPE_HEXAROTOR, ...)."""
-    from pymavlink.dialects.v20 import common
     return getattr(common, name)

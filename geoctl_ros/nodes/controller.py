@@ -1,14 +1,15 @@
 """The controller node: ``ros2 run geoctl_ros controller --ros-args --params-file FILE``.
 
-A thin shell over ``geoctl_ros.core.loop.ControlLoop``: subscriptions feed it checked measurements and
-set points, a timer at ``rate_hz`` runs one control step and publishes the results, services arm,
-disarm and reset the estimate, and parameter changes are validated by the shared schema before
+A thin shell over ``geoctl_ros.core.loop.ControlLoop``: subscriptions feed it checked measurements
+and set points, a timer at ``rate_hz`` runs one control step and publishes the results, services
+arm, disarm and reset the estimate, and parameter changes are validated by the shared schema before
 they touch the running controller. Topics, services and parameters: see the README.
 """
+from dataclasses import replace
 import sys
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, QuaternionStamped, Vector3Stamped, WrenchStamped
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -19,11 +20,17 @@ from std_srvs.srv import SetBool, Trigger
 from geoctl_ros.core import so3
 from geoctl_ros.core.control import gain_condition
 from geoctl_ros.core.loop import ControlLoop, step_period
-from geoctl_ros.nodes import qos, ros_params
-from geoctl_ros.nodes.conversions import (quaternion, set_quaternion, set_vector, stamp_seconds,
-                                          vector)
-from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.core.stats import WindowStats
+from geoctl_ros.nodes import qos, ros_params
+from geoctl_ros.nodes.conversions import (
+    quaternion,
+    set_quaternion,
+    set_vector,
+    stamp_seconds,
+    status_msg,
+    vector,
+)
+from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.params import CONTROLLER, ConfigError, controller_setup, resolve
 
 DIAGNOSTICS_PERIOD = 0.5      # s: the fixed statistics window
@@ -32,14 +39,16 @@ STATUS_NAME = 'geoctl_ros: controller'
 
 def build(values):
     """The controller setup of a node's parameters: cones defined but not yet in cones.names are
-    allowed (they are being added, one parameter at a time, or came from a dump)."""
+    allowed (they are being added, one parameter at a time, or came from a dump).
+    """
     return controller_setup(resolve(CONTROLLER, values, staged_cones=True))
 
 
 class ControllerNode(Node):
     def _unconfigured(self, setup):
         """Why this node flies nothing it was given, or None: no parameter file and no override
-        reached it (a launch file's missing params_file only warns and passes none)."""
+        reached it (a launch file's missing params_file only warns and passes none).
+        """
         given = set(self._parameter_overrides) - {'use_sim_time', 'allow_default_configuration'}
         if given or setup.values['allow_default_configuration']:
             return None
@@ -113,14 +122,16 @@ class ControllerNode(Node):
     def _now(self):
         """Seconds on the node's clock: the ROS clock with use_sim_time, else the steady clock,
         read as time.monotonic() (the same CLOCK_MONOTONIC that rclpy's steady clock reads, at a
-        tenth of the cost: it is read on every sample and tick)."""
+        tenth of the cost: it is read on every sample and tick).
+        """
         if self._sim_time:
             return self.clock_.now().nanoseconds * 1e-9
         return time.monotonic()
 
     def on_shutdown(self):
         """Leave the motors at zero when the node stops."""
-        self.pub_motors.publish(Float64MultiArray(data=[0.0] * self.loop.setup.mixer.allocator.count))
+        count = self.loop.setup.mixer.allocator.count
+        self.pub_motors.publish(Float64MultiArray(data=[0.0] * count))
 
     # --- inputs ------------------------------------------------------------------------------
     def _on_pose(self, msg):
@@ -173,7 +184,8 @@ class ControllerNode(Node):
 
     def _validate(self, values):
         """A run-time change: the whole configuration, and the set point now being flown (which
-        may have come in on the topic) against the new cones."""
+        may have come in on the topic) against the new cones.
+        """
         setup = build(values)
         controller = self.loop.controller
         problem = controller.setpoint_problem(controller.R_d, setup.config.cones)
@@ -193,7 +205,8 @@ class ControllerNode(Node):
     # --- the control tick --------------------------------------------------------------------
     def _on_timer(self):
         """The rate_hz timer: a step, unless samples start the steps (step_on) and one did within
-        the last 1.5 periods; then the timer only stands in when they stop."""
+        the last 1.5 periods; then the timer only stands in when they stop.
+        """
         now = self._now()
         if (self.loop.setup.values['step_on'] == 'timer' or self._last_tick is None
                 or now - self._last_tick >= 1.5 * self.period):
@@ -201,7 +214,8 @@ class ControllerNode(Node):
 
     def _tick(self, now):
         """One control step at now: the motor command is published first, then the monitoring
-        topics."""
+        topics.
+        """
         t0 = time.perf_counter()
         dt = self.period
         if self._last_tick is not None:
@@ -260,14 +274,10 @@ class ControllerNode(Node):
     def _publish_diagnostics(self):
         """Publish the loop's status with this window's timing figures so far."""
         st = self.loop.status(self._now(), self._other_commanders())
-        values = dict(st.values)
-        values['loop period [ms]'] = self._period_stats.summary()
-        values['tick to motor command [ms]'] = self._compute_stats.summary()
-        values['pose-to-command latency [ms]'] = self._latency_stats.summary()
-        status = DiagnosticStatus(level=bytes([st.level]), name=STATUS_NAME,
-                                  hardware_id='hexrotor', message=st.message,
-                                  values=[KeyValue(key=k, value=v) for k, v in values.items()])
-        msg = DiagnosticArray(status=[status])
+        st = replace(st, figures=st.figures.with_timing(self._period_stats.window(),
+                                                        self._compute_stats.window(),
+                                                        self._latency_stats.window()))
+        msg = DiagnosticArray(status=[status_msg(st, STATUS_NAME, 'hexrotor')])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(msg)
 

@@ -2,6 +2,9 @@
 import array
 
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+from geoctl_ros.core.diagnostics import Status, from_values, to_values
 
 
 def stamp_seconds(stamp):
@@ -40,3 +43,30 @@ def python_value(value):
     if isinstance(value, (list, tuple)):
         return list(value)
     return value
+
+
+def level(status_msg):
+    """The level of a diagnostic_msgs/DiagnosticStatus as an int (the field is a byte)."""
+    raw = status_msg.level
+    return raw[0] if isinstance(raw, (bytes, bytearray)) else int(raw)
+
+
+def status_msg(status, name, hardware_id):
+    """A core Status (level, message, typed figures) -> diagnostic_msgs/DiagnosticStatus."""
+    values = [KeyValue(key=k, value=v) for k, v in to_values(status.figures)]
+    return DiagnosticStatus(level=bytes([status.level]), name=name, hardware_id=hardware_id,
+                            message=status.message, values=values)
+
+
+def status_of(status_msg):
+    """diagnostic_msgs/DiagnosticStatus of the controller -> a core Status with typed figures."""
+    return Status(level(status_msg), status_msg.message,
+                  from_values((kv.key, kv.value) for kv in status_msg.values))
+
+
+def key_values(status_msg):
+    """Any node's diagnostic_msgs/DiagnosticStatus as a dict: level (int), message, name and its
+    key/values as text.
+    """
+    return {'level': level(status_msg), 'message': status_msg.message, 'name': status_msg.name,
+            **{kv.key: kv.value for kv in status_msg.values}}

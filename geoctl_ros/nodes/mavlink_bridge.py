@@ -1,4 +1,5 @@
-"""The MAVLink bridge: ``ros2 run geoctl_ros mavlink_bridge`` shows the testbed to a ground station.
+"""The MAVLink bridge: ``ros2 run geoctl_ros mavlink_bridge`` shows the testbed to a ground
+station.
 
 A thin shell: topics of the controller feed ``geoctl_ros.mavlink.vehicle.Vehicle``, its messages go
 out through ``geoctl_ros.mavlink.link.Link`` (a thread of its own), and what a ground station asks
@@ -7,6 +8,8 @@ is carried out through the controller's own services: ``~/arm`` for MAV_CMD_COMP
 link reads a PX4/ArduPilot board's HIGHRES_IMU and publishes it on ``imu`` (FLU). Its own health
 goes to /diagnostics. Parameters: ``mavlink.*`` in the README's table.
 """
+import importlib.metadata
+import os
 import subprocess
 import sys
 import time
@@ -22,13 +25,14 @@ from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool
 
 from geoctl_ros.core import so3
+from geoctl_ros.core.diagnostics import ERROR, WARN
 from geoctl_ros.mavlink import frames, signing
 from geoctl_ros.mavlink.link import Link, encoder
 from geoctl_ros.mavlink.params import BY_ROS, TABLE, to_ros
 from geoctl_ros.mavlink.vehicle import Vehicle, m_const
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
-from geoctl_ros.nodes.conversions import python_value, quaternion, set_vector, vector
+from geoctl_ros.nodes.conversions import python_value, quaternion, set_vector, status_of, vector
 from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.params import MAVLINK, ConfigError
 
@@ -42,8 +46,7 @@ STATUSTEXT_LEN = 50
 
 def _version():
     try:
-        from importlib.metadata import version
-        v = version('geoctl_ros')
+        v = importlib.metadata.version('geoctl_ros')
     except Exception:
         v = '0.0.0'
     parts = (v.split('.') + ['0', '0', '0'])[:3]
@@ -52,7 +55,6 @@ def _version():
 
 def _git_hash():
     try:
-        import os
         here = os.path.dirname(os.path.abspath(__file__))
         return subprocess.run(['git', 'rev-parse', 'HEAD'], cwd=here, capture_output=True,
                               text=True, timeout=5).stdout.strip()
@@ -122,7 +124,8 @@ class MavlinkBridge(Node):
                            (v['mavlink.attitude_rate_hz'],
                             lambda: [self.vehicle.attitude(now()),
                                      self.vehicle.attitude_target(now())]),
-                           (v['mavlink.actuator_rate_hz'], lambda: [self.vehicle.actuators(now())]),
+                           (v['mavlink.actuator_rate_hz'],
+                            lambda: [self.vehicle.actuators(now())]),
                            (v['mavlink.internals_rate_hz'],
                             lambda: self.vehicle.internals(now()))):
             self.create_timer(1.0 / rate, lambda make=make: [send(m) for m in make() if m])
@@ -141,7 +144,8 @@ class MavlinkBridge(Node):
     # --- signing -----------------------------------------------------------------------------
     def _signing_key(self, v):
         """(TimestampStore, key) when a key file is set, else (None, None); a key file that
-        cannot be used stops the node (exit 2) with the reason."""
+        cannot be used stops the node (exit 2) with the reason.
+        """
         path = v['mavlink.signing_key_file']
         if not path:
             return None, None
@@ -174,14 +178,12 @@ class MavlinkBridge(Node):
         for s in msg.status:
             if s.name != CONTROLLER_STATUS:
                 continue
-            level = s.level[0] if isinstance(s.level, bytes) else int(s.level)
-            d = {kv.key: kv.value for kv in s.values}
-            d['level'], d['message'] = level, s.message
-            self.vehicle.view.diagnostics = d
-            if level >= 1 and (level, s.message) != self._last_diag:
-                self._text(s.message, 'MAV_SEVERITY_ERROR' if level >= 2 else
+            status = status_of(s)
+            self.vehicle.view.diagnostics = status
+            if status.level >= WARN and (status.level, s.message) != self._last_diag:
+                self._text(s.message, 'MAV_SEVERITY_ERROR' if status.level >= ERROR else
                            'MAV_SEVERITY_WARNING', limited=True)
-            self._last_diag = (level, s.message)
+            self._last_diag = (status.level, s.message)
 
     def _read_params(self):
         if not self.get_client.service_is_ready():

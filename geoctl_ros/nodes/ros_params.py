@@ -3,23 +3,34 @@
 Every schema parameter of the node is declared with its default, type and description (the
 parameter-file overrides apply at declaration), and every one has a value, so that ``ros2 param
 dump`` lists them all (rclpy answers a get_parameters request with nothing at all when one name in
-it has no value). An empty array is declared with its type and then set to a typed empty value:
-a parameter file's ``[]`` reaches rclpy as "not set", which is how a dump of an empty array reads
+it has no value). An empty array is declared with its type and then set to a typed empty value: a
+parameter file's ``[]`` reaches rclpy as "not set", which is how a dump of an empty array reads
 back. Cones listed in ``cones.names`` are declared too; cones added at run time are set as new
-parameters (the node allows undeclared ones) and take effect when their name joins
-``cones.names``. A file may define cones that ``cones.names`` does not list (a dump taken while a
-cone was being added does): they are declared, and take effect when named. Every change is validated as a whole configuration by the
-same code the headless runner uses; a refused change leaves the running node untouched and the
-reason is returned to the caller (``ros2 param set`` prints it).
+parameters (the node allows undeclared ones) and take effect when their name joins ``cones.names``.
+A file may define cones that ``cones.names`` does not list (a dump taken while a cone was being
+added does): they are declared, and take effect when named. Every change is validated as a whole
+configuration by the same code the headless runner uses; a refused change leaves the running node
+untouched and the reason is returned to the caller (``ros2 param set`` prints it).
 """
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
-from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
-                              ParameterUninitializedException)
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    ParameterUninitializedException,
+)
 from rclpy.parameter import Parameter
 
 from geoctl_ros.nodes.conversions import python_value
-from geoctl_ros.params import (BY_NAME, CONE_KEY, CONE_SCHEMA, CONTROLLER, ConfigError,
-                               cone_param, resolve, schema_for)
+from geoctl_ros.params import (
+    BY_NAME,
+    CONE_KEY,
+    CONE_SCHEMA,
+    CONTROLLER,
+    ConfigError,
+    cone_param,
+    resolve,
+    schema_for,
+)
 
 ROS_TYPE = {
     'double': Parameter.Type.DOUBLE, 'double_array': Parameter.Type.DOUBLE_ARRAY,
@@ -90,7 +101,8 @@ def declare(node, kind):
 
 def load(node, kind):
     """Declare kind's parameters on node and return them resolved (the schema's checks applied);
-    raises ConfigError naming every bad one."""
+    raises ConfigError naming every bad one.
+    """
     errors = declare(node, kind)
     if errors:
         raise ConfigError(errors)
@@ -108,7 +120,8 @@ def values(node, kind, pending=()):
     """The node's parameters as a flat dict of Python values, with pending (not yet applied)
     rclpy Parameters laid over them, and any parameter-file entries that are not declared (so
     that validation reports them as unknown; those of the other node, which a shared '/**'
-    section gives every node, are left out)."""
+    section gives every node, are left out).
+    """
     out = {}
     for name in node.list_parameters([], 0).names:
         if name.startswith(ROS_OWN):
@@ -134,7 +147,8 @@ def values(node, kind, pending=()):
 
 def watch(node, kind, build, apply):
     """Validate every parameter change with build(values) (raising ConfigError); after a change
-    is accepted, call apply(build(values), changed names)."""
+    is accepted, call apply(build(values), changed names).
+    """
     def on_set(params):
         try:
             build(values(node, kind, params))

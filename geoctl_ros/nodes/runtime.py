@@ -1,9 +1,12 @@
-"""Running a node: events executor, clean stop on SIGINT/SIGTERM, exit code 2 for bad parameters."""
+"""Running a node: events executor, clean stop on SIGINT/SIGTERM, exit code 2 for bad
+parameters.
+"""
 import signal
 import sys
 
 import rclpy
 from rclpy._rclpy_pybind11 import RCLError
+from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
 from geoctl_ros.params import ConfigError
@@ -15,6 +18,14 @@ class _StopFlag:
 
     def __call__(self, signum, frame):
         self.raised = True
+
+
+def make_executor():
+    """The executor every process of this package spins its nodes with: rclpy's EventsExecutor
+    (Jazzy's rclpy 7.1 has it), which serves a callback with less latency and CPU than the
+    single-threaded executor's wait sets.
+    """
+    return EventsExecutor()
 
 
 def spin(node_class, name, args=None):
@@ -39,11 +50,7 @@ def spin(node_class, name, args=None):
         rclpy.logging.get_logger(name).fatal(str(e))
         rclpy.try_shutdown()
         return 2
-    try:
-        from rclpy.experimental import EventsExecutor
-        executor = EventsExecutor()
-    except ImportError:      # pragma: no cover - rclpy before 7.1.4
-        executor = rclpy.executors.SingleThreadedExecutor()
+    executor = make_executor()
     executor.add_node(node)
     try:
         # spin_once in a loop: this rclpy's EventsExecutor.spin() was seen to busy-loop here

@@ -2,14 +2,16 @@
 
 A thin shell over ``geoctl_ros.sim.testbed.TestbedSim``: integrates the testbed at
 ``integration_rate_hz`` from the latest ``motor_commands`` (normalised, as the controller publishes
-them; with ``actuation: torque``, from the torque of the latest ``control_wrench``), and publishes ``pose`` (motion capture) and ``imu`` with the configured noise, the true
-state on ``sim/true_pose``, and ``/clock`` when ``publish_clock`` is set. Simulated time follows
-the wall clock times ``real_time_factor``: one timer, at the faster of the two sensor rates,
-integrates as many steps as are due and publishes what is due.
+them; with ``actuation: torque``, from the torque of the latest ``control_wrench``), and publishes
+``pose`` (motion capture) and ``imu`` with the configured noise, the true state on
+``sim/true_pose``, and ``/clock`` when ``publish_clock`` is set. Simulated time follows the wall
+clock times ``real_time_factor``: one timer, at the faster of the two sensor rates, integrates as
+many steps as are due and publishes what is due.
 
 Commands older than ``command_timeout`` stop the motors (as the ESCs do when the I2C bus goes
-quiet; ``geoctl_ros.sim.testbed.EscWatchdog``, which does not count the sim's own stalls); a malformed command message (wrong length, not finite, outside [0, 1]) is refused with a
-warning and the previous one stays.
+quiet; ``geoctl_ros.sim.testbed.EscWatchdog``, which does not count the sim's own stalls); a
+malformed command message (wrong length, not finite, outside [0, 1]) is refused with a warning and
+the previous one stays.
 """
 import sys
 import time
@@ -69,7 +71,8 @@ class SimNode(Node):
         self.imu_msg.orientation_covariance[0] = -1.0            # no orientation in this imu
         wall_period = min(self.pose_period, self.imu_period) / self.rtf
         self.create_timer(wall_period, self._on_timer)
-        self.get_logger().info('sim ready: %s actuation, %g Hz integration, pose %g Hz, imu %g Hz, '
+        self.get_logger().info('sim ready: %s actuation, %g Hz integration, pose %g Hz, '
+                               'imu %g Hz, '
                                'real-time factor %g' % (v['actuation'], v['integration_rate_hz'],
                                                          v['pose_rate_hz'], v['imu_rate_hz'],
                                                          self.rtf))
@@ -131,7 +134,8 @@ class SimNode(Node):
             self.next_pose = t + self.pose_period
             stamp = self._stamp(t)
             self.pose_msg.header.stamp = stamp
-            set_quaternion(self.pose_msg.pose.orientation, so3.rot_to_quat(self.sim.measure_attitude()))
+            set_quaternion(self.pose_msg.pose.orientation,
+                           so3.rot_to_quat(self.sim.measure_attitude()))
             self.pub_pose.publish(self.pose_msg)
             self.true_msg.header.stamp = stamp
             set_quaternion(self.true_msg.pose.orientation, so3.rot_to_quat(plant.R))

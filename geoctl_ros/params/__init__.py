@@ -12,18 +12,39 @@ Where each piece lives (the names below are this package's public API):
 Nothing here imports rclpy: the nodes (``geoctl_ros.nodes.ros_params``) and the headless runner
 use the same code.
 """
-from geoctl_ros.params.build import (ControllerSetup, airframe, cone_set, controller_config,
-                                     controller_setup, mixer, plant_config, setpoint_rotation,
-                                     testbed_sim)
+from geoctl_ros.params.build import (
+                                     ControllerSetup,
+                                     airframe,
+                                     cone_set,
+                                     controller_config,
+                                     controller_setup,
+                                     mixer,
+                                     plant_config,
+                                     setpoint_rotation,
+                                     testbed_sim,
+)
 from geoctl_ros.params.files import flatten, load_parameter_file, node_overrides
-from geoctl_ros.params.schema import (BOTH, BY_NAME, CONE_KEY, CONE_SCHEMA, CONTROLLER,
-                                      LAB_INERTIA, MAVLINK, SCENARIO, SCHEMA, SIM, ConfigError,
-                                      Param,
-                                      cone_param, schema_for)
+from geoctl_ros.params.schema import (
+                                     BOTH,
+                                     BY_NAME,
+                                     CONE_KEY,
+                                     CONE_SCHEMA,
+                                     CONTROLLER,
+                                     LAB_INERTIA,
+                                     MAVLINK,
+                                     SCENARIO,
+                                     SCHEMA,
+                                     SIM,
+                                     ConfigError,
+                                     Param,
+                                     cone_param,
+                                     schema_for,
+)
 from geoctl_ros.params.validate import check_value, resolve
 
 __all__ = ['BOTH', 'BY_NAME', 'CONE_KEY', 'CONE_SCHEMA', 'CONTROLLER', 'ConfigError',
-           'ControllerSetup', 'LAB_INERTIA', 'MAVLINK', 'Param', 'SCENARIO', 'SCHEMA', 'SIM', 'airframe',
+           'ControllerSetup', 'LAB_INERTIA', 'MAVLINK', 'Param', 'SCENARIO', 'SCHEMA', 'SIM',
+           'airframe',
            'check_value', 'cone_param', 'cone_set', 'controller_config', 'controller_setup',
            'flatten', 'load_parameter_file', 'mixer', 'node_overrides', 'plant_config', 'resolve',
            'schema_for', 'setpoint_rotation', 'testbed_sim']

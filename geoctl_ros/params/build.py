@@ -1,14 +1,22 @@
 """Building the core's and the simulator's objects from resolved parameters, with the checks
 that span several parameters (a set point against the cones, a thrust limit against the curve, an
-airframe that must produce every moment)."""
+airframe that must produce every moment).
+"""
 from dataclasses import dataclass
 import math
 
 import numpy as np
 
 from geoctl_ros.core import so3
-from geoctl_ros.core.airframe import (AirframeError, Allocator, Mixer, RotorGeometry, ThrustCurve,
-                                      effectiveness, tilted_ring)
+from geoctl_ros.core.airframe import (
+    AirframeError,
+    Allocator,
+    Mixer,
+    RotorGeometry,
+    ThrustCurve,
+    effectiveness,
+    tilted_ring,
+)
 from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.core.control import AttitudeController, ControllerConfig
 from geoctl_ros.core.safety import SetpointSchedule, quaternion_problem
@@ -57,7 +65,8 @@ class ControllerSetup:
 
 def controller_setup(values):
     """Build and cross-check a controller from resolved parameters; ConfigError on any problem,
-    including a set point (or scheduled one) that puts the sensor in a cone."""
+    including a set point (or scheduled one) that puts the sensor in a cone.
+    """
     config = controller_config(values)
     mix = mixer(values)
     probe = AttitudeController(config)
@@ -79,7 +88,8 @@ def controller_setup(values):
             R = so3.quat_to_rot(q) if reason is None else None
             reason = reason or probe.setpoint_problem(R)
             if reason:
-                errors.append(('setpoint_schedule.quaternions', 'set point %d: %s' % (k + 1, reason)))
+                errors.append(('setpoint_schedule.quaternions',
+                               'set point %d: %s' % (k + 1, reason)))
             rotations.append(R)
     for stream, timeout in (('pose', 'pose_timeout'), ('imu', 'imu_timeout')):
         limit = values[stream + '_ride_through']
@@ -93,7 +103,8 @@ def controller_setup(values):
 
 def airframe(values):
     """(RotorGeometry, ThrustCurve, failed rotor numbers) of resolved parameters; raises
-    ConfigError naming the parameter for a layout or curve that does not fit together."""
+    ConfigError naming the parameter for a layout or curve that does not fit together.
+    """
     errors = []
     if values['rotors.layout'] == 'tilted_ring':
         geometry = tilted_ring(values['rotors.count'], values['rotors.arm_length'],

@@ -31,7 +31,8 @@ def load_parameter_file(path):
         what = getattr(e, 'problem', None) or str(e).splitlines()[0]
         raise ConfigError([(str(path), 'not valid YAML%s: %s' % (where, what))]) from None
     if not isinstance(doc, dict):
-        raise ConfigError([(str(path), 'not a ROS 2 parameter file (top level must be a mapping)')])
+        raise ConfigError([(str(path),
+                            'not a ROS 2 parameter file (top level must be a mapping)')])
     sections = {}
     for node, body in doc.items():
         if not isinstance(body, dict) or not isinstance(body.get('ros__parameters'), dict):

@@ -1,6 +1,6 @@
 """The README's parameter table, generated from the schema.
 
-    ./run shell -m geoctl_ros.params.readme --write-readme README.md
+./run shell -m geoctl_ros.params.readme --write-readme README.md
 """
 import sys
 

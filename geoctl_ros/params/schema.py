@@ -35,7 +35,7 @@ class ConfigError(ValueError):
             '  %s: %s' % (name, reason) for name, reason in self.errors))
 
 
-# --- checks: each returns a reason (str) or None ---------------------------------------------------
+# --- checks: each returns a reason (str) or None ------------------------------------------------
 def _positive(v):
     return None if v > 0.0 else 'must be > 0 (got %r)' % v
 
@@ -88,7 +88,8 @@ def _floor(v):
 @dataclass(frozen=True)
 class Param:
     """One parameter: ROS type ('double', 'double_array', 'bool', 'string', 'string_array'),
-    array length (0: any), default, unit, one-line doc, the nodes that read it, and a check."""
+    array length (0: any), default, unit, one-line doc, the nodes that read it, and a check.
+    """
 
     name: str
     type: str
@@ -144,13 +145,13 @@ SCHEMA = [
        'the real cones; set points must clear the widened cone)', CONTROLLER,
        check=lambda v: None if 0.0 <= v <= 10.0 else 'must be in [0, 10]'),
     _p('motor_lag_compensation', 'double', 0.0, 's',
-       'the motors\' thrust time constant the mixer compensates (commands the thrust that brings '
+       "the motors' thrust time constant the mixer compensates (commands the thrust that brings "
        'a model of the lagged rotors to the allocated thrust by the next step; README, "Safety '
        'campaign"); 0 = none', CONTROLLER,
        check=lambda v: None if 0.0 <= v <= 0.5 else 'must be in [0, 0.5]'),
     _p('unmodelled_moment_max', 'double', 0.0, 'N m',
        'the moment the controller may have to hold without having learnt it (disturbance plus '
-       'model errors); set points whose cones\' barriers cannot hold it near the goal are refused '
+       "model errors); set points whose cones' barriers cannot hold it near the goal are refused "
        '(README, "Safety campaign"); 0 = no check', CONTROLLER, check=_nonnegative),
     _p('barrier_floor_deg', 'double', 0.25, 'deg',
        'within this angle of a cone boundary the barrier is extended linearly (saturated)',
@@ -245,8 +246,8 @@ SCHEMA = [
        check=_nonnegative),
     # Simulator.
     _p('actuation', 'string', 'rotors', '-', 'rotors (commands through the motors) or torque '
-       '(the controller\'s moment, ideal)', SIM, choices=('rotors', 'torque')),
-    _p('motor_time_constant', 'double', 0.04, 's', 'first-order lag of each rotor\'s thrust',
+       "(the controller's moment, ideal)", SIM, choices=('rotors', 'torque')),
+    _p('motor_time_constant', 'double', 0.04, 's', "first-order lag of each rotor's thrust",
        SIM, check=_positive),
     _p('noise.attitude_deg', 'double', 0.0, 'deg',
        'std dev of measured-attitude noise per axis (motion capture)', SIM, check=_nonnegative),
@@ -279,7 +280,8 @@ SCHEMA = [
        'controller: of active_setpoint)', BOTH),
     # MAVLink bridge (geoctl_ros.nodes.mavlink_bridge).
     _p('mavlink.url', 'string', 'udpout:127.0.0.1:14550', '-',
-       'ground-station link, as pymavlink takes it (udpout:HOST:PORT, udpin:IP:PORT, tcp:HOST:PORT, '
+       'ground-station link, as pymavlink takes it (udpout:HOST:PORT, udpin:IP:PORT, '
+       'tcp:HOST:PORT, '
        'DEVICE,BAUD)', MAVLINK),
     _p('mavlink.signing_key_file', 'string', '', '-',
        'MAVLink 2 signing key file: 64 hex digits (the key), or a passphrase (the key is its '
@@ -312,13 +314,15 @@ SCHEMA = [
     # Headless runner.
     _p('duration', 'double', 20.0, 's', 'simulated time of a scenario run', SCENARIO,
        check=_positive),
-    _p('title', 'string', '', '-', 'title for a scenario run\'s plots and summary', SCENARIO),
+    _p('title', 'string', '', '-', "title for a scenario run's plots and summary", SCENARIO),
     _p('latency', 'double', 0.0, 's', 'measurement latency of a scenario run: the controller sees '
        'the state this long ago (a whole number of integration steps)', SCENARIO,
        check=lambda v: None if 0.0 <= v <= 0.1 else 'must be in [0, 0.1]'),
-    _p('tick_jitter', 'double', 0.0, 's', 'lateness of a scenario run\'s control steps: each comes a '
+    _p('tick_jitter', 'double', 0.0, 's',
+       "lateness of a scenario run's control steps: each comes a "
        'random 0..tick_jitter (uniform, whole integration steps, seeded by noise.seed) more than '
-       'a period after the one before, as on a busy machine; a command is held until the next', SCENARIO,
+       'a period after the one before, as on a busy machine; a command is held until the next',
+       SCENARIO,
        check=lambda v: None if 0.0 <= v <= 0.2 else 'must be in [0, 0.2]'),
 ]
 

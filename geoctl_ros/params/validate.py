@@ -4,8 +4,16 @@ import math
 
 import numpy as np
 
-from geoctl_ros.params.schema import (CONE_NAME, BY_NAME, CONE_KEY, CONTROLLER, SCHEMA, ConfigError,
-                                      cone_param, schema_for)
+from geoctl_ros.params.schema import (
+    BY_NAME,
+    CONE_KEY,
+    CONE_NAME,
+    CONTROLLER,
+    SCHEMA,
+    ConfigError,
+    cone_param,
+    schema_for,
+)
 
 
 def check_value(p, value):

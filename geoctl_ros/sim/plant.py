@@ -5,17 +5,17 @@ Equations of motion about the pivot (body frame):
     J_p Omega' + Omega x J_p Omega = tau + M_g(R) + Delta(t),     R' = R hat(Omega)
 
 with J_p the inertia about the pivot, M_g the gravity moment of the centre of mass offset rho
-(``geoctl_ros.core.mechanics``), tau the actuation moment (held constant over a step) and Delta(t) the
-disturbance: constant + amplitude * [sin wt, cos wt, (sin wt + cos wt) / 2] (elementwise; the
+(``geoctl_ros.core.mechanics``), tau the actuation moment (held constant over a step) and Delta(t)
+the disturbance: constant + amplitude * [sin wt, cos wt, (sin wt + cos wt) / 2] (elementwise; the
 dissertation's time-varying case).
 
 Integrator: RKMK4, the classical fourth-order Runge-Kutta method applied in the Lie algebra
-(Runge-Kutta-Munthe-Kaas). Over a step R(t) = R_n exp(hat(xi(t))) with
-xi' = dexp^{-1}_{-xi}(Omega) = Omega + 1/2 xi x Omega + 1/12 xi x (xi x Omega) (truncated where it no
-longer affects fourth order), so R_{n+1} = R_n exp(hat(xi_{n+1})) is a rotation to machine
-precision at every step, with no re-orthonormalisation. Global error is O(h^4) (halving the step
-divides it by 16): a body tumbling at 3.7 rad/s for 10 s ends 2e-12 rad from the reference at the
-default 1 kHz (3e-11 rad at 500 Hz), and its kinetic energy drifts by 1e-15 (see test_plant.py).
+(Runge-Kutta-Munthe-Kaas). Over a step R(t) = R_n exp(hat(xi(t))) with xi' = dexp^{-1}_{-xi}(Omega)
+= Omega + 1/2 xi x Omega + 1/12 xi x (xi x Omega) (truncated where it no longer affects fourth
+order), so R_{n+1} = R_n exp(hat(xi_{n+1})) is a rotation to machine precision at every step, with
+no re-orthonormalisation. Global error is O(h^4) (halving the step divides it by 16): a body
+tumbling at 3.7 rad/s for 10 s ends 2e-12 rad from the reference at the default 1 kHz (3e-11 rad at
+500 Hz), and its kinetic energy drifts by 1e-15 (see test_plant.py).
 
 A batch of testbeds (one per run of a campaign) is one Plant whose configuration and state carry a
 leading batch axis (inertia (batch, 3, 3), mass (batch,), R (batch, 3, 3), ...); ``step`` advances
@@ -27,8 +27,8 @@ import math
 import numpy as np
 
 from geoctl_ros.core import so3
-from geoctl_ros.core.so3 import cross, matvec
 from geoctl_ros.core.mechanics import first_moment, gravity_moment, pivot_inertia
+from geoctl_ros.core.so3 import cross, matvec
 
 
 @dataclass(frozen=True)
@@ -79,10 +79,12 @@ class Plant:
 
     def external_moment(self, t, R):
         """Gravity moment plus disturbance about the pivot, body frame."""
-        return gravity_moment(R, self.config.m_rho, self.config.gravity) + self.config.disturbance(t)
+        c = self.config
+        return gravity_moment(R, c.m_rho, c.gravity) + c.disturbance(t)
 
     def _angular_acceleration(self, t, R, Omega, tau):
-        return matvec(self.J_inv, tau + self.external_moment(t, R) - cross(Omega, matvec(self.J, Omega)))
+        gyroscopic = cross(Omega, matvec(self.J, Omega))
+        return matvec(self.J_inv, tau + self.external_moment(t, R) - gyroscopic)
 
     def step(self, tau, h):
         """Advance by h seconds with the actuation moment tau held constant (RKMK4)."""
@@ -116,6 +118,7 @@ class Plant:
 def _dexpinv(xi, w):
     """xi' for R = R_n exp(hat(xi)) and body rate w (R' = R hat(w)): dexp^{-1}_{-xi}(w), truncated
     after the terms RKMK4 needs. (The sign of the commutator term is that of the body-frame,
-    left-trivialised kinematics; the other sign silently gives a second-order method.)"""
+    left-trivialised kinematics; the other sign silently gives a second-order method.)
+    """
     xw = cross(xi, w)
     return w + 0.5 * xw + cross(xi, xw) / 12.0

@@ -4,8 +4,8 @@ Composes the rigid body about the pivot (``geoctl_ros.sim.plant``), the actuatio
 
 - actuation ``rotors``: integer ESC commands -> thrust through the motors' thrust curve, a
   first-order lag per rotor (time constant ``motor_time_constant``, discretised exactly and held
-  over each integration step), saturation at the curve's range, and the rotors' forces and
-  reaction moments about the pivot (``geoctl_ros.core.airframe.effectiveness``) from the true geometry;
+  over each integration step), saturation at the curve's range, and the rotors' forces and reaction
+  moments about the pivot (``geoctl_ros.core.airframe.effectiveness``) from the true geometry;
 - actuation ``torque``: the commanded moment itself (ideal);
 - sensors: attitude R exp(hat(n)), n ~ N(0, sigma_R^2 I) (motion capture), and angular velocity
   Omega + bias + N(0, sigma_w^2 I) (gyro).
@@ -19,8 +19,8 @@ import math
 import numpy as np
 
 from geoctl_ros.core import so3
-from geoctl_ros.core.so3 import matvec
 from geoctl_ros.core.airframe import effectiveness
+from geoctl_ros.core.so3 import matvec
 from geoctl_ros.sim.plant import Plant
 
 
@@ -54,9 +54,9 @@ class EscWatchdog:
     stop the motors for the whole catch-up it integrates next (the controller kept commanding; the
     simulator could not listen), an open-loop fall no vehicle would see. So the age is taken at the
     last moment the simulator was running: a tick more than ``stall`` after the previous one means
-    the simulator itself stalled, and the command's age is judged as of that previous tick. Commands
-    that really stopped are still caught: at the tick after the stall (the first one after the
-    queued commands could arrive), the age is the wall clock's again.
+    the simulator itself stalled, and the command's age is judged as of that previous tick.
+    Commands that really stopped are still caught: at the tick after the stall (the first one after
+    the queued commands could arrive), the age is the wall clock's again.
     """
 
     def __init__(self, timeout, stall):

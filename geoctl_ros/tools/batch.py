@@ -25,8 +25,14 @@ import numpy as np
 from geoctl_ros.core import so3
 from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.core.control import AttitudeController
-from geoctl_ros.params import (CONTROLLER, SIM, airframe, cone_set, controller_setup,
-                               setpoint_rotation)
+from geoctl_ros.params import (
+    CONTROLLER,
+    SIM,
+    airframe,
+    cone_set,
+    controller_setup,
+    setpoint_rotation,
+)
 from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
 from geoctl_ros.sim.testbed import RotorActuator
 
@@ -173,7 +179,8 @@ def run_batch(scenarios, progress=None):
     cos_err = np.clip(0.5 * (np.trace(RdtR, axis1=-2, axis2=-1) - 1.0), -1.0, 1.0)
     return BatchResult(
         names=[s.name for s in scenarios], min_margin_deg=min_margin,
-        violated=np.any(min_margin <= 0.0, axis=-1), final_error_deg=np.degrees(np.arccos(cos_err)),
+        violated=np.any(min_margin <= 0.0, axis=-1),
+        final_error_deg=np.degrees(np.arccos(cos_err)),
         final_psi=np.asarray(final.psi), saturated_s=saturated * dt, max_rate=max_rate,
         margin_series=margin_series, sensor_series=sensor_series, dt=dt,
         wall_s=time.perf_counter() - t0)

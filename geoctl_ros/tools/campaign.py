@@ -33,8 +33,8 @@ on how many others there are):
 
 Per run: the closest approach to each cone (after every 1 ms integration step), whether the sensor
 touched a cone (a violation), convergence (attitude error below 5 deg at the end), and the time the
-allocation was saturated. Writes DIR/runs.csv, DIR/summary.md (the table), DIR/closest_approach.png,
-DIR/worst_runs.png and DIR/worst/run_NNNN.yaml.
+allocation was saturated. Writes DIR/runs.csv, DIR/summary.md (the table),
+DIR/closest_approach.png, DIR/worst_runs.png and DIR/worst/run_NNNN.yaml.
 """
 import argparse
 import math
@@ -43,14 +43,26 @@ import os
 import sys
 import time
 
+import matplotlib
+import matplotlib.pyplot as plt
 import numpy as np
 import yaml
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.control import AttitudeController
-from geoctl_ros.params import (CONTROLLER, SIM, ConfigError, cone_set, controller_config,
-                               load_parameter_file, node_overrides, resolve)
+from geoctl_ros.params import (
+    CONTROLLER,
+    SIM,
+    ConfigError,
+    cone_set,
+    controller_config,
+    load_parameter_file,
+    node_overrides,
+    resolve,
+)
+from geoctl_ros.tools.batch import run_batch
 from geoctl_ros.tools.rosenv import config_dir
+from geoctl_ros.tools.scenario import from_sections
 
 CONVERGED_DEG = 5.0                # attitude error at the end below which a run has converged
 CLEAR_DEG = 5.0                    # start and goal at least this far outside every cone
@@ -94,7 +106,8 @@ def _elevation_deg(d):
 def _attitude(rng, r, d):
     """An attitude with the sensor axis r pointing along d and the body as upright as it can be
     (then turned about d by up to +-TWIST_DEG); None if that leaves the body tilted more than
-    TILT_DEG (the joint's range)."""
+    TILT_DEG (the joint's range).
+    """
     base = _aligning(r, d)
     twists = np.radians(np.arange(-180.0, 180.0, 2.0))
     ups = so3.exp(d * twists[:, None]) @ (base @ UP)            # body z for each twist
@@ -105,7 +118,8 @@ def _attitude(rng, r, d):
 
 def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None):
     """The random part of run index of campaign seed: a dict of per-run values. goal_ok(cones,
-    R_d) (cones as [(axis, half-angle deg)]), if given, must accept the goal (else redrawn)."""
+    R_d) (cones as [(axis, half-angle deg)]), if given, must accept the goal (else redrawn).
+    """
     rng = np.random.default_rng([seed, index])
     r = _unit(np.asarray(sensor_axis, dtype=float))
     while True:
@@ -151,10 +165,12 @@ def _floats(a):
 def unmodelled_moment(nominal_sim, disturbance_max=DISTURBANCE_MAX):
     """The most the campaign's runs ask the controller to hold before learning it (N m): the
     largest disturbance plus the gravity moment of the largest error in m rho (mass and
-    centre-of-mass height each off by 20 %: 1.2^2 - 1 = 44 %) at the largest tilt at the goal."""
+    centre-of-mass height each off by 20 %: 1.2^2 - 1 = 44 %) at the largest tilt at the goal.
+    """
     m_rho = nominal_sim['mass'] * float(np.linalg.norm(nominal_sim['cog_offset']))
     return float(disturbance_max + ((1.0 + MODEL_ERROR) ** 2 - 1.0) * m_rho
-                 * float(np.linalg.norm(nominal_sim['gravity'])) * math.sin(math.radians(TILT_DEG)))
+                 * float(np.linalg.norm(nominal_sim['gravity']))
+                 * math.sin(math.radians(TILT_DEG)))
 
 
 def run_sections(base, seed, index, duration=20.0, disturbance_max=DISTURBANCE_MAX):
@@ -215,7 +231,8 @@ def write_scenario_file(sections, path):
             d[leaf] = value.tolist() if isinstance(value, np.ndarray) else value
         doc[node] = {'ros__parameters': tree}
     with open(path, 'w') as f:
-        f.write('# Written by `campaign`; fly it again with `campaign --replay %s` or `scenario %s '
+        f.write('# Written by `campaign`; fly it again with `campaign --replay %s` or '
+                '`scenario %s '
                 '--out DIR`.\n' % (os.path.basename(path), os.path.basename(path)))
         yaml.safe_dump(doc, f, sort_keys=False, default_flow_style=None, width=100)
 
@@ -232,8 +249,6 @@ def _init_worker(counter):
 
 def _fly(job):
     """Worker: fly one batch of scenarios (all with the same number of cones)."""
-    from geoctl_ros.tools.batch import run_batch
-    from geoctl_ros.tools.scenario import from_sections
     indices, sections = job
     scenarios = [from_sections(s, 'run_%04d' % i) for i, s in zip(indices, sections)]
     done = [0.0]
@@ -337,9 +352,7 @@ def rows_of(flown):
 
 def figures(rows, flown, sections_by_index, out_dir, worst):
     """closest_approach.png (histogram) and worst_runs.png (margins in time, sensor paths)."""
-    import matplotlib
     matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
     margins = np.array([r['closest_deg'] for r in rows])
     fig, ax = plt.subplots(figsize=(7, 3.5))
     ax.hist(margins, bins=40, color='tab:blue', alpha=0.8)
@@ -358,7 +371,7 @@ def figures(rows, flown, sections_by_index, out_dir, worst):
         t = np.arange(res.margin_series.shape[0]) * res.dt
         a1.plot(t, res.margin_series[:, p], lw=1, label='run %d' % i)
     a1.axhline(0.0, color='k', lw=0.8)
-    a1.set(xlabel='t [s]', ylabel='min cone margin [deg]', title='the %d worst runs' % len(worst))
+    a1.set(xlabel='t [s]', ylabel='cone margin [deg]', title='the %d worst runs' % len(worst))
     a1.legend(fontsize=7)
     a1.grid(True, alpha=0.3)
     i = worst[0]
@@ -374,7 +387,8 @@ def _sky(ax, path, controller, title):
     """The sensor's world direction in azimuth / elevation, with the cones' boundaries."""
     def az_el(d):
         d = np.atleast_2d(d)
-        return np.degrees(np.arctan2(d[:, 1], d[:, 0])), np.degrees(np.arcsin(np.clip(d[:, 2], -1, 1)))
+        return (np.degrees(np.arctan2(d[:, 1], d[:, 0])),
+                np.degrees(np.arcsin(np.clip(d[:, 2], -1, 1))))
     for name in controller['cones.names']:
         v = _unit(np.asarray(controller['cones.%s.axis' % name], dtype=float))
         th = math.radians(controller['cones.%s.half_angle_deg' % name])
@@ -450,7 +464,8 @@ def main(argv=None):
     rows = rows_of(flown)
     for r in rows:
         r['latency_ms'] = int(round(1000 * sections[r['run']]['scenario']['latency']))
-        r['disturbance_Nm'] = float(np.linalg.norm(sections[r['run']]['sim']['disturbance.constant']))
+        constant = sections[r['run']]['sim']['disturbance.constant']
+        r['disturbance_Nm'] = float(np.linalg.norm(constant))
     if args.replay:
         for r, path in zip(rows, args.replay):
             print('%s: closest approach %.6f deg, %s, final error %.3f deg, saturated %.2f s'

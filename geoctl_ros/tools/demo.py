@@ -2,14 +2,14 @@
 
 Starts the ``sim`` and ``controller`` nodes as two processes with ``config/testbed.yaml`` (as
 ``ros2 run ... --ros-args --params-file`` would), waits for them, arms the controller through its
-``~/arm`` service, records the topics while the 90 deg yaw round the cone plays, disarms, and prints
-a summary: the closest approach to each cone (from the simulator's true attitude), the final error,
-the control loop's rate and jitter and its input-to-command latency (from the controller's
+``~/arm`` service, records the topics while the 90 deg yaw round the cone plays, disarms, and
+prints a summary: the closest approach to each cone (from the simulator's true attitude), the final
+error, the control loop's rate and jitter and its input-to-command latency (from the controller's
 diagnostics), and what a subscriber sees of the command stream. Writes OUT/sil_summary.json,
 OUT/sil.png and the two nodes' logs. Discovery stays on loopback in a DDS domain of its own.
 
-``./run demo --headless`` instead runs every shipped scenario through the headless runner and prints
-the README's results table.
+``./run demo --headless`` instead runs every shipped scenario through the headless runner and
+prints the README's results table.
 """
 import argparse
 import glob
@@ -19,12 +19,24 @@ import os
 import sys
 import time
 
+import matplotlib
+import matplotlib.pyplot as plt
 import numpy as np
+import rclpy
 
-from geoctl_ros.tools import scenario
 from geoctl_ros.core import so3
-from geoctl_ros.core.stats import aggregate
-from geoctl_ros.tools.rosenv import config_dir
+from geoctl_ros.core.diagnostics import aggregate
+from geoctl_ros.params import (
+    CONTROLLER,
+    cone_set,
+    controller_setup,
+    load_parameter_file,
+    node_overrides,
+    resolve,
+)
+from geoctl_ros.tools import scenario
+from geoctl_ros.tools.processes import Monitor, NodeProcess
+from geoctl_ros.tools.rosenv import config_dir, use_node_env
 
 TABLE_HEAD = ('| scenario | min angle to each cone (half-angle), deg | final attitude error, deg '
               '| final Psi | settle time (Psi < 1e-3), s | final Delta_bar | wall time, s |\n'
@@ -55,20 +67,14 @@ def headless(out):
     return 0
 
 
-def _diag_stats(diags, key):
-    """Aggregate the controller's windowed figures of one diagnostics key, ms."""
-    f = aggregate(d.get(key, '') for d in diags)
-    return None if f is None else {k + '_ms': v for k, v in f.items()}
+def _diag_stats(diags, name):
+    """The controller's windows of one diagnostics figure (a Figures field) as one, ms."""
+    w = aggregate(getattr(d.figures, name) for d in diags)
+    return None if w is None else {k + '_ms': 1e3 * v for k, v in w._asdict().items()}
 
 
 def fly(params_file, out, duration, monitor_factory=None, mavlink=None):
     """Run sim + controller as processes, arm, record duration seconds; returns the summary."""
-    import rclpy
-    from geoctl_ros.params import CONTROLLER, cone_set, load_parameter_file, node_overrides, \
-        resolve, controller_setup
-    from geoctl_ros.tools.rosenv import use_node_env
-    from geoctl_ros.tools.processes import Monitor, NodeProcess
-
     use_node_env()
     values = resolve(CONTROLLER, node_overrides(load_parameter_file(params_file), CONTROLLER))
     setup = controller_setup(values)
@@ -117,9 +123,9 @@ def fly(params_file, out, duration, monitor_factory=None, mavlink=None):
         'min_cone_margin_deg': float((angles - np.degrees(cones.theta)).min()) if len(cones)
         else None,
         'final_attitude_error_deg': float(err[-1]),
-        'loop_period': _diag_stats(diags, 'loop period [ms]'),
-        'step_compute': _diag_stats(diags, 'tick to motor command [ms]'),
-        'pose_to_command_latency': _diag_stats(diags, 'pose-to-command latency [ms]'),
+        'loop_period': _diag_stats(diags, 'loop_period'),
+        'step_compute': _diag_stats(diags, 'tick_to_command'),
+        'pose_to_command_latency': _diag_stats(diags, 'pose_to_command_latency'),
         'commands_seen_by_subscriber': {'count': int(len(cmd_times)),
                                         'rate_hz': float(1e3 / gaps.mean()),
                                         'gap_std_ms': float(gaps.std()),
@@ -135,19 +141,19 @@ def fly(params_file, out, duration, monitor_factory=None, mavlink=None):
 
 
 def _plot(out, t, angles, cones, err, psi, cmd_t, commands):
-    import matplotlib
     matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
     fig, axs = plt.subplots(2, 2, figsize=(11, 7))
     ax = axs[0, 0]
     for i, name in enumerate(cones.names):
         line, = ax.plot(t, angles[:, i], label=name)
         ax.axhline(math.degrees(cones.theta[i]), color=line.get_color(), ls='--', lw=1)
-    ax.set(xlabel='t since arming [s]', ylabel='deg', title='true angle to each cone (dashed: limit)')
+    ax.set(xlabel='t since arming [s]', ylabel='deg',
+           title='true angle to each cone (dashed: limit)')
     ax.legend()
     ax = axs[0, 1]
     ax.plot(t, err)
-    ax.set(xlabel='t since arming [s]', ylabel='deg', title='true attitude error to the final set point')
+    ax.set(xlabel='t since arming [s]', ylabel='deg',
+           title='true attitude error to the final set point')
     ax = axs[1, 0]
     if psi:
         ax.semilogy([p[0] for p in psi], [max(p[1], 1e-12) for p in psi])
@@ -180,7 +186,7 @@ def main(argv=None):
     if args.headless:
         return headless(args.out)
     params_file = args.params_file or os.path.join(config_dir(), 'testbed.yaml')
-    if args.mavlink and not args.mavlink.split(':')[1:2] in (['127.0.0.1'], ['localhost']) \
+    if args.mavlink and args.mavlink.split(':')[1:2] not in (['127.0.0.1'], ['localhost']) \
             and args.mavlink.startswith(('udp', 'tcp')):
         parser.error('--mavlink: the demo talks to this machine only (127.0.0.1)')
     s = fly(params_file, args.out, args.duration, mavlink=args.mavlink)

@@ -8,6 +8,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from geoctl_ros.core import so3  # noqa: E402
+from geoctl_ros.params import cone_set
 
 
 def _col(result, name):
@@ -20,7 +21,8 @@ def _cols(result, prefix):
 
 def scenario_figures(result, out_dir):
     """Write attitude_error.png, psi.png, cone_angles.png, disturbance.png, control_moment.png,
-    motor_commands.png (rotor actuation only) and sensor_path.png; returns their paths."""
+    motor_commands.png (rotor actuation only) and sensor_path.png; returns their paths.
+    """
     title = result.summary.get('title') or result.scenario.name
     t = _col(result, 't')
     paths = []
@@ -101,7 +103,6 @@ def scenario_figures(result, out_dir):
 
 def sphere_path(ax, result):
     """The sensor axis R r on the unit sphere, with the cones drawn in red."""
-    from geoctl_ros.params import cone_set
     cones = cone_set(result.scenario.controller)
     q = result.history[:, [result.columns.index(c) for c in ('qx', 'qy', 'qz', 'qw')]]
     path = np.array([so3.quat_to_rot(qi) @ cones.r for qi in q])

@@ -5,15 +5,17 @@ their services and parameters.
 Every process started here runs with the loopback DDS profile and the caller's ``ROS_DOMAIN_ID``
 (``geoctl_ros.tools.rosenv.node_env``), so DDS traffic stays on 127.0.0.1.
 """
+import ipaddress
 import os
 import shutil
 import signal
+import struct
 import subprocess
 import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from rcl_interfaces.srv import SetParameters
 import rclpy
 from rclpy.node import Node
@@ -23,13 +25,14 @@ from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.nodes import qos
 from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
-from geoctl_ros.nodes.conversions import quaternion, stamp_seconds
+from geoctl_ros.nodes.conversions import key_values, quaternion, stamp_seconds, status_of
 from geoctl_ros.tools.rosenv import node_env
 
 
 def executable(name):
     """Path of an installed console script: beside this Python (venv, pip) or in an ament
-    prefix's lib/geoctl_ros (colcon). None if not found."""
+    prefix's lib/geoctl_ros (colcon). None if not found.
+    """
     candidates = [os.path.join(os.path.dirname(sys.executable), name)]
     for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
         if prefix:
@@ -45,7 +48,8 @@ class NodeProcess:
 
     def __init__(self, name, params_file=None, ros_args=(), log_dir='.', env=None, prefix=()):
         """env: the process's environment (default: geoctl_ros.tools.rosenv.node_env()); prefix: a
-        command to run it under (as ``ros2 run --prefix``), e.g. ('nice', '-n', '-10')."""
+        command to run it under (as ``ros2 run --prefix``), e.g. ('nice', '-n', '-10').
+        """
         exe = executable(name)
         cmd = list(prefix) + ([exe] if exe else [sys.executable, '-m', 'geoctl_ros.nodes.' + name])
         cmd += ['--ros-args'] + (['--params-file', str(params_file)] if params_file else [])
@@ -100,8 +104,7 @@ class Monitor(Node):
         self._sub(PoseStamped, 'sim/true_pose', 'true_pose', tel, _pose_quat)
         self._sub(PoseStamped, 'pose', 'pose', qos.SENSOR, _pose_quat)
         self.log['other diagnostics'] = []
-        self._sub(DiagnosticArray, '/diagnostics', 'diagnostics', qos.EVENT, _diag)
-        from geometry_msgs.msg import Vector3Stamped
+        self._sub(DiagnosticArray, '/diagnostics', 'diagnostics', qos.EVENT, None)
         self._sub(Vector3Stamped, 'attitude_error', 'eR', tel,
                   lambda m: (m.vector.x, m.vector.y, m.vector.z))
         self.arm_client = self.create_client(SetBool, '/%s/arm' % controller)
@@ -115,11 +118,14 @@ class Monitor(Node):
             return
 
         def record(msg):
-            value = convert(msg)
-            if key == 'diagnostics' and value.get('name') != CONTROLLER_STATUS:
-                self.log['other diagnostics'].append((time.monotonic(), value))
+            if key == 'diagnostics':        # the controller's typed, any other node's as text
+                for s in msg.status:
+                    if s.name == CONTROLLER_STATUS:
+                        self.log[key].append((time.monotonic(), status_of(s)))
+                    else:
+                        self.log['other diagnostics'].append((time.monotonic(), key_values(s)))
                 return
-            self.log[key].append((time.monotonic(), value))
+            self.log[key].append((time.monotonic(), convert(msg)))
         self.create_subscription(msg_type, topic, record, qos)
 
     # --- waiting -----------------------------------------------------------------------------
@@ -142,8 +148,8 @@ class Monitor(Node):
     def controller_has_inputs(self):
         """True once the controller's diagnostics show accepted pose and imu samples."""
         d = self.last_diagnostic()
-        return (d is not None and not d.get('pose accepted/refused', '0/').startswith('0/')
-                and not d.get('imu accepted/refused', '0/').startswith('0/'))
+        return (d is not None and d.figures.pose_counts.accepted > 0
+                and d.figures.imu_counts.accepted > 0)
 
     def since(self, key, t0):
         return [v for t, v in self.log[key] if t >= t0]
@@ -166,7 +172,8 @@ class Monitor(Node):
 
     def arm_when_ready(self, timeout=30.0):
         """Wait for the controller to report inputs, then arm, retrying while it refuses for
-        stale or missing inputs (as an operator would); returns the last reply."""
+        stale or missing inputs (as an operator would); returns the last reply.
+        """
         end = time.monotonic() + timeout
         self.wait_for(self.controller_has_inputs, timeout, 'the controller to receive its inputs')
         while True:
@@ -188,17 +195,10 @@ def _pose_quat(msg):
     return (stamp_seconds(msg.header.stamp), quaternion(msg.pose.orientation))
 
 
-def _diag(msg):
-    """The first status of a DiagnosticArray as a dict (level, message, name, key/values); the
-    controller's go to the 'diagnostics' log, any other node's to 'other diagnostics'."""
-    s = msg.status[0]
-    return {'level': int.from_bytes(s.level, 'little') if isinstance(s.level, bytes) else s.level,
-            'message': s.message, 'name': s.name, **{kv.key: kv.value for kv in s.values}}
-
-
 def process_sockets(pid):
     """The IP sockets process pid holds, as (protocol, local address, local port, remote address),
-    read from /proc (Linux). The tests use it to prove that every socket is on loopback."""
+    read from /proc (Linux). The tests use it to prove that every socket is on loopback.
+    """
     inodes = set()
     fd_dir = '/proc/%d/fd' % pid
     for fd in os.listdir(fd_dir):
@@ -226,8 +226,6 @@ def process_sockets(pid):
 
 def _proc_address(text):
     """'0100007F:1C8B' (/proc/net: 32-bit words in host byte order) -> ('127.0.0.1', 7307)."""
-    import ipaddress
-    import struct
     addr, port = text.split(':')
     words = [int(addr[k:k + 8], 16) for k in range(0, len(addr), 8)]
     raw = b''.join(struct.pack('=I', w) for w in words)

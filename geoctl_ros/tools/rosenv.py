@@ -1,4 +1,5 @@
-"""The DDS environment of every ROS process this project starts: loopback only, a domain of its own.
+"""The DDS environment of every ROS process this project starts: loopback only, a domain of its
+own.
 
 Two settings, both keeping traffic on 127.0.0.1 (README, "DDS transport"):
 
@@ -18,6 +19,8 @@ do not hear each other. No rclpy here: this is read before anything creates a no
 import os
 import random
 
+from ament_index_python.packages import get_package_share_directory
+
 PROFILE_VAR = 'FASTRTPS_DEFAULT_PROFILES_FILE'   # Fast DDS 2.x (ROS 2 Jazzy)
 RANGE_VAR = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
 
@@ -27,7 +30,6 @@ def config_dir():
     top = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     here = os.path.join(top, 'config')
     if not os.path.isdir(here):
-        from ament_index_python.packages import get_package_share_directory
         here = os.path.join(get_package_share_directory('geoctl_ros'), 'config')
     return here
 

@@ -1,10 +1,10 @@
 """Headless closed loop: ``scenario CONFIG.yaml --out DIR [--duration S]``.
 
 A scenario file is a ROS 2 parameter file with ``/**`` (shared), ``controller:``, ``sim:`` and
-optionally ``scenario:`` sections; the parameters are those of ``geoctl_ros.params``. The controller
-runs at ``rate_hz`` with a zero-order hold on its moment; the simulator integrates at
-``integration_rate_hz`` (an integer multiple). Writes DIR/summary.json, DIR/history.csv (one row per
-control step) and PNG plots like the paper's figures.
+optionally ``scenario:`` sections; the parameters are those of ``geoctl_ros.params``. The
+controller runs at ``rate_hz`` with a zero-order hold on its moment; the simulator integrates at
+``integration_rate_hz`` (an integer multiple). Writes DIR/summary.json, DIR/history.csv (one row
+per control step) and PNG plots like the paper's figures.
 
 ``scenario.latency`` delays the measurements: at each control step the controller sees the
 simulated state of ``latency`` seconds before (noise added to that state), as a motion-capture
@@ -26,9 +26,19 @@ from geoctl_ros.core import so3
 from geoctl_ros.core.control import SetpointRejected, gain_condition
 from geoctl_ros.core.loop import ControlLoop
 from geoctl_ros.core.mechanics import gravity_moment
-from geoctl_ros.params import (CONTROLLER, SCENARIO, SIM, ConfigError, controller_config,
-                               controller_setup, load_parameter_file, node_overrides, resolve,
-                               testbed_sim)
+from geoctl_ros.params import (
+    CONTROLLER,
+    SCENARIO,
+    SIM,
+    ConfigError,
+    controller_config,
+    controller_setup,
+    load_parameter_file,
+    node_overrides,
+    resolve,
+    testbed_sim,
+)
+from geoctl_ros.tools import plots as plotting
 
 SETTLE_PSI = 1e-3
 
@@ -51,7 +61,8 @@ def load(path):
 
 def from_sections(sections, name):
     """A validated Scenario from parameter-file sections ({'/**' or node: flat parameters}), as
-    ``load`` reads them from a file; raises ConfigError naming every bad parameter."""
+    ``load`` reads them from a file; raises ConfigError naming every bad parameter.
+    """
     errors = []
     resolved = {}
     for node in (CONTROLLER, SIM, SCENARIO):
@@ -85,7 +96,8 @@ def hold_steps(steps, n_sub, jitter, seed):
     periods of n_sub integration steps: n_sub each, or with jitter (in integration steps, > 0)
     n_sub plus a uniform random whole number in 0..jitter, as on a machine too busy to run the
     loop on time: the steps come late, one after the other, and fewer fit in the run. From a
-    stream of its own of ``seed``, so the noise is the same with and without it."""
+    stream of its own of ``seed``, so the noise is the same with and without it.
+    """
     if jitter <= 0.0:
         return np.full(steps, n_sub)
     holds = n_sub + np.random.default_rng([seed, 1]).integers(0, int(round(jitter)) + 1, steps)
@@ -234,7 +246,6 @@ def write(result, out_dir, plots=True):
     np.savetxt(os.path.join(out_dir, 'history.csv'), result.history, delimiter=',',
                header=','.join(result.columns), comments='', fmt='%.9g')
     if plots:
-        from geoctl_ros.tools import plots as plotting
         plotting.scenario_figures(result, out_dir)
 
 
@@ -253,7 +264,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(prog='scenario', description=__doc__.split('\n\n')[0])
     parser.add_argument('config', help='scenario file (ROS 2 parameter YAML)')
     parser.add_argument('--out', required=True, help='output directory')
-    parser.add_argument('--duration', type=float, help='simulated seconds (default: the file\'s)')
+    parser.add_argument('--duration', type=float, help="simulated seconds (default: the file's)")
     parser.add_argument('--no-plots', action='store_true', help='skip the PNG figures')
     args = parser.parse_args(argv)
     if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):

@@ -24,8 +24,8 @@ duplicated, reordered, held back and released in bursts, poses or IMU missing fo
 the sim process paused with SIGSTOP/SIGCONT (both inputs missing).
 
 ``--transport profile`` (default) runs the nodes on the shipped loopback profile
-(``geoctl_ros.tools.rosenv``), ``rmw-default`` on the rmw's defaults (shared memory + UDP, LOCALHOST):
-the "before" of the README's table. Everything stays on 127.0.0.1.
+(``geoctl_ros.tools.rosenv``), ``rmw-default`` on the rmw's defaults (shared memory + UDP,
+LOCALHOST): the "before" of the README's table. Everything stays on 127.0.0.1.
 """
 import argparse
 import json
@@ -39,8 +39,20 @@ import tempfile
 import time
 
 import numpy as np
+import rclpy
+from std_msgs.msg import String
 
-from geoctl_ros.core.stats import aggregate
+from geoctl_ros.core import so3
+from geoctl_ros.core.diagnostics import WARN, aggregate, to_values
+from geoctl_ros.nodes.qos import EVENT
+from geoctl_ros.params import (
+    CONTROLLER,
+    cone_set,
+    load_parameter_file,
+    node_overrides,
+    resolve,
+)
+from geoctl_ros.tools.processes import Monitor, NodeProcess
 from geoctl_ros.tools.rosenv import PROFILE_VAR, cli_env, config_dir, node_env
 from geoctl_ros.tools.soak_agents import CHURN_LOOP, CLI_LOOP, PARAMS_LOOP
 
@@ -71,8 +83,7 @@ class Session:
     """sim + controller (+ the relay) + a monitor in this process, armed; stopped by close()."""
 
     def __init__(self, params_file, out, transport='profile', relay=False, prefix=()):
-        import rclpy
-        from geoctl_ros.tools.processes import Monitor, NodeProcess
+
         env = node_env() if transport == 'profile' else cli_env()
         os.environ.update(env)          # this process's monitor joins the same way
         if PROFILE_VAR not in env:
@@ -100,9 +111,7 @@ class Session:
                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         rclpy.init()
         self.mon = Monitor(record=('diagnostics', 'true_pose'))
-        from std_msgs.msg import String
 
-        from geoctl_ros.nodes.qos import EVENT
         self._String = String
         self._fault_pub = self.mon.create_publisher(String, 'soak/fault', EVENT)
         if relay:     # a fault command sent before the relay has matched would be lost
@@ -179,7 +188,7 @@ class Session:
                     next_fault = (time.monotonic() + period) if period else float('inf')
                 mon.spin_for(0.1)
                 d = mon.last_diagnostic()
-                if d and d['state'].startswith('failsafe'):
+                if d is not None and d.figures.failsafe:
                     self.fault('off', 0)
                     mon.wait_for(lambda: mon.arm(True).success, 10.0, 're-arming after a failsafe')
         finally:
@@ -190,7 +199,8 @@ class Session:
         with open(os.path.join(self.out, 'diagnostics.jsonl'), 'w') as f:
             for t, d in mon.log['diagnostics']:
                 if t0 <= t <= self.t_end:
-                    f.write(json.dumps(dict(d, t=round(t - t0, 3))) + '\n')
+                    f.write(json.dumps(dict(to_values(d.figures), level=d.level,
+                                            message=d.message, t=round(t - t0, 3))) + '\n')
         return figures(mon, t0, self.t_end, self.cones)
 
     def command_times(self):
@@ -204,7 +214,6 @@ class Session:
             return np.array([])
 
     def close(self):
-        import rclpy
         self.command_times()
         self.mon.destroy_node()
         rclpy.try_shutdown()
@@ -214,15 +223,15 @@ class Session:
         return [p.stop() for p in self.procs]
 
 
-def _windows(diags, key):
-    """(p99 over the windows' p99, max) of a controller diagnostics figure, ms."""
-    f = aggregate(d.get(key, '') for d in diags)
-    return (float('nan'), float('nan')) if f is None else (f['p99'], f['max'])
+def _windows(diags, name):
+    """(p99 over the windows' p99, max) of a windowed figure of the controller's diagnostics
+    (a Figures field), ms.
+    """
+    w = aggregate(getattr(d.figures, name) for d in diags)
+    return (float('nan'), float('nan')) if w is None else (1e3 * w.p99, 1e3 * w.max)
 
 
 def _cones(params_file):
-    from geoctl_ros.params import CONTROLLER, cone_set, load_parameter_file, node_overrides, \
-        resolve
     return cone_set(resolve(CONTROLLER, node_overrides(load_parameter_file(params_file),
                                                        CONTROLLER)))
 
@@ -238,24 +247,22 @@ def command_gaps(times, t0, t1):
 
 def figures(mon, t0, t1, cones):
     """The figures of the flight between t0 and t1 (monotonic, as the monitor's log)."""
-    from geoctl_ros.core import so3
     diags = [d for t, d in mon.log['diagnostics'] if t0 <= t <= t1]
-    states = [d['state'] for d in diags]
-    failsafes = sum(1 for a, b in zip(['armed'] + states, states)
-                    if b.startswith('failsafe') and not a.startswith('failsafe'))
+    failed = [d.figures.failsafe for d in diags]
+    failsafes = sum(1 for a, b in zip([False] + failed, failed) if b and not a)
     margins = [float(np.min(cones.margins_deg(so3.quat_to_rot(q))))
                for t, (_, q) in mon.log['true_pose'] if t0 <= t <= t1] if len(cones) else [np.nan]
-    last = diags[-1] if diags else {}
+    last = diags[-1].figures if diags else None
     out = {
         'seconds': t1 - t0,
         'failsafes': failsafes,
-        'warn windows': sum(1 for d in diags if d['level'] == 1),
-        'pose age p99/max [ms]': _windows(diags, 'pose age at tick [ms]'),
-        'imu age p99/max [ms]': _windows(diags, 'imu age at tick [ms]'),
-        'loop period p99/max [ms]': _windows(diags, 'loop period [ms]'),
-        'min cone margin [deg]': min(margins) if margins else float('nan'),
-        'gaps ridden (pose, imu)': (last.get('pose gaps ridden through', '-'),
-                                    last.get('imu gaps ridden through', '-')),
+        'warn windows': sum(1 for d in diags if d.level == WARN),
+        'pose age p99/max [ms]': _windows(diags, 'pose_age_at_tick'),
+        'imu age p99/max [ms]': _windows(diags, 'imu_age_at_tick'),
+        'loop period p99/max [ms]': _windows(diags, 'loop_period'),
+        'closest approach [deg]': min(margins) if margins else float('nan'),
+        'gaps ridden (pose, imu)': (('-', '-') if last is None else
+                                    (last.pose_gaps.count, last.imu_gaps.count)),
     }
     return out
 
@@ -271,13 +278,14 @@ def table_row(name, f):
     return '| %s | %.0f | %d | %s | %s | %s | %s | %.1f |' % (
         name, f['seconds'], f['failsafes'], pair(f['pose age p99/max [ms]']),
         pair(f['imu age p99/max [ms]']), pair(f['command gap p99/max [ms]']),
-        pair(f['loop period p99/max [ms]']), f['min cone margin [deg]'])
+        pair(f['loop period p99/max [ms]']), f['closest approach [deg]'])
 
 
 def run_cases(names, duration, params_file, out, transport='profile', prefix=(),
               progress=print):
     """Run the named cases, each on a fresh session (relay when a fault needs one); returns
-    {name: figures}."""
+    {name: figures}.
+    """
     results = {}
     for name in names:
         loads, fault, what = CASES[name]
@@ -312,7 +320,8 @@ def main(argv=None):
     out = args.out or tempfile.mkdtemp(prefix='soak-')
     names = args.case or list(CASES)
     results = run_cases(names, args.duration, params_file, out, args.transport,
-                        args.prefix.split(), progress=lambda m: print(m, file=sys.stderr, flush=True))
+                        args.prefix.split(),
+                        progress=lambda m: print(m, file=sys.stderr, flush=True))
     with open(os.path.join(out, 'soak.json'), 'w') as f:
         json.dump({'transport': args.transport, 'results': results}, f, indent=2)
     print('transport: %s, %s%s' % (args.transport, os.path.basename(params_file),

@@ -1,19 +1,27 @@
 """The processes a soak run starts beside the flight (``geoctl_ros.tools.soak``).
 
-    python -m geoctl_ros.tools.soak_agents relay          # fault injection between sim and controller
-    python -m geoctl_ros.tools.soak_agents listen FILE    # motor_commands receipt times -> FILE.npy
+    python -m geoctl_ros.tools.soak_agents relay        # faults between sim and controller
+    python -m geoctl_ros.tools.soak_agents listen FILE  # motor_commands receipt times -> FILE.npy
 
 and the load scripts (``CLI_LOOP`` for bash, ``CHURN_LOOP`` and ``PARAMS_LOOP`` for Python) that
 stand for other people's processes in a plain LOCALHOST shell.
 """
+import heapq
 import random
 import signal
 import sys
 import time
 
+from geometry_msgs.msg import PoseStamped
 import numpy as np
+import rclpy
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Float64MultiArray, String
 
-CLI_LOOP = r'''
+from geoctl_ros.nodes.qos import COMMAND, EVENT, SENSOR
+from geoctl_ros.nodes.runtime import make_executor
+
+CLI_LOOP = r"""
 while true; do
   timeout 4 ros2 topic echo /cone_margins > /dev/null
   timeout 4 ros2 topic hz /pose > /dev/null
@@ -21,14 +29,16 @@ while true; do
   ros2 param dump /sim > /dev/null
   ros2 param get /controller k_R > /dev/null
   ros2 param get /sim mass > /dev/null
-  ros2 service call /controller/get_parameters rcl_interfaces/srv/GetParameters "{names: [k_R]}" > /dev/null
-  ros2 service call /sim/get_parameters rcl_interfaces/srv/GetParameters "{names: [mass]}" > /dev/null
+  ros2 service call /controller/get_parameters rcl_interfaces/srv/GetParameters \
+    "{names: [k_R]}" > /dev/null
+  ros2 service call /sim/get_parameters rcl_interfaces/srv/GetParameters \
+    "{names: [mass]}" > /dev/null
   ros2 service list > /dev/null
   timeout 3 ros2 topic echo /diagnostics > /dev/null
 done
-'''
+"""
 
-CHURN_LOOP = r'''
+CHURN_LOOP = r"""
 import random, signal, subprocess, sys, time
 CHILD = ("import rclpy, sys, time\nfrom geometry_msgs.msg import PoseStamped\n"
          "from rclpy.qos import qos_profile_sensor_data\nrclpy.init()\n"
@@ -52,15 +62,16 @@ while True:
                 p.send_signal(signal.SIGKILL)
         children = [(p, t) for p, t in children if p.poll() is None]
         time.sleep(0.05)
-'''
+"""
 
-PARAMS_LOOP = r'''
+PARAMS_LOOP = r"""
 import time, rclpy
 from rcl_interfaces.srv import GetParameters, ListParameters
 rclpy.init()
 n = rclpy.create_node('soak_param_reader')
 clients = [(n.create_client(ListParameters, '/%s/list_parameters' % x),
-            n.create_client(GetParameters, '/%s/get_parameters' % x)) for x in ('controller', 'sim')]
+            n.create_client(GetParameters, '/%s/get_parameters' % x))
+           for x in ('controller', 'sim')]
 def call(c, req):
     if not c.wait_for_service(timeout_sec=2.0):
         return None
@@ -74,19 +85,12 @@ while True:
         if r is not None:
             call(gc, GetParameters.Request(names=list(r.result.names)))
     rclpy.spin_once(n, timeout_sec=max(0.0, 0.5 - (time.monotonic() - t)))
-'''
+"""
 
 
 # --- the relay ------------------------------------------------------------------------------
 def relay_main():
     """Republish raw/pose and raw/imu on pose and imu, with the faults commanded on soak/fault."""
-    import heapq
-    import rclpy
-    from geometry_msgs.msg import PoseStamped
-    from geoctl_ros.nodes.qos import EVENT, SENSOR
-    from sensor_msgs.msg import Imu
-    from std_msgs.msg import String
-
     rclpy.init()
     node = rclpy.create_node('soak_relay')
     pubs = {'pose': node.create_publisher(PoseStamped, 'pose', SENSOR),
@@ -150,12 +154,8 @@ def relay_main():
 
 def listen_main(path):
     """A subscriber to motor_commands alone (as an ESC bridge would be): writes the receipt times
-    (CLOCK_MONOTONIC, shared by every process) to path when stopped with SIGTERM."""
-    import rclpy
-    from std_msgs.msg import Float64MultiArray
-
-    from geoctl_ros.nodes.qos import COMMAND
-
+    (CLOCK_MONOTONIC, shared by every process) to path when stopped with SIGTERM.
+    """
     rclpy.init()
     node = rclpy.create_node('soak_command_listener')
     stamps = []
@@ -164,11 +164,7 @@ def listen_main(path):
                              COMMAND)
     stop = []
     signal.signal(signal.SIGTERM, lambda *a: stop.append(1))
-    try:
-        from rclpy.experimental import EventsExecutor
-        executor = EventsExecutor()
-    except ImportError:        # pragma: no cover - rclpy before 7.1.4
-        executor = rclpy.executors.SingleThreadedExecutor()
+    executor = make_executor()
     executor.add_node(node)
     while not stop:
         executor.spin_once(timeout_sec=0.1)
