@@ -1,17 +1,24 @@
 """The controller node's decisions without ROS: input checks, arming, failsafe, set points,
 schedule, adaptation only while armed.
 """
+from dataclasses import replace
 import math
+import os
 
 import numpy as np
 import pytest
 
 from geoctl_ros.core import so3
+from geoctl_ros.core.cones import ConeSet
+from geoctl_ros.core.control import AttitudeController
 from geoctl_ros.core.diagnostics import ERROR, OK, WARN
 from geoctl_ros.core.loop import NON_FINITE, ControlLoop, step_period
+from geoctl_ros.core.step import ControlTick
 from geoctl_ros.params import CONTROLLER, ConfigError, controller_setup, resolve
+from geoctl_ros.tools import scenario
 
 pytestmark = pytest.mark.odroid
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 YAW90 = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))
 CONE = {'cones.names': ['obstacle'], 'cones.obstacle.axis': [1.0, 1.0, 0.0],
@@ -317,3 +324,45 @@ def test_a_burst_of_samples_does_not_make_the_lag_compensation_command_extreme_t
         after = loop.tick(0.4901, dt).motors.commands
         spread[dt] = int(np.abs(after - before).max())
     assert spread[0.005] < 30 and spread[1e-4] < 30, spread   # counts of 240 (6 here)
+
+
+def test_a_batch_of_one_commands_what_the_control_loop_does_tick_for_tick():
+    """The closed loop's tick exists once (geoctl_ros.core.step.ControlTick): ControlLoop (the
+    node's logic) and a batch of one as the campaign builds it (batched cone set, set point and
+    estimate), fed the same recorded inputs, command the same motors at every tick.
+    """
+    sc = scenario.load(os.path.join(ROOT, 'config', 'scenarios', 'testbed_yaw90.yaml'))
+    recorded = scenario.run(sc, duration=3.0)          # the flight's true states, 100 Hz
+    cols = recorded.columns
+    q = recorded.history[:, [cols.index(c) for c in ('qx', 'qy', 'qz', 'qw')]]
+    w = recorded.history[:, [cols.index(c) for c in ('wx', 'wy', 'wz')]]
+    # a noisy, late measurement of them, so that the prediction and the lag model both work
+    rng = np.random.default_rng(7)
+    w = w + 0.02 * rng.standard_normal(w.shape)
+    values = dict(sc.controller, **{'setpoint_schedule.times': np.zeros(0),
+                                    'setpoint_schedule.quaternions': np.zeros(0),
+                                    'setpoint': list(YAW90), 'measurement_delay': 0.01})
+    loop = ControlLoop(controller_setup(values))
+    setup = controller_setup(values)
+    c = setup.config.cones
+    one = ConeSet(c.r, c.V[None], c.theta[None], c.alpha, c.floor, c.names, c.guard)
+    controller = AttitudeController(replace(setup.config, cones=one))
+    controller.R_d = setup.setpoint[None]
+    controller.delta_bar = np.zeros((1, setup.config.n_params))
+    batch = ControlTick(controller, setup.mixer, setup.loop.measurement_delay)
+    dt = 1.0 / sc.controller['rate_hz']
+    moved = 0
+    for k in range(len(q)):
+        t = k * dt + 0.002 * (k % 3)        # the node's ticks are not exactly on time
+        loop.offer_pose(q[k], t - 0.004, t - 0.003)
+        loop.offer_angular_velocity(w[k], t - 0.002, t - 0.001)
+        if k == 0:
+            assert loop.arm(t).ok
+        tick = loop.tick(t, dt)
+        out, motors = batch(so3.quat_to_rot(q[k])[None], w[k][None], dt, now=t,
+                            ages=(0.003, 0.001))
+        assert np.array_equal(motors.commands[0], tick.motors.commands), k
+        assert np.allclose(out.u[0], tick.control.u, rtol=0, atol=1e-12), k
+        assert np.allclose(out.delta_bar[0], tick.control.delta_bar, rtol=0, atol=1e-12), k
+        moved += bool(tick.motors.commands.any())
+    assert moved > 0.9 * len(q)                       # the motors were flying all along

@@ -14,6 +14,7 @@ from geoctl_ros.core.diagnostics import ERROR, FAILSAFE, OK, WARN, Counts, Figur
 from geoctl_ros.core.gaps import GYRO, POSE, GapBridge
 from geoctl_ros.core.safety import Stream, Supervisor, angular_velocity_problem, quaternion_problem
 from geoctl_ros.core.stats import WindowStats
+from geoctl_ros.core.step import ControlTick
 
 NEAR_CONE_DEG = 2.0           # a cone margin below this is reported (WARN)
 NON_FINITE = 'failsafe: non-finite control output'
@@ -28,15 +29,40 @@ def step_period(since, period):
     return min(max(since, 0.5 * period), 2.0 * period)
 
 
+@dataclass(frozen=True)
+class LoopSettings:
+    """The loop's and the node's settings, typed, built once from the parameters at configuration
+    (``geoctl_ros.params.controller_setup``); nothing on the hot path reads the parameter dict.
+    """
+
+    rate_hz: float                 # the control timer
+    step_on: str                   # 'timer', 'pose' or 'imu': what starts a control step
+    pose_timeout: float            # s: a pose older than this is stale
+    pose_ride_through: float       # s: how long a stale pose is ridden through (0: not at all)
+    imu_timeout: float
+    imu_ride_through: float
+    pose_rate_window: float        # s: the poses a rate is differenced from during an imu gap
+    max_angular_velocity: float    # rad/s: an imu sample faster than this is refused
+    measurement_delay: float       # s: the inputs' latency the prediction makes up for
+    allow_default_configuration: bool   # may arm without a parameter file (the opt-in)
+    frame_id: str                  # the body frame of the published vectors
+    world_frame_id: str
+
+
 @dataclass
 class Tick:
-    """One control tick's results for the node to publish."""
+    """One control tick's results: everything the node publishes and logs."""
 
     control: object          # ControlOutput, or None before the first pose and rate
     motors: object           # MotorOutput (zero commands unless armed)
     armed: bool
-    measurement_stamp: float  # stamp of the pose the step used (None before the first)
-    bridging: bool = False    # a gap is being ridden through (see geoctl_ros.core.gaps)
+    stamp: object            # stamp of the pose the step used, as offer_pose was given it
+                             # (the node's header stamp, for exact-time matching; or None)
+    pose_receipt: float      # when that pose was received, on the loop's clock (or None)
+    state: str               # the supervisor's state: 'armed', or why not
+    sources: tuple           # (attitude source, rate source): POSE/GYRO, or a gap's stand-ins
+    setpoint: np.ndarray     # R_d being flown (the same object until a new one is adopted)
+    bridging: bool = False   # a gap is being ridden through (see geoctl_ros.core.gaps)
 
 
 class ControlLoop:
@@ -50,17 +76,17 @@ class ControlLoop:
         self.unconfigured = unconfigured
         self.controller = AttitudeController(setup.config)
         self.controller.set_setpoint(setup.setpoint)
-        v = setup.values
-        self.pose = Stream('pose', v['pose_timeout'], v['pose_ride_through'])
-        self.rate = Stream('angular velocity', v['imu_timeout'], v['imu_ride_through'])
+        s = setup.loop
+        self.pose = Stream('pose', s.pose_timeout, s.pose_ride_through)
+        self.rate = Stream('angular velocity', s.imu_timeout, s.imu_ride_through)
         self.supervisor = Supervisor([self.pose, self.rate])
-        self.bridge = GapBridge(v['pose_rate_window'])
+        self.bridge = GapBridge(s.pose_rate_window)
         self.R = None                   # last accepted measurements
         self.Omega = None
         self.setpoint_note = None       # last set-point refusal, for diagnostics
+        self._pose_stamp = None         # the last accepted pose's stamp, as given
         self.last_tick = None
-        self._last_now = None           # the time of the last tick
-        self._moment = np.zeros(3)      # what the rotors were last told to produce
+        self.step = ControlTick(self.controller, setup.mixer, setup.loop.measurement_delay)
         self._schedule_index = -1
         # per diagnostics window: input ages at the ticks, armed ticks saturated / bridging
         self.pose_age = WindowStats()
@@ -69,11 +95,15 @@ class ControlLoop:
         self.gaps = {'pose': [0, 0.0], 'angular velocity': [0, 0.0]}   # count, longest (s)
 
     # --- inputs ------------------------------------------------------------------------------
-    def offer_pose(self, q, stamp, receipt):
-        """A motion-capture attitude (x, y, z, w); None if accepted, else why it was refused."""
+    def offer_pose(self, q, stamp, receipt, stamp_as_given=None):
+        """A motion-capture attitude (x, y, z, w) of stamp (s) received at receipt (s, the loop's
+        clock); None if accepted, else why it was refused. stamp_as_given: the stamp in the
+        caller's own form, handed back on the ticks that use this pose (default: stamp).
+        """
         previous = self.pose.last_receipt
         problem = self.pose.offer(stamp, receipt, quaternion_problem(q))
         if problem is None:
+            self._pose_stamp = stamp if stamp_as_given is None else stamp_as_given
             self._end_gap(self.pose, previous, receipt)
             self.R = so3.quat_to_rot(q)
             self.bridge.pose(self.R, stamp, receipt)
@@ -83,7 +113,7 @@ class ControlLoop:
         """A body angular velocity (rad/s); None if accepted, else why it was refused."""
         previous = self.rate.last_receipt
         problem = self.rate.offer(
-            stamp, receipt, angular_velocity_problem(w, self.setup.values['max_angular_velocity']))
+            stamp, receipt, angular_velocity_problem(w, self.setup.loop.max_angular_velocity))
         if problem is None:
             self._end_gap(self.rate, previous, receipt)
             self.Omega = np.array(w, dtype=float)
@@ -136,15 +166,16 @@ class ControlLoop:
             return str(e)
         setup.mixer.adopt_state(self.setup.mixer)
         self.setup = setup
-        v = setup.values
-        self.pose.timeout, self.pose.ride_through = v['pose_timeout'], v['pose_ride_through']
-        self.rate.timeout, self.rate.ride_through = v['imu_timeout'], v['imu_ride_through']
-        self.bridge.rate_window = v['pose_rate_window']
+        self.step.reconfigure(setup.mixer, setup.loop.measurement_delay)
+        s = setup.loop
+        self.pose.timeout, self.pose.ride_through = s.pose_timeout, s.pose_ride_through
+        self.rate.timeout, self.rate.ride_through = s.imu_timeout, s.imu_ride_through
+        self.bridge.rate_window = s.pose_rate_window
         if setpoint_changed:
             self.controller.set_setpoint(setup.setpoint)
         if schedule_changed:
             self._schedule_index = -1
-        if v['allow_default_configuration']:      # the opt-in, given at run time
+        if s.allow_default_configuration:      # the opt-in, given at run time
             self.unconfigured = None
         return None
 
@@ -154,9 +185,6 @@ class ControlLoop:
         the step's command is expected to be held).
         """
         armed = self.supervisor.check(now)
-        # how long the last command was held (the lag compensation's model needs the real time)
-        held = None if self._last_now is None else now - self._last_now
-        self._last_now = now
         schedule = self.setup.schedule
         if armed and len(schedule):
             i = schedule.index_at(now - self.supervisor.armed_since)
@@ -165,24 +193,20 @@ class ControlLoop:
                 self._schedule_index = i
         state = self.bridge.update(now, self.pose.fresh(now), self.rate.fresh(now))
         if state is None:
-            tick = Tick(None, self.setup.mixer.mix(np.zeros(3), armed=False, dt=dt), armed, None)
+            out, motors = self.step.idle(dt, now)
+            tick = self._result(None, motors, armed, False)
         else:
             bridging = self.bridge.bridging
             R, Omega = state
-            if not bridging:        # delay compensation (a bridged state is already propagated):
-                delay = self.setup.values['measurement_delay']   # by the onboard clock only
-                R, Omega = self.controller.predict(
-                    R, Omega, delay + max(now - self.pose.last_receipt, 0.0),
-                    delay + max(now - self.rate.last_receipt, 0.0), self._moment, dt)
-            # the estimate learns only from measurements, not from a bridged state
-            out = self.controller.step(R, Omega, dt, adapt=armed and not bridging)
-            if not np.isfinite(out.u).all():        # a last line of defence: never publish it
+            # the measurements' ages by the onboard clock only; a bridged state is already
+            # propagated, and the estimate learns only from measurements
+            ages = (max(now - self.pose.last_receipt, 0.0), max(now - self.rate.last_receipt, 0.0))
+            out, motors = self.step(R, Omega, dt, now, ages, armed=armed,
+                                    adapt=armed and not bridging, predict=not bridging)
+            if out is None:
                 self.disarm(NON_FINITE)
-                armed, out = False, None
-            motors = self.setup.mixer.mix(np.zeros(3) if out is None else out.u, armed=armed,
-                                          dt=dt, held=held)
-            self._moment = motors.allocation.moment if armed else np.zeros(3)
-            tick = Tick(out, motors, armed, self.pose.last_stamp, bridging)
+                armed = False
+            tick = self._result(out, motors, armed, bridging)
         if self.pose.last_receipt is not None:
             self.pose_age.add(self.pose.age(now))
         if self.rate.last_receipt is not None:
@@ -193,6 +217,28 @@ class ControlLoop:
         w['bridging'] += bool(armed and tick.bridging)
         self.last_tick = tick
         return tick
+
+    def _result(self, out, motors, armed, bridging):
+        b = self.bridge
+        return Tick(out, motors, armed, self._pose_stamp, self.pose.last_receipt,
+                    self.supervisor.reason, (b.attitude_source, b.rate_source),
+                    self.controller.R_d, bridging)
+
+    @property
+    def settings(self):
+        """The LoopSettings in effect."""
+        return self.setup.loop
+
+    @property
+    def rotor_count(self):
+        return self.setup.mixer.allocator.count
+
+    def reconfiguration_problem(self, setup):
+        """Why setup (validated on its own) cannot replace the running one, or None: the set
+        point now being flown (it may have come in on the topic) against the new cones.
+        """
+        problem = self.controller.setpoint_problem(self.controller.R_d, setup.config.cones)
+        return None if problem is None else 'the current ' + problem
 
     # --- what the diagnostics say ------------------------------------------------------------
     def gap_notes(self, now):

@@ -19,6 +19,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.control import gain_condition
+from geoctl_ros.core.diagnostics import FAILSAFE
 from geoctl_ros.core.loop import ControlLoop, step_period
 from geoctl_ros.core.stats import WindowStats
 from geoctl_ros.nodes import qos, ros_params
@@ -50,7 +51,7 @@ class ControllerNode(Node):
         reached it (a launch file's missing params_file only warns and passes none).
         """
         given = set(self._parameter_overrides) - {'use_sim_time', 'allow_default_configuration'}
-        if given or setup.values['allow_default_configuration']:
+        if given or setup.loop.allow_default_configuration:
             return None
         return ('no configuration given: started without a parameter file, so every arm '
                 'request is refused (give --params-file FILE, or -p '
@@ -78,9 +79,9 @@ class ControllerNode(Node):
 
         sim_time = self._sim_time = self.get_parameter('use_sim_time').value
         self.clock_ = self.get_clock() if sim_time else Clock(clock_type=ClockType.STEADY_TIME)
-        self.period = 1.0 / setup.values['rate_hz']
-        self.frame_id = setup.values['frame_id']
-        self.world_frame_id = setup.values['world_frame_id']
+        self.period = 1.0 / setup.loop.rate_hz
+        self.frame_id = setup.loop.frame_id
+        self.world_frame_id = setup.loop.world_frame_id
 
         self.create_subscription(PoseStamped, 'pose', self._on_pose, qos.SENSOR)
         self.create_subscription(Imu, 'imu', self._on_imu, qos.SENSOR)
@@ -107,7 +108,6 @@ class ControllerNode(Node):
                       'dbar': Float64MultiArray(), 'margins': Float64MultiArray()}
         for key in ('wrench', 'eR', 'eW'):
             self._msgs[key].header.frame_id = self.frame_id
-        self._pose_stamp_msg = None
         self._last_tick = None
         self._period_stats = WindowStats()
         self._compute_stats = WindowStats()
@@ -116,7 +116,7 @@ class ControllerNode(Node):
         self.create_timer(self.period, self._on_timer, clock=self.clock_)
         self.create_timer(DIAGNOSTICS_PERIOD, self._end_window, clock=self.clock_)
         self.get_logger().info('controller ready at %g Hz (%s clock), %d cone(s), disarmed'
-                               % (setup.values['rate_hz'], 'ROS' if sim_time else 'steady',
+                               % (setup.loop.rate_hz, 'ROS' if sim_time else 'steady',
                                   len(setup.config.cones)))
 
     def _now(self):
@@ -130,20 +130,17 @@ class ControllerNode(Node):
 
     def on_shutdown(self):
         """Leave the motors at zero when the node stops."""
-        count = self.loop.setup.mixer.allocator.count
-        self.pub_motors.publish(Float64MultiArray(data=[0.0] * count))
+        self.pub_motors.publish(Float64MultiArray(data=[0.0] * self.loop.rotor_count))
 
     # --- inputs ------------------------------------------------------------------------------
     def _on_pose(self, msg):
         now = self._now()
         problem = self.loop.offer_pose(quaternion(msg.pose.orientation),
-                                       stamp_seconds(msg.header.stamp), now)
+                                       stamp_seconds(msg.header.stamp), now, msg.header.stamp)
         if problem:
             self.get_logger().warning('pose refused: ' + problem, throttle_duration_sec=1.0)
-        else:
-            self._pose_stamp_msg = msg.header.stamp
-            if self.loop.setup.values['step_on'] == 'pose':
-                self._tick(now)
+        elif self.loop.settings.step_on == 'pose':
+            self._tick(now)
 
     def _on_imu(self, msg):
         now = self._now()
@@ -151,7 +148,7 @@ class ControllerNode(Node):
                                                    stamp_seconds(msg.header.stamp), now)
         if problem:
             self.get_logger().warning('imu refused: ' + problem, throttle_duration_sec=1.0)
-        elif self.loop.setup.values['step_on'] == 'imu':
+        elif self.loop.settings.step_on == 'imu':
             self._tick(now)
 
     def _on_setpoint(self, msg):
@@ -187,10 +184,9 @@ class ControllerNode(Node):
         may have come in on the topic) against the new cones.
         """
         setup = build(values)
-        controller = self.loop.controller
-        problem = controller.setpoint_problem(controller.R_d, setup.config.cones)
+        problem = self.loop.reconfiguration_problem(setup)
         if problem:
-            raise ConfigError([('cones', 'the current ' + problem)])
+            raise ConfigError([('cones', problem)])
         return setup
 
     def _apply(self, setup, changed):
@@ -208,7 +204,7 @@ class ControllerNode(Node):
         the last 1.5 periods; then the timer only stands in when they stop.
         """
         now = self._now()
-        if (self.loop.setup.values['step_on'] == 'timer' or self._last_tick is None
+        if (self.loop.settings.step_on == 'timer' or self._last_tick is None
                 or now - self._last_tick >= 1.5 * self.period):
             self._tick(now)
 
@@ -221,7 +217,7 @@ class ControllerNode(Node):
         if self._last_tick is not None:
             since = now - self._last_tick
             self._period_stats.add(since)
-            if self.loop.setup.values['step_on'] != 'timer':   # steps as the samples come
+            if self.loop.settings.step_on != 'timer':   # steps as the samples come
                 dt = step_period(since, self.period)
         self._last_tick = now
         tick = self.loop.tick(now, dt)
@@ -230,10 +226,10 @@ class ControllerNode(Node):
         m['motors'].data = tick.motors.normalised.tolist()
         self.pub_motors.publish(m['motors'])
         self._compute_stats.add(time.perf_counter() - t0)
-        if tick.armed and self.loop.pose.last_receipt is not None:
-            self._latency_stats.add(self._now() - self.loop.pose.last_receipt)
+        if tick.armed and tick.pose_receipt is not None:
+            self._latency_stats.add(self._now() - tick.pose_receipt)
         if out is not None:
-            stamp = self._pose_stamp_msg
+            stamp = tick.stamp
             w = m['wrench']
             w.header.stamp = stamp
             set_vector(w.wrench.torque, out.u)
@@ -251,7 +247,7 @@ class ControllerNode(Node):
             self.pub_dbar.publish(m['dbar'])
             m['margins'].data = out.margins_deg.tolist()
             self.pub_margins.publish(m['margins'])
-        R_d = self.loop.controller.R_d
+        R_d = tick.setpoint
         if R_d is not self._published_R_d:      # a new set point (set_setpoint copies)
             self._published_R_d = R_d
             sp = QuaternionStamped()
@@ -259,12 +255,10 @@ class ControllerNode(Node):
             sp.header.frame_id = self.world_frame_id
             set_quaternion(sp.quaternion, so3.rot_to_quat(R_d))
             self.pub_setpoint.publish(sp)
-        bridge = self.loop.bridge
-        state = (tick.armed, self.loop.supervisor.reason, bridge.attitude_source,
-                 bridge.rate_source)
+        state = (tick.armed, tick.state, tick.sources)
         if state != self._last_state:
-            if self._last_state is not None and not tick.armed and state[1].startswith('failsafe'):
-                self.get_logger().error(state[1])
+            if self._last_state is not None and not tick.armed and tick.state.startswith(FAILSAFE):
+                self.get_logger().error(tick.state)
             elif tick.bridging:
                 self.get_logger().warning('; '.join(self.loop.gap_notes(now)))
             self._last_state = state

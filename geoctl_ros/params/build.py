@@ -2,7 +2,7 @@
 that span several parameters (a set point against the cones, a thrust limit against the curve, an
 airframe that must produce every moment).
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 import math
 
 import numpy as np
@@ -19,6 +19,7 @@ from geoctl_ros.core.airframe import (
 )
 from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.core.control import AttitudeController, ControllerConfig
+from geoctl_ros.core.loop import LoopSettings
 from geoctl_ros.core.safety import SetpointSchedule, quaternion_problem
 from geoctl_ros.params.schema import ConfigError
 from geoctl_ros.sim.plant import Disturbance, PlantConfig
@@ -47,6 +48,11 @@ def controller_config(values):
         unmodelled_moment_max=values['unmodelled_moment_max'])
 
 
+def loop_settings(values):
+    """The LoopSettings of resolved controller parameters."""
+    return LoopSettings(**{f.name: values[f.name] for f in fields(LoopSettings)})
+
+
 def setpoint_rotation(values):
     """R_d of the resolved controller parameters."""
     return so3.quat_to_rot(values['setpoint'])
@@ -60,7 +66,8 @@ class ControllerSetup:
     mixer: object                # geoctl_ros.core.airframe.Mixer
     setpoint: np.ndarray         # R_d
     schedule: object             # geoctl_ros.core.safety.SetpointSchedule
-    values: dict
+    loop: LoopSettings           # the loop's and the node's own settings
+    values: dict                 # the resolved parameters it was built from (for reconfiguring)
 
 
 def controller_setup(values):
@@ -98,7 +105,8 @@ def controller_setup(values):
                            % (timeout, values[timeout])))
     if errors:
         raise ConfigError(errors)
-    return ControllerSetup(config, mix, R_d, SetpointSchedule(times, rotations), values)
+    return ControllerSetup(config, mix, R_d, SetpointSchedule(times, rotations),
+                           loop_settings(values), values)
 
 
 def airframe(values):

@@ -25,6 +25,7 @@ import numpy as np
 from geoctl_ros.core import so3
 from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.core.control import AttitudeController
+from geoctl_ros.core.step import ControlTick
 from geoctl_ros.params import (
     CONTROLLER,
     SIM,
@@ -107,7 +108,6 @@ def run_batch(scenarios, progress=None):
     controller = AttitudeController(replace(setup.config, cones=cones))
     controller.R_d = np.array([setpoint_rotation(s.controller) for s in scenarios])
     controller.delta_bar = np.zeros((n, setup.config.n_params))
-    mixer = setup.mixer
 
     plant = Plant(PlantConfig(inertia=stack('sim', 'inertia').reshape(n, 3, 3),
                               mass=stack('sim', 'mass'), cog_offset=stack('sim', 'cog_offset'),
@@ -145,8 +145,9 @@ def run_batch(scenarios, progress=None):
     W_past = np.repeat(plant.Omega[None], ring, axis=0)
     runs = np.arange(n)
 
-    delay_model = cv['measurement_delay']      # what the controller assumes (the truth: latency)
-    moment = np.zeros((n, 3))                  # the allocation's moment at the last step
+    # the control tick of ControlLoop's (geoctl_ros.core.step), every step on time; the
+    # controller assumes measurement_delay (the truth: latency), each sample received at the tick
+    tick = ControlTick(controller, setup.mixer, setup.loop.measurement_delay)
     min_margin = cones.margins_deg(plant.R)
     margin_series = np.empty((steps, n))
     sensor_series = np.empty((steps, n, 3), dtype=np.float32)
@@ -159,11 +160,7 @@ def run_batch(scenarios, progress=None):
         R_seen = R_past[seen, runs] @ so3.exp(noise[0, k])
         W_seen = W_past[seen, runs] + gyro_bias + noise[1, k]
         max_rate = np.maximum(max_rate, np.linalg.norm(W_seen, axis=-1))
-        # as ControlLoop.tick: predicted by the assumed delay (each sample is received at the tick)
-        R_seen, W_seen = controller.predict(R_seen, W_seen, delay_model, delay_model, moment, dt)
-        out = controller.step(R_seen, W_seen, dt)
-        motors = mixer.mix(out.u, dt=dt)
-        moment = motors.allocation.moment
+        out, motors = tick(R_seen, W_seen, dt)
         saturated += motors.allocation.saturated
         margin_series[k] = cones.margins_deg(plant.R).min(axis=-1)
         sensor_series[k] = so3.matvec(plant.R, cones.r)

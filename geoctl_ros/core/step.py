@@ -1,0 +1,82 @@
+"""The control tick of the closed loop, written once: prediction, control step, mixing, and the
+bookkeeping of how long each command was held.
+
+``ControlLoop.tick`` (the controller node and the scenario runner, which flies the node's logic)
+and ``geoctl_ros.tools.batch.run_batch`` (a campaign's batches) both call :class:`ControlTick`.
+Like the core's formulas it takes one run (R (3, 3), Omega (3,)) or a batch of N ((N, 3, 3),
+(N, 3)); the single run is the batch of one, to rounding.
+"""
+from typing import NamedTuple
+
+import numpy as np
+
+
+class TickResult(NamedTuple):
+    """What one control tick commands."""
+
+    control: object     # ControlOutput of the step, or None when its moment was not finite
+    motors: object      # MotorOutput: zero commands unless armed
+
+
+class ControlTick:
+    """One control tick, with the state that ties a tick to the one before: the moment the rotors
+    were last told to produce (the prediction's input) and when the last command went out (the
+    lag compensation's real hold).
+    """
+
+    def __init__(self, controller, mixer, measurement_delay):
+        """controller: AttitudeController (one run or a batch); mixer: Mixer; measurement_delay:
+        the inputs' latency (s) that the prediction makes up for, on top of their age.
+        """
+        self.controller = controller
+        self.mixer = mixer
+        self.measurement_delay = measurement_delay
+        self.moment = np.zeros(3)       # what the rotors were last told to produce
+        self._last_now = None
+
+    def reconfigure(self, mixer, measurement_delay):
+        """A new mixer (that has adopted the old one's lag model) and delay, at run time."""
+        self.mixer, self.measurement_delay = mixer, measurement_delay
+
+    def _held(self, now):
+        """How long the last command was held: the time since the last tick, or None (a period)
+        for ticks that are not timed (now None).
+        """
+        held = None if now is None or self._last_now is None else now - self._last_now
+        if now is not None:
+            self._last_now = now
+        return held
+
+    def __call__(self, R, Omega, dt, now=None, ages=(0.0, 0.0), armed=True, adapt=True,
+                 predict=True):
+        """Command the rotors from a measured attitude R and rate Omega.
+
+        dt: the control period (how long this command is expected to be held); now: the tick's
+        time on the loop's clock (None: every tick on time, as in a batch); ages: how old the
+        attitude and rate measurements are (s), besides measurement_delay; predict: bring the
+        measurements forward by their age and the delay (off for a state that is already
+        propagated, as a gap's); adapt: let the estimate learn from this step.
+
+        A step whose moment is not finite commands zero and returns control None: for one run the
+        caller then disarms; a batch raises FloatingPointError, as a diverged simulation does.
+        """
+        held = self._held(now)
+        if predict:
+            d = self.measurement_delay
+            R, Omega = self.controller.predict(R, Omega, d + ages[0], d + ages[1], self.moment, dt)
+        out = self.controller.step(R, Omega, dt, adapt=adapt)
+        if not np.isfinite(out.u).all():           # a last line of defence: never command it
+            if np.ndim(out.u) > 1:
+                raise FloatingPointError('a run of the batch produced a non-finite moment')
+            out, armed = None, False
+        motors = self.mixer.mix(np.zeros(3) if out is None else out.u, armed=armed, dt=dt,
+                                held=held)
+        self.moment = motors.allocation.moment if armed else np.zeros(3)
+        return TickResult(out, motors)
+
+    def idle(self, dt, now=None):
+        """A tick without a state to control from (before the first pose and rate): zero
+        commands, and the time noted.
+        """
+        self._held(now)
+        return TickResult(None, self.mixer.mix(np.zeros(3), armed=False, dt=dt))
