@@ -54,7 +54,11 @@ def test_every_socket_of_the_nodes_and_of_this_process_is_on_loopback(tmp_path):
     rclpy.init()
     node = rclpy.create_node('socket_probe')
     try:
-        time.sleep(4.0)
+        # once the nodes have found each other and this process (discovery is what multicasts)
+        deadline = time.monotonic() + 30.0
+        while not {'sim', 'controller'} <= set(node.get_node_names()):
+            assert time.monotonic() < deadline, 'the nodes were not discovered in 30 s'
+            rclpy.spin_once(node, timeout_sec=0.1)
         for pid in [p.proc.pid for p in procs] + [os.getpid()]:
             socks = process_sockets(pid)
             assert socks, 'no sockets found for pid %d' % pid
