@@ -98,7 +98,8 @@ def garbage(kind, gcs, rng):
 
 def drained(bridge, timeout=10.0):
     """Wait until the bridge has read whatever reached its socket: its datagram count stops
-    growing (a condition, not a duration: a busy machine only makes it take longer)."""
+    growing (a condition, not a duration: a busy machine only makes it take longer).
+    """
     last, steady, end = -1, 0, time.monotonic() + timeout
     while steady < 3 and time.monotonic() < end:
         n = bridge.link.counts['datagrams']

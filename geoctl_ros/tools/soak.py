@@ -114,15 +114,18 @@ class Session:
 
         self._String = String
         self._fault_pub = self.mon.create_publisher(String, 'soak/fault', EVENT)
-        if relay:     # a fault command sent before the relay has matched would be lost
-            self.mon.wait_for(lambda: self._fault_pub.get_subscription_count() > 0, 40.0,
-                              'the relay')
-        reply = self.mon.arm_when_ready(40.0)
-        if not reply.success:
-            self.close()
-            raise RuntimeError('could not arm: ' + reply.message)
-        self.mon.spin_for(1.0)
         self.loads = []
+        try:          # whatever goes wrong from here, every process started above is stopped
+            if relay:     # a fault command sent before the relay has matched would be lost
+                self.mon.wait_for(lambda: self._fault_pub.get_subscription_count() > 0, 40.0,
+                                  'the relay')
+            reply = self.mon.arm_when_ready(40.0)
+            if not reply.success:
+                raise RuntimeError('could not arm: ' + reply.message)
+            self.mon.spin_for(1.0)
+        except BaseException:
+            self.close()
+            raise
 
     def fault(self, kind, arg):
         """Start a fault now: a relay mode, or 'pause' (SIGSTOP the sim for arg seconds)."""
