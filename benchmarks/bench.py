@@ -48,7 +48,7 @@ from geoctl_ros.params import (
     resolve,
     testbed_sim,
 )
-from geoctl_ros.tools import campaign, scenario
+from geoctl_ros.tools import manoeuvres, scenario
 from geoctl_ros.tools.batch import run_batch
 from geoctl_ros.tools.rosenv import use_node_env
 
@@ -184,7 +184,7 @@ def batched():
     base = load_parameter_file(os.path.join(os.path.dirname(HERE), 'config', 'testbed.yaml'))
     pool, i = [], 0
     while len(pool) < 256:
-        sections = campaign.run_sections(base, 1, i, 1.0)
+        sections = manoeuvres.run_sections(base, 1, i, 1.0)
         if len(sections['controller']['cones.names']) == 1:
             pool.append(scenario.from_sections(sections, 'run_%d' % i))
         i += 1

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from geoctl_ros.params import load_parameter_file
-from geoctl_ros.tools import campaign, scenario
+from geoctl_ros.tools import campaign, manoeuvres, scenario
 from geoctl_ros.tools.batch import run_batch
 
 # on the vehicle's stack too, but for the campaign and the replay of a written run: they fly the
@@ -21,14 +21,14 @@ TESTBED = os.path.join(ROOT, 'config', 'testbed.yaml')
 
 
 def sections(index, duration=20.0, seed=1):
-    return campaign.run_sections(load_parameter_file(TESTBED), seed, index, duration)
+    return manoeuvres.run_sections(load_parameter_file(TESTBED), seed, index, duration)
 
 
 @odroid
 def test_the_distribution_is_what_the_readme_says():
     r = np.array([1.0, 0.0, 0.0])
     for i in range(40):
-        m = campaign.draw_manoeuvre(7, i, r)
+        m = manoeuvres.draw_manoeuvre(7, i, r)
         assert 1 <= len(m['cones']) <= 4 and 0 <= m['latency_ms'] <= 10
         axes = [np.array(v) for v, _ in m['cones']]
         for (v, theta) in m['cones']:
@@ -48,8 +48,8 @@ def test_the_distribution_is_what_the_readme_says():
         arc = [(1 - s) * d0 + s * d1 for s in np.linspace(0, 1, 101)]
         assert min(np.degrees(np.arccos(p @ v0 / np.linalg.norm(p))) for p in arc) < th0
     # run i does not depend on the others
-    assert np.array_equal(campaign.draw_manoeuvre(7, 3, r)['R_d'],
-                          campaign.draw_manoeuvre(7, 3, r)['R_d'])
+    assert np.array_equal(manoeuvres.draw_manoeuvre(7, 3, r)['R_d'],
+                          manoeuvres.draw_manoeuvre(7, 3, r)['R_d'])
 
 
 @odroid
@@ -76,7 +76,7 @@ def test_a_run_written_out_replays_to_the_same_figures(tmp_path):
     flown = campaign.fly({i: sections(i, duration=3.0) for i in indices}, jobs=1)
     i = 4
     path = tmp_path / 'run.yaml'
-    campaign.write_scenario_file(sections(i, duration=3.0), str(path))
+    manoeuvres.write_scenario_file(sections(i, duration=3.0), str(path))
     again = run_batch([scenario.load(str(path))])                      # alone, from the file
     result, p = flown[i]
     assert np.array_equal(again.min_margin_deg[0], result.min_margin_deg[p])

@@ -16,15 +16,16 @@ from geoctl_ros.core.control import (
     SetpointRejected,
     attractive_error,
     configuration_error,
-    gain_condition,
-    holding_clearance_deg,
-    holding_moment,
     linear_terms,
 )
+from geoctl_ros.core.feasibility import holding_clearance_deg, holding_moment
+from geoctl_ros.core.gains import gain_condition
 from geoctl_ros.core.mechanics import gravity_moment
 from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
 
-pytestmark = pytest.mark.odroid
+# on the vehicle's stack too, but for the four long closed-loop flights: the scenario and campaign
+# tests and the sim-in-the-loop flight fly the same loop there
+odroid = pytest.mark.odroid
 
 rng = np.random.default_rng(7)
 G = np.array([0.9, 1.1, 1.0])
@@ -61,6 +62,7 @@ def random_attitudes(n):
 
 
 # --- Prop. 1: gradients ------------------------------------------------------------------------
+@odroid
 def test_e_RA_is_the_gradient_of_A():
     for R in random_attitudes(50):
         R_d = so3.exp(rng.normal(size=3))
@@ -69,6 +71,7 @@ def test_e_RA_is_the_gradient_of_A():
         assert fd == pytest.approx(eta @ attractive_error(R, R_d, G)[1], rel=1e-6, abs=1e-9)
 
 
+@odroid
 def test_e_RB_is_the_gradient_of_B_outside_the_cones_including_the_saturated_band():
     cones = four_cones(floor_deg=5.0)      # a wide band, so that random attitudes land in it
     in_band = 0
@@ -84,6 +87,7 @@ def test_e_RB_is_the_gradient_of_B_outside_the_cones_including_the_saturated_ban
     assert in_band > 5   # the extended barrier was exercised too
 
 
+@odroid
 def test_e_R_is_the_gradient_of_Psi_with_several_cones():
     cones = four_cones()
     n = 0
@@ -98,6 +102,7 @@ def test_e_R_is_the_gradient_of_Psi_with_several_cones():
     assert n > 30
 
 
+@odroid
 def test_barrier_matches_the_paper_formula_outside_the_floor():
     cones = one_cone()
     R = so3.axis_angle([0, 0, 1], math.radians(80.0))     # sensor 35 deg from the cone axis
@@ -112,6 +117,7 @@ def test_barrier_matches_the_paper_formula_outside_the_floor():
 
 
 # --- Prop. 2: error dynamics along the flow -----------------------------------------------------
+@odroid
 def test_E_and_F_match_finite_differences_along_the_flow():
     cones = one_cone()
     n = 0
@@ -144,6 +150,7 @@ def closed_loop(cfg, R0, rate_hz, seconds, disturbance=None, sub=1, setpoint=Non
             plant.step(out.u, dt / sub)
 
 
+@odroid
 def test_lyapunov_function_never_increases_without_disturbance():
     cfg = config(four_cones(), adaptive=False)
     V = []
@@ -159,6 +166,7 @@ def test_lyapunov_function_never_increases_without_disturbance():
     assert min_margin > 0.0
 
 
+@odroid
 def test_stabilises_to_the_desired_attitude_and_keeps_the_cone():
     cfg = config(one_cone(), k_Omega=0.7)
     outs = list(closed_loop(cfg, so3.axis_angle([0, 0, 1], math.pi / 2), 200.0, 25.0))
@@ -209,6 +217,7 @@ def test_without_adaptation_a_disturbance_leaves_a_steady_error():
     assert np.allclose(cfg.k_R * out.e_R, 0.2, atol=2e-3)
 
 
+@odroid
 def test_estimate_projection_bounds_the_estimate():
     cfg = config(one_cone(), delta_bar_max=0.05, k_Delta=50.0)
     ctrl = AttitudeController(cfg)
@@ -218,6 +227,7 @@ def test_estimate_projection_bounds_the_estimate():
     assert np.linalg.norm(ctrl.delta_bar) == pytest.approx(0.05)
 
 
+@odroid
 def test_adapt_false_holds_the_estimate_and_reset_zeroes_it():
     ctrl = AttitudeController(config(one_cone()))
     R = so3.axis_angle([0, 0, 1], math.pi / 2)
@@ -230,6 +240,7 @@ def test_adapt_false_holds_the_estimate_and_reset_zeroes_it():
     assert not ctrl.delta_bar.any()
 
 
+@odroid
 def test_gain_bound_of_eq_40_matches_a_hand_computation():
     """One cone, theta 30 deg, margin 5 deg, alpha 8, G = diag(0.9, 1.1, 1.0), by hand:
     h1 = 1.9; b1 = 1.9 / (0.2^2 + 2.1^2) = 0.42697; Psi <= 1.9;
@@ -248,6 +259,7 @@ def test_gain_bound_of_eq_40_matches_a_hand_computation():
         4 * 0.4 * 0.7 / (0.7 ** 2 + 4 * 0.4 * lam[-1] * 698.3), rel=2e-3)
 
 
+@odroid
 def test_the_gain_check_bounds_hold_where_sampled():
     """|e_RA|^2 <= A / b1 (the b1 the check uses) and |e_RB| <= its bound on the domain, at
     random attitudes: the bounds of Prop. 1 and 4 are bounds.
@@ -269,6 +281,7 @@ def test_the_gain_check_bounds_hold_where_sampled():
     assert 0.5 * bound_eRB < worst_B <= bound_eRB
 
 
+@odroid
 def test_gain_check_reports_numbers():
     check = gain_condition(config(four_cones(), c=1e-4))
     assert check.ok and check.c_max > 1e-4 and check.H > 0
@@ -278,6 +291,7 @@ def test_gain_check_reports_numbers():
 
 
 # --- safety: cones crossed between samples, bad set points --------------------------------------
+@odroid
 def test_on_or_inside_a_cone_the_output_is_finite_flagged_and_repulsive():
     cones = one_cone()
     ctrl = AttitudeController(config(cones))
@@ -305,6 +319,7 @@ def test_on_or_inside_a_cone_the_output_is_finite_flagged_and_repulsive():
     assert norms[-1] == pytest.approx(cones.e_RB_inside[0], rel=1e-6)
 
 
+@odroid
 def test_setpoint_inside_a_cone_is_rejected_with_the_reason():
     ctrl = AttitudeController(config(one_cone()))
     bad = so3.axis_angle([0, 0, 1], math.radians(40.0))
@@ -320,6 +335,7 @@ def test_setpoint_inside_a_cone_is_rejected_with_the_reason():
     assert np.array_equal(ctrl.R_d, ok)
 
 
+@odroid
 def test_reconfigure_refuses_cones_that_contain_the_current_setpoint():
     ctrl = AttitudeController(config(one_cone()))
     around_identity = ConeSet([1, 0, 0], [[1.0, 0.0, 0.0]], [math.radians(10.0)], 8.0, 0.01)
@@ -355,6 +371,7 @@ def test_gravity_moment_is_cancelled_and_cog_model_estimates_the_offset():
     assert np.allclose(learnt, missing, atol=0.02 * np.linalg.norm(missing))
 
 
+@odroid
 def test_the_control_step_equals_a_plain_transcription_of_the_paper():
     """benchmarks/paper_law.py, written from the paper with a loop over cones, independently:
     the same moment and Psi at random attitudes outside the cones' floor bands.
@@ -380,6 +397,7 @@ def test_the_control_step_equals_a_plain_transcription_of_the_paper():
     assert checked > 100
 
 
+@odroid
 def test_the_linear_map_of_the_step_reproduces_the_formulas_single_and_batched():
     """The step reads A, e_RA, every cone's terms and M_g from one precomputed matrix: they are
     affine in R, so at any attitude the map must give what the formulas give, and a batch of
@@ -419,6 +437,7 @@ def test_the_linear_map_of_the_step_reproduces_the_formulas_single_and_batched()
             assert np.allclose(batch.delta_bar[k], one.delta_bar, atol=1e-15)
 
 
+@odroid
 def test_a_set_point_too_close_to_hold_against_the_unmodelled_moment_is_refused():
     """unmodelled_moment_max: near the goal the barrier's repulsion k_R A e_RB is at most
     holding_moment (A is small there); a set point whose cone cannot hold the bound is refused

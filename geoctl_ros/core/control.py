@@ -28,13 +28,13 @@ and model are shared by the batch. (``x.T`` on a stack of vectors puts the batch
 ``(x.T * a).T`` scales each run's vector by its own scalar and a single vector by a scalar.)
 """
 from dataclasses import dataclass, field
-import math
 from typing import NamedTuple
 
 import numpy as np
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.cones import ConeSet
+from geoctl_ros.core.feasibility import setpoint_problem
 from geoctl_ros.core.flags import any_flag
 from geoctl_ros.core.mechanics import cog_regressor, first_moment, gravity_moment, pivot_inertia
 from geoctl_ros.core.so3 import cross, matvec, transpose, vee
@@ -43,7 +43,6 @@ from geoctl_ros.core.so3 import cross, matvec, transpose, vee
 #   constant:      W = I,                     Delta = a constant moment (the paper's case)
 #   constant+cog:  W = [I, -hat(R^T g_w)],    Delta = [constant moment; error of m * rho]
 DISTURBANCE_MODELS = {'constant': 3, 'constant+cog': 6}
-PREDICT_SLOW_S = 0.25     # s, what delay compensation counts as the model's slow error
 
 
 class SetpointRejected(ValueError):
@@ -172,48 +171,11 @@ class LinearMap:
         return matvec(self.L, R.reshape(R.shape[:-2] + (9,))) + self.y0
 
 
-def smallest_pair_sum(G):
-    """min_{i != j} (g_i + g_j): the least A can grow per (1 - cos) of a rotation's angle,
-    A = (1 - cos phi) (tr G - n^T G n) / 2 (the paper's h_1).
-    """
-    g = np.sort(np.asarray(G, dtype=float))
-    return float(g[0] + g[1])
-
-
-def holding_moment(config, cones, R_d):
-    """Per cone: the largest moment its barrier can oppose near the cone, with the set point R_d.
-
-    The repulsion k_R A e_RB,i is largest in the floor band (and inside, where it keeps the band's
-    magnitude): k_R A sin(theta_i) / (alpha g0_i). It is proportional to the attitude error A,
-    so it is weakest near the goal: where the sensor meets the (guarded) cone, the body has turned
-    at least the set point's clearance c_i from that cone away from R_d, and A is then at least
-    (1 - cos c_i) (g_a + g_b) / 2 (g_a, g_b the two smallest weights). An unlearnt moment larger
-    than this (a disturbance, an error in the model of gravity, before the adaptive estimate has
-    caught up) holds the sensor in the cone: the campaign's creep class (README, "Safety
-    campaign").
-    """
-    if not len(cones):
-        return np.zeros(0)
-    c = np.maximum(np.radians(cones.margins_deg(R_d)) - cones.guard, 0.0)
-    A_min = 0.5 * (1.0 - np.cos(c)) * smallest_pair_sum(config.G)
-    return config.k_R * A_min * np.sin(cones.theta_b) / (cones.alpha * cones.g0)
-
-
-def holding_clearance_deg(config, cones, moment):
-    """Per cone: the set point's clearance (degrees from the real cone) at which
-    ``holding_moment`` equals moment.
-    """
-    x = (2.0 * moment * cones.alpha * cones.g0
-         / (config.k_R * smallest_pair_sum(config.G) * np.sin(cones.theta_b)))
-    return np.degrees(np.arccos(np.clip(1.0 - x, -1.0, 1.0)) + cones.guard)
-
-
 class AttitudeController:
     """The controller's state (estimate, set point) and its pure-math step."""
 
     def __init__(self, config):
         self._set_config(config)
-        self._acc_slow = 0.0              # slow part of the model's acceleration (see predict)
         self.delta_bar = np.zeros(config.n_params)
         self.R_d = np.eye(3)
         self.Omega_d = np.zeros(3)
@@ -234,31 +196,10 @@ class AttitudeController:
 
     # --- configuration-time operations -------------------------------------------------------
     def setpoint_problem(self, R_d, cones=None):
-        """Why R_d cannot be a set point (a sentence), or None if it can."""
-        cones = self.config.cones if cones is None else cones
-        if not np.all(np.isfinite(R_d)):
-            return 'setpoint is not finite'
-        if not len(cones):
-            return None
-        margins = cones.margins_deg(R_d)
-        floor_deg = math.degrees(cones.floor + cones.guard)    # the barrier's band, guard included
-        i = int(np.argmin(margins))
-        if margins[i] < floor_deg:
-            where = 'inside' if margins[i] < 0 else 'within %.2f deg of' % floor_deg
-            return ('setpoint puts the sensor axis %s cone %r (angle to its axis %.2f deg, '
-                    'half-angle %.2f deg)' % (where, cones.names[i],
-                                              margins[i] + math.degrees(cones.theta[i]),
-                                              math.degrees(cones.theta[i])))
-        moment = self.config.unmodelled_moment_max
-        if moment > 0.0:
-            held = holding_moment(self.config, cones, R_d)
-            i = int(np.argmin(held - moment))
-            if held[i] < moment:
-                need = holding_clearance_deg(self.config, cones, moment)[i]
-                return ('setpoint is %.2f deg clear of cone %r; against unmodelled_moment_max = '
-                        '%.3g N m its barrier holds only %.3g N m near the goal, %.1f deg is '
-                        'needed' % (margins[i], cones.names[i], moment, held[i], need))
-        return None
+        """Why R_d cannot be a set point (a sentence), or None if it can (with this
+        configuration's cones, or the given ones).
+        """
+        return setpoint_problem(self.config, self.config.cones if cones is None else cones, R_d)
 
     def set_setpoint(self, R_d, Omega_d=None, dOmega_d=None):
         """Set the desired attitude (and optionally its angular velocity and acceleration, body
@@ -294,33 +235,6 @@ class AttitudeController:
         self._project()
 
     # --- the hot path ----------------------------------------------------------------------------
-    def predict(self, R, Omega, age_R, age_Omega, moment, dt):
-        """Delay compensation: the attitude and rate at the control tick from measurements age_R
-        and age_Omega seconds old (scalars, or one per run of a batch), given the moment the rotors
-        produce (the last allocation's). Ages of 0 return the measurements unchanged.
-
-        The angular acceleration is the model's, J^-1 (moment + M_g(R) + W Delta_bar - Omega x J
-        Omega) (Delta_bar standing for the disturbance it estimates), less its own slow part
-        (low-pass, time constant PREDICT_SLOW_S; dt is the time since the last call), held over the
-        age: Omega <- Omega + age_Omega Omega', R <- R exp(hat(Omega + age_R Omega' / 2) age_R).
-        The slow part is what the model gets wrong at rest: there the true acceleration is zero
-        while the model's is J^-1 times the moment not yet learnt (k_R e_R of the steady error);
-        predicting with it would soften the attitude loop (the demo's final error went from 5.5 to
-        15 deg). The fast part, which the delay turns into lost damping, is kept. A measurement 10
-        ms old on the testbed, with its 40 ms motor lag, otherwise costs the rate loop most of its
-        phase margin (README, "Safety campaign").
-        """
-        cfg = self.config
-        W = self.regressor(R)
-        acc = matvec(self._J_inv, moment + gravity_moment(R, cfg.m_rho, cfg.gravity)
-                     + (self.delta_bar if W is None else matvec(W, self.delta_bar))
-                     - cross(Omega, matvec(cfg.J, Omega)))
-        self._acc_slow = self._acc_slow + (acc - self._acc_slow) * (dt / (PREDICT_SLOW_S + dt))
-        acc = acc - self._acc_slow
-        acc_R = (acc.T * age_R).T
-        Omega_now = Omega + (acc.T * age_Omega).T
-        return R @ so3.exp(((Omega + 0.5 * acc_R).T * age_R).T), Omega_now
-
     def regressor(self, R):
         """W(R, Omega): 3 x n_params (a stack of them for a batch); None for the constant model,
         where W = I.
@@ -380,74 +294,7 @@ class AttitudeController:
 
     def _set_config(self, config):
         self.config = config
-        self._J_inv = np.linalg.inv(config.J)
+        self.J_inv = np.linalg.inv(config.J)     # the model's, for the prediction too
         self._balls = [(block, bound) for block, bound in ((slice(0, 3), config.delta_bar_max),
                                                            (slice(3, 6), config.cog_estimate_max))
                        if bound > 0.0 and block.start < config.n_params]
-
-
-@dataclass
-class GainCheck:
-    """The upper bounds on c of Prop. 5 on an operating domain, and whether c respects them."""
-
-    c: float
-    c_max_paper: float          # 4 k_R k_Omega / (k_Omega^2 + 4 k_R lambda_M H), eq. (40)
-    c_max_dissertation: float   # sqrt(2 lambda_m k_R n_1 / lambda_M^2)
-    H: float
-    psi_max: float
-    margin_deg: float
-
-    @property
-    def c_max(self):
-        return min(self.c_max_paper, self.c_max_dissertation)
-
-    @property
-    def ok(self):
-        return 0.0 < self.c < self.c_max
-
-    def message(self):
-        verdict = 'satisfies' if self.ok else 'VIOLATES'
-        return ('c = %.4g %s the sufficient condition of Prop. 5: c < min(%.4g (paper eq. 40, '
-                'H = %.4g), %.4g (dissertation)) on the domain Psi < %.3g, every cone at least '
-                '%.1f deg clear' % (self.c, verdict, self.c_max_paper, self.H,
-                                    self.c_max_dissertation, self.psi_max, self.margin_deg))
-
-
-def gain_condition(config, margin_deg=5.0):
-    """Evaluate the bound on c of Prop. 5 (eq. 40 with "4k - R" read as 4 k_R, and the
-    dissertation's second bound) on the domain D of Prop. 4.
-
-    D is taken as Psi < psi with psi = h_1 (the largest the proposition allows) and every cone at
-    least margin_deg clear (beta_i = cos(theta_i + margin)). The bounds of Prop. 4 are summed over
-    the cones. The condition is sufficient, not necessary: a violation is a warning.
-    """
-    g = np.asarray(config.G, dtype=float)
-    pairs = [(0, 1), (1, 2), (2, 0)]
-    h1 = smallest_pair_sum(g)
-    # |e_RA|^2 <= A / b1. The paper's Prop. 1 (v) prints b1 = h1 / (h2 + h3) with the minima of
-    # (g_i - g_j)^2 and (g_i + g_j)^2; that is not a bound (for G = diag(0.9, 1.1, 1.0), sampled
-    # |e_RA|^2 / A reaches 2.099 > 1/b1 = 1.905). With the maxima, as the dissertation's n1, it is.
-    b1 = n1 = h1 / (max((g[i] - g[j]) ** 2 for i, j in pairs)
-                    + max((g[i] + g[j]) ** 2 for i, j in pairs))
-    psi = h1
-    c_A = c_B = psi
-    E_bound = float(g.sum()) / math.sqrt(2.0)
-    eRA_bound = math.sqrt(psi / b1)
-    cones = config.cones
-    eRB_sum = F_sum = 0.0
-    for theta in cones.theta_b:
-        beta = math.cos(theta + math.radians(margin_deg))
-        d = beta - math.cos(theta)
-        # |e_RB| = sin(angle) / (alpha (cos theta - cos angle)); on the domain (angle >= theta +
-        # margin) it is largest at angle = theta + margin, so sin(theta + margin), not sin(theta)
-        eRB_sum += math.sin(theta + math.radians(margin_deg)) / (config.cones.alpha * -d)
-        F_sum += (((beta ** 2 + 1.0) * d ** 2 + 1.0 + beta ** 2 * (beta ** 2 - 2.0))
-                  / (cones.alpha ** 2 * d ** 4))
-    H = c_B * E_bound + 2.0 * eRA_bound * eRB_sum + c_A * F_sum
-    eig = np.linalg.eigvalsh(config.J)
-    lam_m, lam_M = float(eig[0]), float(eig[-1])
-    c_paper = (4.0 * config.k_R * config.k_Omega
-               / (config.k_Omega ** 2 + 4.0 * config.k_R * lam_M * H))
-    c_diss = math.sqrt(2.0 * lam_m * config.k_R * n1 / lam_M ** 2)
-    return GainCheck(c=config.c, c_max_paper=c_paper, c_max_dissertation=c_diss, H=H,
-                     psi_max=psi, margin_deg=margin_deg)

@@ -10,6 +10,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from geoctl_ros.core.prediction import DelayPredictor
+
 
 class TickResult(NamedTuple):
     """What one control tick commands."""
@@ -29,6 +31,7 @@ class ControlTick:
         the inputs' latency (s) that the prediction makes up for, on top of their age.
         """
         self.controller = controller
+        self.predict = DelayPredictor(controller)
         self.mixer = mixer
         self.measurement_delay = measurement_delay
         self.moment = np.zeros(3)       # what the rotors were last told to produce
@@ -63,7 +66,7 @@ class ControlTick:
         held = self._held(now)
         if predict:
             d = self.measurement_delay
-            R, Omega = self.controller.predict(R, Omega, d + ages[0], d + ages[1], self.moment, dt)
+            R, Omega = self.predict(R, Omega, d + ages[0], d + ages[1], self.moment, dt)
         out = self.controller.step(R, Omega, dt, adapt=adapt)
         if not np.isfinite(out.u).all():           # a last line of defence: never command it
             if np.ndim(out.u) > 1:

@@ -18,8 +18,8 @@ from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core import so3
-from geoctl_ros.core.control import gain_condition
 from geoctl_ros.core.diagnostics import FAILSAFE
+from geoctl_ros.core.gains import gain_condition
 from geoctl_ros.core.loop import ControlLoop, step_period
 from geoctl_ros.core.stats import WindowStats
 from geoctl_ros.nodes import qos, ros_params

@@ -26,13 +26,14 @@ from std_srvs.srv import SetBool
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.diagnostics import ERROR, WARN
-from geoctl_ros.mavlink import frames, signing
+from geoctl_ros.mavlink import signing
 from geoctl_ros.mavlink.link import Link, encoder
 from geoctl_ros.mavlink.params import BY_ROS, TABLE, to_ros
 from geoctl_ros.mavlink.vehicle import Vehicle, m_const
 from geoctl_ros.nodes import qos, ros_params
+from geoctl_ros.nodes.autopilot_imu import AutopilotImu
 from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
-from geoctl_ros.nodes.conversions import python_value, quaternion, set_vector, status_of, vector
+from geoctl_ros.nodes.conversions import python_value, quaternion, status_of, vector
 from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.params import MAVLINK, ConfigError
 
@@ -81,15 +82,11 @@ class MavlinkBridge(Node):
         else:
             self.get_logger().warning(UNSIGNED_WARNING + ' (set mavlink.signing_key_file)')
         self._refusals_logged = 0
-        self.autopilot = (Link(v['mavlink.autopilot_url'], self.sysid,
-                               m_const('MAV_COMP_ID_ONBOARD_COMPUTER'))
+        self.autopilot = (AutopilotImu(self, v['mavlink.autopilot_url'], self.sysid,
+                                       v['mavlink.autopilot_imu_rate_hz'], self.vehicle.mav)
                           if v['mavlink.autopilot_url'] else None)
         self.counts = {'ignored': 0, 'arm requests': 0, 'param sets': 0, 'statustext': 0}
         self.gcs_heartbeat = None
-        self.autopilot_heartbeat = None
-        self.autopilot_imu = 0
-        self._imu_requested = False
-        self._imu_rate = v['mavlink.autopilot_imu_rate_hz']
         self._text_period = 1.0 / v['mavlink.statustext_rate_hz']
         self._last_text = -1e9
         self._last_diag = (None, None)
@@ -111,7 +108,6 @@ class MavlinkBridge(Node):
             view, 'margins', list(m.data)), qos.TELEMETRY)
         self.create_subscription(Float64MultiArray, 'disturbance_estimate', lambda m: setattr(
             view, 'dbar', list(m.data)), qos.TELEMETRY)
-        self.pub_imu = self.create_publisher(Imu, 'imu', qos.SENSOR) if self.autopilot else None
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
         self.arm_client = self.create_client(SetBool, ctl + '/arm')
         self.get_client = self.create_client(GetParameters, ctl + '/get_parameters')
@@ -223,7 +219,7 @@ class MavlinkBridge(Node):
             for action in self.vehicle.handle(msg):
                 self._act(action, msg)
         if self.autopilot is not None:
-            self._pump_autopilot()
+            self.autopilot.pump()
 
     def _act(self, action, msg):
         what = action[0]
@@ -296,31 +292,6 @@ class MavlinkBridge(Node):
             msg.id, msg.chunk_seq = tid, k
             self.link.send(msg)
 
-    # --- the autopilot as IMU ----------------------------------------------------------------
-    def _pump_autopilot(self):
-        for msg in self.autopilot.receive():
-            kind = msg.get_type()
-            if kind == 'HEARTBEAT':
-                self.autopilot_heartbeat = time.monotonic()
-                if not self._imu_requested:
-                    self.autopilot.send(self.vehicle.mav.command_long_encode(
-                        msg.get_srcSystem(), msg.get_srcComponent(),
-                        m_const('MAV_CMD_SET_MESSAGE_INTERVAL'), 0,
-                        m_const('MAVLINK_MSG_ID_HIGHRES_IMU'), 1e6 / self._imu_rate,
-                        0, 0, 0, 0, 0))
-                    self._imu_requested = True
-            elif kind == 'HIGHRES_IMU':
-                out = Imu()
-                out.header.stamp = self.get_clock().now().to_msg()
-                out.header.frame_id = 'base_link'
-                out.orientation_covariance[0] = -1.0
-                set_vector(out.angular_velocity,
-                           frames.body_vector((msg.xgyro, msg.ygyro, msg.zgyro)))
-                set_vector(out.linear_acceleration,
-                           frames.body_vector((msg.xacc, msg.yacc, msg.zacc)))
-                self.pub_imu.publish(out)
-                self.autopilot_imu += 1
-
     # --- own health --------------------------------------------------------------------------
     def _publish_diagnostics(self):
         now = time.monotonic()
@@ -345,11 +316,10 @@ class MavlinkBridge(Node):
         if self.link.counts['bad data']:
             values['link last error'] = self.link.last_error[:80]
         if self.autopilot is not None:
-            age = None if self.autopilot_heartbeat is None else now - self.autopilot_heartbeat
-            values['autopilot'] = ('none yet' if age is None else 'heartbeat %.1f s ago' % age)
-            values['autopilot imu messages'] = str(self.autopilot_imu)
-            if age is None or age > GCS_TIMEOUT:
-                warnings.append('no autopilot heartbeat')
+            ap_values, ap_warning = self.autopilot.status(now)
+            values.update(ap_values)
+            if ap_warning:
+                warnings.append(ap_warning)
         status = DiagnosticStatus(level=bytes([1 if warnings else 0]),
                                   name='geoctl_ros: mavlink_bridge', hardware_id='mavlink',
                                   message='; '.join(warnings) or 'ground station connected',

@@ -27,7 +27,7 @@ from geoctl_ros.core import so3
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg, vector
 from geoctl_ros.nodes.runtime import spin
-from geoctl_ros.params import SIM, airframe, testbed_sim
+from geoctl_ros.params import SIM, testbed_sim
 from geoctl_ros.sim.testbed import EscWatchdog
 
 LATE = 0.05     # s behind real time before the sim warns
@@ -38,8 +38,9 @@ class SimNode(Node):
         super().__init__('sim', **kwargs)
         v = ros_params.load(self, SIM)
         self.sim = testbed_sim(v)
-        _, self.curve, _ = airframe(v)
-        self.n_rotors = len(self.sim.actuator.thrusts) if self.sim.actuator else 0
+        rotors = self.sim.actuator              # None with torque actuation
+        self.n_rotors = len(rotors.thrusts) if rotors else 0
+        self.command_max = rotors.curve.command_max if rotors else 0
         self.h = 1.0 / v['integration_rate_hz']
         self.rtf = v['real_time_factor']
         self.command_timeout = v['command_timeout']
@@ -88,7 +89,7 @@ class SimNode(Node):
             self.get_logger().warning('motor_commands refused: values outside [0, 1]',
                                       throttle_duration_sec=1.0)
             return
-        self.commands = np.rint(data * self.curve.command_max).astype(int)
+        self.commands = np.rint(data * self.command_max).astype(int)
         self.esc.received(time.monotonic())
         self.ever_commanded = True
 

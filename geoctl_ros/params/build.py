@@ -8,18 +8,12 @@ import math
 import numpy as np
 
 from geoctl_ros.core import so3
-from geoctl_ros.core.airframe import (
-    AirframeError,
-    Allocator,
-    Mixer,
-    RotorGeometry,
-    ThrustCurve,
-    effectiveness,
-    tilted_ring,
-)
+from geoctl_ros.core.airframe import AirframeError, RotorGeometry, effectiveness, tilted_ring
+from geoctl_ros.core.allocation import Allocator
 from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.core.control import AttitudeController, ControllerConfig
 from geoctl_ros.core.loop import LoopSettings
+from geoctl_ros.core.motors import Mixer, ThrustCurve
 from geoctl_ros.core.safety import SetpointSchedule, quaternion_problem
 from geoctl_ros.params.schema import ConfigError
 from geoctl_ros.sim.plant import Disturbance, PlantConfig
@@ -63,7 +57,7 @@ class ControllerSetup:
     """Everything a controller (node or headless) builds from its parameters."""
 
     config: ControllerConfig
-    mixer: object                # geoctl_ros.core.airframe.Mixer
+    mixer: object                # geoctl_ros.core.motors.Mixer
     setpoint: np.ndarray         # R_d
     schedule: object             # geoctl_ros.core.safety.SetpointSchedule
     loop: LoopSettings           # the loop's and the node's own settings

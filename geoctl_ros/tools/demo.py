@@ -19,8 +19,6 @@ import os
 import sys
 import time
 
-import matplotlib
-import matplotlib.pyplot as plt
 import numpy as np
 import rclpy
 
@@ -34,7 +32,7 @@ from geoctl_ros.params import (
     node_overrides,
     resolve,
 )
-from geoctl_ros.tools import scenario
+from geoctl_ros.tools import plots, scenario
 from geoctl_ros.tools.processes import Monitor, NodeProcess
 from geoctl_ros.tools.rosenv import config_dir, use_node_env
 
@@ -136,39 +134,8 @@ def fly(params_file, out, duration, monitor_factory=None, mavlink=None):
     with open(os.path.join(out, 'sil_summary.json'), 'w') as f:
         json.dump(summary, f, indent=2)
         f.write('\n')
-    _plot(out, t, angles, cones, err, psi, cmd_times - t_arm, commands)
+    plots.sil_figure(out, t, angles, cones, err, psi, cmd_times - t_arm, commands)
     return summary
-
-
-def _plot(out, t, angles, cones, err, psi, cmd_t, commands):
-    matplotlib.use('Agg')
-    fig, axs = plt.subplots(2, 2, figsize=(11, 7))
-    ax = axs[0, 0]
-    for i, name in enumerate(cones.names):
-        line, = ax.plot(t, angles[:, i], label=name)
-        ax.axhline(math.degrees(cones.theta[i]), color=line.get_color(), ls='--', lw=1)
-    ax.set(xlabel='t since arming [s]', ylabel='deg',
-           title='true angle to each cone (dashed: limit)')
-    ax.legend()
-    ax = axs[0, 1]
-    ax.plot(t, err)
-    ax.set(xlabel='t since arming [s]', ylabel='deg',
-           title='true attitude error to the final set point')
-    ax = axs[1, 0]
-    if psi:
-        ax.semilogy([p[0] for p in psi], [max(p[1], 1e-12) for p in psi])
-    ax.set(xlabel='t since arming [s]', ylabel='Psi', title='configuration error (as published)')
-    ax = axs[1, 1]
-    if len(commands):
-        ax.plot(cmd_t, commands, lw=0.8)
-    ax.set(xlabel='t since arming [s]', ylabel='normalised command',
-           title='motor_commands (as received)')
-    for a in axs.flat:
-        a.grid(True, alpha=0.3)
-    fig.suptitle('sim-in-the-loop over DDS: controller and sim as separate processes')
-    fig.tight_layout()
-    fig.savefig(os.path.join(out, 'sil.png'), dpi=100)
-    plt.close(fig)
 
 
 def main(argv=None):

@@ -1,14 +1,22 @@
-"""PNG figures of a run, after the paper's Figs. 2, 3 and 5 (matplotlib, Agg backend)."""
+"""Every figure the tools draw, in one place: a scenario run's after the paper's Figs. 2, 3 and 5,
+a campaign's, and a sim-in-the-loop flight's. Each is a matplotlib Figure of its own written to a
+PNG (no pyplot state, so no display and no backend are needed).
+"""
+import math
 import os
 
-import matplotlib
+from matplotlib.figure import Figure
+import numpy as np
 
-matplotlib.use('Agg')
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from geoctl_ros.core import so3  # noqa: E402
+from geoctl_ros.core import so3
 from geoctl_ros.params import cone_set
+from geoctl_ros.tools import manoeuvres
+
+
+def _subplots(*grid, figsize, **kw):
+    """(figure, axes) like pyplot.subplots, on a Figure of its own."""
+    fig = Figure(figsize=figsize)
+    return fig, fig.subplots(*grid, **kw)
 
 
 def _col(result, name):
@@ -32,10 +40,9 @@ def scenario_figures(result, out_dir):
         fig.tight_layout()
         path = os.path.join(out_dir, name)
         fig.savefig(path, dpi=110)
-        plt.close(fig)
         paths.append(path)
 
-    fig, ax = plt.subplots(figsize=(7, 3.5))
+    fig, ax = _subplots(figsize=(7, 3.5))
     for i, c in enumerate(('eR_x', 'eR_y', 'eR_z')):
         ax.plot(t, _col(result, c), label='$e_{R,%d}$' % (i + 1))
     ax.set(xlabel='t [s]', ylabel='$e_R$', title='attitude error vector')
@@ -43,13 +50,13 @@ def scenario_figures(result, out_dir):
     ax.legend()
     save(fig, 'attitude_error.png')
 
-    fig, ax = plt.subplots(figsize=(7, 3.5))
+    fig, ax = _subplots(figsize=(7, 3.5))
     ax.plot(t, _col(result, 'psi'))
     ax.set(xlabel='t [s]', ylabel=r'$\Psi$', title=r'configuration error $\Psi$')
     ax.grid(True, alpha=0.3)
     save(fig, 'psi.png')
 
-    fig, ax = plt.subplots(figsize=(7, 3.5))
+    fig, ax = _subplots(figsize=(7, 3.5))
     theta = result.summary['cone_half_angle_deg']
     for i, c in enumerate(_cols(result, 'angle_')):
         name = c[len('angle_'):]
@@ -62,7 +69,7 @@ def scenario_figures(result, out_dir):
         ax.legend()
     save(fig, 'cone_angles.png')
 
-    fig, ax = plt.subplots(figsize=(7, 3.5))
+    fig, ax = _subplots(figsize=(7, 3.5))
     for i, c in enumerate(_cols(result, 'dbar_')):
         line, = ax.plot(t, _col(result, c), label=r'$\bar\Delta_{%d}$' % (i + 1))
         ax.plot(t, _col(result, 'dtrue_%d' % i), color=line.get_color(), ls='--', lw=1)
@@ -72,7 +79,7 @@ def scenario_figures(result, out_dir):
     ax.legend(ncol=2)
     save(fig, 'disturbance.png')
 
-    fig, ax = plt.subplots(figsize=(7, 3.5))
+    fig, ax = _subplots(figsize=(7, 3.5))
     for c in ('u_x', 'u_y', 'u_z'):
         ax.plot(t, _col(result, c), label=c)
     ax.set(xlabel='t [s]', ylabel='moment [N m]', title='control moment u about the pivot')
@@ -82,7 +89,7 @@ def scenario_figures(result, out_dir):
 
     cmd_cols = _cols(result, 'cmd_')
     if cmd_cols:
-        fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
+        fig, (ax1, ax2) = _subplots(2, 1, figsize=(7, 5.5), sharex=True)
         for c in cmd_cols:
             ax1.plot(t, _col(result, c), lw=1, label='motor %s' % c[len('cmd_'):])
         ax1.set(ylabel='ESC command', title='motor commands (integer, 0..command_max)')
@@ -94,7 +101,7 @@ def scenario_figures(result, out_dir):
         ax2.grid(True, alpha=0.3)
         save(fig, 'motor_commands.png')
 
-    fig = plt.figure(figsize=(6, 6))
+    fig = Figure(figsize=(6, 6))
     ax = fig.add_subplot(projection='3d')
     sphere_path(ax, result)
     save(fig, 'sensor_path.png')
@@ -129,3 +136,86 @@ def sphere_path(ax, result):
            title='sensor axis on the unit sphere (world frame)')
     ax.set_box_aspect((1, 1, 1))
     ax.legend(loc='upper left')
+
+
+def campaign_figures(rows, flown, sections_by_index, out_dir, worst):
+    """closest_approach.png (histogram) and worst_runs.png (margins in time, sensor paths)."""
+    margins = np.array([r['closest_deg'] for r in rows])
+    fig, ax = _subplots(figsize=(7, 3.5))
+    ax.hist(margins, bins=40, color='tab:blue', alpha=0.8)
+    ax.axvline(0.0, color='tab:red', lw=1.5, label='cone boundary')
+    ax.set(xlabel='closest approach to a cone [deg] (negative: inside)', ylabel='runs',
+           title='%d manoeuvres: closest approach of the sensor to any cone' % len(rows))
+    ax.legend()
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out_dir, 'closest_approach.png'), dpi=110)
+
+    fig, (a1, a2) = _subplots(1, 2, figsize=(11, 4))
+    for i in worst:
+        res, p = flown[i]
+        t = np.arange(res.margin_series.shape[0]) * res.dt
+        a1.plot(t, res.margin_series[:, p], lw=1, label='run %d' % i)
+    a1.axhline(0.0, color='k', lw=0.8)
+    a1.set(xlabel='t [s]', ylabel='cone margin [deg]', title='the %d worst runs' % len(worst))
+    a1.legend(fontsize=7)
+    a1.grid(True, alpha=0.3)
+    i = worst[0]
+    res, p = flown[i]
+    path = res.sensor_series[:, p].astype(float)
+    _sky(a2, path, sections_by_index[i]['controller'], 'run %d: sensor path' % i)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out_dir, 'worst_runs.png'), dpi=110)
+
+
+def _sky(ax, path, controller, title):
+    """The sensor's world direction in azimuth / elevation, with the cones' boundaries."""
+    def az_el(d):
+        d = np.atleast_2d(d)
+        return (np.degrees(np.arctan2(d[:, 1], d[:, 0])),
+                np.degrees(np.arcsin(np.clip(d[:, 2], -1, 1))))
+    for name in controller['cones.names']:
+        v = manoeuvres.unit(np.asarray(controller['cones.%s.axis' % name], dtype=float))
+        th = math.radians(controller['cones.%s.half_angle_deg' % name])
+        ring = np.array([manoeuvres.direction(v, th, a)
+                         for a in np.linspace(0, 2 * math.pi, 181)])
+        az, el = az_el(ring)
+        ax.plot(az, el, '.', ms=1.5, color='tab:red')
+    az, el = az_el(path)
+    ax.plot(az, el, '.', ms=1.5, color='tab:blue')
+    ax.plot(az[0], el[0], 'o', color='tab:green', label='start')
+    ax.plot(az[-1], el[-1], 's', color='k', label='end')
+    ax.set(xlabel='azimuth [deg]', ylabel='elevation [deg]', title=title, xlim=(-180, 180),
+           ylim=(-90, 90))
+    ax.legend(fontsize=7)
+    ax.grid(True, alpha=0.3)
+
+
+def sil_figure(out, t, angles, cones, err, psi, cmd_t, commands):
+    """sil.png: a sim-in-the-loop flight as recorded over DDS (``geoctl_ros.tools.demo``)."""
+    fig, axs = _subplots(2, 2, figsize=(11, 7))
+    ax = axs[0, 0]
+    for i, name in enumerate(cones.names):
+        line, = ax.plot(t, angles[:, i], label=name)
+        ax.axhline(math.degrees(cones.theta[i]), color=line.get_color(), ls='--', lw=1)
+    ax.set(xlabel='t since arming [s]', ylabel='deg',
+           title='true angle to each cone (dashed: limit)')
+    ax.legend()
+    ax = axs[0, 1]
+    ax.plot(t, err)
+    ax.set(xlabel='t since arming [s]', ylabel='deg',
+           title='true attitude error to the final set point')
+    ax = axs[1, 0]
+    if psi:
+        ax.semilogy([p[0] for p in psi], [max(p[1], 1e-12) for p in psi])
+    ax.set(xlabel='t since arming [s]', ylabel='Psi', title='configuration error (as published)')
+    ax = axs[1, 1]
+    if len(commands):
+        ax.plot(cmd_t, commands, lw=0.8)
+    ax.set(xlabel='t since arming [s]', ylabel='normalised command',
+           title='motor_commands (as received)')
+    for a in axs.flat:
+        a.grid(True, alpha=0.3)
+    fig.suptitle('sim-in-the-loop over DDS: controller and sim as separate processes')
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, 'sil.png'), dpi=100)

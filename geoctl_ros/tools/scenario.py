@@ -23,7 +23,8 @@ import time
 import numpy as np
 
 from geoctl_ros.core import so3
-from geoctl_ros.core.control import SetpointRejected, gain_condition
+from geoctl_ros.core.control import SetpointRejected
+from geoctl_ros.core.gains import gain_condition
 from geoctl_ros.core.loop import ControlLoop
 from geoctl_ros.core.mechanics import gravity_moment
 from geoctl_ros.params import (

@@ -1,0 +1,218 @@
+"""The campaign's random manoeuvres, and each as an ordinary scenario (``run_sections``) or a
+scenario file (``write_scenario_file``); flown by ``geoctl_ros.tools.campaign``.
+
+The distribution (run i of seed S draws from numpy's default_rng([S, i]), so a run does not depend
+on how many others there are):
+
+- cones: 1-4 (uniform), half-angles uniform in 10-35 deg, axes at a uniform azimuth and an
+  elevation uniform within +-20 deg of the horizon (where a body-fixed sensor of a testbed on a
+  joint can point), every two cones at least 10 deg apart (edge to edge), so there is always a way
+  round;
+- the manoeuvre: the sensor starts 5-30 deg outside the first cone (uniform, at a uniform azimuth
+  round its axis) and its goal is 5-30 deg outside the same cone on the far side (azimuth 150-210
+  deg away), so the straight way crosses the cone and the controller must go round; start and goal
+  are at least 5 deg clear of every cone, and the goal is one the controller accepts with
+  ``unmodelled_moment_max`` set to what the errors below can add up to (``unmodelled_moment``,
+  0.40 N m for the testbed; redrawn otherwise). About the sensor axis, start and goal attitudes
+  are the most upright ones turned by up to +-15 deg, and the body's z axis is within 40 deg of
+  vertical (the joint's range; redrawn otherwise);
+- the testbed (``config/testbed.yaml``): its gains, rotors, thrust curve, 40 ms motor lag and
+  saturation, motion-capture (0.1 deg) and gyro (0.005 rad/s) noise, 100 Hz control, 1 kHz
+  integration, 20 s;
+- per run: measurement latency 0-10 ms (whole ms, uniform); a constant disturbance of uniform
+  direction and magnitude up to 0.05 N m (``--disturbance-max``; with the gravity moment of the
+  errors below the estimate sees at most 0.40 N m, within its bound delta_bar_max = 1 N m); the
+  true mass off by up to +-20 %; the true inertia's mass distribution stretched by up to +-20 %
+  along each body axis (second moment E = tr(J)/2 I - J -> S E S, S = diag(sqrt(f)), f uniform
+  0.8-1.2; J = tr(E) I - E stays a physical inertia); the true centre-of-mass offset scaled by
+  0.8-1.2.
+"""
+import math
+import os
+
+import numpy as np
+import yaml
+
+from geoctl_ros.core import so3
+from geoctl_ros.core.control import AttitudeController
+from geoctl_ros.params import (
+    CONTROLLER,
+    SIM,
+    cone_set,
+    controller_config,
+    node_overrides,
+    resolve,
+)
+
+CLEAR_DEG = 5.0                    # start and goal at least this far outside every cone
+GAP_DEG = 10.0                     # edge-to-edge distance between two cones, at least
+UP = np.array([0.0, 0.0, 1.0])
+TILT_DEG = 40.0                    # the body's z axis within this of vertical at start and goal
+TWIST_DEG = 15.0                   # turn about the sensor axis from the most upright attitude
+CONE_ELEVATION_DEG = 20.0          # cone axes within this of the horizon
+DISTURBANCE_MAX = 0.05             # N m, largest constant disturbance (see the README)
+MODEL_ERROR = 0.2                  # true mass, inertia stretch and centre of mass within +-20 %
+
+
+def unit(v):
+    return v / np.linalg.norm(v)
+
+
+def direction(axis, angle, azimuth):
+    """The unit vector at angle from axis, at azimuth round it."""
+    e1 = unit(np.cross(axis, np.eye(3)[int(np.argmin(np.abs(axis)))]))
+    e2 = np.cross(axis, e1)
+    return (math.cos(angle) * axis
+            + math.sin(angle) * (math.cos(azimuth) * e1 + math.sin(azimuth) * e2))
+
+
+def _aligning(r, d):
+    """The rotation by the shortest arc that takes r to d (unit vectors, not opposite)."""
+    axis = np.cross(r, d)
+    return so3.exp(axis / max(np.linalg.norm(axis), 1e-12)
+                   * math.atan2(np.linalg.norm(axis), float(r @ d)))
+
+
+def _angle_deg(a, b):
+    return math.degrees(math.acos(min(1.0, max(-1.0, float(a @ b)))))
+
+
+def _attitude(rng, r, d):
+    """An attitude with the sensor axis r pointing along d and the body as upright as it can be
+    (then turned about d by up to +-TWIST_DEG); None if that leaves the body tilted more than
+    TILT_DEG (the joint's range).
+    """
+    base = _aligning(r, d)
+    twists = np.radians(np.arange(-180.0, 180.0, 2.0))
+    ups = so3.exp(d * twists[:, None]) @ (base @ UP)            # body z for each twist
+    twist = twists[int(np.argmax(ups[:, 2]))] + math.radians(rng.uniform(-TWIST_DEG, TWIST_DEG))
+    R = so3.exp(d * twist) @ base
+    return R if _angle_deg(R @ UP, UP) <= TILT_DEG else None
+
+
+def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None):
+    """The random part of run index of campaign seed: a dict of per-run values. goal_ok(cones,
+    R_d) (cones as [(axis, half-angle deg)]), if given, must accept the goal (else redrawn).
+    """
+    rng = np.random.default_rng([seed, index])
+    r = unit(np.asarray(sensor_axis, dtype=float))
+    while True:
+        n = int(rng.integers(1, 5))
+        theta = rng.uniform(10.0, 35.0, n)
+        axes = [direction(UP, math.radians(90.0 - rng.uniform(-CONE_ELEVATION_DEG,
+                                                                CONE_ELEVATION_DEG)),
+                           rng.uniform(0.0, 2.0 * math.pi)) for _ in range(n)]
+        if any(_angle_deg(axes[i], axes[j]) < theta[i] + theta[j] + GAP_DEG
+               for i in range(n) for j in range(i)):
+            continue
+        v0, th0 = axes[0], math.radians(theta[0])
+        azimuth = rng.uniform(0.0, 2.0 * math.pi)
+        d0 = direction(v0, th0 + math.radians(rng.uniform(5.0, 30.0)), azimuth)
+        d1 = direction(v0, th0 + math.radians(rng.uniform(5.0, 30.0)),
+                        azimuth + math.pi + math.radians(rng.uniform(-30.0, 30.0)))
+        if any(_angle_deg(d, v) < t + CLEAR_DEG for d in (d0, d1) for v, t in zip(axes, theta)):
+            continue
+        arc = [unit((1.0 - s) * d0 + s * d1) for s in np.linspace(0.0, 1.0, 41)]
+        if min(_angle_deg(p, v0) for p in arc) >= theta[0]:
+            continue                                    # the straight way misses the cone
+        R0, R_d = _attitude(rng, r, d0), _attitude(rng, r, d1)
+        if R0 is not None and R_d is not None and (
+                goal_ok is None or goal_ok(list(zip(axes, theta)), R_d)):
+            break
+    push = unit(rng.normal(size=3))
+    return {
+        'cones': [(list(map(float, v)), float(t)) for v, t in zip(axes, theta)],
+        'R0': R0, 'R_d': R_d,
+        'latency_ms': int(rng.integers(0, 11)),
+        'disturbance': push * rng.uniform(0.0, 1.0),      # times --disturbance-max
+        'mass_factor': rng.uniform(1.0 - MODEL_ERROR, 1.0 + MODEL_ERROR),
+        'inertia_factors': rng.uniform(1.0 - MODEL_ERROR, 1.0 + MODEL_ERROR, 3),
+        'cog_factor': rng.uniform(1.0 - MODEL_ERROR, 1.0 + MODEL_ERROR),
+        'noise_seed': int(rng.integers(0, 2 ** 31)),
+    }
+
+
+def _floats(a):
+    return [float(x) for x in np.ravel(a)]
+
+
+def unmodelled_moment(nominal_sim, disturbance_max=DISTURBANCE_MAX):
+    """The most the campaign's runs ask the controller to hold before learning it (N m): the
+    largest disturbance plus the gravity moment of the largest error in m rho (mass and
+    centre-of-mass height each off by 20 %: 1.2^2 - 1 = 44 %) at the largest tilt at the goal.
+    """
+    m_rho = nominal_sim['mass'] * float(np.linalg.norm(nominal_sim['cog_offset']))
+    return float(disturbance_max + ((1.0 + MODEL_ERROR) ** 2 - 1.0) * m_rho
+                 * float(np.linalg.norm(nominal_sim['gravity']))
+                 * math.sin(math.radians(TILT_DEG)))
+
+
+def run_sections(base, seed, index, duration=20.0, disturbance_max=DISTURBANCE_MAX):
+    """The scenario file's sections ({'/**' or node: flat parameters}) of run index."""
+    nominal_c = resolve(CONTROLLER, node_overrides(base, CONTROLLER))
+    nominal_s = resolve(SIM, node_overrides(base, SIM))
+    unmodelled = unmodelled_moment(nominal_s, disturbance_max)
+    probe = AttitudeController(controller_config(dict(nominal_c,
+                                                      unmodelled_moment_max=unmodelled)))
+
+    def goal_ok(cones, R_d):                    # the controller's own set-point check
+        values = dict(nominal_c, **{'cones.names': ['c%d' % i for i in range(len(cones))]})
+        for i, (axis, half_angle) in enumerate(cones):
+            values['cones.c%d.axis' % i] = axis
+            values['cones.c%d.half_angle_deg' % i] = half_angle
+        return probe.setpoint_problem(R_d, cone_set(values)) is None
+
+    m = draw_manoeuvre(seed, index, nominal_c['sensor_axis'], goal_ok)
+    controller = {k: v for k, v in base.get('controller', {}).items()
+                  if not k.startswith(('cones.', 'setpoint'))}
+    controller['unmodelled_moment_max'] = unmodelled
+    names = ['c%d' % (i + 1) for i in range(len(m['cones']))]
+    controller['cones.names'] = names
+    for name, (axis, half_angle) in zip(names, m['cones']):
+        controller['cones.%s.axis' % name] = axis
+        controller['cones.%s.half_angle_deg' % name] = half_angle
+    controller['setpoint'] = _floats(so3.rot_to_quat(m['R_d']))
+    S = np.diag(np.sqrt(m['inertia_factors']))
+    J = nominal_s['inertia'].reshape(3, 3)
+    E = S @ (0.5 * np.trace(J) * np.eye(3) - J) @ S            # second moment of the mass
+    rho = nominal_s['cog_offset']
+    sim = dict(base.get('sim', {}))
+    sim.update({
+        'initial_attitude': _floats(so3.rot_to_quat(m['R0'])),
+        'mass': float(nominal_s['mass'] * m['mass_factor']),
+        'inertia': _floats(np.trace(E) * np.eye(3) - E),
+        'cog_offset': _floats(rho * m['cog_factor']),
+        'disturbance.constant': _floats(m['disturbance'] * disturbance_max),
+        'noise.seed': m['noise_seed'],
+    })
+    return {
+        '/**': dict(base.get('/**', {})), 'controller': controller, 'sim': sim,
+        'scenario': {'title': 'campaign seed %d, run %d' % (seed, index),
+                     'duration': float(duration), 'latency': m['latency_ms'] / 1000.0},
+    }
+
+
+def write_scenario_file(sections, path):
+    """Write sections as a ROS 2 parameter file (nested keys, floats exact)."""
+    doc = {}
+    for node, flat in sections.items():
+        tree = {}
+        for key, value in flat.items():
+            *parents, leaf = key.split('.')
+            d = tree
+            for p in parents:
+                d = d.setdefault(p, {})
+            d[leaf] = value.tolist() if isinstance(value, np.ndarray) else value
+        doc[node] = {'ros__parameters': tree}
+    with open(path, 'w') as f:
+        f.write('# Written by `campaign`; fly it again with `campaign --replay %s` or '
+                '`scenario %s '
+                '--out DIR`.\n' % (os.path.basename(path), os.path.basename(path)))
+        yaml.safe_dump(doc, f, sort_keys=False, default_flow_style=None, width=100)
+
+
+# --- flying -----------------------------------------------------------------------------------
+
+_progress = None        # shared counter of simulated run-steps (set in each worker)
+
+
