@@ -41,7 +41,7 @@ def test_the_distribution_is_what_the_readme_says():
                        - m['cones'][a][1] - m['cones'][b][1])
                 assert gap >= 10.0
         for R in (m['R0'], m['R_d']):                          # within the joint's range
-            assert np.degrees(np.arccos(R[2, 2])) <= campaign.TILT_DEG + 1e-9
+            assert np.degrees(np.arccos(R[2, 2])) <= manoeuvres.TILT_DEG + 1e-9
         # the straight way from start to goal crosses the first cone
         v0, th0 = axes[0], m['cones'][0][1]
         d0, d1 = m['R0'] @ r, m['R_d'] @ r

@@ -53,7 +53,9 @@ def ros(tmp_path):
     mon.destroy_node()
     rclpy.try_shutdown()
     for p in procs:
-        p.stop()
+        code = p.stop()
+        # pytest shows this only for a test that failed: what each node said, and how it ended
+        print('--- %s (exit %s), the end of its log:\n%s' % (p.name, code, p.output()[-3000:]))
 
 
 def published_values_are_finite(mon):

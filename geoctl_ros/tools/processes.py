@@ -81,7 +81,8 @@ class NodeProcess:
         self._log.close()
 
     def output(self):
-        self._log.flush()
+        if not self._log.closed:
+            self._log.flush()
         with open(self.log_path) as f:
             return f.read()
 
