@@ -212,22 +212,24 @@ def figures():
 
 def against(rev, rounds=3):
     """This tree against git revision `rev`, on this interpreter, alternating rounds (A B A B ..)
-    in fresh processes so that a busy machine slows both alike; the fastest round of each.
+    in fresh processes so that a busy machine slows both alike; the fastest round of each. Each
+    tree runs its own bench.py (from a revision that has ``--json``).
     """
     root = os.path.dirname(HERE)
     with tempfile.TemporaryDirectory() as tmp:
-        archive = subprocess.run(['git', 'archive', rev, 'geoctl_ros', 'config'], cwd=root,
-                                 capture_output=True, check=True).stdout
+        archive = subprocess.run(['git', 'archive', rev, 'geoctl_ros', 'config', 'benchmarks'],
+                                 cwd=root, capture_output=True, check=True).stdout
         subprocess.run(['tar', '-x', '-C', tmp], input=archive, check=True)
         trees = {rev: tmp, 'this tree': root}
+        # each tree is measured by its own bench.py, which knows that tree's modules
         best, failed = {}, {}
         for _ in range(rounds):
             for label, tree in trees.items():
                 if label in failed:
                     continue
                 env = dict(os.environ, PYTHONPATH=tree)   # ahead of the editable install
-                r = subprocess.run([sys.executable, os.path.abspath(__file__), '--json'],
-                                   env=env, capture_output=True, text=True)
+                r = subprocess.run([sys.executable, os.path.join(tree, 'benchmarks', 'bench.py'),
+                                    '--json'], env=env, capture_output=True, text=True)
                 if r.returncode != 0:
                     lines = r.stderr.strip().splitlines() or ['exit %d' % r.returncode]
                     failed[label] = lines[-1]
