@@ -366,3 +366,17 @@ def test_a_batch_of_one_commands_what_the_control_loop_does_tick_for_tick():
         assert np.allclose(out.delta_bar[0], tick.control.delta_bar, rtol=0, atol=1e-12), k
         moved += bool(tick.motors.commands.any())
     assert moved > 0.9 * len(q)                       # the motors were flying all along
+
+
+def test_poses_before_any_imu_sample_are_flown_on_without_an_exception():
+    """A (re)started controller may get poses before its first imu sample: the rate then comes
+    from successive poses (bridged, not predicted), and the tick must not fail on the imu's
+    missing receipt (a live restart once killed the node that way).
+    """
+    loop = make_loop()
+    for k in range(5):
+        t = 0.01 * k
+        assert loop.offer_pose(so3.rot_to_quat(spinning(t)), t, t) is None
+        tick = loop.tick(t, 0.01)
+    assert tick.bridging and tick.control is not None and np.isfinite(tick.control.u).all()
+    assert not tick.motors.commands.any()                       # disarmed: commands zero

@@ -8,12 +8,14 @@ import time
 import numpy as np
 import pytest
 import rclpy
+from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from support import FakeInputs
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.diagnostics import ERROR, OK, WARN
 from geoctl_ros.nodes import qos
+from geoctl_ros.nodes.controller import ControllerNode
 from geoctl_ros.nodes.conversions import stamp_seconds
 from geoctl_ros.params import (
     cone_set,
@@ -402,3 +404,34 @@ def test_step_on_imu_steps_on_every_sample_and_the_timer_still_fails_safe(ros):
     assert time.monotonic() - t_drop < 0.25 + 0.5
     mon.wait_for(lambda: mon.last_diagnostic().level == ERROR, 2.0, 'an ERROR diagnostic')
     assert 'stale' in mon.last_diagnostic().message
+
+
+def test_a_control_step_that_raises_disarms_and_commands_zero_and_the_node_stays_up(ros,
+                                                                                    monkeypatch):
+    """A defect in a tick (one killed the node once: a TypeError on a stream never received)
+    must leave the node up, disarmed, with zero commands and the reason in its diagnostics. The
+    node runs in this process here, so that its loop can be made to fail.
+    """
+    mon, _ = ros
+    node = ControllerNode(parameter_overrides=[Parameter('allow_default_configuration',
+                                                         value=True)])
+    executor = rclpy.executors.SingleThreadedExecutor()
+    executor.add_node(node)
+    executor.add_node(mon)
+    try:
+        def fail(now, dt):
+            raise TypeError('planted')
+        monkeypatch.setattr(node.loop, 'tick', fail)
+        end = time.monotonic() + 10.0
+        while time.monotonic() < end and not (
+                mon.last_diagnostic() is not None and 'planted' in mon.last_diagnostic().message
+                and mon.last('motors') is not None):
+            executor.spin_once(timeout_sec=0.05)
+        diag = mon.last_diagnostic()
+        assert diag is not None and diag.level == ERROR, diag
+        assert 'failsafe: control step failed: TypeError: planted' in diag.message
+        assert zero_commands(mon) and not diag.figures.armed
+    finally:
+        executor.remove_node(mon)
+        executor.shutdown()
+        node.destroy_node()

@@ -154,3 +154,14 @@ def test_every_default_passes_its_own_type_and_check():
     for p in params.SCHEMA:
         value, reason = params.check_value(p, p.default)
         assert reason is None, (p.name, reason)
+
+
+def test_a_node_reads_its_settings_by_name_and_cannot_change_them():
+    values = resolve(params.MAVLINK, {'mavlink.url': 'udpin:127.0.0.1:14550'})
+    cfg = params.settings(values, 'mavlink.')
+    assert cfg.url == 'udpin:127.0.0.1:14550' and cfg.system_id == values['mavlink.system_id']
+    assert len(cfg) == len(values)                      # one attribute per parameter
+    sim = params.settings(resolve(SIM, {}))
+    assert sim.noise_seed == resolve(SIM, {})['noise.seed']
+    with pytest.raises(AttributeError):
+        cfg.url = 'udpin:0.0.0.0:1'

@@ -199,8 +199,10 @@ class ControlLoop:
             bridging = self.bridge.bridging
             R, Omega = state
             # the measurements' ages by the onboard clock only; a bridged state is already
-            # propagated, and the estimate learns only from measurements
-            ages = (max(now - self.pose.last_receipt, 0.0), max(now - self.rate.last_receipt, 0.0))
+            # propagated (and one of its streams may never have come), and the estimate learns
+            # only from measurements
+            ages = (0.0, 0.0) if bridging else (max(now - self.pose.last_receipt, 0.0),
+                                                max(now - self.rate.last_receipt, 0.0))
             out, motors = self.step(R, Omega, dt, now, ages, armed=armed,
                                     adapt=armed and not bridging, predict=not bridging)
             if out is None:

@@ -208,6 +208,16 @@ class ControllerNode(Node):
                 or now - self._last_tick >= 1.5 * self.period):
             self._tick(now)
 
+    def _failed_step(self, error):
+        """A control step raised (a defect): disarm, command zero, and say so; the node stays
+        up, so its topics, diagnostics and services still answer.
+        """
+        reason = '%s: control step failed: %s: %s' % (FAILSAFE, type(error).__name__, error)
+        self.loop.disarm(reason)
+        self.get_logger().error(reason, throttle_duration_sec=1.0)
+        self._msgs['motors'].data = [0.0] * self.loop.rotor_count
+        self.pub_motors.publish(self._msgs['motors'])
+
     def _tick(self, now):
         """One control step at now: the motor command is published first, then the monitoring
         topics.
@@ -220,7 +230,11 @@ class ControllerNode(Node):
             if self.loop.settings.step_on != 'timer':   # steps as the samples come
                 dt = step_period(since, self.period)
         self._last_tick = now
-        tick = self.loop.tick(now, dt)
+        try:
+            tick = self.loop.tick(now, dt)
+        except Exception as e:      # a defect must not end the node with the motors running on
+            self._failed_step(e)
+            return
         out = tick.control
         m = self._msgs
         m['motors'].data = tick.motors.normalised.tolist()

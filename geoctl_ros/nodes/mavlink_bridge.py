@@ -35,7 +35,7 @@ from geoctl_ros.nodes.autopilot_imu import AutopilotImu
 from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
 from geoctl_ros.nodes.conversions import python_value, quaternion, status_of, vector
 from geoctl_ros.nodes.runtime import spin
-from geoctl_ros.params import MAVLINK, ConfigError
+from geoctl_ros.params import MAVLINK, ConfigError, settings
 
 GCS_TIMEOUT = 3.0          # s without a ground-station heartbeat: "no ground station"
 TIMESTAMP_LEAD = 10 * 100_000   # signing units saved ahead of the last sent (10 s of clock):
@@ -66,14 +66,14 @@ def _git_hash():
 class MavlinkBridge(Node):
     def __init__(self, **kwargs):
         super().__init__('mavlink_bridge', **kwargs)
-        v = ros_params.load(self, MAVLINK)
-        self.sysid = v['mavlink.system_id']
+        cfg = settings(ros_params.load(self, MAVLINK), 'mavlink.')
+        self.sysid = cfg.system_id
         self.vehicle = Vehicle(encoder(self.sysid, m_const('MAV_COMP_ID_AUTOPILOT1')), self.sysid,
                                _version(), _git_hash())
         # the key before the link: a key file that cannot be used stops the node first
-        self.timestamps, key = self._signing_key(v)
-        self.link_id = v['mavlink.signing_link_id']
-        self.link = Link(v['mavlink.url'], self.sysid, m_const('MAV_COMP_ID_AUTOPILOT1'),
+        self.timestamps, key = self._signing_key(cfg)
+        self.link_id = cfg.signing_link_id
+        self.link = Link(cfg.url, self.sysid, m_const('MAV_COMP_ID_AUTOPILOT1'),
                          signing=None if key is None else
                          (key, self.link_id, self.timestamps.start()))
         if key is not None:
@@ -82,15 +82,15 @@ class MavlinkBridge(Node):
         else:
             self.get_logger().warning(UNSIGNED_WARNING + ' (set mavlink.signing_key_file)')
         self._refusals_logged = 0
-        self.autopilot = (AutopilotImu(self, v['mavlink.autopilot_url'], self.sysid,
-                                       v['mavlink.autopilot_imu_rate_hz'], self.vehicle.mav)
-                          if v['mavlink.autopilot_url'] else None)
+        self.autopilot = (AutopilotImu(self, cfg.autopilot_url, self.sysid,
+                                       cfg.autopilot_imu_rate_hz, self.vehicle.mav)
+                          if cfg.autopilot_url else None)
         self.counts = {'ignored': 0, 'arm requests': 0, 'param sets': 0, 'statustext': 0}
         self.gcs_heartbeat = None
-        self._text_period = 1.0 / v['mavlink.statustext_rate_hz']
+        self._text_period = 1.0 / cfg.statustext_rate_hz
         self._last_text = -1e9
         self._last_diag = (None, None)
-        ctl = '/' + v['mavlink.controller'].strip('/')
+        ctl = '/' + cfg.controller.strip('/')
 
         view = self.vehicle.view
         self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, qos.EVENT)
@@ -115,14 +115,14 @@ class MavlinkBridge(Node):
 
         send = self.link.send
         now = time.monotonic
-        for rate, make in ((v['mavlink.heartbeat_rate_hz'], lambda: [self.vehicle.heartbeat()]),
-                           (v['mavlink.status_rate_hz'], lambda: [self.vehicle.sys_status()]),
-                           (v['mavlink.attitude_rate_hz'],
+        for rate, make in ((cfg.heartbeat_rate_hz, lambda: [self.vehicle.heartbeat()]),
+                           (cfg.status_rate_hz, lambda: [self.vehicle.sys_status()]),
+                           (cfg.attitude_rate_hz,
                             lambda: [self.vehicle.attitude(now()),
                                      self.vehicle.attitude_target(now())]),
-                           (v['mavlink.actuator_rate_hz'],
+                           (cfg.actuator_rate_hz,
                             lambda: [self.vehicle.actuators(now())]),
-                           (v['mavlink.internals_rate_hz'],
+                           (cfg.internals_rate_hz,
                             lambda: self.vehicle.internals(now()))):
             self.create_timer(1.0 / rate, lambda make=make: [send(m) for m in make() if m])
         self.create_timer(0.01, self._pump)
@@ -134,22 +134,22 @@ class MavlinkBridge(Node):
         self.create_timer(1.0, self._log_refusals)
         self._read_params()
         self.get_logger().info('mavlink_bridge: system %d component 1 on %s%s' % (
-            self.sysid, v['mavlink.url'],
-            ', autopilot IMU from ' + v['mavlink.autopilot_url'] if self.autopilot else ''))
+            self.sysid, cfg.url,
+            ', autopilot IMU from ' + cfg.autopilot_url if self.autopilot else ''))
 
     # --- signing -----------------------------------------------------------------------------
-    def _signing_key(self, v):
+    def _signing_key(self, cfg):
         """(TimestampStore, key) when a key file is set, else (None, None); a key file that
         cannot be used stops the node (exit 2) with the reason.
         """
-        path = v['mavlink.signing_key_file']
+        path = cfg.signing_key_file
         if not path:
             return None, None
         try:
             key = signing.load_key(path)
         except signing.SigningKeyError as e:
             raise ConfigError([('mavlink.signing_key_file', str(e))]) from None
-        return (signing.TimestampStore(v['mavlink.signing_timestamp_file'] or path + '.timestamp'),
+        return (signing.TimestampStore(cfg.signing_timestamp_file or path + '.timestamp'),
                 key)
 
     def _save_timestamp(self):

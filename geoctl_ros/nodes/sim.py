@@ -27,7 +27,7 @@ from geoctl_ros.core import so3
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg, vector
 from geoctl_ros.nodes.runtime import spin
-from geoctl_ros.params import SIM, testbed_sim
+from geoctl_ros.params import SIM, settings, testbed_sim
 from geoctl_ros.sim.testbed import EscWatchdog
 
 LATE = 0.05     # s behind real time before the sim warns
@@ -36,23 +36,24 @@ LATE = 0.05     # s behind real time before the sim warns
 class SimNode(Node):
     def __init__(self, **kwargs):
         super().__init__('sim', **kwargs)
-        v = ros_params.load(self, SIM)
-        self.sim = testbed_sim(v)
+        values = ros_params.load(self, SIM)
+        self.sim = testbed_sim(values)
+        cfg = settings(values)
         rotors = self.sim.actuator              # None with torque actuation
         self.n_rotors = len(rotors.thrusts) if rotors else 0
         self.command_max = rotors.curve.command_max if rotors else 0
-        self.h = 1.0 / v['integration_rate_hz']
-        self.rtf = v['real_time_factor']
-        self.command_timeout = v['command_timeout']
+        self.h = 1.0 / cfg.integration_rate_hz
+        self.rtf = cfg.real_time_factor
+        self.command_timeout = cfg.command_timeout
         self.esc = EscWatchdog(self.command_timeout, LATE)
-        self.publish_clock = v['publish_clock']
+        self.publish_clock = cfg.publish_clock
         self.commands = np.zeros(self.n_rotors, dtype=int)
         self.torque = np.zeros(3)
         self.ever_commanded = False
         self.commands_fresh = False
         self.wall0 = time.monotonic()
-        self.pose_period = 1.0 / v['pose_rate_hz']
-        self.imu_period = 1.0 / v['imu_rate_hz']
+        self.pose_period = 1.0 / cfg.pose_rate_hz
+        self.imu_period = 1.0 / cfg.imu_rate_hz
         self.next_pose = self.next_imu = 0.0
 
         if self.n_rotors:
@@ -67,15 +68,15 @@ class SimNode(Node):
         self.pub_clock = (self.create_publisher(ClockMsg, '/clock', qos.EVENT)
                           if self.publish_clock else None)
         self.pose_msg, self.true_msg, self.imu_msg = PoseStamped(), PoseStamped(), Imu()
-        self.pose_msg.header.frame_id = self.true_msg.header.frame_id = v['world_frame_id']
-        self.imu_msg.header.frame_id = v['frame_id']
+        self.pose_msg.header.frame_id = self.true_msg.header.frame_id = cfg.world_frame_id
+        self.imu_msg.header.frame_id = cfg.frame_id
         self.imu_msg.orientation_covariance[0] = -1.0            # no orientation in this imu
         wall_period = min(self.pose_period, self.imu_period) / self.rtf
         self.create_timer(wall_period, self._on_timer)
         self.get_logger().info('sim ready: %s actuation, %g Hz integration, pose %g Hz, '
                                'imu %g Hz, '
-                               'real-time factor %g' % (v['actuation'], v['integration_rate_hz'],
-                                                         v['pose_rate_hz'], v['imu_rate_hz'],
+                               'real-time factor %g' % (cfg.actuation, cfg.integration_rate_hz,
+                                                         cfg.pose_rate_hz, cfg.imu_rate_hz,
                                                          self.rtf))
 
     def _on_commands(self, msg):

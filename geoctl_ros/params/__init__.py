@@ -21,6 +21,7 @@ from geoctl_ros.params.build import (
                                      mixer,
                                      plant_config,
                                      setpoint_rotation,
+                                     settings,
                                      testbed_sim,
 )
 from geoctl_ros.params.files import flatten, load_parameter_file, node_overrides
@@ -47,4 +48,4 @@ __all__ = ['BOTH', 'BY_NAME', 'CONE_KEY', 'CONE_SCHEMA', 'CONTROLLER', 'ConfigEr
            'airframe',
            'check_value', 'cone_param', 'cone_set', 'controller_config', 'controller_setup',
            'flatten', 'load_parameter_file', 'mixer', 'node_overrides', 'plant_config', 'resolve',
-           'schema_for', 'setpoint_rotation', 'testbed_sim']
+           'schema_for', 'setpoint_rotation', 'settings', 'testbed_sim']

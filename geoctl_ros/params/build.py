@@ -2,6 +2,7 @@
 that span several parameters (a set point against the cones, a thrust limit against the curve, an
 airframe that must produce every moment).
 """
+import collections
 from dataclasses import dataclass, fields
 import math
 
@@ -40,6 +41,23 @@ def controller_config(values):
         disturbance_model=values['disturbance_model'], delta_bar_max=values['delta_bar_max'],
         cog_estimate_max=values['cog_estimate_max'],
         unmodelled_moment_max=values['unmodelled_moment_max'])
+
+
+_RECORDS = {}
+
+
+def settings(values, prefix=''):
+    """Resolved parameters as a read-only record with one attribute per parameter (dots as
+    underscores, ``prefix`` such as 'mavlink.' dropped): what a node reads once, at
+    configuration, by name instead of by indexing the parameter dict. The names are the schema's,
+    so there is no second list of them.
+    """
+    names = tuple(k[len(prefix):] if k.startswith(prefix) else k for k in values)
+    record = _RECORDS.get(names)
+    if record is None:
+        record = _RECORDS[names] = collections.namedtuple(
+            'Settings', [n.replace('.', '_') for n in names])
+    return record(*values.values())
 
 
 def loop_settings(values):
