@@ -20,6 +20,11 @@ OK, WARN, ERROR = 0, 1, 2
 FAILSAFE = 'failsafe'          # how the state of a vehicle that failed safe begins
 
 
+def failsafe(why):
+    """The state (and disarm reason) of a vehicle that failed safe because of why."""
+    return '%s: %s' % (FAILSAFE, why)
+
+
 class Window(NamedTuple):
     """Mean, standard deviation, 99th percentile and maximum of a quantity over one diagnostics
     window, in seconds (shown in milliseconds).
@@ -49,6 +54,14 @@ def aggregate(windows):
         return None
     return Window(float(rows[:, 0].mean()), float(np.sqrt((rows[:, 1] ** 2).mean())),
                   float(np.percentile(rows[:, 2], 99)), float(rows[:, 3].max()))
+
+
+def aggregate_ms(statuses, name):
+    """The windows of one Figures field (``loop_period``, ...) over several reports, as one
+    (``aggregate``), in milliseconds; None when none has it.
+    """
+    w = aggregate(getattr(s.figures, name) for s in statuses)
+    return None if w is None else Window(*(1e3 * x for x in w))
 
 
 class Counts(NamedTuple):

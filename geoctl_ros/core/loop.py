@@ -10,14 +10,24 @@ import numpy as np
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.control import AttitudeController, SetpointRejected
-from geoctl_ros.core.diagnostics import ERROR, FAILSAFE, OK, WARN, Counts, Figures, Gaps, Status
+from geoctl_ros.core.diagnostics import (
+    ERROR,
+    FAILSAFE,
+    OK,
+    WARN,
+    Counts,
+    Figures,
+    Gaps,
+    Status,
+    failsafe,
+)
 from geoctl_ros.core.gaps import GYRO, POSE, GapBridge
 from geoctl_ros.core.safety import Stream, Supervisor, angular_velocity_problem, quaternion_problem
 from geoctl_ros.core.stats import WindowStats
 from geoctl_ros.core.step import ControlTick
 
 NEAR_CONE_DEG = 2.0           # a cone margin below this is reported (WARN)
-NON_FINITE = 'failsafe: non-finite control output'
+NON_FINITE = failsafe('non-finite control output')
 
 
 def step_period(since, period):

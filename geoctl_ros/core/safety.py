@@ -20,6 +20,8 @@ import math
 
 import numpy as np
 
+from geoctl_ros.core.diagnostics import failsafe
+
 QUATERNION_TOLERANCE = 1e-3
 
 
@@ -157,7 +159,7 @@ class Supervisor:
         if self.armed:
             problem = self.input_loss(now)
             if problem:
-                self.disarm('failsafe: ' + problem)
+                self.disarm(failsafe(problem))
         return self.armed
 
 

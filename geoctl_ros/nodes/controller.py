@@ -18,7 +18,7 @@ from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core import so3
-from geoctl_ros.core.diagnostics import FAILSAFE
+from geoctl_ros.core.diagnostics import FAILSAFE, failsafe
 from geoctl_ros.core.gains import gain_condition
 from geoctl_ros.core.loop import ControlLoop, step_period
 from geoctl_ros.core.stats import WindowStats
@@ -130,6 +130,9 @@ class ControllerNode(Node):
 
     def on_shutdown(self):
         """Leave the motors at zero when the node stops."""
+        self._publish_zero()
+
+    def _publish_zero(self):
         self.pub_motors.publish(Float64MultiArray(data=[0.0] * self.loop.rotor_count))
 
     # --- inputs ------------------------------------------------------------------------------
@@ -212,11 +215,10 @@ class ControllerNode(Node):
         """A control step raised (a defect): disarm, command zero, and say so; the node stays
         up, so its topics, diagnostics and services still answer.
         """
-        reason = '%s: control step failed: %s: %s' % (FAILSAFE, type(error).__name__, error)
+        reason = failsafe('control step failed: %s: %s' % (type(error).__name__, error))
         self.loop.disarm(reason)
         self.get_logger().error(reason, throttle_duration_sec=1.0)
-        self._msgs['motors'].data = [0.0] * self.loop.rotor_count
-        self.pub_motors.publish(self._msgs['motors'])
+        self._publish_zero()
 
     def _tick(self, now):
         """One control step at now: the motor command is published first, then the monitoring

@@ -23,7 +23,7 @@ import numpy as np
 import rclpy
 
 from geoctl_ros.core import so3
-from geoctl_ros.core.diagnostics import aggregate
+from geoctl_ros.core.diagnostics import aggregate_ms
 from geoctl_ros.params import (
     CONTROLLER,
     cone_set,
@@ -67,8 +67,8 @@ def headless(out):
 
 def _diag_stats(diags, name):
     """The controller's windows of one diagnostics figure (a Figures field) as one, ms."""
-    w = aggregate(getattr(d.figures, name) for d in diags)
-    return None if w is None else {k + '_ms': 1e3 * v for k, v in w._asdict().items()}
+    w = aggregate_ms(diags, name)
+    return None if w is None else {k + '_ms': v for k, v in w._asdict().items()}
 
 
 def fly(params_file, out, duration, monitor_factory=None, mavlink=None):

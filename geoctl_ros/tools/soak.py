@@ -43,7 +43,7 @@ import rclpy
 from std_msgs.msg import String
 
 from geoctl_ros.core import so3
-from geoctl_ros.core.diagnostics import WARN, aggregate, to_values
+from geoctl_ros.core.diagnostics import WARN, aggregate_ms, to_values
 from geoctl_ros.nodes.qos import EVENT
 from geoctl_ros.params import (
     CONTROLLER,
@@ -230,8 +230,8 @@ def _windows(diags, name):
     """(p99 over the windows' p99, max) of a windowed figure of the controller's diagnostics
     (a Figures field), ms.
     """
-    w = aggregate(getattr(d.figures, name) for d in diags)
-    return (float('nan'), float('nan')) if w is None else (1e3 * w.p99, 1e3 * w.max)
+    w = aggregate_ms(diags, name)
+    return (float('nan'), float('nan')) if w is None else (w.p99, w.max)
 
 
 def _cones(params_file):
