@@ -96,6 +96,7 @@ def ros():
 
 
 @needs_launch
+@pytest.mark.realtime
 def test_sil_launch_flies_the_testbed_on_loopback_and_keeps_the_cone(installed, ros, tmp_path):
     env, prefix = installed
     mon = ros

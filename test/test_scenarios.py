@@ -5,6 +5,8 @@ import math
 import multiprocessing
 import os
 import re
+import subprocess
+import sys
 
 import matplotlib.image
 import pytest
@@ -223,3 +225,28 @@ def test_a_late_loop_keeps_the_lag_compensated_testbed_steady():
     assert abs(r.history[:, 5:8]).max() < 1.5                   # rad/s
     assert not r.summary['constraint_violated']
     assert min(r.summary['min_cone_angle_deg'].values()) > 12.0 + 10.0
+
+
+def _scenario_cli(*args):
+    """The scenario command as a user runs it, in a process of its own."""
+    return subprocess.run([sys.executable, '-m', 'geoctl_ros.tools.scenario', *map(str, args)],
+                          capture_output=True, text=True)
+
+
+def test_scenario_reports_a_bad_file_or_output_in_one_line(tmp_path):
+    bad_yaml = tmp_path / 'broken.yaml'
+    bad_yaml.write_text('controller:\n  ros__parameters:\n    k_R: [0.4\n')
+    r = _scenario_cli(bad_yaml, '--out', tmp_path / 'o')
+    assert r.returncode == 2 and 'Traceback' not in r.stderr
+    assert str(bad_yaml) in r.stderr and 'line 3' in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+    missing = tmp_path / 'nope.yaml'
+    r = _scenario_cli(missing, '--out', tmp_path / 'o')
+    assert r.returncode == 2 and 'Traceback' not in r.stderr and str(missing) in r.stderr
+    blocker = tmp_path / 'file'
+    blocker.write_text('')
+    r = _scenario_cli(os.path.join(ROOT, 'config', 'testbed.yaml'), '--out', blocker / 'out',
+                      '--duration', '0.05', '--no-plots')
+    assert r.returncode == 2 and 'Traceback' not in r.stderr, r.stderr
+    assert str(blocker / 'out') in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr

@@ -155,6 +155,9 @@ class Monitor(Node):
     def since(self, key, t0):
         return [v for t, v in self.log[key] if t >= t0]
 
+    def between(self, key, t0, t1):
+        return [v for t, v in self.log[key] if t0 <= t <= t1]
+
     def last(self, key):
         return self.log[key][-1][1] if self.log[key] else None
 

@@ -138,49 +138,10 @@ class Session:
         else:
             self._fault_pub.publish(self._String(data='%s %g' % (kind, arg)))
 
-    def start_loads(self, loads):
-        env = cli_env(self.env)
-        for load in loads:
-            if load == 'cli':
-                if not shutil.which('ros2', path=os.path.dirname(sys.executable) + os.pathsep
-                                    + env.get('PATH', '')):
-                    raise RuntimeError('the cli load needs the ros2 command (README, "Set-up")')
-                env_cli = dict(env, PATH=os.path.dirname(sys.executable) + os.pathsep
-                               + env.get('PATH', ''))
-                self.loads.append(subprocess.Popen(['bash', '-c', CLI_LOOP], env=env_cli,
-                                                   stdout=subprocess.DEVNULL,
-                                                   stderr=subprocess.DEVNULL,
-                                                   start_new_session=True))
-            elif load in ('churn', 'params'):
-                code = CHURN_LOOP if load == 'churn' else PARAMS_LOOP
-                self.loads.append(subprocess.Popen([sys.executable, '-c', code], env=env,
-                                                   stdout=subprocess.DEVNULL,
-                                                   stderr=subprocess.DEVNULL,
-                                                   start_new_session=True))
-            elif load == 'cpu':
-                for _ in range(os.cpu_count() or 1):
-                    self.loads.append(subprocess.Popen(
-                        [sys.executable, '-c', 'while True: pass'], start_new_session=True))
-            else:
-                raise ValueError('unknown load %r' % load)
-
-    def stop_loads(self):
-        for p in self.loads:
-            try:
-                os.killpg(p.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-            p.wait()
-        self.loads = []
-        if shutil.which('ros2', path=os.path.dirname(sys.executable)):
-            subprocess.run([os.path.join(os.path.dirname(sys.executable), 'ros2'), 'daemon',
-                            'stop'], env=cli_env(self.env), stdout=subprocess.DEVNULL,
-                           stderr=subprocess.DEVNULL, timeout=30)
-
     def phase(self, duration, loads=(), fault=None):
         """Fly duration seconds with the loads running and the fault repeating; the figures."""
         mon = self.mon
-        self.start_loads(loads)
+        self.loads = start_loads(loads, self.env)
         t0 = time.monotonic()
         next_fault = t0 + 1.0
         try:
@@ -195,7 +156,8 @@ class Session:
                     self.fault('off', 0)
                     mon.wait_for(lambda: mon.arm(True).success, 10.0, 're-arming after a failsafe')
         finally:
-            self.stop_loads()          # the loads' teardown is part of the window
+            stop_loads(self.loads, self.env)     # the loads' teardown is part of the window
+            self.loads = []
             self.fault('off', 0)
             mon.spin_for(1.0)
         self.t_end = time.monotonic()
@@ -224,6 +186,61 @@ class Session:
             self.relay.terminate()
             self.relay.wait(10)
         return [p.stop() for p in self.procs]
+
+
+def ros2_command():
+    """The `ros2` command beside this interpreter (the venv's) or on PATH, or None."""
+    return (shutil.which('ros2', path=os.path.dirname(sys.executable))
+            or shutil.which('ros2'))
+
+
+def start_loads(loads, env):
+    """Start the named loads (CASES) as other people's processes in a plain LOCALHOST shell
+    beside nodes started with env; the processes, for stop_loads.
+    """
+    env = cli_env(env)
+    procs = []
+    try:
+        for load in loads:
+            if load == 'cli':
+                ros2 = ros2_command()
+                if ros2 is None:
+                    raise RuntimeError('the cli load needs the ros2 command (README, "Set-up")')
+                env_cli = dict(env, PATH=os.path.dirname(ros2) + os.pathsep + env.get('PATH', ''))
+                procs.append(subprocess.Popen(['bash', '-c', CLI_LOOP], env=env_cli,
+                                              stdout=subprocess.DEVNULL,
+                                              stderr=subprocess.DEVNULL, start_new_session=True))
+            elif load in ('churn', 'params'):
+                code = CHURN_LOOP if load == 'churn' else PARAMS_LOOP
+                procs.append(subprocess.Popen([sys.executable, '-c', code], env=env,
+                                              stdout=subprocess.DEVNULL,
+                                              stderr=subprocess.DEVNULL, start_new_session=True))
+            elif load == 'cpu':
+                for _ in range(os.cpu_count() or 1):
+                    procs.append(subprocess.Popen([sys.executable, '-c', 'while True: pass'],
+                                                  start_new_session=True))
+            else:
+                raise ValueError('unknown load %r' % load)
+    except BaseException:
+        stop_loads(procs, env)
+        raise
+    return procs
+
+
+def stop_loads(procs, env):
+    """Stop what start_loads started (each with its process group) and the `ros2` daemon that
+    the cli load spawns.
+    """
+    for p in procs:
+        try:
+            os.killpg(p.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        p.wait()
+    ros2 = ros2_command()
+    if ros2 is not None:
+        subprocess.run([ros2, 'daemon', 'stop'], env=cli_env(env), stdout=subprocess.DEVNULL,
+                       stderr=subprocess.DEVNULL, timeout=30)
 
 
 def _windows(diags, name):
