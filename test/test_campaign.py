@@ -15,6 +15,7 @@ from geoctl_ros.tools.batch import run_batch
 # same batches as these, and a 50-run campaign's runs.csv was byte-identical on both stacks when
 # checked by hand (README "Two stacks")
 odroid = pytest.mark.odroid
+pytestmark = pytest.mark.headless
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TESTBED = os.path.join(ROOT, 'config', 'testbed.yaml')

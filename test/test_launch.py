@@ -124,7 +124,7 @@ def test_sil_launch_flies_the_testbed_on_loopback_and_keeps_the_cone(installed, 
         reply = mon.arm_when_ready()
         assert reply.success, reply.message
         t0 = time.monotonic()
-        mon.spin_for(8.0)
+        mon.spin_for(8.0)                   # round the cone (closest about 7 s after arming)
         assert mon.last_diagnostic().figures.armed
         values = resolve('controller', node_overrides(
             load_parameter_file(os.path.join(ROOT, 'config', 'testbed.yaml')), 'controller'))

@@ -18,6 +18,7 @@ from geoctl_ros.tools.demo import table_row
 # the same on both stacks when compared by hand (README "Two stacks"), and the full runs alone
 # would double that stack's share of ./run test.
 odroid = pytest.mark.odroid
+pytestmark = pytest.mark.headless
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENARIOS = os.path.join(ROOT, 'config', 'scenarios')

@@ -119,12 +119,16 @@ def test_param_dump_restarts_a_node_with_identical_parameters(tmp_path, stop_dae
     first = NodeProcess(node, TESTBED, log_dir=tmp_path)
     try:
         if node == 'controller':       # a cone added at run time, and one half-defined
-            for name, value in (('cones.sun.axis', '[0.0, 0.0, 1.0]'),
-                                ('cones.sun.half_angle_deg', '10.0'),
-                                ('cones.names', '[obstacle, sun]'),
-                                ('cones.moon.axis', '[0.0, 0.0, -1.0]')):
-                r = ros2('param', 'set', '--timeout', '20', '/' + node, name, value)
-                assert 'successful' in r.stdout, r.stdout + r.stderr
+            r = ros2('param', 'set', '--timeout', '20', '/' + node, 'cones.sun.axis',
+                     '[0.0, 0.0, 1.0]')
+            assert 'successful' in r.stdout, r.stdout + r.stderr
+            # the rest in one call, set one by one in the file's order
+            (tmp_path / 'more.yaml').write_text(
+                '/controller:\n  ros__parameters:\n    cones:\n'
+                '      sun: {half_angle_deg: 10.0}\n      names: [obstacle, sun]\n'
+                '      moon: {axis: [0.0, 0.0, -1.0]}\n')
+            r = ros2('param', 'load', '--timeout', '20', '/' + node, str(tmp_path / 'more.yaml'))
+            assert r.returncode == 0 and r.stdout.count('successful') == 3, r.stdout + r.stderr
         dump = ros2('param', 'dump', '--timeout', '20', '/' + node)
         assert dump.returncode == 0, dump.stderr
     finally:
