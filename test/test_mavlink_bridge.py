@@ -158,11 +158,11 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     assert gcs.wait(lambda m: m.get_type() == 'MISSION_COUNT', 5.0, 'MISSION_COUNT').count == 0
     # telemetry at its rates, in NED/FRD
     t0 = time.monotonic()
-    gcs.poll(3.0)
+    gcs.poll(2.0)
     mon.spin_for(0.2)
     atts = [m for m in gcs.since(t0, 'ATTITUDE_QUATERNION') if is_ours(m)]
-    assert 40 <= len(atts) <= 80                                   # 20 Hz for 3 s
-    assert 2 <= len([m for m in gcs.since(t0, 'HEARTBEAT') if is_ours(m)]) <= 4
+    assert 27 <= len(atts) <= 53                                   # 20 Hz for 2 s
+    assert 1 <= len([m for m in gcs.since(t0, 'HEARTBEAT') if is_ours(m)]) <= 3
     R_true = so3.quat_to_rot(mon.last('true_pose')[1])
     R_mav = frames.from_wxyz((atts[-1].q1, atts[-1].q2, atts[-1].q3, atts[-1].q4))
     assert math.degrees(so3.angle(frames.ned_frd(R_true).T @ R_mav)) < 3.0
@@ -337,7 +337,15 @@ def test_with_a_key_only_the_station_holding_it_reads_sets_arms_and_disarms(tmp_
                       guess.command_long_encode(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM,
                                                 0, 1, 0, 0, 0, 0, 0, 0).pack(guess)):
             stranger.sendto(frame, bridge)
-        mon.spin_for(1.5)
+        t_sent = time.monotonic()
+
+        def refusals():
+            d = [d for d in mon.since('other diagnostics', t_sent) if 'signing' in d]
+            return d and {k: int(d[-1][k]) for k in ('refused unsigned', 'refused replayed',
+                                                     'refused bad signature')}
+        mon.wait_for(lambda: refusals() == {'refused unsigned': 2, 'refused replayed': 1,
+                                            'refused bad signature': 2}, 5.0,
+                     "the stranger's five frames refused (2 unsigned, 1 replay, 2 bad signatures)")
         assert mon.last_diagnostic().figures.armed is False
         # the genuine station is not locked out by the forged frame from the future
         t0 = time.monotonic()
@@ -345,11 +353,8 @@ def test_with_a_key_only_the_station_holding_it_reads_sets_arms_and_disarms(tmp_
         p = gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE', 5.0, 'a parameter read', mon,
                      since=t0)
         assert p.param_value == pytest.approx(0.5)                    # the stranger's 0.9 not
-        mon.spin_for(1.2)
         diag = [d for _, d in mon.log['other diagnostics'] if 'signing' in d][-1]
         assert diag['signing'] == 'on (link id 0)'
-        assert int(diag['refused unsigned']) == 2 and int(diag['refused replayed']) == 1
-        assert int(diag['refused bad signature']) == 2
         assert 'from' in diag['last refused']
     finally:
         stranger.close()
