@@ -140,6 +140,7 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros):
     mon.wait_for(lambda: zero_commands(mon), 2.0, 'zero commands after disarming')
 
 
+@pytest.mark.realtime
 def test_arming_needs_fresh_inputs_and_disarming_zeroes_the_motors(ros):
     mon, launch = ros
     launch('controller', TESTBED, *FED)
@@ -190,6 +191,7 @@ def test_input_dropout_fails_safe_to_zero_and_disarms(ros):
     assert mon.arm(True).success                              # until armed again
 
 
+@pytest.mark.realtime
 def test_nan_and_garbage_inputs_are_refused_and_never_reach_a_topic(ros):
     mon, launch = ros
     fed_controller(mon, launch, arm=True)
