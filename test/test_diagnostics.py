@@ -1,6 +1,8 @@
-"""The controller's diagnostics contract (geoctl_ros.core.diagnostics): what the loop reports comes
-back typed from what is published, a reader survives any text, and no other file spells a key.
+"""The diagnostics contracts (the controller's, geoctl_ros.core.diagnostics; the MAVLink bridge's,
+geoctl_ros.mavlink.health): what is reported comes back typed from what is published, a reader
+survives any text, and no other file spells a key.
 """
+import dataclasses
 import math
 import os
 import pathlib
@@ -11,6 +13,7 @@ import pytest
 from geoctl_ros.core import diagnostics
 from geoctl_ros.core.diagnostics import Counts, Figures, Gaps, Window, from_values, key, to_values
 from geoctl_ros.core.stats import WindowStats
+from geoctl_ros.mavlink import health
 
 pytestmark = pytest.mark.odroid
 ROOT = pathlib.Path(__file__).resolve().parent.parent
@@ -56,17 +59,50 @@ def test_a_reader_never_fails_on_text_it_does_not_understand():
     assert back.pose_age_at_tick is None and back.min_cone_margin_deg is None
 
 
+BRIDGE = health.BridgeStatus(
+    url='udpout:127.0.0.1:14550', gcs_age=1.25, link_counts={'received': 7, 'bad data': 13},
+    counts=dict.fromkeys(health.BRIDGE_COUNTS, 2), signing_link_id=0,
+    refused={'unsigned': 2, 'bad signature': 1, 'replayed': 0, 'too old': 0},
+    last_refused='unsigned COMMAND_LONG from 127.0.0.1:5000', last_error='bad CRC',
+    autopilot_age=None, autopilot_messages=17)
+
+
+def test_the_bridge_status_reads_back_as_it_was():
+    values = health.to_values(BRIDGE)
+    back, rest = health.from_values(list(values.items()) + [('level', '1')])
+    assert back == dataclasses.replace(BRIDGE, gcs_age=pytest.approx(1.2, abs=0.051))
+    assert rest == {'level': '1'}
+    unsigned, _ = health.from_values(health.to_values(health.BridgeStatus('udp', None)).items())
+    assert not unsigned.signing and unsigned.gcs_age is None and unsigned.refused == {}
+    assert unsigned.autopilot_messages is None                    # no autopilot link
+
+
+def test_the_bridge_reader_never_fails_on_text_it_does_not_understand():
+    values = health.to_values(BRIDGE)
+    for k, v in list(values.items()):          # garble the numbers 13 and 17, and the link id
+        values[k] = {'13': 'lots', '17': '?', 'on (link id 0)': 'on (x)'}.get(v, v)
+    back, _ = health.from_values(values.items())
+    assert 'bad data' not in back.link_counts and back.link_counts['received'] == 7
+    assert not back.signing and back.autopilot_messages is None
+    assert health.from_values({'a key': 'of someone else'}.items())[0] is None
+
+
 def test_no_other_file_spells_a_diagnostics_key():
-    """Renaming a key changes core/diagnostics.py only: no other source (package, tools, tests,
-    benchmarks) writes a key of more than one word.
+    """Renaming a key changes core/diagnostics.py (the controller's) or mavlink/health.py (the
+    bridge's) only: no other source (package, tools, tests, benchmarks) writes a key of more than
+    one word.
     """
     keys = [k for k, _, _ in diagnostics.KEYS.values() if ' ' in k]
     assert len(keys) > 10
-    own = ROOT / 'geoctl_ros' / 'core' / 'diagnostics.py'
+    bridge_keys = [k for k in health.to_values(BRIDGE) if ' ' in k]
+    assert len(bridge_keys) > 10
+    keys += bridge_keys
+    owners = {ROOT / 'geoctl_ros' / 'core' / 'diagnostics.py',
+              ROOT / 'geoctl_ros' / 'mavlink' / 'health.py'}
     found = []
     for folder in ('geoctl_ros', 'test', 'benchmarks'):
         for path in (ROOT / folder).rglob('*.py'):
-            if path == own:
+            if path in owners:
                 continue
             text = path.read_text()
             found += ['%s: %r' % (os.path.relpath(path, ROOT), k) for k in keys

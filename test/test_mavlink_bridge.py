@@ -18,7 +18,7 @@ from sensor_msgs.msg import Imu
 from support import FakeInputs
 
 from geoctl_ros.core import so3
-from geoctl_ros.mavlink import frames
+from geoctl_ros.mavlink import frames, health
 from geoctl_ros.mavlink.params import TABLE
 from geoctl_ros.nodes import qos
 from geoctl_ros.tools.processes import NodeProcess
@@ -208,7 +208,7 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
              mon, since=t0)
 
     def bad_data_counted():
-        return any(int(d.get('link bad data', 0)) > 0 for d in mon.since('other diagnostics', t0))
+        return any(r.status.link_counts.get('bad data', 0) > 0 for r in mon.since('bridge', t0))
     mon.wait_for(bad_data_counted, 5.0, 'the garbage counted in the diagnostics')
     ctl = mon.last_diagnostic()
     assert ctl.figures.armed
@@ -238,8 +238,8 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     port = int(gcs.conn.address.split(':')[1]) if hasattr(gcs.conn, 'address') else None
     gcs.conn.close()
     t_gone = time.monotonic()
-    mon.wait_for(lambda: any('no ground station heartbeat' in d.get('message', '')
-                             for d in mon.since('other diagnostics', t_gone)), 10.0,
+    mon.wait_for(lambda: any(health.NO_GCS_HEARTBEAT in r.message
+                             for r in mon.since('bridge', t_gone)), 10.0,
                  'the lost ground station in the diagnostics')
     back = Endpoint('udpin:127.0.0.1:%d' % port, 255, 190)
     t0 = time.monotonic()
@@ -340,11 +340,11 @@ def test_with_a_key_only_the_station_holding_it_reads_sets_arms_and_disarms(tmp_
         t_sent = time.monotonic()
 
         def refusals():
-            d = [d for d in mon.since('other diagnostics', t_sent) if 'signing' in d]
-            return d and {k: int(d[-1][k]) for k in ('refused unsigned', 'refused replayed',
-                                                     'refused bad signature')}
-        mon.wait_for(lambda: refusals() == {'refused unsigned': 2, 'refused replayed': 1,
-                                            'refused bad signature': 2}, 5.0,
+            reports = mon.since('bridge', t_sent)
+            return reports and {k: reports[-1].status.refused[k]
+                                for k in ('unsigned', 'replayed', 'bad signature')}
+        mon.wait_for(lambda: refusals() == {'unsigned': 2, 'replayed': 1, 'bad signature': 2},
+                     5.0,
                      "the stranger's five frames refused (2 unsigned, 1 replay, 2 bad signatures)")
         assert mon.last_diagnostic().figures.armed is False
         # the genuine station is not locked out by the forged frame from the future
@@ -353,9 +353,9 @@ def test_with_a_key_only_the_station_holding_it_reads_sets_arms_and_disarms(tmp_
         p = gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE', 5.0, 'a parameter read', mon,
                      since=t0)
         assert p.param_value == pytest.approx(0.5)                    # the stranger's 0.9 not
-        diag = [d for _, d in mon.log['other diagnostics'] if 'signing' in d][-1]
-        assert diag['signing'] == 'on (link id 0)'
-        assert 'from' in diag['last refused']
+        bridge_status = mon.last('bridge').status
+        assert bridge_status.signing and bridge_status.signing_link_id == 0
+        assert 'from' in bridge_status.last_refused
     finally:
         stranger.close()
         mon.destroy_node()

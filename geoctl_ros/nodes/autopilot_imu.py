@@ -7,6 +7,7 @@ import time
 from sensor_msgs.msg import Imu
 
 from geoctl_ros.mavlink import frames
+from geoctl_ros.mavlink.health import NO_AUTOPILOT_HEARTBEAT
 from geoctl_ros.mavlink.link import Link
 from geoctl_ros.mavlink.vehicle import m_const
 from geoctl_ros.nodes import qos
@@ -54,13 +55,13 @@ class AutopilotImu:
                 self._pub.publish(out)
                 self.messages += 1
 
-    def status(self, now):
-        """(diagnostics key/values, a warning or None) at now (time.monotonic())."""
+    def health(self, now):
+        """(heartbeat age in s or None, HIGHRES_IMU republished, a warning or None) at now
+        (time.monotonic()).
+        """
         age = None if self.heartbeat is None else now - self.heartbeat
-        values = {'autopilot': 'none yet' if age is None else 'heartbeat %.1f s ago' % age,
-                  'autopilot imu messages': str(self.messages)}
         lost = age is None or age > HEARTBEAT_TIMEOUT
-        return values, 'no autopilot heartbeat' if lost else None
+        return age, self.messages, NO_AUTOPILOT_HEARTBEAT if lost else None
 
     def close(self):
         self.link.close()

@@ -5,6 +5,8 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
 from geoctl_ros.core.diagnostics import Status, from_values, to_values
+from geoctl_ros.mavlink.health import Report as BridgeReport
+from geoctl_ros.mavlink.health import from_values as bridge_values
 
 
 def stamp_seconds(stamp):
@@ -62,6 +64,12 @@ def status_of(status_msg):
     """diagnostic_msgs/DiagnosticStatus of the controller -> a core Status with typed figures."""
     return Status(level(status_msg), status_msg.message,
                   from_values((kv.key, kv.value) for kv in status_msg.values))
+
+
+def bridge_report(status_msg):
+    """diagnostic_msgs/DiagnosticStatus of the MAVLink bridge -> a typed mavlink.health.Report."""
+    figures, _ = bridge_values((kv.key, kv.value) for kv in status_msg.values)
+    return BridgeReport(level(status_msg), status_msg.message, figures)
 
 
 def key_values(status_msg):

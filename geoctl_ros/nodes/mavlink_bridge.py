@@ -26,7 +26,7 @@ from std_srvs.srv import SetBool
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.diagnostics import ERROR, WARN
-from geoctl_ros.mavlink import signing
+from geoctl_ros.mavlink import health, signing
 from geoctl_ros.mavlink.link import Link, encoder
 from geoctl_ros.mavlink.params import BY_ROS, TABLE, to_ros
 from geoctl_ros.mavlink.vehicle import Vehicle, m_const
@@ -85,7 +85,7 @@ class MavlinkBridge(Node):
         self.autopilot = (AutopilotImu(self, cfg.autopilot_url, self.sysid,
                                        cfg.autopilot_imu_rate_hz, self.vehicle.mav)
                           if cfg.autopilot_url else None)
-        self.counts = {'ignored': 0, 'arm requests': 0, 'param sets': 0, 'statustext': 0}
+        self.counts = dict.fromkeys(health.BRIDGE_COUNTS, 0)
         self.gcs_heartbeat = None
         self._text_period = 1.0 / cfg.statustext_rate_hz
         self._last_text = -1e9
@@ -226,14 +226,14 @@ class MavlinkBridge(Node):
         if what == 'send':
             self.link.send(action[1])
         elif what == 'ignored':
-            self.counts['ignored'] += 1
+            self.counts[health.IGNORED] += 1
         elif what == 'arm':
             self._arm(action[1], action[2])
         elif what == 'set':
             self._set_param(*action[1:])
 
     def _arm(self, on, command):
-        self.counts['arm requests'] += 1
+        self.counts[health.ARM_REQUESTS] += 1
         if not self.arm_client.service_is_ready():
             self.link.send(self.vehicle.command_ack(command, 'MAV_RESULT_TEMPORARILY_REJECTED'))
             self._text('arm: the controller is not reachable', 'MAV_SEVERITY_ERROR')
@@ -251,7 +251,7 @@ class MavlinkBridge(Node):
         future.add_done_callback(done)
 
     def _set_param(self, name, value, index):
-        self.counts['param sets'] += 1
+        self.counts[health.PARAM_SETS] += 1
 
         def answer(ok, reason=''):
             if ok:
@@ -284,9 +284,9 @@ class MavlinkBridge(Node):
         if limited and now - self._last_text < self._text_period:
             return
         self._last_text = now
-        self.counts['statustext'] += 1
+        self.counts[health.STATUSTEXT] += 1
         chunks = [text[i:i + STATUSTEXT_LEN] for i in range(0, len(text), STATUSTEXT_LEN)] or ['']
-        tid = (self.counts['statustext'] % 65535) + 1 if len(chunks) > 1 else 0
+        tid = (self.counts[health.STATUSTEXT] % 65535) + 1 if len(chunks) > 1 else 0
         for k, chunk in enumerate(chunks):
             msg = self.vehicle.statustext(chunk, severity)
             msg.id, msg.chunk_seq = tid, k
@@ -296,34 +296,30 @@ class MavlinkBridge(Node):
     def _publish_diagnostics(self):
         now = time.monotonic()
         gcs_age = None if self.gcs_heartbeat is None else now - self.gcs_heartbeat
-        values = {'link': self.link.url,
-                  'ground station': ('none yet' if gcs_age is None else
-                                     'heartbeat %.1f s ago' % gcs_age)}
-        values.update({'link ' + k: str(n) for k, n in self.link.counts.items()})
-        values.update({k: str(n) for k, n in self.counts.items()})
         warnings = []
         if self.link.verifier is None:
             warnings.append(UNSIGNED_WARNING)
-            values['signing'] = 'off'
-        else:
-            values['signing'] = 'on (link id %d)' % self.link_id
-            values.update({'refused ' + k: str(n) for k, n in self.link.verifier.refused.items()})
-            if self.link.refusals:
-                why, kind, sender = self.link.refusals[-1]
-                values['last refused'] = '%s %s from %s' % (why, kind, sender)
         if gcs_age is None or gcs_age > GCS_TIMEOUT:
-            warnings.append('no ground station heartbeat')
-        if self.link.counts['bad data']:
-            values['link last error'] = self.link.last_error[:80]
+            warnings.append(health.NO_GCS_HEARTBEAT)
+        ap_age = ap_messages = None
         if self.autopilot is not None:
-            ap_values, ap_warning = self.autopilot.status(now)
-            values.update(ap_values)
+            ap_age, ap_messages, ap_warning = self.autopilot.health(now)
             if ap_warning:
                 warnings.append(ap_warning)
-        status = DiagnosticStatus(level=bytes([1 if warnings else 0]),
-                                  name='geoctl_ros: mavlink_bridge', hardware_id='mavlink',
+        verifier = self.link.verifier
+        last = self.link.refusals[-1] if verifier is not None and self.link.refusals else None
+        figures = health.BridgeStatus(
+            url=self.link.url, gcs_age=gcs_age, link_counts=dict(self.link.counts),
+            counts=dict(self.counts), signing_link_id=None if verifier is None else self.link_id,
+            refused={} if verifier is None else dict(verifier.refused),
+            last_refused='' if last is None else '%s %s from %s' % tuple(last),
+            last_error=self.link.last_error if self.link.counts['bad data'] else '',
+            autopilot_age=ap_age, autopilot_messages=ap_messages)
+        status = DiagnosticStatus(level=bytes([1 if warnings else 0]), name=health.NAME,
+                                  hardware_id='mavlink',
                                   message='; '.join(warnings) or 'ground station connected',
-                                  values=[KeyValue(key=k, value=v) for k, v in values.items()])
+                                  values=[KeyValue(key=k, value=v)
+                                          for k, v in health.to_values(figures).items()])
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(msg)

@@ -23,9 +23,16 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
+from geoctl_ros.mavlink.health import NAME as BRIDGE_STATUS
 from geoctl_ros.nodes import qos
 from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
-from geoctl_ros.nodes.conversions import key_values, quaternion, stamp_seconds, status_of
+from geoctl_ros.nodes.conversions import (
+    bridge_report,
+    key_values,
+    quaternion,
+    stamp_seconds,
+    status_of,
+)
 from geoctl_ros.tools.rosenv import node_env
 
 
@@ -104,6 +111,7 @@ class Monitor(Node):
         self._sub(Float64MultiArray, 'disturbance_estimate', 'dbar', tel, lambda m: list(m.data))
         self._sub(PoseStamped, 'sim/true_pose', 'true_pose', tel, _pose_quat)
         self._sub(PoseStamped, 'pose', 'pose', qos.SENSOR, _pose_quat)
+        self.log['bridge'] = []                 # the MAVLink bridge's, typed
         self.log['other diagnostics'] = []
         self._sub(DiagnosticArray, '/diagnostics', 'diagnostics', qos.EVENT, None)
         self._sub(Vector3Stamped, 'attitude_error', 'eR', tel,
@@ -119,10 +127,12 @@ class Monitor(Node):
             return
 
         def record(msg):
-            if key == 'diagnostics':        # the controller's typed, any other node's as text
+            if key == 'diagnostics':     # the controller's and the bridge's typed, others' as text
                 for s in msg.status:
                     if s.name == CONTROLLER_STATUS:
                         self.log[key].append((time.monotonic(), status_of(s)))
+                    elif s.name == BRIDGE_STATUS:
+                        self.log['bridge'].append((time.monotonic(), bridge_report(s)))
                     else:
                         self.log['other diagnostics'].append((time.monotonic(), key_values(s)))
                 return
