@@ -6,9 +6,7 @@ Tests that need the ``ros2`` command (../shared/wheels/ros2cli, installed by ./r
 with the reason, where it is missing.
 """
 import os
-import shutil
 import subprocess
-import sys
 import time
 
 import numpy as np
@@ -19,12 +17,12 @@ import yaml
 from geoctl_ros.core import so3
 from geoctl_ros.tools.processes import NodeProcess, process_sockets
 from geoctl_ros.tools.rosenv import cli_env, config_dir
-from geoctl_ros.tools.soak import Session
+from geoctl_ros.tools.soak import Session, ros2_command
 
 pytestmark = pytest.mark.dds
 
 TESTBED = os.path.join(config_dir(), 'testbed.yaml')
-ROS2 = shutil.which('ros2', path=os.path.dirname(sys.executable)) or shutil.which('ros2')
+ROS2 = ros2_command()
 needs_ros2 = pytest.mark.skipif(ROS2 is None, reason='no `ros2` command: install it from '
                                 '../shared/wheels/ros2cli (./run does when the folder exists)')
 
