@@ -32,6 +32,8 @@ setup(
             'soak = geoctl_ros.tools.soak:main',
             'mavlink_bridge = geoctl_ros.nodes.mavlink_bridge:main',
             'campaign = geoctl_ros.tools.campaign:main',
+            'record = geoctl_ros.nodes.recorder:main',
+            'report = geoctl_ros.tools.report:main',
         ],
     },
 )

@@ -33,6 +33,7 @@ from geoctl_ros.params.schema import (
                                      CONTROLLER,
                                      LAB_INERTIA,
                                      MAVLINK,
+                                     RECORD,
                                      SCENARIO,
                                      SCHEMA,
                                      SIM,
@@ -44,7 +45,8 @@ from geoctl_ros.params.schema import (
 from geoctl_ros.params.validate import check_value, resolve
 
 __all__ = ['BOTH', 'BY_NAME', 'CONE_KEY', 'CONE_SCHEMA', 'CONTROLLER', 'ConfigError',
-           'ControllerSetup', 'LAB_INERTIA', 'MAVLINK', 'Param', 'SCENARIO', 'SCHEMA', 'SIM',
+           'ControllerSetup', 'LAB_INERTIA', 'MAVLINK', 'Param', 'RECORD', 'SCENARIO', 'SCHEMA',
+           'SIM',
            'airframe',
            'check_value', 'cone_param', 'cone_set', 'controller_config', 'controller_setup',
            'flatten', 'load_parameter_file', 'mixer', 'node_overrides', 'plant_config', 'resolve',

@@ -14,9 +14,12 @@ import numpy as np
 
 from geoctl_ros.core.control import DISTURBANCE_MODELS
 from geoctl_ros.core.safety import quaternion_problem
+from geoctl_ros.records.bag import TOPICS as _RECORDED
 
-CONTROLLER, SIM, SCENARIO, MAVLINK = 'controller', 'sim', 'scenario', 'mavlink_bridge'
+CONTROLLER, SIM, SCENARIO, MAVLINK, RECORD = ('controller', 'sim', 'scenario', 'mavlink_bridge',
+                                              'record')
 BOTH = (CONTROLLER, SIM)
+RECORD_TOPICS = tuple(t.name for t in _RECORDED)
 
 # The lab's inertia about the centre of mass is given in its code's forward-right-down body frame;
 # in this package's forward-left-up frame (F = diag(1, -1, -1), J_FLU = F J_FRD F) the products
@@ -311,6 +314,18 @@ SCHEMA = [
        'as IMU (empty: none)', MAVLINK),
     _p('mavlink.autopilot_imu_rate_hz', 'double', 100.0, 'Hz', 'HIGHRES_IMU rate requested from '
        'the autopilot', MAVLINK, check=_positive),
+    # Flight recorder (geoctl_ros.nodes.recorder).
+    _p('record.path', 'string', '', '-', 'the bag folder to create (empty: '
+       'records/flight_<UTC date and time> under the working directory)', RECORD),
+    _p('record.storage', 'string', 'mcap', '-', "the bag's storage: mcap (Jazzy's default) or "
+       'sqlite3', RECORD,
+       check=lambda v: None if v in ('mcap', 'sqlite3') else 'must be mcap or sqlite3'),
+    _p('record.topics', 'string_array', list(RECORD_TOPICS), '-', 'the topics to record, '
+       'of those the package publishes and reads (README "Flight records")', RECORD,
+       check=lambda v: next(('unknown topic %r (one of %s)' % (t, ', '.join(RECORD_TOPICS))
+                             for t in v if t not in RECORD_TOPICS), None)),
+    _p('record.controller', 'string', 'controller', '-', 'the controller node whose parameters '
+       '(cones, sensor axis) are stored in the bag for the report', RECORD),
     # Headless runner.
     _p('duration', 'double', 20.0, 's', 'simulated time of a scenario run', SCENARIO,
        check=_positive),

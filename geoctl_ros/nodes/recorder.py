@@ -1,0 +1,117 @@
+"""The flight recorder: ``ros2 run geoctl_ros record`` writes the package's topics to a rosbag2
+bag (MCAP by default, or sqlite3) as ``ros2 bag record`` would, in a process of its own.
+
+Messages are recorded as they arrive (the bytes rclpy received, stamped with the receipt time on
+this node's clock) and written by geoctl_ros.records.bag on a thread of its own, so the disk never
+holds up a callback. The controller's cone and sensor parameters are asked for once it is up and
+stored in the bag's custom data (``geoctl_ros.controller``), so ``report`` can draw the cones.
+"""
+import datetime
+import importlib
+import os
+import sys
+
+from rcl_interfaces.srv import GetParameters, ListParameters
+from rclpy.node import Node
+from rclpy.parameter import parameter_value_to_python
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+import yaml
+
+from geoctl_ros.nodes import ros_params
+from geoctl_ros.nodes.conversions import python_value
+from geoctl_ros.nodes.runtime import spin
+from geoctl_ros.params import RECORD, settings
+from geoctl_ros.records import bag
+
+DEPTH = 50          # a burst of this many per topic waits for the callback, none is lost
+
+
+def _qos(topic):
+    """What the subscription asks: the publisher's reliability and durability, a deep queue."""
+    return QoSProfile(
+        depth=DEPTH,
+        reliability=(ReliabilityPolicy.RELIABLE if topic.reliable
+                     else ReliabilityPolicy.BEST_EFFORT),
+        durability=(DurabilityPolicy.TRANSIENT_LOCAL if topic.transient_local
+                    else DurabilityPolicy.VOLATILE))
+
+
+def default_path(now=None):
+    """records/flight_<UTC date and time> under the working directory."""
+    now = now or datetime.datetime.now(datetime.timezone.utc)
+    return os.path.join('records', now.strftime('flight_%Y%m%d_%H%M%S'))
+
+
+class Recorder(Node):
+    def __init__(self, **kwargs):
+        super().__init__('record', **kwargs)
+        cfg = settings(ros_params.load(self, RECORD), 'record.')
+        self.path = cfg.path or default_path()
+        topics = [bag.BY_NAME[name] for name in cfg.topics]
+        parent = os.path.dirname(os.path.abspath(self.path))
+        os.makedirs(parent, exist_ok=True)
+        self.writer = bag.BagWriter(self.path, topics, cfg.storage)
+        clock = self.get_clock()
+        for topic in topics:
+            def on_message(data, name=topic.name):
+                self.writer.put(name, clock.now().nanoseconds, data)
+            self.create_subscription(self._msg_class(topic.type), topic.name, on_message,
+                                     _qos(topic), raw=True)
+        controller = '/' + cfg.controller.strip('/')
+        self._list = self.create_client(ListParameters, controller + '/list_parameters')
+        self._get = self.create_client(GetParameters, controller + '/get_parameters')
+        self._asking = None
+        self._ask_timer = self.create_timer(1.0, self._ask_controller)
+        self.get_logger().info('recording %d topics to %s (%s)' % (len(topics), self.path,
+                                                                    cfg.storage))
+
+    @staticmethod
+    def _msg_class(type_name):
+        package, _, name = type_name.split('/')
+        return getattr(importlib.import_module(package + '.msg'), name)
+
+    # --- the controller's parameters, once -------------------------------------------------
+    def _ask_controller(self):
+        if self._asking is not None or not self._list.service_is_ready():
+            return
+        request = ListParameters.Request()
+        request.prefixes, request.depth = ['cones', 'sensor_axis'], 0
+        self._asking = self._list.call_async(request)
+        self._asking.add_done_callback(self._on_list)
+
+    def _on_list(self, future):
+        names = list(future.result().result.names) if future.result() else []
+        if not names:
+            self._asking = None
+            return
+        request = GetParameters.Request()
+        request.names = names
+        self._get.call_async(request).add_done_callback(
+            lambda f: self._on_values(names, f))
+
+    def _on_values(self, names, future):
+        if future.result() is None:
+            self._asking = None
+            return
+        values = {n: python_value(parameter_value_to_python(v))
+                  for n, v in zip(names, future.result().values)}
+        self.writer.custom_data[bag.CONTROLLER_PARAMETERS] = yaml.safe_dump(values)
+        self.destroy_timer(self._ask_timer)
+        self.get_logger().info("stored the controller's %d cone and sensor parameters"
+                               % len(values))
+
+    def on_shutdown(self):
+        self.writer.close()
+        counts = ', '.join('%s %d' % (k, n) for k, n in self.writer.counts.items() if n)
+        self.get_logger().info('wrote %s: %s%s' % (self.path, counts or 'no messages', (
+            '; %d dropped (queue full)' % self.writer.dropped) if self.writer.dropped else ''))
+        if self.writer.error is not None:
+            self.get_logger().error('the bag stopped early: %s' % self.writer.error)
+
+
+def main():
+    sys.exit(spin(Recorder, 'record'))
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,192 @@
+"""Flight records as rosbag2 bags, through rosbags (no rclpy): what ``record`` writes, as
+``ros2 bag record -s mcap`` (or ``-s sqlite3``) would (a folder with ``metadata.yaml`` and the
+storage file), and what ``report`` reads, from any rosbag2 bag of these topics.
+
+Messages go in as the bytes rclpy serialises (CDR) and come out as rosbags' message objects, whose
+fields have the ROS names (``msg.pose.orientation.x``).
+"""
+import os
+from pathlib import Path
+import queue
+import threading
+import time
+from typing import NamedTuple
+
+from rosbags.highlevel import AnyReader
+from rosbags.interfaces import (
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+STORAGES = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
+CHECKPOINT_S = 1.0           # what is written is on disk (a chunk closed, a commit) this often
+CONTROLLER_PARAMETERS = 'geoctl_ros.controller'     # custom data: the controller's parameters
+
+
+class Topic(NamedTuple):
+    """A recorded topic: its name (absolute), type and the QoS its publisher offers."""
+
+    name: str
+    type: str
+    reliable: bool
+    transient_local: bool = False
+    depth: int = 1
+
+
+# The package's topics, as the nodes publish them at the root namespace (qos.py's profiles).
+TOPICS = (
+    Topic('/pose', 'geometry_msgs/msg/PoseStamped', False, depth=5),
+    Topic('/imu', 'sensor_msgs/msg/Imu', False, depth=5),
+    Topic('/motor_commands', 'std_msgs/msg/Float64MultiArray', True),
+    Topic('/control_wrench', 'geometry_msgs/msg/WrenchStamped', True),
+    Topic('/attitude_error', 'geometry_msgs/msg/Vector3Stamped', False),
+    Topic('/angular_velocity_error', 'geometry_msgs/msg/Vector3Stamped', False),
+    Topic('/configuration_error', 'std_msgs/msg/Float64', False),
+    Topic('/disturbance_estimate', 'std_msgs/msg/Float64MultiArray', False),
+    Topic('/cone_margins', 'std_msgs/msg/Float64MultiArray', False),
+    Topic('/active_setpoint', 'geometry_msgs/msg/QuaternionStamped', True, True),
+    Topic('/attitude_setpoint', 'geometry_msgs/msg/QuaternionStamped', True, depth=10),
+    Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', True, depth=10),
+    Topic('/sim/true_pose', 'geometry_msgs/msg/PoseStamped', False),
+)
+BY_NAME = {t.name: t for t in TOPICS}
+
+
+def _qos(topic):
+    """The offered QoS of metadata.yaml (deadline, lifespan and lease at their defaults)."""
+    zero = QosTime(0, 0)
+    return Qos(QosHistory.KEEP_LAST, topic.depth,
+               QosReliability.RELIABLE if topic.reliable else QosReliability.BEST_EFFORT,
+               QosDurability.TRANSIENT_LOCAL if topic.transient_local else QosDurability.VOLATILE,
+               zero, zero, QosLiveliness.AUTOMATIC, zero, False)
+
+
+class BagWriter:
+    """A bag being written on a thread of its own: put() never waits for the disk.
+
+    Every CHECKPOINT_S what was written is made durable (the MCAP chunk closed and flushed, the
+    sqlite3 transaction committed), so a recorder killed mid-flight loses at most that much.
+    """
+
+    def __init__(self, path, topics, storage='mcap', custom_data=None):
+        """Create the bag at path (which must not exist) with these topics; raises ValueError
+        when it cannot.
+        """
+        if storage not in STORAGES:
+            raise ValueError('storage must be one of %s, not %r' % (sorted(STORAGES), storage))
+        self.path = path
+        self.counts = {t.name: 0 for t in topics}
+        self.dropped = 0
+        self.error = None              # what stopped the writer thread, if anything did
+        self.custom_data = dict(custom_data or {})     # metadata.yaml's, written at close
+        self._queue = queue.Queue(maxsize=100_000)
+        opened = queue.Queue()
+        # (sqlite3 objects belong to the thread that made them: the thread opens the bag too)
+        self._thread = threading.Thread(target=self._run, name='bag writer', daemon=True,
+                                        args=(topics, STORAGES[storage], opened))
+        self._thread.start()
+        problem = opened.get()
+        if problem is not None:
+            self._thread.join()
+            raise ValueError('%s: cannot write a bag there: %s' % (path, problem))
+
+    def put(self, topic, stamp_ns, data):
+        """Queue one serialised message received at stamp_ns (ns since the epoch)."""
+        try:
+            self._queue.put_nowait((topic, stamp_ns, bytes(data)))
+        except queue.Full:
+            self.dropped += 1
+
+    def _run(self, topics, plugin, opened):
+        try:
+            writer = Writer(self.path, version=8, storage_plugin=plugin)
+            writer.open()
+            connections = {t.name: writer.add_connection(
+                t.name, t.type, typestore=TYPESTORE, offered_qos_profiles=[_qos(t)])
+                for t in topics}
+        except Exception as e:
+            opened.put(e)
+            return
+        opened.put(None)
+        next_checkpoint = time.monotonic() + CHECKPOINT_S
+        try:
+            while True:
+                try:
+                    item = self._queue.get(timeout=0.1)
+                except queue.Empty:
+                    item = ()
+                if item is None:
+                    break
+                if item:
+                    topic, stamp, data = item
+                    writer.write(connections[topic], stamp, data)
+                    self.counts[topic] += 1
+                if time.monotonic() >= next_checkpoint:
+                    _checkpoint(writer)
+                    next_checkpoint = time.monotonic() + CHECKPOINT_S
+        except Exception as e:       # a full disk: stop writing, keep what is on disk
+            self.error = e
+        finally:
+            try:
+                for k, v in self.custom_data.items():
+                    writer.set_custom_data(k, v)
+                writer.close()
+            except Exception as e:
+                self.error = self.error or e
+
+    def close(self):
+        """Write what is queued and close the bag (metadata.yaml with the counts)."""
+        self._queue.put(None)
+        self._thread.join()
+
+
+
+
+def _checkpoint(writer):
+    """Make what was written durable: rosbags keeps a chunk (MCAP) or a transaction (sqlite3)
+    open until it is large or the bag is closed; both are reached through its storage object
+    (rosbags 0.11, pinned).
+    """
+    storage = writer.storage
+    if hasattr(storage, 'close_chunk'):
+        if storage.chunk.bio.tell():
+            storage.close_chunk()
+        storage.bio.flush()
+    elif hasattr(storage, 'conn'):
+        storage.conn.commit()
+
+
+class Message(NamedTuple):
+    """One recorded message: receipt time (s since the epoch) and the message object."""
+
+    t: float
+    msg: object
+
+
+def read_bag(path, topics=None):
+    """{topic: [Message, ...]} of the bag at path (MCAP or sqlite3), in receipt order, and its
+    custom data; only the named topics when given. Raises ValueError for what is not a bag.
+    """
+    if not os.path.isdir(path) or not os.path.isfile(os.path.join(path, 'metadata.yaml')):
+        raise ValueError('%s is not a rosbag2 bag (no metadata.yaml in a folder)' % path)
+    try:
+        with AnyReader([Path(path)], default_typestore=TYPESTORE) as reader:
+            wanted = [c for c in reader.connections if topics is None or c.topic in topics]
+            out = {c.topic: [] for c in wanted}
+            for conn, stamp, raw in reader.messages(connections=wanted):
+                msg = reader.deserialize(raw, conn.msgtype)
+                out[conn.topic].append(Message(stamp * 1e-9, msg))
+            custom = {}
+            for r in reader.readers:
+                custom.update(getattr(r.storage.metadata, 'custom', None) or {})
+    except Exception as e:          # rosbags' reader errors name what is wrong with the file
+        raise ValueError('%s: cannot be read as a rosbag2 bag: %s' % (path, e)) from None
+    return out, custom
+
