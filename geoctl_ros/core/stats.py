@@ -30,3 +30,18 @@ class WindowStats:
     def window(self):
         """The diagnostics Window of the samples (mean, std, p99, max), or None for none."""
         return window(self.samples())
+
+
+SETTLE_PSI = 1e-3          # Psi below this counts as settled (the runner's and report's summary)
+
+
+def settle_time(t, psi, threshold=SETTLE_PSI):
+    """The time from which Psi stays below threshold: t[0] when it always was, None when it is
+    not below at the end (t and psi: samples in time order).
+    """
+    above = np.nonzero(np.asarray(psi) >= threshold)[0]
+    if not len(above):
+        return float(t[0])
+    if above[-1] + 1 < len(psi):
+        return float(t[above[-1] + 1])
+    return None

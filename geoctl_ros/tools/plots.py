@@ -103,16 +103,17 @@ def scenario_figures(result, out_dir):
 
     fig = Figure(figsize=(6, 6))
     ax = fig.add_subplot(projection='3d')
-    sphere_path(ax, result)
+    cones = cone_set(result.scenario.controller)
+    q = result.history[:, [result.columns.index(c) for c in ('qx', 'qy', 'qz', 'qw')]]
+    sphere_path(ax, np.array([so3.quat_to_rot(qi) @ cones.r for qi in q]), cones)
     save(fig, 'sensor_path.png')
     return paths
 
 
-def sphere_path(ax, result):
-    """The sensor axis R r on the unit sphere, with the cones drawn in red."""
-    cones = cone_set(result.scenario.controller)
-    q = result.history[:, [result.columns.index(c) for c in ('qx', 'qy', 'qz', 'qw')]]
-    path = np.array([so3.quat_to_rot(qi) @ cones.r for qi in q])
+def sphere_path(ax, path, cones):
+    """The sensor axis R r (path: (N, 3), world frame) on the unit sphere, with the cones drawn
+    in red.
+    """
     u, v = np.mgrid[0:2 * np.pi:40j, 0:np.pi:20j]
     ax.plot_wireframe(np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v), color='0.85',
                       lw=0.4)
@@ -219,3 +220,63 @@ def sil_figure(out, t, angles, cones, err, psi, cmd_t, commands):
     fig.suptitle('sim-in-the-loop over DDS: controller and sim as separate processes')
     fig.tight_layout()
     fig.savefig(os.path.join(out, 'sil.png'), dpi=100)
+
+
+def flight_figures(f, out_dir):
+    """The figures of a recorded flight (``geoctl_ros.tools.report``): sensor_path.png (the
+    sensor axis on the unit sphere with the cones) and flight.png (angle to each cone, Psi, e_R
+    and e_Omega, Delta_bar, the motor commands, input ages, with failsafes and gaps ridden
+    marked); panels whose topic the bag lacks say so. Returns the paths written.
+    """
+    paths = []
+    if f.cones is not None and len(f.attitude_t):
+        fig = Figure(figsize=(6, 6))
+        ax = fig.add_subplot(projection='3d')
+        sphere_path(ax, f.sensor_path, f.cones)
+        ax.set_title('sensor axis on the unit sphere (%s)' % f.attitude_source)
+        paths.append(os.path.join(out_dir, 'sensor_path.png'))
+        fig.savefig(paths[-1], dpi=100)
+    fig, axs = _subplots(4, 2, figsize=(12, 13))
+    panels = [
+        ('angle to each cone [deg] (dashed: half-angle)', None),
+        ('Psi', f.psi), ('e_R', f.e_R), ('e_Omega [rad/s]', f.e_Omega),
+        ('Delta_bar', f.delta_bar), ('motor commands (normalised)', f.motors),
+        ('input age at the controller [ms]', None), ('state', None)]
+    for ax, (title, series) in zip(axs.flat, panels):
+        ax.set_title(title, fontsize=10)
+        ax.grid(True, alpha=0.3)
+        if series is not None:
+            t, v = series
+            if len(t):
+                if title == 'Psi':
+                    ax.semilogy(t, np.maximum(v, 1e-12))
+                else:
+                    ax.plot(t, v, lw=0.8)
+            else:
+                ax.text(0.5, 0.5, 'not in the bag', ha='center', transform=ax.transAxes)
+    ax = axs[0, 0]
+    if f.cones is not None and len(f.attitude_t):
+        for i, name in enumerate(f.cones.names):
+            line, = ax.plot(f.attitude_t, f.cone_angles[:, i], label=name)
+            ax.axhline(math.degrees(f.cones.theta[i]), color=line.get_color(), ls='--', lw=1)
+        ax.legend(fontsize=8)
+    else:
+        ax.text(0.5, 0.5, 'no attitude or no cones', ha='center', transform=ax.transAxes)
+    ax = axs[3, 0]
+    if len(f.diag_t):
+        ax.plot(f.diag_t, f.pose_age_ms, label='pose')
+        ax.plot(f.diag_t, f.imu_age_ms, label='imu')
+        ax.legend(fontsize=8)
+    ax = axs[3, 1]
+    if len(f.diag_t):
+        ax.step(f.diag_t, f.armed, where='post', label='armed')
+        for t in f.failsafe_t:
+            ax.axvline(t, color='tab:red', lw=1)
+        ax.set_yticks([0, 1], ['disarmed', 'armed'])
+        ax.set_title('armed (red: failsafes)', fontsize=10)
+    for ax in axs[-1]:
+        ax.set_xlabel('t since the first message [s]')
+    fig.tight_layout()
+    paths.append(os.path.join(out_dir, 'flight.png'))
+    fig.savefig(paths[-1], dpi=90)
+    return paths

@@ -27,6 +27,7 @@ from geoctl_ros.core.control import SetpointRejected
 from geoctl_ros.core.gains import gain_condition
 from geoctl_ros.core.loop import ControlLoop
 from geoctl_ros.core.mechanics import gravity_moment
+from geoctl_ros.core.stats import settle_time
 from geoctl_ros.params import (
     CONTROLLER,
     SCENARIO,
@@ -40,8 +41,6 @@ from geoctl_ros.params import (
     testbed_sim,
 )
 from geoctl_ros.tools import plots as plotting
-
-SETTLE_PSI = 1e-3
 
 
 @dataclass
@@ -197,14 +196,7 @@ def run(scenario, duration=None):
             raise FloatingPointError('simulation diverged at t = %.3f s' % plant.t)
     wall = time.perf_counter() - t0
 
-    psi = hist[:, columns.index('psi')]
-    above = np.nonzero(psi >= SETTLE_PSI)[0]
-    if not len(above):
-        settle = 0.0
-    elif above[-1] + 1 < steps:
-        settle = float(hist[above[-1] + 1, 0])
-    else:
-        settle = None
+    settle = settle_time(hist[:, 0], hist[:, columns.index('psi')]) if steps else 0.0
     R_end = plant.R
     final = controller.step(R_end, plant.Omega, dt, adapt=False)
     theta_deg = np.degrees(cones.theta)

@@ -1,0 +1,219 @@
+"""A recorded flight as the paper's figures and a summary: ``report BAG [--out DIR]``.
+
+BAG is any rosbag2 bag of this package's topics (MCAP or sqlite3; from ``record`` or from
+``ros2 bag record``). The cones come from the bag (``record`` stores the controller's) or from
+``--params-file``. The sensor's path and the closest approach come from the sim's true attitude
+(``/sim/true_pose``) where the bag has it, otherwise from the measured one (``/pose``).
+
+Writes ``summary.json``, ``summary.md``, ``flight.png`` and ``sensor_path.png`` to DIR (default:
+BAG/report) and prints the Markdown summary. Topics the bag lacks are named, and what can be
+drawn without them is drawn. What is not a readable bag ends with one line and exit code 2.
+"""
+import argparse
+import json
+import math
+import os
+import sys
+from typing import NamedTuple
+
+import numpy as np
+import yaml
+
+from geoctl_ros.core import so3
+from geoctl_ros.core.diagnostics import from_values
+from geoctl_ros.core.stats import settle_time
+from geoctl_ros.params import (
+    CONTROLLER,
+    ConfigError,
+    cone_set,
+    load_parameter_file,
+    node_overrides,
+    resolve,
+)
+from geoctl_ros.records import bag
+from geoctl_ros.tools import plots
+
+CONTROLLER_STATUS = 'geoctl_ros: controller'
+
+
+class Flight(NamedTuple):
+    """A recorded flight as time series (t in s since the bag's first message)."""
+
+    cones: object                  # core.cones.ConeSet, or None
+    attitude_source: str           # '/sim/true_pose', '/pose' or ''
+    attitude_t: np.ndarray
+    rotations: np.ndarray          # (N, 3, 3)
+    sensor_path: np.ndarray        # (N, 3): R r
+    cone_angles: np.ndarray        # (N, cones) deg
+    psi: tuple
+    e_R: tuple
+    e_Omega: tuple
+    delta_bar: tuple
+    motors: tuple
+    diag_t: np.ndarray
+    armed: np.ndarray
+    pose_age_ms: np.ndarray
+    imu_age_ms: np.ndarray
+    failsafe_t: list
+    states: list                   # (t, state) of the controller's diagnostics
+    last_figures: object           # the last diagnostics' Figures, or None
+    missing: list                  # the package's topics the bag lacks
+
+
+def _series(msgs, t0, value):
+    if not msgs:
+        return np.zeros(0), np.zeros((0,))
+    return (np.array([m.t - t0 for m in msgs]),
+            np.array([value(m.msg) for m in msgs], dtype=float))
+
+
+def _quat(q):
+    return (q.x, q.y, q.z, q.w)
+
+
+def _cones_of(custom, params_file):
+    if params_file:
+        values = node_overrides(load_parameter_file(params_file), CONTROLLER)
+    elif bag.CONTROLLER_PARAMETERS in custom:
+        values = yaml.safe_load(custom[bag.CONTROLLER_PARAMETERS])
+    else:
+        return None
+    return cone_set(resolve(CONTROLLER, values))
+
+
+def load_flight(path, params_file=None):
+    """The Flight recorded in the bag at path; raises ValueError (not a bag) or ConfigError."""
+    topics, custom = bag.read_bag(path)
+    present = {k for k, v in topics.items() if v}
+    first = [v[0].t for v in topics.values() if v]
+    t0 = min(first) if first else 0.0
+    cones = _cones_of(custom, params_file)
+    source = next((s for s in ('/sim/true_pose', '/pose') if s in present), '')
+    att = topics.get(source, [])
+    att_t = np.array([m.t - t0 for m in att])
+    Rs = (np.array([so3.quat_to_rot(_quat(m.msg.pose.orientation)) for m in att])
+          if att else np.zeros((0, 3, 3)))
+    if cones is not None and att:
+        path_ = Rs @ cones.r
+        angles = np.array([cones.angles_deg(R) for R in Rs]).reshape(len(Rs), len(cones))
+    else:
+        path_, angles = np.zeros((0, 3)), np.zeros((0, 0))
+    statuses = [(m.t - t0, s) for m in topics.get('/diagnostics', [])
+                for s in m.msg.status if s.name == CONTROLLER_STATUS]
+    figures = [(t, s.level, s.message, from_values((kv.key, kv.value) for kv in s.values))
+               for t, s in statuses]
+    failsafe_t, previous = [], False
+    for t, _, _, fig in figures:
+        if fig.failsafe and not previous:
+            failsafe_t.append(t)
+        previous = fig.failsafe
+
+    def vec3(m):
+        return (m.vector.x, m.vector.y, m.vector.z)
+    return Flight(
+        cones=cones, attitude_source=source, attitude_t=att_t, rotations=Rs, sensor_path=path_,
+        cone_angles=angles,
+        psi=_series(topics.get('/configuration_error', []), t0, lambda m: m.data),
+        e_R=_series(topics.get('/attitude_error', []), t0, vec3),
+        e_Omega=_series(topics.get('/angular_velocity_error', []), t0, vec3),
+        delta_bar=_series(topics.get('/disturbance_estimate', []), t0, lambda m: list(m.data)),
+        motors=_series(topics.get('/motor_commands', []), t0, lambda m: list(m.data)),
+        diag_t=np.array([t for t, *_ in figures]),
+        armed=np.array([float(f.armed) for *_, f in figures]),
+        pose_age_ms=np.array([1e3 * f.pose_age if math.isfinite(f.pose_age) else np.nan
+                              for *_, f in figures]),
+        imu_age_ms=np.array([1e3 * f.imu_age if math.isfinite(f.imu_age) else np.nan
+                             for *_, f in figures]),
+        failsafe_t=failsafe_t,
+        states=[(t, f.state) for t, *_, f in figures],
+        last_figures=figures[-1][3] if figures else None,
+        missing=[t.name for t in bag.TOPICS if t.name not in present])
+
+
+def summary(f):
+    """The flight's figures: closest approach per cone, time in each state, settle time, final
+    error, failsafes and gaps ridden through.
+    """
+    out = {'attitude_source': f.attitude_source or None, 'missing_topics': f.missing}
+    if f.cones is not None and len(f.attitude_t):
+        theta = np.degrees(f.cones.theta)
+        out['closest_approach_deg'] = {
+            n: {'angle': float(f.cone_angles[:, i].min()), 'half_angle': float(theta[i]),
+                'margin': float(f.cone_angles[:, i].min() - theta[i]),
+                't': float(f.attitude_t[np.argmin(f.cone_angles[:, i])])}
+            for i, n in enumerate(f.cones.names)}
+    t_psi, psi = f.psi
+    out['final_psi'] = float(psi[-1]) if len(psi) else None
+    out['settle_time_s'] = settle_time(t_psi, psi) if len(psi) else None
+    t_eR, e_R = f.e_R
+    out['final_eR_norm'] = float(np.linalg.norm(e_R[-1])) if len(e_R) else None
+    durations = {}
+    for (t, state), (t_next, _) in zip(f.states, f.states[1:]):
+        kind = 'failsafe' if state.startswith('failsafe') else state.split(':')[0]
+        durations[kind] = durations.get(kind, 0.0) + (t_next - t)
+    out['time_in_state_s'] = {k: round(v, 3) for k, v in durations.items()}
+    out['failsafes'] = len(f.failsafe_t)
+    last = f.last_figures
+    out['gaps_ridden'] = (None if last is None else
+                          {'pose': last.pose_gaps.count, 'imu': last.imu_gaps.count})
+    out['duration_s'] = float(max([0.0] + [s[0][-1] for s in (f.psi, f.motors) if len(s[0])]
+                                  + list(f.attitude_t[-1:])))
+    return out
+
+
+def markdown(path, s):
+    lines = ['# Flight %s' % os.path.basename(os.path.normpath(path)), '',
+             '| figure | value |', '|---|---|', '| duration | %.1f s |' % s['duration_s']]
+    for n, c in (s.get('closest_approach_deg') or {}).items():
+        lines.append('| closest approach, cone %s | %.2f deg (half-angle %.1f): margin %.2f deg '
+                     'at %.1f s |' % (n, c['angle'], c['half_angle'], c['margin'], c['t']))
+    lines.append('| attitude from | %s |' % (s['attitude_source'] or '-'))
+    fmt = {'final_psi': '%.3g', 'settle_time_s': '%.1f s', 'final_eR_norm': '%.3g'}
+    for k, f in fmt.items():
+        lines.append('| %s | %s |' % (k, '-' if s[k] is None else f % s[k]))
+    lines.append('| time in each state | %s |' % (', '.join(
+        '%s %.1f s' % kv for kv in s['time_in_state_s'].items()) or '-'))
+    lines.append('| failsafes | %d |' % s['failsafes'])
+    g = s['gaps_ridden']
+    lines.append('| gaps ridden through | %s |' % ('-' if g is None else
+                                                  'pose %d, imu %d' % (g['pose'], g['imu'])))
+    if s['missing_topics']:
+        lines.append('| not in the bag | %s |' % ', '.join(s['missing_topics']))
+    return '\n'.join(lines) + '\n'
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog='report', description=__doc__.split('\n\n')[0])
+    parser.add_argument('bag', help='a rosbag2 bag folder (MCAP or sqlite3)')
+    parser.add_argument('--out', default=None, help='output folder (default: BAG/report)')
+    parser.add_argument('--params-file', default=None,
+                        help="the controller's parameter file, for the cones (default: the "
+                             "ones record stored in the bag)")
+    parser.add_argument('--no-plots', action='store_true', help='skip the PNG figures')
+    args = parser.parse_args(argv)
+    try:
+        f = load_flight(args.bag, args.params_file)
+        out = args.out or os.path.join(args.bag, 'report')
+        os.makedirs(out, exist_ok=True)
+    except (ValueError, ConfigError, OSError) as e:
+        print('report: %s' % str(e).replace('\n', ' '), file=sys.stderr)
+        return 2
+    s = summary(f)
+    text = markdown(args.bag, s)
+    with open(os.path.join(out, 'summary.json'), 'w') as fh:
+        json.dump(s, fh, indent=2)
+        fh.write('\n')
+    with open(os.path.join(out, 'summary.md'), 'w') as fh:
+        fh.write(text)
+    if not args.no_plots:
+        plots.flight_figures(f, out)
+    print(text + 'wrote %s' % out)
+    if f.missing:
+        print('report: the bag has no %s' % ', '.join(f.missing), file=sys.stderr)
+    if f.cones is None:
+        print('report: no cones (the bag has none stored: give --params-file)', file=sys.stderr)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
