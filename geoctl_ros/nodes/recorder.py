@@ -52,9 +52,13 @@ class Recorder(Node):
         os.makedirs(parent, exist_ok=True)
         self.writer = bag.BagWriter(self.path, topics, cfg.storage)
         clock = self.get_clock()
+        self._silent = {t.name for t in topics}           # no message yet
         for topic in topics:
             def on_message(data, name=topic.name):
                 self.writer.put(name, clock.now().nanoseconds, data)
+                if name in self._silent:
+                    self._silent.discard(name)
+                    self.get_logger().info('first message on %s' % name)
             self.create_subscription(self._msg_class(topic.type), topic.name, on_message,
                                      _qos(topic), raw=True)
         controller = '/' + cfg.controller.strip('/')
