@@ -468,13 +468,17 @@ def test_a_control_step_that_raises_disarms_and_commands_zero_and_the_node_stays
 
 def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_approach(ros,
                                                                                       tmp_path):
-    """``record`` beside the sim and the controller (disarmed: the testbed tips over, so the
-    sensor moves), in both storages. The bags read back with rosbags' own reader (not the
-    package's), and ``report`` gives the closest approach that the recorded true attitude
-    gives, computed here with plain numpy.
+    """``record`` beside the sim and the controller, in both storages. The sim starts tilted
+    20 deg towards the cone, and disarmed the testbed (its centre of mass above the pivot) falls,
+    so the sensor sweeps. The bags read back with rosbags' own reader (not the package's), and
+    ``report`` gives the closest approach that the recorded true attitude gives, computed here
+    with plain numpy.
     """
     mon, launch = ros
-    launch('sim')
+    tilted = so3.rot_to_quat(so3.quat_to_rot(LEVEL_YAW90) @ so3.axis_angle([0, 1, 0],
+                                                                           math.radians(-20.0)))
+    launch('sim', TESTBED, '-p', 'sim:initial_attitude:=[%s]' % ', '.join('%r' % float(v)
+                                                                      for v in tilted))
     launch('controller')
     recorders = {}
     for storage in ('mcap', 'sqlite3'):
@@ -508,10 +512,13 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
                 q = reader.deserialize(raw, conn.msgtype).pose.orientation
                 sensor = so3.quat_to_rot((q.x, q.y, q.z, q.w)) @ np.array([1.0, 0.0, 0.0])
                 angles.append(math.degrees(math.acos(np.clip(sensor @ axis, -1.0, 1.0))))
-        seconds = t_end - t_start        # every stream was flowing in this window at least
+        # every stream flowed all through this window (best effort ones may lose a few on a busy
+        # machine: at least half their rate)
+        seconds = t_end - t_start
         assert counts['/motor_commands'] > 0.8 * 100 * seconds, (counts, seconds)   # 100 Hz
-        assert counts['/pose'] > 0.8 * 200 * seconds and counts['/diagnostics'] >= 2 * seconds
-        assert len(angles) == counts['/sim/true_pose'] > 0.8 * 200 * seconds
+        assert counts['/diagnostics'] >= 2 * seconds - 2                             # 2 Hz
+        assert counts['/pose'] > 0.5 * 200 * seconds, (counts, seconds)             # 200 Hz
+        assert len(angles) == counts['/sim/true_pose'] > 0.5 * 200 * seconds
         out = tmp_path / ('report_' + storage)
         r = subprocess.run([sys.executable, '-m', 'geoctl_ros.tools.report', str(path),
                             '--out', str(out)], capture_output=True, text=True)
@@ -519,6 +526,7 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
         reports[storage] = json.loads((out / 'summary.json').read_text())
         closest = reports[storage]['closest_approach_deg']['obstacle']
         assert closest['angle'] == pytest.approx(min(angles), abs=0.01)
+        assert max(angles) - min(angles) > 5.0                        # the sensor did move
         assert closest['half_angle'] == pytest.approx(math.degrees(cones.theta[0]))
         assert reports[storage]['attitude_source'] == '/sim/true_pose'
         assert reports[storage]['failsafes'] == 0 and reports[storage]['gaps_ridden'] is not None
