@@ -472,7 +472,7 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
     20 deg towards the cone, and disarmed the testbed (its centre of mass above the pivot) falls,
     so the sensor sweeps. The bags read back with rosbags' own reader (not the package's), and
     ``report`` gives the closest approach that the recorded true attitude gives, computed here
-    with plain numpy.
+    with plain numpy. A third recorder, killed mid-flight, leaves a bag that still reports.
     """
     mon, launch = ros
     tilted = so3.rot_to_quat(so3.quat_to_rot(LEVEL_YAW90) @ so3.axis_angle([0, 1, 0],
@@ -481,19 +481,21 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
                                                                       for v in tilted))
     launch('controller')
     recorders = {}
-    for storage in ('mcap', 'sqlite3'):
-        p = NodeProcess('record', None, ('-p', 'record.path:=%s' % (tmp_path / storage),
+    for name, storage in (('mcap', 'mcap'), ('sqlite3', 'sqlite3'), ('killed', 'mcap')):
+        p = NodeProcess('record', None, ('-p', 'record.path:=%s' % (tmp_path / name),
                                          '-p', 'record.storage:=%s' % storage),
-                        log_dir=tmp_path / ('log_' + storage))
+                        log_dir=tmp_path / ('log_' + name))
         launch.procs.append(p)
-        recorders[storage] = p
+        recorders[name] = p
     mon.wait_for(mon.controller_has_inputs, 30.0, 'the sim and the controller')
     mon.wait_for(lambda: all("stored the controller's" in p.output() and
                              'first message on /sim/true_pose' in p.output()
                              for p in recorders.values()), 20.0,
-                 'the cones and the true pose in both records')
+                 'the cones and the true pose in the three records')
     t_start = time.time()
-    mon.spin_for(3.0)
+    mon.spin_for(2.5)
+    recorders.pop('killed').kill()                # mid-flight, as a crash or a full disk would
+    mon.spin_for(0.5)
     for p in recorders.values():
         assert p.stop() == 0, p.output()
     t_end = time.time()
@@ -535,3 +537,14 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
     # the same flight in both storages (each recorder heard it on its own: a sample or two apart)
     assert reports['mcap']['closest_approach_deg']['obstacle']['angle'] == pytest.approx(
         reports['sqlite3']['closest_approach_deg']['obstacle']['angle'], abs=0.5)
+    # the killed recorder's bag (no metadata.yaml, its file cut) reports what it had written:
+    # the flight up to its last second, its cones from the bag itself
+    assert not (tmp_path / 'killed' / 'metadata.yaml').exists()
+    out = tmp_path / 'report_killed'
+    r = subprocess.run([sys.executable, '-m', 'geoctl_ros.tools.report', str(tmp_path / 'killed'),
+                        '--out', str(out), '--no-plots'], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    cut = json.loads((out / 'summary.json').read_text())
+    assert cut['duration_s'] > 1.0 and cut['attitude_source'] == '/sim/true_pose'
+    assert cut['closest_approach_deg']['obstacle']['angle'] >= reports['mcap'][
+        'closest_approach_deg']['obstacle']['angle'] - 0.5          # a part of the same flight

@@ -4,7 +4,8 @@ bag (MCAP by default, or sqlite3) as ``ros2 bag record`` would, in a process of 
 Messages are recorded as they arrive (the bytes rclpy received, stamped with the receipt time on
 this node's clock) and written by geoctl_ros.records.bag on a thread of its own, so the disk never
 holds up a callback. The controller's cone and sensor parameters are asked for once it is up and
-stored in the bag's custom data (``geoctl_ros.controller``), so ``report`` can draw the cones.
+written into the bag as a message of its own (``/record/controller_parameters``), so that
+``report`` can draw the cones, from a bag cut short too.
 """
 import datetime
 import importlib
@@ -15,6 +16,8 @@ from rcl_interfaces.srv import GetParameters, ListParameters
 from rclpy.node import Node
 from rclpy.parameter import parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
+from std_msgs.msg import String
 import yaml
 
 from geoctl_ros.nodes import ros_params
@@ -99,7 +102,8 @@ class Recorder(Node):
             return
         values = {n: python_value(parameter_value_to_python(v))
                   for n, v in zip(names, future.result().values)}
-        self.writer.custom_data[bag.CONTROLLER_PARAMETERS] = yaml.safe_dump(values)
+        self.writer.put(bag.CONTROLLER_PARAMETERS.name, self.get_clock().now().nanoseconds,
+                        serialize_message(String(data=yaml.safe_dump(values))))
         self.destroy_timer(self._ask_timer)
         self.get_logger().info("stored the controller's %d cone and sensor parameters"
                                % len(values))

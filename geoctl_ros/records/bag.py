@@ -8,6 +8,7 @@ fields have the ROS names (``msg.pose.orientation.x``).
 import os
 from pathlib import Path
 import queue
+import tempfile
 import threading
 import time
 from typing import NamedTuple
@@ -27,7 +28,6 @@ from rosbags.typesys import Stores, get_typestore
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 STORAGES = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
 CHECKPOINT_S = 1.0           # what is written is on disk (a chunk closed, a commit) this often
-CONTROLLER_PARAMETERS = 'geoctl_ros.controller'     # custom data: the controller's parameters
 
 
 class Topic(NamedTuple):
@@ -57,6 +57,9 @@ TOPICS = (
     Topic('/sim/true_pose', 'geometry_msgs/msg/PoseStamped', False),
 )
 BY_NAME = {t.name: t for t in TOPICS}
+# Written by the recorder itself, not heard on DDS: the controller's cone and sensor parameters
+# (a YAML mapping), so that a bag cut short still knows its cones.
+CONTROLLER_PARAMETERS = Topic('/record/controller_parameters', 'std_msgs/msg/String', True, True)
 
 
 def _qos(topic):
@@ -75,17 +78,17 @@ class BagWriter:
     sqlite3 transaction committed), so a recorder killed mid-flight loses at most that much.
     """
 
-    def __init__(self, path, topics, storage='mcap', custom_data=None):
-        """Create the bag at path (which must not exist) with these topics; raises ValueError
-        when it cannot.
+    def __init__(self, path, topics, storage='mcap'):
+        """Create the bag at path (which must not exist) with these topics and
+        CONTROLLER_PARAMETERS; raises ValueError when it cannot.
         """
         if storage not in STORAGES:
             raise ValueError('storage must be one of %s, not %r' % (sorted(STORAGES), storage))
         self.path = path
+        topics = list(topics) + [CONTROLLER_PARAMETERS]
         self.counts = {t.name: 0 for t in topics}
         self.dropped = 0
         self.error = None              # what stopped the writer thread, if anything did
-        self.custom_data = dict(custom_data or {})     # metadata.yaml's, written at close
         self._queue = queue.Queue(maxsize=100_000)
         opened = queue.Queue()
         # (sqlite3 objects belong to the thread that made them: the thread opens the bag too)
@@ -135,8 +138,6 @@ class BagWriter:
             self.error = e
         finally:
             try:
-                for k, v in self.custom_data.items():
-                    writer.set_custom_data(k, v)
                 writer.close()
             except Exception as e:
                 self.error = self.error or e
@@ -171,22 +172,65 @@ class Message(NamedTuple):
 
 
 def read_bag(path, topics=None):
-    """{topic: [Message, ...]} of the bag at path (MCAP or sqlite3), in receipt order, and its
-    custom data; only the named topics when given. Raises ValueError for what is not a bag.
+    """{topic: [Message, ...]} of the bag at path (MCAP or sqlite3), in receipt order; only the
+    named topics when given. A bag whose writer was killed (no metadata.yaml; an MCAP file cut
+    mid-chunk) is read up to its last complete chunk or commit. Raises ValueError for what is not
+    a bag.
     """
-    if not os.path.isdir(path) or not os.path.isfile(os.path.join(path, 'metadata.yaml')):
-        raise ValueError('%s is not a rosbag2 bag (no metadata.yaml in a folder)' % path)
-    try:
-        with AnyReader([Path(path)], default_typestore=TYPESTORE) as reader:
-            wanted = [c for c in reader.connections if topics is None or c.topic in topics]
-            out = {c.topic: [] for c in wanted}
-            for conn, stamp, raw in reader.messages(connections=wanted):
-                msg = reader.deserialize(raw, conn.msgtype)
-                out[conn.topic].append(Message(stamp * 1e-9, msg))
-            custom = {}
-            for r in reader.readers:
-                custom.update(getattr(r.storage.metadata, 'custom', None) or {})
-    except Exception as e:          # rosbags' reader errors name what is wrong with the file
-        raise ValueError('%s: cannot be read as a rosbag2 bag: %s' % (path, e)) from None
-    return out, custom
+    with tempfile.TemporaryDirectory() as tmp:
+        source = _readable(path, tmp)
+        try:
+            with AnyReader([source], default_typestore=TYPESTORE) as reader:
+                wanted = [c for c in reader.connections if topics is None or c.topic in topics]
+                out = {c.topic: [] for c in wanted}
+                for conn, stamp, raw in reader.messages(connections=wanted):
+                    msg = reader.deserialize(raw, conn.msgtype)
+                    out[conn.topic].append(Message(stamp * 1e-9, msg))
+        except Exception as e:        # rosbags' reader errors name what is wrong with the file
+            raise ValueError('%s: cannot be read as a rosbag2 bag: %s' % (path, e)) from None
+    return out
 
+
+def _readable(path, tmp):
+    """What rosbags can open for the bag at path: the folder when it has metadata.yaml, else its
+    storage file (an MCAP file cut short is mended into tmp first).
+    """
+    if not os.path.isdir(path):
+        raise ValueError('%s is not a rosbag2 bag (not a folder)' % path)
+    if os.path.isfile(os.path.join(path, 'metadata.yaml')):
+        return Path(path)
+    files = sorted(f for f in os.listdir(path) if f.endswith(('.mcap', '.db3')))
+    if not files:
+        raise ValueError('%s is not a rosbag2 bag (no metadata.yaml, no .mcap or .db3 file)'
+                         % path)
+    name = os.path.join(path, files[0])
+    if name.endswith('.db3'):
+        return Path(name)
+    mended = os.path.join(tmp, files[0])
+    _mend_mcap(name, mended)
+    return Path(mended)
+
+
+_MCAP_MAGIC = b'\x89MCAP0\r\n'
+
+
+def _mend_mcap(src, dst):
+    """Copy the MCAP file src up to its last complete record and close it as a writer would
+    (a data-end record and a footer without a summary), so that a reader scans it.
+    """
+    with open(src, 'rb') as f:
+        data = f.read()
+    if not data.startswith(_MCAP_MAGIC):
+        raise ValueError('%s is not an MCAP file' % src)
+    end = pos = len(_MCAP_MAGIC)
+    while pos + 9 <= len(data):
+        size = int.from_bytes(data[pos + 1:pos + 9], 'little')
+        if pos + 9 + size > len(data) or data[pos] in (0x0F, 0x02):   # cut, or already closed
+            break
+        pos += 9 + size
+        end = pos
+    with open(dst, 'wb') as f:
+        f.write(data[:end])
+        f.write(bytes([0x0F]) + (4).to_bytes(8, 'little') + bytes(4))           # data end
+        f.write(bytes([0x02]) + (20).to_bytes(8, 'little') + bytes(20))         # footer
+        f.write(_MCAP_MAGIC)

@@ -1,9 +1,10 @@
 """A recorded flight as the paper's figures and a summary: ``report BAG [--out DIR]``.
 
 BAG is any rosbag2 bag of this package's topics (MCAP or sqlite3; from ``record`` or from
-``ros2 bag record``). The cones come from the bag (``record`` stores the controller's) or from
-``--params-file``. The sensor's path and the closest approach come from the sim's true attitude
-(``/sim/true_pose``) where the bag has it, otherwise from the measured one (``/pose``).
+``ros2 bag record``; one whose writer was killed too). The cones come from the bag (``record``
+writes the controller's in it) or from ``--params-file``. The sensor's path and the closest
+approach come from the sim's true attitude (``/sim/true_pose``) where the bag has it, otherwise
+from the measured one (``/pose``).
 
 Writes ``summary.json``, ``summary.md``, ``flight.png`` and ``sensor_path.png`` to DIR (default:
 BAG/report) and prints the Markdown summary. Topics the bag lacks are named, and what can be
@@ -71,11 +72,11 @@ def _quat(q):
     return (q.x, q.y, q.z, q.w)
 
 
-def _cones_of(custom, params_file):
+def _cones_of(stored, params_file):
     if params_file:
         values = node_overrides(load_parameter_file(params_file), CONTROLLER)
-    elif bag.CONTROLLER_PARAMETERS in custom:
-        values = yaml.safe_load(custom[bag.CONTROLLER_PARAMETERS])
+    elif stored:
+        values = yaml.safe_load(stored[-1].msg.data)
     else:
         return None
     return cone_set(resolve(CONTROLLER, values))
@@ -83,11 +84,14 @@ def _cones_of(custom, params_file):
 
 def load_flight(path, params_file=None):
     """The Flight recorded in the bag at path; raises ValueError (not a bag) or ConfigError."""
-    topics, custom = bag.read_bag(path)
+    topics = bag.read_bag(path)
     present = {k for k, v in topics.items() if v}
+    if not present & set(bag.BY_NAME):
+        raise ValueError('%s has none of the topics geoctl_ros publishes (it has %s)' % (
+            path, ', '.join(sorted(present)) or 'no messages'))
     first = [v[0].t for v in topics.values() if v]
     t0 = min(first) if first else 0.0
-    cones = _cones_of(custom, params_file)
+    cones = _cones_of(topics.get(bag.CONTROLLER_PARAMETERS.name), params_file)
     source = next((s for s in ('/sim/true_pose', '/pose') if s in present), '')
     att = topics.get(source, [])
     att_t = np.array([m.t - t0 for m in att])
