@@ -24,6 +24,7 @@ import rclpy
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.diagnostics import aggregate_ms
+from geoctl_ros.nodes.recorder import default_path
 from geoctl_ros.params import (
     CONTROLLER,
     cone_set,
@@ -71,8 +72,10 @@ def _diag_stats(diags, name):
     return None if w is None else {k + '_ms': v for k, v in w._asdict().items()}
 
 
-def fly(params_file, out, duration, monitor_factory=None, mavlink=None):
-    """Run sim + controller as processes, arm, record duration seconds; returns the summary."""
+def fly(params_file, out, duration, monitor_factory=None, mavlink=None, record=True):
+    """Run sim + controller as processes, arm, fly duration seconds; returns the summary. With
+    record, ``record`` writes the flight to a bag under out/records (its path in the summary).
+    """
     use_node_env()
     values = resolve(CONTROLLER, node_overrides(load_parameter_file(params_file), CONTROLLER))
     setup = controller_setup(values)
@@ -84,9 +87,16 @@ def fly(params_file, out, duration, monitor_factory=None, mavlink=None):
     if mavlink:        # a ground station on this machine can watch the flight
         procs.append(NodeProcess('mavlink_bridge', None, ('-p', 'mavlink.url:=' + mavlink),
                                  log_dir=out))
+    bag_path = os.path.join(out, default_path()) if record else None
+    if record:
+        recorder = NodeProcess('record', None, ('-p', 'record.path:=' + bag_path), log_dir=out)
+        procs.append(recorder)
     rclpy.init()
     mon = (monitor_factory or Monitor)()
     try:
+        if record:          # from the first true pose on: the flight is recorded whole
+            mon.wait_for(lambda: 'first message on /sim/true_pose' in recorder.output()
+                         or recorder.proc.poll() is not None, 30.0, 'the recorder')
         reply = mon.arm_when_ready(30.0)
         if not reply.success:
             raise RuntimeError(reply.message)
@@ -130,6 +140,7 @@ def fly(params_file, out, duration, monitor_factory=None, mavlink=None):
                                         'gap_max_ms': float(gaps.max())},
         'commands_zero_after_disarm': bool(after_disarm is not None and not any(after_disarm)),
         'node_exit_codes': codes,
+        'record': bag_path,
     }
     with open(os.path.join(out, 'sil_summary.json'), 'w') as f:
         json.dump(summary, f, indent=2)
@@ -146,6 +157,8 @@ def main(argv=None):
     parser.add_argument('--params-file', default=None,
                         help='parameter file for both nodes (default: config/testbed.yaml)')
     parser.add_argument('--duration', type=float, default=25.0, help='seconds to fly (25)')
+    parser.add_argument('--no-record', action='store_true',
+                        help='do not record the flight (default: a bag under OUT/records)')
     parser.add_argument('--mavlink', metavar='URL', nargs='?', const='udpout:127.0.0.1:14550',
                         help='also run the MAVLink bridge to a ground station on this machine '
                              '(default URL udpout:127.0.0.1:14550, where QGroundControl listens)')
@@ -156,7 +169,8 @@ def main(argv=None):
     if args.mavlink and args.mavlink.split(':')[1:2] not in (['127.0.0.1'], ['localhost']) \
             and args.mavlink.startswith(('udp', 'tcp')):
         parser.error('--mavlink: the demo talks to this machine only (127.0.0.1)')
-    s = fly(params_file, args.out, args.duration, mavlink=args.mavlink)
+    s = fly(params_file, args.out, args.duration, mavlink=args.mavlink,
+            record=not args.no_record)
     lp, lat, sub = s['loop_period'], s['pose_to_command_latency'], s['commands_seen_by_subscriber']
     print('sim-in-the-loop: %s, %.0f s armed' % (os.path.basename(params_file), s['flight_s']))
     for n, a in s['min_cone_angle_deg'].items():
@@ -177,6 +191,8 @@ def main(argv=None):
     print('  commands after disarm  %s' % ('all zero' if s['commands_zero_after_disarm']
                                           else 'NOT ZERO'))
     print('  wrote %s/sil_summary.json, %s/sil.png' % (args.out, args.out))
+    if s['record']:
+        print('  recorded the flight   %s (./run report %s)' % (s['record'], s['record']))
     ok = (s['min_cone_margin_deg'] is None or s['min_cone_margin_deg'] > 0) and \
         s['commands_zero_after_disarm']
     return 0 if ok else 1

@@ -250,6 +250,11 @@ def flight_figures(f, out_dir):
             if len(t):
                 if title == 'Psi':
                     ax.semilogy(t, np.maximum(v, 1e-12))
+                elif v.ndim == 2:
+                    names = 'xyz' if v.shape[1] == 3 else [str(i + 1) for i in range(v.shape[1])]
+                    for i, name in enumerate(names):
+                        ax.plot(t, v[:, i], lw=0.8, label=name)
+                    ax.legend(fontsize=7, ncol=len(names))
                 else:
                     ax.plot(t, v, lw=0.8)
             else:

@@ -146,10 +146,24 @@ def summary(f):
                 'margin': float(f.cone_angles[:, i].min() - theta[i]),
                 't': float(f.attitude_t[np.argmin(f.cone_angles[:, i])])}
             for i, n in enumerate(f.cones.names)}
+    # the final figures are the armed flight's (after a disarm the testbed is on its own)
+    armed = np.nonzero(f.armed > 0)[0]
+    if len(armed):
+        t_from = f.diag_t[armed[0]]
+        t_to = f.diag_t[armed[-1] + 1] if armed[-1] + 1 < len(f.diag_t) else np.inf
+        out['armed_s'] = [float(t_from), None if np.isinf(t_to) else float(t_to)]
+    else:
+        t_from, t_to = -np.inf, np.inf
+        out['armed_s'] = None
     t_psi, psi = f.psi
+    keep = (t_psi >= t_from) & (t_psi <= t_to)
+    t_psi, psi = t_psi[keep], psi[keep]
     out['final_psi'] = float(psi[-1]) if len(psi) else None
-    out['settle_time_s'] = settle_time(t_psi, psi) if len(psi) else None
+    settle = settle_time(t_psi, psi) if len(psi) else None
+    out['settle_time_s'] = (None if settle is None else
+                            settle - (t_from if np.isfinite(t_from) else 0.0))
     t_eR, e_R = f.e_R
+    e_R = e_R[(t_eR >= t_from) & (t_eR <= t_to)]
     out['final_eR_norm'] = float(np.linalg.norm(e_R[-1])) if len(e_R) else None
     durations = {}
     for (t, state), (t_next, _) in zip(f.states, f.states[1:]):
@@ -172,7 +186,11 @@ def markdown(path, s):
         lines.append('| closest approach, cone %s | %.2f deg (half-angle %.1f): margin %.2f deg '
                      'at %.1f s |' % (n, c['angle'], c['half_angle'], c['margin'], c['t']))
     lines.append('| attitude from | %s |' % (s['attitude_source'] or '-'))
-    fmt = {'final_psi': '%.3g', 'settle_time_s': '%.1f s', 'final_eR_norm': '%.3g'}
+    lines.append('| armed | %s |' % ('never' if s['armed_s'] is None else
+                                      'from %.1f s to %s' % (s['armed_s'][0], '%.1f s' % s[
+                                          'armed_s'][1] if s['armed_s'][1] else 'the end')))
+    fmt = {'final_psi': '%.3g (armed)', 'settle_time_s': '%.1f s after arming',
+           'final_eR_norm': '%.3g (armed)'}
     for k, f in fmt.items():
         lines.append('| %s | %s |' % (k, '-' if s[k] is None else f % s[k]))
     lines.append('| time in each state | %s |' % (', '.join(
