@@ -15,6 +15,7 @@ setup(
         ('share/' + PACKAGE + '/config', glob('config/*.yaml')),
         ('share/' + PACKAGE + '/config/scenarios', glob('config/scenarios/*.yaml')),
         ('share/' + PACKAGE + '/config/dds', glob('config/dds/*.xml')),
+        ('share/' + PACKAGE + '/config/rviz', glob('config/rviz/*.rviz')),
         ('share/' + PACKAGE + '/launch', glob('launch/*.launch.xml')),
     ],
     install_requires=['setuptools'],
@@ -34,6 +35,7 @@ setup(
             'campaign = geoctl_ros.tools.campaign:main',
             'record = geoctl_ros.nodes.recorder:main',
             'report = geoctl_ros.tools.report:main',
+            'view = geoctl_ros.nodes.view:main',
         ],
     },
 )

@@ -4,8 +4,6 @@ scripts run as separate processes, and a monitor node in this process checks wha
 import json
 import math
 import os
-import subprocess
-import sys
 import time
 
 import numpy as np
@@ -29,6 +27,7 @@ from geoctl_ros.params import (
     node_overrides,
     resolve,
 )
+from geoctl_ros.tools import report
 from geoctl_ros.tools.processes import NodeProcess
 from geoctl_ros.tools.soak import ros2_command, start_loads, stop_loads
 
@@ -472,7 +471,8 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
     20 deg towards the cone, and disarmed the testbed (its centre of mass above the pivot) falls,
     so the sensor sweeps. The bags read back with rosbags' own reader (not the package's), and
     ``report`` gives the closest approach that the recorded true attitude gives, computed here
-    with plain numpy. A third recorder, killed mid-flight, leaves a bag that still reports.
+    with plain numpy. A third recorder, killed mid-flight, leaves a bag that still reports. The
+    live view runs beside them, and its markers are in the records too.
     """
     mon, launch = ros
     tilted = so3.rot_to_quat(so3.quat_to_rot(LEVEL_YAW90) @ so3.axis_angle([0, 1, 0],
@@ -480,6 +480,7 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
     launch('sim', TESTBED, '-p', 'sim:initial_attitude:=[%s]' % ', '.join('%r' % float(v)
                                                                       for v in tilted))
     launch('controller')
+    launch('view', None)
     recorders = {}
     for name, storage in (('mcap', 'mcap'), ('sqlite3', 'sqlite3'), ('killed', 'mcap')):
         p = NodeProcess('record', None, ('-p', 'record.path:=%s' % (tmp_path / name),
@@ -502,6 +503,23 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
     values = resolve('controller', node_overrides(load_parameter_file(TESTBED), 'controller'))
     cones = cone_set(values)
     axis = np.array(values['cones.obstacle.axis']) / np.linalg.norm(values['cones.obstacle.axis'])
+    # the live view, as recorded: at its rate; the cone drawn at its half-angle, red while the
+    # sensor was within view.warning_deg (5) of it; the sensor arrow a unit vector
+    with AnyReader([tmp_path / 'mcap'], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as rd:
+        views = [rd.deserialize(raw, c.msgtype) for c, _, raw in rd.messages(
+            connections=[c for c in rd.connections if c.topic == '/view/markers'])]
+    assert len(views) > 0.8 * 10 * (t_end - t_start)
+    cones_drawn = [m for v in views for m in v.markers if m.ns == 'cones']
+    assert cones_drawn
+    rim = np.array([[p.x, p.y, p.z] for p in cones_drawn[-1].points[1::3]])
+    assert np.allclose(np.degrees(np.arccos(rim @ axis / np.linalg.norm(rim, axis=1))), 12.0)
+    red = {m.color.r == 1.0 and m.color.g == 0.0 for m in cones_drawn}
+    assert red == {True, False}                # it swept from 36 deg clear into the cone
+    for v in views:
+        for m in v.markers:
+            if m.ns == 'sensor':
+                tip = m.points[1]
+                assert math.isclose(math.hypot(tip.x, tip.y, tip.z), 1.0, abs_tol=1e-9)
     reports = {}
     for storage in recorders:
         path = tmp_path / storage
@@ -522,9 +540,7 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
         assert counts['/pose'] > 0.5 * 200 * seconds, (counts, seconds)             # 200 Hz
         assert len(angles) == counts['/sim/true_pose'] > 0.5 * 200 * seconds
         out = tmp_path / ('report_' + storage)
-        r = subprocess.run([sys.executable, '-m', 'geoctl_ros.tools.report', str(path),
-                            '--out', str(out)], capture_output=True, text=True)
-        assert r.returncode == 0, r.stderr
+        assert report.main([str(path), '--out', str(out)]) == 0
         reports[storage] = json.loads((out / 'summary.json').read_text())
         closest = reports[storage]['closest_approach_deg']['obstacle']
         assert closest['angle'] == pytest.approx(min(angles), abs=0.01)
@@ -541,9 +557,7 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
     # the flight up to its last second, its cones from the bag itself
     assert not (tmp_path / 'killed' / 'metadata.yaml').exists()
     out = tmp_path / 'report_killed'
-    r = subprocess.run([sys.executable, '-m', 'geoctl_ros.tools.report', str(tmp_path / 'killed'),
-                        '--out', str(out), '--no-plots'], capture_output=True, text=True)
-    assert r.returncode == 0, r.stderr
+    assert report.main([str(tmp_path / 'killed'), '--out', str(out), '--no-plots']) == 0
     cut = json.loads((out / 'summary.json').read_text())
     assert cut['duration_s'] > 1.0 and cut['attitude_source'] == '/sim/true_pose'
     assert cut['closest_approach_deg']['obstacle']['angle'] >= reports['mcap'][

@@ -107,7 +107,7 @@ ROSDEP_KEYS = {'numpy': 'python3-numpy', 'yaml': 'python3-yaml',
                'pytest': 'python3-pytest', 'rosbags': 'python3-rosbags-pip'}
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python', 'std_msgs',
                 'geometry_msgs', 'sensor_msgs', 'std_srvs', 'diagnostic_msgs', 'rosgraph_msgs',
-                'launch_ros'}
+                'launch_ros', 'visualization_msgs'}
 
 
 def _third_party_imports(top):

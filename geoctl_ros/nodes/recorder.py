@@ -12,18 +12,16 @@ import importlib
 import os
 import sys
 
-from rcl_interfaces.srv import GetParameters, ListParameters
 from rclpy.node import Node
-from rclpy.parameter import parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from std_msgs.msg import String
 import yaml
 
 from geoctl_ros.nodes import ros_params
-from geoctl_ros.nodes.conversions import python_value
+from geoctl_ros.nodes.controller_params import ControllerParameters
 from geoctl_ros.nodes.runtime import spin
-from geoctl_ros.params import RECORD, settings
+from geoctl_ros.params import RECORD, ConfigError, settings
 from geoctl_ros.records import bag
 
 DEPTH = 50          # a burst of this many per topic waits for the callback, none is lost
@@ -53,7 +51,10 @@ class Recorder(Node):
         topics = [bag.BY_NAME[name] for name in cfg.topics]
         parent = os.path.dirname(os.path.abspath(self.path))
         os.makedirs(parent, exist_ok=True)
-        self.writer = bag.BagWriter(self.path, topics, cfg.storage)
+        try:
+            self.writer = bag.BagWriter(self.path, topics, cfg.storage)
+        except ValueError as e:         # the folder exists, or cannot be made: say so, exit 2
+            raise ConfigError([('record.path', str(e))]) from None
         clock = self.get_clock()
         self._silent = {t.name for t in topics}           # no message yet
         for topic in topics:
@@ -64,11 +65,7 @@ class Recorder(Node):
                     self.get_logger().info('first message on %s' % name)
             self.create_subscription(self._msg_class(topic.type), topic.name, on_message,
                                      _qos(topic), raw=True)
-        controller = '/' + cfg.controller.strip('/')
-        self._list = self.create_client(ListParameters, controller + '/list_parameters')
-        self._get = self.create_client(GetParameters, controller + '/get_parameters')
-        self._asking = None
-        self._ask_timer = self.create_timer(1.0, self._ask_controller)
+        ControllerParameters(self, cfg.controller, self._store_controller_parameters)
         self.get_logger().info('recording %d topics to %s (%s)' % (len(topics), self.path,
                                                                     cfg.storage))
 
@@ -77,34 +74,9 @@ class Recorder(Node):
         package, _, name = type_name.split('/')
         return getattr(importlib.import_module(package + '.msg'), name)
 
-    # --- the controller's parameters, once -------------------------------------------------
-    def _ask_controller(self):
-        if self._asking is not None or not self._list.service_is_ready():
-            return
-        request = ListParameters.Request()
-        request.prefixes, request.depth = ['cones', 'sensor_axis'], 0
-        self._asking = self._list.call_async(request)
-        self._asking.add_done_callback(self._on_list)
-
-    def _on_list(self, future):
-        names = list(future.result().result.names) if future.result() else []
-        if not names:
-            self._asking = None
-            return
-        request = GetParameters.Request()
-        request.names = names
-        self._get.call_async(request).add_done_callback(
-            lambda f: self._on_values(names, f))
-
-    def _on_values(self, names, future):
-        if future.result() is None:
-            self._asking = None
-            return
-        values = {n: python_value(parameter_value_to_python(v))
-                  for n, v in zip(names, future.result().values)}
+    def _store_controller_parameters(self, values):
         self.writer.put(bag.CONTROLLER_PARAMETERS.name, self.get_clock().now().nanoseconds,
                         serialize_message(String(data=yaml.safe_dump(values))))
-        self.destroy_timer(self._ask_timer)
         self.get_logger().info("stored the controller's %d cone and sensor parameters"
                                % len(values))
 

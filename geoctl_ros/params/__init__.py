@@ -37,6 +37,7 @@ from geoctl_ros.params.schema import (
                                      SCENARIO,
                                      SCHEMA,
                                      SIM,
+                                     VIEW,
                                      ConfigError,
                                      Param,
                                      cone_param,
@@ -46,7 +47,7 @@ from geoctl_ros.params.validate import check_value, resolve
 
 __all__ = ['BOTH', 'BY_NAME', 'CONE_KEY', 'CONE_SCHEMA', 'CONTROLLER', 'ConfigError',
            'ControllerSetup', 'LAB_INERTIA', 'MAVLINK', 'Param', 'RECORD', 'SCENARIO', 'SCHEMA',
-           'SIM',
+           'SIM', 'VIEW',
            'airframe',
            'check_value', 'cone_param', 'cone_set', 'controller_config', 'controller_setup',
            'flatten', 'load_parameter_file', 'mixer', 'node_overrides', 'plant_config', 'resolve',

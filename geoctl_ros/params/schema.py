@@ -16,8 +16,8 @@ from geoctl_ros.core.control import DISTURBANCE_MODELS
 from geoctl_ros.core.safety import quaternion_problem
 from geoctl_ros.records.bag import TOPICS as _RECORDED
 
-CONTROLLER, SIM, SCENARIO, MAVLINK, RECORD = ('controller', 'sim', 'scenario', 'mavlink_bridge',
-                                              'record')
+CONTROLLER, SIM, SCENARIO, MAVLINK, RECORD, VIEW = (
+    'controller', 'sim', 'scenario', 'mavlink_bridge', 'record', 'view')
 BOTH = (CONTROLLER, SIM)
 RECORD_TOPICS = tuple(t.name for t in _RECORDED)
 
@@ -280,7 +280,7 @@ SCHEMA = [
     _p('command_timeout', 'double', 0.1, 's',
        'sim node: motors stop when motor_commands are older than this', SIM, check=_positive),
     _p('world_frame_id', 'string', 'world', '-', 'world frame id (sim: of pose messages; '
-       'controller: of active_setpoint)', BOTH),
+       'controller: of active_setpoint; view: of its markers)', (CONTROLLER, SIM, VIEW)),
     # MAVLink bridge (geoctl_ros.nodes.mavlink_bridge).
     _p('mavlink.url', 'string', 'udpout:127.0.0.1:14550', '-',
        'ground-station link, as pymavlink takes it (udpout:HOST:PORT, udpin:IP:PORT, '
@@ -326,6 +326,15 @@ SCHEMA = [
                              for t in v if t not in RECORD_TOPICS), None)),
     _p('record.controller', 'string', 'controller', '-', 'the controller node whose parameters '
        '(cones, sensor axis) are stored in the bag for the report', RECORD),
+    # Live 3D view (geoctl_ros.nodes.view).
+    _p('view.rate_hz', 'double', 10.0, 'Hz', 'view/markers rate', VIEW,
+       check=lambda v: None if 0.0 < v <= 50.0 else 'must be in (0, 50]'),
+    _p('view.trail_s', 'double', 3.0, 's', 'how long a trail of sensor directions is drawn',
+       VIEW, check=_nonnegative),
+    _p('view.warning_deg', 'double', 5.0, 'deg', 'a cone turns red while the sensor is this close '
+       'to it (or inside)', VIEW, check=_nonnegative),
+    _p('view.controller', 'string', 'controller', '-', 'the controller node whose cones are '
+       'drawn', VIEW),
     # Headless runner.
     _p('duration', 'double', 20.0, 's', 'simulated time of a scenario run', SCENARIO,
        check=_positive),

@@ -55,6 +55,7 @@ TOPICS = (
     Topic('/attitude_setpoint', 'geometry_msgs/msg/QuaternionStamped', True, depth=10),
     Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', True, depth=10),
     Topic('/sim/true_pose', 'geometry_msgs/msg/PoseStamped', False),
+    Topic('/view/markers', 'visualization_msgs/msg/MarkerArray', False),
 )
 BY_NAME = {t.name: t for t in TOPICS}
 # Written by the recorder itself, not heard on DDS: the controller's cone and sensor parameters
