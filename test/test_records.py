@@ -7,17 +7,25 @@ import math
 import os
 from typing import NamedTuple
 
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, QuaternionStamped
 import numpy as np
 import pytest
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64
+import yaml
 
+from geoctl_ros.core.diagnostics import Figures, Status
 from geoctl_ros.core.view import Trail, cone_triangles, in_warning
+from geoctl_ros.nodes.conversions import set_quaternion, status_msg
 from geoctl_ros.records import bag
-from geoctl_ros.records.bag import Topic
+from geoctl_ros.records.bag import BY_NAME, Topic
+from geoctl_ros.tools import scenario
 from geoctl_ros.tools.report import main as report_main
 
 pytestmark = pytest.mark.odroid
+TESTBED = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config',
+                       'testbed.yaml')
 
 
 class Ran(NamedTuple):
@@ -95,3 +103,55 @@ def test_the_view_draws_each_cone_at_its_half_angle_and_the_trail_oldest_first()
     for k in range(5):
         trail.add([k, 0.0, 0.0])
     assert list(trail.points()[:, 0]) == [2.0, 3.0, 4.0]
+
+
+def test_compare_flies_a_record_again_headless_and_finds_the_same_flight(tmp_path, report):
+    """A record made from a headless run of the testbed (its true attitude, Psi, set points and
+    armed diagnostics, at the runner's steps), compared with the testbed's file stripped of its
+    start and its set points: the headless twin starts at the record's attitude at arming and
+    flies the record's set points, so it finds the same closest approach.
+    """
+    flown = scenario.run(scenario.load(TESTBED), duration=8.0)
+    cols = flown.columns
+    t = flown.history[:, 0]
+    names = [n for n in BY_NAME if n in ('/sim/true_pose', '/configuration_error',
+                                         '/active_setpoint', '/diagnostics')]
+    w = bag.BagWriter(str(tmp_path / 'flight'), [BY_NAME[n] for n in names])
+    ns = (1_000_000_000 + np.round(t * 1e9)).astype(int)
+    for k, row in enumerate(flown.history):
+        pose = PoseStamped()
+        set_quaternion(pose.pose.orientation, row[[cols.index(c) for c in ('qx', 'qy', 'qz',
+                                                                           'qw')]])
+        w.put('/sim/true_pose', int(ns[k]), serialize_message(pose))
+        w.put('/configuration_error', int(ns[k]),
+              serialize_message(Float64(data=float(row[cols.index('psi')]))))
+    schedule = flown.scenario.controller
+    for t_set, q in zip(schedule['setpoint_schedule.times'],
+                        np.reshape(schedule['setpoint_schedule.quaternions'], (-1, 4))):
+        sp = QuaternionStamped()
+        set_quaternion(sp.quaternion, q)
+        w.put('/active_setpoint', int(1_000_000_000 + t_set * 1e9), serialize_message(sp))
+    for t_d in np.arange(0.0, 8.0, 0.5):
+        status = status_msg(Status(0, 'armed', Figures(armed=True, state='armed')),
+                            'geoctl_ros: controller', 'geoctl_ros')
+        w.put('/diagnostics', int(1_000_000_000 + t_d * 1e9),
+              serialize_message(DiagnosticArray(status=[status])))
+    w.close()
+    # the scenario file compared with has neither the start nor the set points: they must come
+    # from the record
+    doc = yaml.safe_load(open(TESTBED))
+    del doc['controller']['ros__parameters']['setpoint_schedule']
+    doc['sim']['ros__parameters']['initial_attitude'] = [0.0, 0.0, 0.0, 1.0]
+    bare = tmp_path / 'bare.yaml'
+    bare.write_text(yaml.safe_dump(doc))
+    out = tmp_path / 'out'
+    r = report(tmp_path / 'flight', '--out', out, '--params-file', TESTBED, '--compare', bare)
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / 'summary.json').read_text())
+    recorded = s['closest_approach_deg']['obstacle']['angle']
+    assert recorded == pytest.approx(flown.summary['min_cone_angle_deg']['obstacle'], abs=0.01)
+    assert s['headless']['closest_approach_deg']['obstacle'] == pytest.approx(recorded, abs=0.05)
+    assert (out / 'compare.png').stat().st_size > 10_000
+    never = tmp_path / 'never_armed'
+    write(never, BY_NAME['/configuration_error'], [0.5, 0.4])
+    assert report(never, '--out', tmp_path / 'o2', '--compare', TESTBED).returncode == 2

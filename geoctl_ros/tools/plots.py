@@ -285,3 +285,30 @@ def flight_figures(f, out_dir):
     paths.append(os.path.join(out_dir, 'flight.png'))
     fig.savefig(paths[-1], dpi=90)
     return paths
+
+
+def compare_figure(f, headless, t_arm, out_dir):
+    """compare.png: a recorded flight (``report``) and its headless twin (``report --compare``),
+    the angle to each cone and Psi against the time since arming.
+    """
+    fig, (a1, a2) = _subplots(1, 2, figsize=(12, 4.5))
+    t_h = headless.history[:, 0]
+    for i, name in enumerate(f.cones.names if f.cones is not None else []):
+        line, = a1.plot(f.attitude_t - t_arm, f.cone_angles[:, i], label='%s, recorded' % name)
+        a1.plot(t_h, headless.history[:, headless.columns.index('angle_' + name)], ls='--',
+                color=line.get_color(), label='%s, headless' % name)
+        a1.axhline(math.degrees(f.cones.theta[i]), color=line.get_color(), lw=0.8, ls=':')
+    a1.set(xlabel='t since arming [s]', ylabel='deg', title='angle to each cone')
+    t, psi = f.psi
+    a2.semilogy(t - t_arm, np.maximum(psi, 1e-12), label='recorded')
+    a2.semilogy(t_h, np.maximum(headless.history[:, headless.columns.index('psi')], 1e-12),
+                ls='--', label='headless')
+    a2.set(xlabel='t since arming [s]', title='Psi', xlim=(0, t_h[-1] if len(t_h) else 1))
+    a1.set_xlim(0, t_h[-1] if len(t_h) else 1)
+    for a in (a1, a2):
+        a.legend(fontsize=8)
+        a.grid(True, alpha=0.3)
+    fig.tight_layout()
+    path = os.path.join(out_dir, 'compare.png')
+    fig.savefig(path, dpi=100)
+    return path

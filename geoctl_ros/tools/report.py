@@ -25,6 +25,8 @@ from geoctl_ros.core.diagnostics import from_values
 from geoctl_ros.core.stats import settle_time
 from geoctl_ros.params import (
     CONTROLLER,
+    SCENARIO,
+    SIM,
     ConfigError,
     cone_set,
     load_parameter_file,
@@ -32,7 +34,7 @@ from geoctl_ros.params import (
     resolve,
 )
 from geoctl_ros.records import bag
-from geoctl_ros.tools import plots
+from geoctl_ros.tools import plots, scenario
 
 CONTROLLER_STATUS = 'geoctl_ros: controller'
 
@@ -59,6 +61,7 @@ class Flight(NamedTuple):
     states: list                   # (t, state) of the controller's diagnostics
     last_figures: object           # the last diagnostics' Figures, or None
     missing: list                  # the package's topics the bag lacks
+    setpoints: list                # (t, quaternion) of active_setpoint, as the controller flew
 
 
 def _series(msgs, t0, value):
@@ -131,7 +134,9 @@ def load_flight(path, params_file=None):
         failsafe_t=failsafe_t,
         states=[(t, f.state) for t, *_, f in figures],
         last_figures=figures[-1][3] if figures else None,
-        missing=[t.name for t in bag.TOPICS if t.name not in present])
+        missing=[t.name for t in bag.TOPICS if t.name not in present],
+        setpoints=[(m.t - t0, _quat(m.msg.quaternion))
+                   for m in topics.get('/active_setpoint', [])])
 
 
 def summary(f):
@@ -179,6 +184,53 @@ def summary(f):
     return out
 
 
+def armed_span(f):
+    """(first armed time, end of the armed span) of the controller's diagnostics, or None."""
+    armed = np.nonzero(f.armed > 0)[0]
+    if not len(armed):
+        return None
+    end = f.diag_t[armed[-1] + 1] if armed[-1] + 1 < len(f.diag_t) else f.diag_t[-1]
+    return float(f.diag_t[armed[0]]), float(end)
+
+
+def compare_sections(f, scenario_file):
+    """The scenario file's sections, flown from the record's state at arming: the sim starts at
+    the recorded attitude, and the controller flies the set points the record shows, at their
+    times after arming, for as long as the record was armed. Raises ValueError when the record
+    has no armed span or no attitude.
+    """
+    span = armed_span(f)
+    if span is None or not len(f.attitude_t):
+        raise ValueError('the record was never armed, or has no attitude: nothing to compare')
+    t_arm, t_end = span
+    sections = load_parameter_file(scenario_file)
+    sim = sections.setdefault(SIM, {})
+    ctl = sections.setdefault(CONTROLLER, {})
+    k = int(np.searchsorted(f.attitude_t, t_arm))
+    sim['initial_attitude'] = [float(v) for v in so3.rot_to_quat(
+        f.rotations[min(k, len(f.rotations) - 1)])]
+    sim['initial_angular_velocity'] = [0.0, 0.0, 0.0]
+    before = [q for t, q in f.setpoints if t <= t_arm]
+    after = [(t - t_arm, q) for t, q in f.setpoints if t_arm < t <= t_end]
+    first = before[-1] if before else (after[0][1] if after else None)
+    for key in [k for k in ctl if k.startswith('setpoint_schedule.')]:
+        del ctl[key]
+    if first is not None:
+        ctl['setpoint'] = [float(v) for v in first]
+    if after:
+        ctl['setpoint_schedule.times'] = [0.0] + [float(t) for t, _ in after]
+        ctl['setpoint_schedule.quaternions'] = [float(v) for q in [first] + [q for _, q in after]
+                                                for v in q]
+    sections.setdefault(SCENARIO, {})['duration'] = round(t_end - t_arm, 3)
+    return sections, t_arm
+
+
+def fly_headless(f, scenario_file):
+    """(scenario Result, the record's arming time) of compare_sections' run."""
+    sections, t_arm = compare_sections(f, scenario_file)
+    return scenario.run(scenario.from_sections(sections, 'headless')), t_arm
+
+
 def markdown(path, s):
     lines = ['# Flight %s' % os.path.basename(os.path.normpath(path)), '',
              '| figure | value |', '|---|---|', '| duration | %.1f s |' % s['duration_s']]
@@ -199,6 +251,11 @@ def markdown(path, s):
     g = s['gaps_ridden']
     lines.append('| gaps ridden through | %s |' % ('-' if g is None else
                                                   'pose %d, imu %d' % (g['pose'], g['imu'])))
+    h = s.get('headless')
+    if h:
+        lines.append('| headless (%s), closest approach | %s |' % (
+            os.path.basename(h['scenario']), ', '.join(
+                '%s %.2f deg' % kv for kv in h['closest_approach_deg'].items())))
     if s['missing_topics']:
         lines.append('| not in the bag | %s |' % ', '.join(s['missing_topics']))
     return '\n'.join(lines) + '\n'
@@ -211,6 +268,10 @@ def main(argv=None):
     parser.add_argument('--params-file', default=None,
                         help="the controller's parameter file, for the cones (default: the "
                              "ones record stored in the bag)")
+    parser.add_argument('--compare', metavar='SCENARIO.yaml', default=None,
+                        help="also fly this scenario file headless from the record's attitude "
+                             'at arming, through its set points, and lay the two side by side '
+                             '(compare.png; the summary gets the headless closest approach)')
     parser.add_argument('--no-plots', action='store_true', help='skip the PNG figures')
     args = parser.parse_args(argv)
     try:
@@ -221,6 +282,17 @@ def main(argv=None):
         print('report: %s' % str(e).replace('\n', ' '), file=sys.stderr)
         return 2
     s = summary(f)
+    headless = None
+    if args.compare:
+        try:
+            headless, t_arm = fly_headless(f, args.compare)
+        except (ValueError, ConfigError, OSError) as e:
+            print('report: --compare: %s' % str(e).replace('\n', ' '), file=sys.stderr)
+            return 2
+        s['headless'] = {'scenario': args.compare, 'armed_at_s': t_arm,
+                         'closest_approach_deg': headless.summary['min_cone_angle_deg'],
+                         'final_attitude_error_deg':
+                             headless.summary['final_attitude_error_deg']}
     text = markdown(args.bag, s)
     with open(os.path.join(out, 'summary.json'), 'w') as fh:
         json.dump(s, fh, indent=2)
@@ -229,6 +301,8 @@ def main(argv=None):
         fh.write(text)
     if not args.no_plots:
         plots.flight_figures(f, out)
+        if headless is not None:
+            plots.compare_figure(f, headless, t_arm, out)
     print(text + 'wrote %s' % out)
     if f.missing:
         print('report: the bag has no %s' % ', '.join(f.missing), file=sys.stderr)

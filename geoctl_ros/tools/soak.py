@@ -19,9 +19,10 @@ Loads (other people's processes, in a plain ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCA
 topic hz, param dump and get on both nodes, service call, service list); ``churn`` a ROS process
 joining every second and leaving after 0.5-1.5 s, one in three killed with SIGKILL; ``params``
 an rclpy client reading every parameter of both nodes every 0.5 s; ``cpu`` one busy process
-per core. Faults, through a relay between the sim and the controller: inputs delayed by 0-10 ms,
-duplicated, reordered, held back and released in bursts, poses or IMU missing for a while; and
-the sim process paused with SIGSTOP/SIGCONT (both inputs missing).
+per core; ``record`` the flight recorder and the live 3D view, on the nodes' loopback profile
+(what recording costs the flight). Faults, through a relay between the sim and the controller:
+inputs delayed by 0-10 ms, duplicated, reordered, held back and released in bursts, poses or IMU
+missing for a while; and the sim process paused with SIGSTOP/SIGCONT (both inputs missing).
 
 ``--transport profile`` (default) runs the nodes on the shipped loopback profile
 (``geoctl_ros.tools.rosenv``), ``rmw-default`` on the rmw's defaults (shared memory + UDP,
@@ -52,7 +53,7 @@ from geoctl_ros.params import (
     node_overrides,
     resolve,
 )
-from geoctl_ros.tools.processes import Monitor, NodeProcess
+from geoctl_ros.tools.processes import Monitor, NodeProcess, executable
 from geoctl_ros.tools.rosenv import PROFILE_VAR, cli_env, config_dir, node_env
 from geoctl_ros.tools.soak_agents import CHURN_LOOP, CLI_LOOP, PARAMS_LOOP
 
@@ -67,6 +68,7 @@ CASES = {
                      'processes joining/leaving every second (1 in 3 SIGKILLed), full '
                      'parameter reads every 0.5 s'),
     'all loads': (('cli', 'churn', 'params', 'cpu'), None, 'every load at once'),
+    'recording': (('record',), None, 'the flight recorded (record) and drawn (view) beside it'),
     'delayed': ((), ('delay', 0.010, 0), 'inputs delayed by 0-10 ms (so some reordered)'),
     'duplicated': ((), ('duplicate', 0, 0), 'every input sent twice'),
     'reordered': ((), ('reorder', 0, 0), 'one input pair in ten swapped'),
@@ -215,6 +217,13 @@ def start_loads(loads, env):
                 procs.append(subprocess.Popen([sys.executable, '-c', code], env=env,
                                               stdout=subprocess.DEVNULL,
                                               stderr=subprocess.DEVNULL, start_new_session=True))
+            elif load == 'record':          # a lab's recorder and 3D view, ros2 run as they are
+                bag = os.path.join(tempfile.mkdtemp(prefix='soak-record-'), 'flight')
+                for name, args in (('record', ['-p', 'record.path:=' + bag]), ('view', [])):
+                    procs.append(subprocess.Popen(
+                        [executable(name) or name, '--ros-args', *args], env=node_env(),
+                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                        start_new_session=True))
             elif load == 'cpu':
                 for _ in range(os.cpu_count() or 1):
                     procs.append(subprocess.Popen([sys.executable, '-c', 'while True: pass'],
@@ -280,6 +289,7 @@ def figures(mon, t0, t1, cones):
         'pose age p99/max [ms]': _windows(diags, 'pose_age_at_tick'),
         'imu age p99/max [ms]': _windows(diags, 'imu_age_at_tick'),
         'loop period p99/max [ms]': _windows(diags, 'loop_period'),
+        'pose to command p99/max [ms]': _windows(diags, 'pose_to_command_latency'),
         'closest approach [deg]': min(margins) if margins else float('nan'),
         'gaps ridden (pose, imu)': (('-', '-') if last is None else
                                     (last.pose_gaps.count, last.imu_gaps.count)),
@@ -288,17 +298,19 @@ def figures(mon, t0, t1, cones):
 
 
 TABLE_HEAD = ('| case | s | failsafes | pose age p99 / max, ms | imu age p99 / max, ms | '
-              'command gap p99 / max, ms | loop period p99 / max, ms | min cone margin, deg |\n'
-              '|---|---|---|---|---|---|---|---|')
+              'command gap p99 / max, ms | loop period p99 / max, ms | '
+              'pose to command p99 / max, ms | min cone margin, deg |\n'
+              '|---|---|---|---|---|---|---|---|---|')
 
 
 def table_row(name, f):
     def pair(p):
         return '%.1f / %.1f' % p
-    return '| %s | %.0f | %d | %s | %s | %s | %s | %.1f |' % (
+    return '| %s | %.0f | %d | %s | %s | %s | %s | %s | %.1f |' % (
         name, f['seconds'], f['failsafes'], pair(f['pose age p99/max [ms]']),
         pair(f['imu age p99/max [ms]']), pair(f['command gap p99/max [ms]']),
-        pair(f['loop period p99/max [ms]']), f['closest approach [deg]'])
+        pair(f['loop period p99/max [ms]']), pair(f['pose to command p99/max [ms]']),
+        f['closest approach [deg]'])
 
 
 def run_cases(names, duration, params_file, out, transport='profile', prefix=(),
