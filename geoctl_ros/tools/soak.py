@@ -224,6 +224,7 @@ def start_loads(loads, env):
                         [executable(name) or name, '--ros-args', *args], env=node_env(),
                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                         start_new_session=True))
+                    procs[-1].node = True
             elif load == 'cpu':
                 for _ in range(os.cpu_count() or 1):
                     procs.append(subprocess.Popen([sys.executable, '-c', 'while True: pass'],
@@ -240,7 +241,15 @@ def stop_loads(procs, env):
     """Stop what start_loads started (each with its process group) and the `ros2` daemon that
     the cli load spawns.
     """
-    for p in procs:
+    for p in procs:       # SIGKILL, but Ctrl-C first for a node (a recorder closes its bag)
+        try:
+            if getattr(p, 'node', False):
+                os.killpg(p.pid, signal.SIGINT)
+                p.wait(5.0)
+        except ProcessLookupError:
+            pass
+        except subprocess.TimeoutExpired:
+            pass
         try:
             os.killpg(p.pid, signal.SIGKILL)
         except ProcessLookupError:
@@ -319,19 +328,20 @@ def run_cases(names, duration, params_file, out, transport='profile', prefix=(),
     {name: figures}.
     """
     results = {}
-    for name in names:
+    for k, name in enumerate(names):
         loads, fault, what = CASES[name]
-        progress('%s: %s, %.0f s ...' % (name, what, duration))
+        label = name if names.count(name) == 1 else '%s (%d)' % (name, names[:k].count(name) + 1)
+        progress('%s: %s, %.0f s ...' % (label, what, duration))
         relay = fault is not None and fault[0] in RELAYED
-        s = Session(params_file, os.path.join(out, re.sub(r'\W+', '_', name)), transport, relay,
-                    prefix)
+        s = Session(params_file, os.path.join(out, re.sub(r'\W+', '_', label)), transport,
+                    relay, prefix)
         try:
-            results[name] = s.phase(duration, loads, fault)
-            results[name]['command gap p99/max [ms]'] = command_gaps(
-                s.command_times(), s.t_end - results[name]['seconds'], s.t_end)
+            f = results[label] = s.phase(duration, loads, fault)
+            f['command gap p99/max [ms]'] = command_gaps(s.command_times(),
+                                                         s.t_end - f['seconds'], s.t_end)
         finally:
             s.close()
-        progress('  ' + table_row(name, results[name]))
+        progress('  ' + table_row(label, f))
     return results
 
 
@@ -359,8 +369,8 @@ def main(argv=None):
     print('transport: %s, %s%s' % (args.transport, os.path.basename(params_file),
                                     ', nodes under ' + args.prefix if args.prefix else ''))
     print(TABLE_HEAD)
-    for name in names:
-        print(table_row(name, results[name]))
+    for label, f in results.items():
+        print(table_row(label, f))
     print('logs and soak.json in %s' % out)
     return 0
 
