@@ -4,6 +4,7 @@ scripts run as separate processes, and a monitor node in this process checks wha
 import json
 import math
 import os
+import pathlib
 import time
 
 import numpy as np
@@ -90,33 +91,55 @@ def zero_commands(mon):
     return mon.last('motors') is not None and not any(mon.last('motors'))
 
 
+def read_back(path, axis):
+    """A bag as rosbags' own reader (not the package's) sees it: message counts per topic,
+    first and last stamps (s since the epoch), and the angle of the recorded true sensor
+    direction to axis (deg, plain numpy).
+    """
+    with AnyReader([pathlib.Path(path)],
+                   default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+        true = [c for c in reader.connections if c.topic == '/sim/true_pose']
+        angles = []
+        for conn, _, raw in reader.messages(connections=true):
+            q = reader.deserialize(raw, conn.msgtype).pose.orientation
+            sensor = so3.quat_to_rot((q.x, q.y, q.z, q.w)) @ np.array([1.0, 0.0, 0.0])
+            angles.append(math.degrees(math.acos(np.clip(sensor @ axis, -1.0, 1.0))))
+        return counts, reader.start_time * 1e-9, reader.end_time * 1e-9, np.array(angles)
+
+
 FLIGHT_S = 16.0        # the schedule's last step is at 12 s; Psi is down to 2 % of its peak by 16
 
 
 @pytest.mark.odroid          # the one flight over DDS on the vehicle's stack too
 @pytest.mark.realtime
-def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros):
-    """The testbed's manoeuvre, sim and controller as two processes, watched as the lab watches
-    it: where the ``ros2`` command is installed (the development stack), the README's
-    monitoring commands run in a loop all through the flight (tools/soak.py's ``cli`` load).
+def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
+    """The testbed's manoeuvre, sim and controller as two processes, watched and recorded as
+    the lab does it: where the ``ros2`` command is installed, the README's monitoring commands
+    run in a loop all through the flight (tools/soak.py's ``cli`` load), and ``record`` writes
+    the flight to a bag, which reads back with rosbags' own reader and whose report finds the
+    closest approach the recorded true attitude has.
     """
     mon, launch = ros
     launch('sim')
     launch('controller')
+    recorder = launch('record', None, '-p', 'record.path:=%s' % (tmp_path / 'flight'))
     mon.wait_for(mon.controller_has_inputs, 30.0, 'the sim and the controller')
+    mon.wait_for(lambda: 'first message on /sim/true_pose' in recorder.output(), 20.0,
+                 'the recorder')
     # the diagnostics can reach this monitor before its motor_commands subscription is matched
     mon.wait_for(lambda: mon.last('motors') is not None, 10.0, 'a first motor command')
     assert zero_commands(mon)                                  # disarmed at start-up
     assert mon.last_diagnostic().figures.armed is False
     reply = mon.arm_when_ready()
     assert reply.success, reply.message
-    t0 = time.monotonic()
+    t0, wall0 = time.monotonic(), time.time()
     loads = start_loads(('cli',), os.environ) if ros2_command() else []
     try:
         mon.spin_for(FLIGHT_S)
     finally:
         stop_loads(loads, os.environ)
-    t1 = time.monotonic()
+    t1, wall1 = time.monotonic(), time.time()
     values = resolve('controller', node_overrides(load_parameter_file(TESTBED), 'controller'))
     cones = cone_set(values)
     true = [so3.quat_to_rot(q) for _, q in mon.between('true_pose', t0, t1)]
@@ -140,8 +163,24 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros):
     assert diag.level == OK and diag.figures.armed
     assert diag.figures.pose_counts.refused == 0
     published_values_are_finite(mon)
+    # the record, stopped before the disarm (disarmed, the testbed falls): every stream through
+    # the flight (best effort ones at least half their rate), and the report's closest approach
+    # that of the recorded true attitude
+    assert recorder.stop() == 0, recorder.output()
     assert mon.arm(False).success
     mon.wait_for(lambda: zero_commands(mon), 2.0, 'zero commands after disarming')
+    axis = cones.V[0]
+    counts, first, last, angles = read_back(tmp_path / 'flight', axis)
+    assert first < wall0 and last > wall1
+    assert counts['/motor_commands'] > 0.75 * 100 * FLIGHT_S, counts
+    assert counts['/sim/true_pose'] > 0.5 * 200 * FLIGHT_S, counts
+    assert counts['/cone_margins'] > 0.5 * 100 * FLIGHT_S and counts['/diagnostics'] > FLIGHT_S
+    flight = report.load_flight(str(tmp_path / 'flight'))
+    s = report.summary(flight)
+    closest = s['closest_approach_deg']['obstacle']
+    assert closest['angle'] == pytest.approx(angles.min(), abs=0.01)
+    assert closest['margin'] == pytest.approx(min(margins), abs=0.05)    # as this monitor saw
+    assert s['failsafes'] == 0 and s['armed_s'][1] - s['armed_s'][0] > FLIGHT_S
 
 
 @pytest.mark.realtime
@@ -523,15 +562,8 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
     reports = {}
     for storage in recorders:
         path = tmp_path / storage
-        with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
-            counts = {c.topic: c.msgcount for c in reader.connections}
-            assert reader.start_time * 1e-9 < t_start and t_start < reader.end_time * 1e-9 < t_end
-            true = [c for c in reader.connections if c.topic == '/sim/true_pose']
-            angles = []
-            for conn, stamp, raw in reader.messages(connections=true):
-                q = reader.deserialize(raw, conn.msgtype).pose.orientation
-                sensor = so3.quat_to_rot((q.x, q.y, q.z, q.w)) @ np.array([1.0, 0.0, 0.0])
-                angles.append(math.degrees(math.acos(np.clip(sensor @ axis, -1.0, 1.0))))
+        counts, first, last, angles = read_back(path, axis)
+        assert first < t_start and t_start < last < t_end
         # every stream flowed all through this window (best effort ones may lose a few on a busy
         # machine: at least half their rate)
         seconds = t_end - t_start

@@ -139,6 +139,18 @@ def load_flight(path, params_file=None):
                    for m in topics.get('/active_setpoint', [])])
 
 
+def armed_span(f):
+    """(first armed time, the first disarmed report after the last armed one, or the record's
+    end) from the controller's diagnostics, or None when it was never armed.
+    """
+    armed = np.nonzero(f.armed > 0)[0]
+    if not len(armed):
+        return None
+    end = (f.diag_t[armed[-1] + 1] if armed[-1] + 1 < len(f.diag_t)
+           else max([f.diag_t[-1]] + list(f.attitude_t[-1:])))
+    return float(f.diag_t[armed[0]]), float(end)
+
+
 def summary(f):
     """The flight's figures: closest approach per cone, time in each state, settle time, final
     error, failsafes and gaps ridden through.
@@ -152,14 +164,9 @@ def summary(f):
                 't': float(f.attitude_t[np.argmin(f.cone_angles[:, i])])}
             for i, n in enumerate(f.cones.names)}
     # the final figures are the armed flight's (after a disarm the testbed is on its own)
-    armed = np.nonzero(f.armed > 0)[0]
-    if len(armed):
-        t_from = f.diag_t[armed[0]]
-        t_to = f.diag_t[armed[-1] + 1] if armed[-1] + 1 < len(f.diag_t) else np.inf
-        out['armed_s'] = [float(t_from), None if np.isinf(t_to) else float(t_to)]
-    else:
-        t_from, t_to = -np.inf, np.inf
-        out['armed_s'] = None
+    span = armed_span(f)
+    out['armed_s'] = None if span is None else list(span)
+    t_from, t_to = (-np.inf, np.inf) if span is None else span
     t_psi, psi = f.psi
     keep = (t_psi >= t_from) & (t_psi <= t_to)
     t_psi, psi = t_psi[keep], psi[keep]
@@ -182,15 +189,6 @@ def summary(f):
     out['duration_s'] = float(max([0.0] + [s[0][-1] for s in (f.psi, f.motors) if len(s[0])]
                                   + list(f.attitude_t[-1:])))
     return out
-
-
-def armed_span(f):
-    """(first armed time, end of the armed span) of the controller's diagnostics, or None."""
-    armed = np.nonzero(f.armed > 0)[0]
-    if not len(armed):
-        return None
-    end = f.diag_t[armed[-1] + 1] if armed[-1] + 1 < len(f.diag_t) else f.diag_t[-1]
-    return float(f.diag_t[armed[0]]), float(end)
 
 
 def compare_sections(f, scenario_file):
@@ -239,8 +237,7 @@ def markdown(path, s):
                      'at %.1f s |' % (n, c['angle'], c['half_angle'], c['margin'], c['t']))
     lines.append('| attitude from | %s |' % (s['attitude_source'] or '-'))
     lines.append('| armed | %s |' % ('never' if s['armed_s'] is None else
-                                      'from %.1f s to %s' % (s['armed_s'][0], '%.1f s' % s[
-                                          'armed_s'][1] if s['armed_s'][1] else 'the end')))
+                                      'from %.1f s to %.1f s' % tuple(s['armed_s'])))
     fmt = {'final_psi': '%.3g (armed)', 'settle_time_s': '%.1f s after arming',
            'final_eR_norm': '%.3g (armed)'}
     for k, f in fmt.items():
