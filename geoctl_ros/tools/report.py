@@ -23,6 +23,8 @@ import yaml
 from geoctl_ros.core import so3
 from geoctl_ros.core.diagnostics import from_values
 from geoctl_ros.core.stats import settle_time
+from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
+from geoctl_ros.nodes.conversions import quaternion, vector
 from geoctl_ros.params import (
     CONTROLLER,
     SCENARIO,
@@ -35,8 +37,6 @@ from geoctl_ros.params import (
 )
 from geoctl_ros.records import bag
 from geoctl_ros.tools import plots, scenario
-
-CONTROLLER_STATUS = 'geoctl_ros: controller'
 
 
 class Flight(NamedTuple):
@@ -71,10 +71,6 @@ def _series(msgs, t0, value):
             np.array([value(m.msg) for m in msgs], dtype=float))
 
 
-def _quat(q):
-    return (q.x, q.y, q.z, q.w)
-
-
 def _cones_of(stored, params_file):
     if params_file:
         values = node_overrides(load_parameter_file(params_file), CONTROLLER)
@@ -98,7 +94,7 @@ def load_flight(path, params_file=None):
     source = next((s for s in ('/sim/true_pose', '/pose') if s in present), '')
     att = topics.get(source, [])
     att_t = np.array([m.t - t0 for m in att])
-    Rs = (np.array([so3.quat_to_rot(_quat(m.msg.pose.orientation)) for m in att])
+    Rs = (np.array([so3.quat_to_rot(quaternion(m.msg.pose.orientation)) for m in att])
           if att else np.zeros((0, 3, 3)))
     if cones is not None and att:
         path_ = Rs @ cones.r
@@ -116,7 +112,7 @@ def load_flight(path, params_file=None):
         previous = fig.failsafe
 
     def vec3(m):
-        return (m.vector.x, m.vector.y, m.vector.z)
+        return vector(m.vector)
     return Flight(
         cones=cones, attitude_source=source, attitude_t=att_t, rotations=Rs, sensor_path=path_,
         cone_angles=angles,
@@ -135,7 +131,7 @@ def load_flight(path, params_file=None):
         states=[(t, f.state) for t, *_, f in figures],
         last_figures=figures[-1][3] if figures else None,
         missing=[t.name for t in bag.TOPICS if t.name not in present],
-        setpoints=[(m.t - t0, _quat(m.msg.quaternion))
+        setpoints=[(m.t - t0, quaternion(m.msg.quaternion))
                    for m in topics.get('/active_setpoint', [])])
 
 
