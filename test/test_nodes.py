@@ -181,6 +181,9 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     assert closest['angle'] == pytest.approx(angles.min(), abs=0.01)
     assert closest['margin'] == pytest.approx(min(margins), abs=0.05)    # as this monitor saw
     assert s['failsafes'] == 0 and s['armed_s'][1] - s['armed_s'][0] > FLIGHT_S
+    assert s['final_psi'] == pytest.approx(psi[-1], rel=0.25)      # settled: Psi ~0.006 here
+    assert s['gaps_ridden']['pose'] >= diag.figures.pose_gaps.count     # counters: the record
+    assert s['gaps_ridden']['imu'] >= diag.figures.imu_gaps.count       # ends a little later
 
 
 @pytest.mark.realtime
