@@ -66,6 +66,8 @@ class Recorder(Node):
             self.create_subscription(self._msg_class(topic.type), topic.name, on_message,
                                      _qos(topic), raw=True)
         ControllerParameters(self, cfg.controller, self._store_controller_parameters)
+        self._error_said = False
+        self.create_timer(1.0, self._check_writer)
         self.get_logger().info('recording %d topics to %s (%s)' % (len(topics), self.path,
                                                                     cfg.storage))
 
@@ -80,13 +82,19 @@ class Recorder(Node):
         self.get_logger().info("stored the controller's %d cone and sensor parameters"
                                % len(values))
 
+    def _check_writer(self):
+        """Say at once when the bag stopped (a full disk): what was written stays readable."""
+        if self.writer.error is not None and not self._error_said:
+            self._error_said = True
+            self.get_logger().error('the bag stopped: %s (what was written up to then stays '
+                                    'readable: report reads it)' % self.writer.error)
+
     def on_shutdown(self):
         self.writer.close()
         counts = ', '.join('%s %d' % (k, n) for k, n in self.writer.counts.items() if n)
         self.get_logger().info('wrote %s: %s%s' % (self.path, counts or 'no messages', (
             '; %d dropped (queue full)' % self.writer.dropped) if self.writer.dropped else ''))
-        if self.writer.error is not None:
-            self.get_logger().error('the bag stopped early: %s' % self.writer.error)
+        self._check_writer()
 
 
 def main():
