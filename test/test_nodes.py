@@ -318,7 +318,6 @@ def test_setpoint_inside_a_cone_is_rejected(ros):
     assert np.linalg.norm(mon.last('eR')) < np.linalg.norm(e_before)
 
 
-@pytest.mark.realtime
 def test_controller_restart_comes_back_disarmed_and_the_sim_stops_its_motors(ros):
     mon, launch = ros
     launch('sim')
