@@ -514,18 +514,15 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
                                                                                       tmp_path):
     """``record`` beside the sim and the controller, in both storages. The sim starts tilted
     20 deg towards the cone, and disarmed the testbed (its centre of mass above the pivot) falls,
-    so the sensor sweeps. The bags read back with rosbags' own reader (not the package's), and
-    ``report`` gives the closest approach that the recorded true attitude gives, computed here
-    with plain numpy. A third recorder, killed mid-flight, leaves a bag that still reports. The
-    live view runs beside them, and its markers are in the records too.
+    so the sensor sweeps into the cone; the recording runs until it has. The bags read back with
+    rosbags' own reader (not the package's), and ``report`` gives the closest approach that the
+    recorded true attitude gives, computed here with plain numpy. A third recorder, killed
+    mid-flight, leaves a bag that still reports. The live view runs beside them, and its markers
+    are in the records too.
     """
     mon, launch = ros
-    tilted = so3.rot_to_quat(so3.quat_to_rot(LEVEL_YAW90) @ so3.axis_angle([0, 1, 0],
-                                                                           math.radians(-20.0)))
-    launch('sim', TESTBED, '-p', 'sim:initial_attitude:=[%s]' % ', '.join('%r' % float(v)
-                                                                      for v in tilted))
     launch('controller')
-    launch('view', None)
+    view = launch('view', None)
     recorders = {}
     for name, storage in (('mcap', 'mcap'), ('sqlite3', 'sqlite3'), ('killed', 'mcap')):
         p = NodeProcess('record', None, ('-p', 'record.path:=%s' % (tmp_path / name),
@@ -533,13 +530,20 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
                         log_dir=tmp_path / ('log_' + name))
         launch.procs.append(p)
         recorders[name] = p
-    mon.wait_for(mon.controller_has_inputs, 30.0, 'the sim and the controller')
-    mon.wait_for(lambda: all("stored the controller's" in p.output() and
-                             'first message on /sim/true_pose' in p.output()
-                             for p in recorders.values()), 20.0,
-                 'the cones and the true pose in the three records')
-    t_start = time.time()
-    mon.spin_for(2.5)
+    # the testbed starts falling when the sim starts: everything else is ready first
+    mon.wait_for(lambda: 'drawing 1 cone' in view.output() and all(
+        "stored the controller's" in p.output() for p in recorders.values()), 30.0,
+        'the cones in the view and in the three records')
+    tilted = so3.rot_to_quat(so3.quat_to_rot(LEVEL_YAW90) @ so3.axis_angle([0, 1, 0],
+                                                                           math.radians(-20.0)))
+    launch('sim', TESTBED, '-p', 'sim:initial_attitude:=[%s]' % ', '.join('%r' % float(v)
+                                                                      for v in tilted))
+    mon.wait_for(lambda: all('first message on /sim/true_pose' in p.output()
+                             for p in recorders.values()), 30.0, 'the true pose in the records')
+    t_start, t_mon = time.time(), time.monotonic()
+    # until the sensor has fallen a degree into the cone (the controller's own margins)
+    mon.wait_for(lambda: any(m[0] < -1.0 for m in mon.since('margins', t_mon)), 30.0,
+                 'the sensor in the cone')
     recorders.pop('killed').kill()                # mid-flight, as a crash or a full disk would
     mon.spin_for(0.5)
     for p in recorders.values():
