@@ -95,3 +95,21 @@ def test_batched_products_are_the_single_ones_bit_for_bit_and_what_they_say():
     for batched, singles, meant in cases:
         assert np.array_equal(batched, np.array(singles))
         np.testing.assert_allclose(batched, meant, rtol=0, atol=1e-14)
+
+
+def test_a_stack_of_exponentials_rounds_as_a_stack_of_one_whatever_its_size():
+    """The campaign's runs.csv must not depend on how runs are batched: each rotation of a stack
+    is the one a stack of one gives, bit for bit, and both are the single-rotation exp (and
+    exp_apply is exp's matrix applied) to rounding.
+    """
+    rng = np.random.default_rng(11)
+    ws = np.concatenate([rng.normal(size=(40, 3)), 1e-6 * rng.normal(size=(8, 3)),
+                         np.zeros((1, 3))])
+    vs = rng.normal(size=(len(ws), 3))
+    stacked, applied = so3.exp(ws), so3.exp_apply(ws, vs)
+    for k, (w, v) in enumerate(zip(ws, vs)):
+        assert np.array_equal(stacked[k], so3.exp(ws[k:k + 1])[0])
+        assert np.array_equal(applied[k], so3.exp_apply(ws[k:k + 1], vs[k:k + 1])[0])
+        np.testing.assert_allclose(stacked[k], so3.exp(w), rtol=0, atol=1e-15)
+        np.testing.assert_allclose(applied[k], so3.exp(w) @ v, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(so3.exp_apply(w, v), so3.exp(w) @ v, rtol=0, atol=1e-14)

@@ -32,7 +32,12 @@ def gravity_moment(R, m_rho, g_w):
     With the centre of mass above the pivot this moment tips the body further over (an inverted
     pendulum). It is linear in m_rho = m * rho: gravity_moment = cog_regressor(R, g_w) @ m_rho.
     """
-    return cross(m_rho, vecmat(g_w, R))       # g_w^T R = (R^T g_w)^T
+    return body_gravity_moment(m_rho, vecmat(g_w, R))       # g_w^T R = (R^T g_w)^T
+
+
+def body_gravity_moment(m_rho, g_b):
+    """The gravity moment (m rho) x g_b, with g_b = R^T g_w the gravity in the body frame."""
+    return cross(m_rho, g_b)
 
 
 def cog_regressor(R, g_w):

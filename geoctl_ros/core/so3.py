@@ -88,9 +88,13 @@ def transpose(M):
 def exp(w):
     """The rotation matrix exp of hat(w) (Rodrigues), accurate for small angles; a stack (..., 3)
     gives a stack of rotations.
+
+    Written out entry by entry, I + a hat(w) + b (w w^T - |w|^2 I), for one rotation in floats and
+    for a stack in whole-array operations (no 3x3 products): each entry of a stack is then rounded
+    as the same entry of a single-rotation stack, whatever the stack's size.
     """
     w = np.asarray(w, dtype=float)
-    if w.ndim == 1:       # one rotation, in floats: I + a hat(w) + b (w w^T - |w|^2 I)
+    if w.ndim == 1:       # one rotation, in floats
         x, y, z = w.tolist()
         theta2 = x * x + y * y + z * z
         theta = math.sqrt(theta2)
@@ -99,13 +103,37 @@ def exp(w):
         return np.array([[1.0 - b * (y * y + z * z), bxy - az, bxz + ay],
                          [bxy + az, 1.0 - b * (x * x + z * z), byz - ax],
                          [bxz - ay, byz + ax, 1.0 - b * (x * x + y * y)]])
+    x, y, z = w[..., 0], w[..., 1], w[..., 2]
+    xx, yy, zz = x * x, y * y, z * z
+    theta2 = xx + yy + zz
+    theta = np.sqrt(theta2)
+    a, b = _rodrigues(theta2 < 1e-8, theta2, theta, np.sin(theta), np.cos(theta))
+    bx, by = b * x, b * y
+    bxy, bxz, byz, ax, ay, az = bx * y, bx * z, by * z, a * x, a * y, a * z
+    out = np.empty(w.shape + (3,))
+    out[..., 0, 0], out[..., 0, 1], out[..., 0, 2] = 1.0 - b * (yy + zz), bxy - az, bxz + ay
+    out[..., 1, 0], out[..., 1, 1], out[..., 1, 2] = bxy + az, 1.0 - b * (xx + zz), byz - ax
+    out[..., 2, 0], out[..., 2, 1], out[..., 2, 2] = bxz - ay, byz + ax, 1.0 - b * (xx + yy)
+    return out
+
+
+def exp_apply(w, v):
+    """exp(hat(w)) v without forming the matrix: v + a w x v + b w x (w x v) (Rodrigues), for one
+    pair or stacks of them; equal to matvec(exp(w), v) to rounding.
+    """
+    if w.ndim == 1 and v.ndim == 1:
+        x, y, z = w.tolist()
+        theta2 = x * x + y * y + z * z
+        theta = math.sqrt(theta2)
+        a, b = _rodrigues(theta2 < 1e-8, theta2, theta, math.sin(theta), math.cos(theta))
     else:
-        theta2 = np.einsum('...i,...i->...', w, w)
+        x, y, z = w[..., 0], w[..., 1], w[..., 2]
+        theta2 = x * x + y * y + z * z
         theta = np.sqrt(theta2)
         a, b = _rodrigues(theta2 < 1e-8, theta2, theta, np.sin(theta), np.cos(theta))
-        a, b = a[..., None, None], b[..., None, None]
-    W = hat(w)
-    return _I3 + a * W + b * (W @ W)
+        a, b = a[..., None], b[..., None]
+    wv = cross(w, v)
+    return v + a * wv + b * cross(w, wv)
 
 
 def _rodrigues(small, theta2, theta, sin, cos):

@@ -27,8 +27,13 @@ import math
 import numpy as np
 
 from geoctl_ros.core import so3
-from geoctl_ros.core.mechanics import first_moment, gravity_moment, pivot_inertia
-from geoctl_ros.core.so3 import cross, matvec
+from geoctl_ros.core.mechanics import (
+    body_gravity_moment,
+    first_moment,
+    gravity_moment,
+    pivot_inertia,
+)
+from geoctl_ros.core.so3 import cross, matvec, vecmat
 
 
 @dataclass(frozen=True)
@@ -82,28 +87,37 @@ class Plant:
         c = self.config
         return gravity_moment(R, c.m_rho, c.gravity) + c.disturbance(t)
 
-    def _angular_acceleration(self, t, R, Omega, tau):
+    def _angular_acceleration(self, t, g_b, Omega, tau):
+        """Omega' with gravity g_b = R^T g_w in the body frame (all the attitude it needs)."""
+        c = self.config
         gyroscopic = cross(Omega, matvec(self.J, Omega))
-        return matvec(self.J_inv, tau + self.external_moment(t, R) - gyroscopic)
+        return matvec(self.J_inv, tau + body_gravity_moment(c.m_rho, g_b) + c.disturbance(t)
+                      - gyroscopic)
 
     def step(self, tau, h):
-        """Advance by h seconds with the actuation moment tau held constant (RKMK4)."""
+        """Advance by h seconds with the actuation moment tau held constant (RKMK4).
+
+        The stages need the attitude only through gravity in the body frame: at R0 exp(hat(xi))
+        that is exp(-hat(xi)) R0^T g_w, so the stages rotate a vector; only the step's end forms
+        its rotation matrix.
+        """
         t, R0, W0 = self.t, self.R, self.Omega
         acc = self._angular_acceleration
+        g0 = vecmat(self.config.gravity, R0)                     # R0^T g_w
         # stage 1 (xi = 0)
-        k1x, k1w = W0, acc(t, R0, W0, tau)
+        k1x, k1w = W0, acc(t, g0, W0, tau)
         # stage 2
         xi = 0.5 * h * k1x
         W = W0 + 0.5 * h * k1w
-        k2x, k2w = _dexpinv(xi, W), acc(t + 0.5 * h, R0 @ so3.exp(xi), W, tau)
+        k2x, k2w = _dexpinv(xi, W), acc(t + 0.5 * h, so3.exp_apply(-xi, g0), W, tau)
         # stage 3
         xi = 0.5 * h * k2x
         W = W0 + 0.5 * h * k2w
-        k3x, k3w = _dexpinv(xi, W), acc(t + 0.5 * h, R0 @ so3.exp(xi), W, tau)
+        k3x, k3w = _dexpinv(xi, W), acc(t + 0.5 * h, so3.exp_apply(-xi, g0), W, tau)
         # stage 4
         xi = h * k3x
         W = W0 + h * k3w
-        k4x, k4w = _dexpinv(xi, W), acc(t + h, R0 @ so3.exp(xi), W, tau)
+        k4x, k4w = _dexpinv(xi, W), acc(t + h, so3.exp_apply(-xi, g0), W, tau)
         self.R = R0 @ so3.exp((h / 6.0) * (k1x + 2.0 * k2x + 2.0 * k3x + k4x))
         self.Omega = W0 + (h / 6.0) * (k1w + 2.0 * k2w + 2.0 * k3w + k4w)
         self.t = t + h
