@@ -25,6 +25,7 @@ import numpy as np
 from geoctl_ros.core import so3
 from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.core.control import AttitudeController
+from geoctl_ros.core.stats import SETTLE_PSI
 from geoctl_ros.core.step import ControlTick
 from geoctl_ros.params import (
     CONTROLLER,
@@ -57,8 +58,13 @@ class BatchResult:
     final_psi: np.ndarray          # (runs,)
     saturated_s: np.ndarray        # (runs,): time with the allocation saturated
     max_rate: np.ndarray           # (runs,): largest measured |Omega| (rad/s)
-    margin_series: np.ndarray      # (steps, runs): min cone margin at each control step
-    sensor_series: np.ndarray      # (steps, runs, 3): sensor direction R r, world frame (float32)
+    settle_s: np.ndarray           # (runs,): the time from which Psi stays below SETTLE_PSI
+                                   # (core.stats.settle_time of the control steps' Psi; NaN:
+                                   # not settled at the end)
+    margin_series: np.ndarray      # (steps, runs): min cone margin at each control step (None
+                                   # unless asked for: series=True)
+    sensor_series: np.ndarray      # (steps, runs, 3): sensor direction R r, world frame (float32;
+                                   # None unless asked for)
     dt: float
     wall_s: float = 0.0
 
@@ -83,8 +89,11 @@ def _differing(scenarios):
     return None
 
 
-def run_batch(scenarios, progress=None):
-    """Fly the scenarios together; a BatchResult. progress(fraction) is called now and then."""
+def run_batch(scenarios, progress=None, series=True):
+    """Fly the scenarios together; a BatchResult. progress(fraction) is called now and then.
+    series: keep the margin and sensor direction at every control step (the figures of a few
+    runs; a campaign's batches leave them out and fly its worst runs again for them).
+    """
     problem = _differing(scenarios)
     if problem:
         raise ValueError('a batch shares everything but %s; differs: %s'
@@ -149,8 +158,9 @@ def run_batch(scenarios, progress=None):
     # controller assumes measurement_delay (the truth: latency), each sample received at the tick
     tick = ControlTick(controller, setup.mixer, setup.loop.measurement_delay)
     min_margin = cones.margins_deg(plant.R)
-    margin_series = np.empty((steps, n))
-    sensor_series = np.empty((steps, n, 3), dtype=np.float32)
+    margin_series = np.empty((steps, n)) if series else None
+    sensor_series = np.empty((steps, n, 3), dtype=np.float32) if series else None
+    last_unsettled = np.full(n, -1)                # the last control step with Psi >= SETTLE_PSI
     saturated = np.zeros(n)
     max_rate = np.zeros(n)
     j = 0                                                     # integration steps so far
@@ -162,8 +172,10 @@ def run_batch(scenarios, progress=None):
         max_rate = np.maximum(max_rate, np.linalg.norm(W_seen, axis=-1))
         out, motors = tick(R_seen, W_seen, dt)
         saturated += motors.allocation.saturated
-        margin_series[k] = cones.margins_deg(plant.R).min(axis=-1)
-        sensor_series[k] = so3.matvec(plant.R, cones.r)
+        last_unsettled[out.psi >= SETTLE_PSI] = k
+        if series:
+            margin_series[k] = cones.margins_deg(plant.R).min(axis=-1)
+            sensor_series[k] = so3.matvec(plant.R, cones.r)
         for _ in range(n_sub):
             plant.step(actuator.moment(motors.commands, h), h)
             j += 1
@@ -179,5 +191,7 @@ def run_batch(scenarios, progress=None):
         violated=np.any(min_margin <= 0.0, axis=-1),
         final_error_deg=np.degrees(np.arccos(cos_err)),
         final_psi=np.asarray(final.psi), saturated_s=saturated * dt, max_rate=max_rate,
+        # settle_time's rule on the steps' times k dt: the step after the last unsettled one
+        settle_s=np.where(last_unsettled == steps - 1, np.nan, (last_unsettled + 1) * dt),
         margin_series=margin_series, sensor_series=sensor_series, dt=dt,
         wall_s=time.perf_counter() - t0)

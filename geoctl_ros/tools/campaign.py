@@ -1,143 +1,174 @@
-"""Safety campaign: ``campaign --runs 1000 --seed 1 --out DIR [--jobs 2] [--replay FILE...]``.
+"""Safety campaigns and gain studies:
+``campaign --runs 1000 --seed 1 --out DIR [--workers N | --scheduler tcp://HOST:PORT]
+[--grid NAME=V1,V2,...]... [--replay FILE...]``.
 
 Flies many random manoeuvres of the testbed headless and reports how often the sensor kept out of
 the cones. Each run is an ordinary scenario (``config/testbed.yaml`` with its own cones, set point,
-errors and seed), flown by ``geoctl_ros.tools.batch`` many at a time; the worst runs are written as
-scenario files that ``campaign --replay`` flies again to the same figures and ``scenario`` plots.
-
-The distribution of the manoeuvres is ``geoctl_ros.tools.manoeuvres``'s.
+errors and seed), flown by ``geoctl_ros.tools.batch`` many at a time on a Dask cluster
+(``geoctl_ros.tools.cluster``: a local one by default). The distribution of the manoeuvres is
+``geoctl_ros.tools.manoeuvres``'s: run i of a seed draws from its own seed, so ``runs.csv`` is the
+same, bit for bit, on one worker or many, in any batch size, here or on a cluster.
 
 Per run: the closest approach to each cone (after every 1 ms integration step), whether the sensor
-touched a cone (a violation), convergence (attitude error below 5 deg at the end), and the time the
-allocation was saturated. Writes DIR/runs.csv, DIR/summary.md (the table),
-DIR/closest_approach.png, DIR/worst_runs.png and DIR/worst/run_NNNN.yaml.
+touched a cone (a violation), convergence (attitude error below 5 deg at the end), the settle time
+(Psi below 1e-3 from then on), and the time the allocation was saturated. Writes DIR/runs.csv
+(every figure exact: Python's shortest repr of each float), DIR/summary.md (the table),
+DIR/closest_approach.png, DIR/worst_runs.png and DIR/worst/*.yaml; the worst runs are flown again
+for their figure, and the files fly them again (``campaign --replay``, ``scenario``).
+
+With ``--grid`` (``geoctl_ros.tools.study``) every gain set flies the same runs; the campaign then
+also writes DIR/gain_sets.csv, DIR/gain_study.png and DIR/best/gain_set_K.yaml.
 """
 import argparse
 import math
-import multiprocessing
 import os
 import sys
 import time
 
 import numpy as np
 
-from geoctl_ros.params import (
-    ConfigError,
-    load_parameter_file,
-)
-from geoctl_ros.tools import manoeuvres, plots
+from geoctl_ros.params import ConfigError, load_parameter_file
+from geoctl_ros.tools import cluster, manoeuvres, plots, study
 from geoctl_ros.tools.batch import run_batch
 from geoctl_ros.tools.rosenv import config_dir
 from geoctl_ros.tools.scenario import from_sections
 
-BATCH = 300                        # runs flown together (more saves little, costs memory)
-CONVERGED_DEG = 5.0                # attitude error at the end below which a run has converged
-def _init_worker(counter):
-    global _progress
-    _progress = counter
+BATCH = 1024                       # runs flown together at most (README "Campaign speed")
+# runs.csv's columns, in order (gain_set only in a gain study)
+COLUMNS = ('gain_set', 'run', 'cones', 'closest_deg', 'violated', 'final_error_deg', 'converged',
+           'settle_s', 'saturated_s', 'max_rate', 'latency_ms', 'disturbance_Nm')
 
 
-def _fly(job):
-    """Worker: fly one batch of scenarios (all with the same number of cones)."""
-    indices, sections = job
-    scenarios = [from_sections(s, 'run_%04d' % i) for i, s in zip(indices, sections)]
-    done = [0.0]
-
-    def progress(fraction):
-        if _progress is not None:
-            with _progress.get_lock():
-                _progress.value += (fraction - done[0]) * len(indices)
-        done[0] = fraction
-    result = run_batch(scenarios, progress)
-    return indices, result
-
-
-def fly(sections_by_index, jobs=2, report=None):
-    """Fly every run (index -> sections); {index: (result, position in its batch)}.
-
-    Runs are grouped by number of cones (a batch shares it) and cut into batches of at most BATCH;
-    the batches go to `jobs` worker processes. report(runs done, seconds) is called about once a
-    second.
+def plan(groups, workers, batch=BATCH):
+    """Batches (lists of run indices) of the groups (lists of run indices that may fly together):
+    at most `batch` runs each, and as many in all as fill every worker evenly where that does not
+    make them smaller than a quarter of `batch`.
     """
-    groups = {}
-    for i, s in sorted(sections_by_index.items()):
-        groups.setdefault(len(s['controller']['cones.names']), []).append(i)
-    batches = []
-    for members in groups.values():
-        k = max(1, math.ceil(len(members) / BATCH))
-        for part in np.array_split(np.array(members), k):
-            batches.append((list(map(int, part)), [sections_by_index[i] for i in part]))
-    batches.sort(key=lambda b: -len(b[0]))
-    t0 = time.monotonic()
-    out = {}
-    if jobs <= 1:
-        _init_worker(None)
-        for b in batches:
-            indices, result = _fly(b)
-            out.update({i: (result, p) for p, i in enumerate(indices)})
-            if report:
-                report(len(out), time.monotonic() - t0)
-        return out
-    # a fork server, not a fork of the caller: a caller with threads (rclpy's, in a test run)
-    # can hold a lock at the moment of a fork, and the forked worker then deadlocks on it
-    ctx = multiprocessing.get_context('forkserver')
-    counter = ctx.Value('d', 0.0)
-    with ctx.Pool(jobs, initializer=_init_worker, initargs=(counter,)) as pool:
-        pending = pool.map_async(_fly, batches, chunksize=1)
-        while not pending.ready():
-            pending.wait(1.0)
-            if report:
-                report(counter.value, time.monotonic() - t0)
-        for indices, result in pending.get():
-            out.update({i: (result, p) for p, i in enumerate(indices)})
-    if report:
-        report(len(out), time.monotonic() - t0)
-    return out
+    total = sum(len(g) for g in groups)
+    want = math.ceil(total / batch)
+    even = math.ceil(want / workers) * workers
+    if total / even >= batch / 4:
+        want = even
+    out = []
+    for g in groups:
+        k = min(len(g), max(1, math.ceil(len(g) / batch), round(want * len(g) / total)))
+        out += [list(map(int, part)) for part in np.array_split(np.array(g), k)]
+    return sorted(out, key=len, reverse=True)
 
 
-# --- figures ------------------------------------------------------------------------------------
-
-def table(rows):
-    """Summary figures of the per-run rows (dicts)."""
-    margins = np.array([r['closest_deg'] for r in rows])
-    violations = sum(r['violated'] for r in rows)
-    converged = sum(r['converged'] for r in rows)
-    sat = np.array([r['saturated_s'] for r in rows])
-    by_latency = {}
-    for r in rows:
-        by_latency.setdefault(r['latency_ms'], []).append(r['closest_deg'])
+def fly_batch(job):
+    """Worker: fly one batch of runs of one gain set; their figures (arrays, one entry per run).
+    job: (base sections, seed, duration, disturbance max, gain set number, gains, run indices).
+    """
+    base, seed, duration, disturbance_max, gain_set, gains, indices = job
+    t0 = time.perf_counter()
+    draw = manoeuvres.Manoeuvres(base, duration, disturbance_max)
+    sections = [draw.sections(seed, i, gains) for i in indices]
+    scenarios = [from_sections(s, 'run_%d' % i) for i, s in zip(indices, sections)]
+    drawn = time.perf_counter() - t0
+    res = run_batch(scenarios, cluster.report_progress, series=False)
+    n = len(indices)
     return {
-        'runs': len(rows),
-        'violations': int(violations),
-        'converged (error < %g deg at the end)' % CONVERGED_DEG: int(converged),
-        'final attitude error median / p95 [deg]': '%.1f / %.1f' % (
-            np.median([r['final_error_deg'] for r in rows]),
-            np.percentile([r['final_error_deg'] for r in rows], 95)),
-        'closest approach min / p1 / p5 / median [deg]': '%.2f / %.2f / %.2f / %.2f' % (
-            margins.min(), np.percentile(margins, 1), np.percentile(margins, 5),
-            np.median(margins)),
-        'runs with the allocation saturated': int(np.sum(sat > 0)),
-        'saturated time p99 / max [s]': '%.2f / %.2f' % (np.percentile(sat, 99), sat.max()),
-        'worst closest approach by latency 0-3 / 4-7 / 8-10 ms [deg]': ' / '.join(
-            '%.2f' % min(min(by_latency.get(ms, [np.inf])) for ms in band)
-            for band in (range(0, 4), range(4, 8), range(8, 11))),
+        'gain_set': np.full(n, gain_set), 'run': np.array(indices),
+        'cones': np.full(n, res.min_margin_deg.shape[1]),
+        'closest_deg': res.min_margin_deg.min(axis=1), 'violated': res.violated,
+        'final_error_deg': res.final_error_deg,
+        'converged': res.final_error_deg < study.CONVERGED_DEG,
+        'settle_s': res.settle_s, 'saturated_s': res.saturated_s, 'max_rate': res.max_rate,
+        'latency_ms': np.array([int(round(1000 * s['scenario']['latency'])) for s in sections]),
+        'disturbance_Nm': np.array([float(np.linalg.norm(s['sim']['disturbance.constant']))
+                                    for s in sections]),
+        'draw_s': drawn, 'fly_s': res.wall_s,
     }
 
 
-def rows_of(flown):
-    rows = []
-    for i, (res, p) in sorted(flown.items()):
-        rows.append({
-            'run': i, 'cones': res.min_margin_deg.shape[1],
-            'closest_deg': float(res.min_margin_deg[p].min()),
-            'violated': bool(res.violated[p]),
-            'final_error_deg': float(res.final_error_deg[p]),
-            'converged': bool(res.final_error_deg[p] < CONVERGED_DEG),
-            'saturated_s': float(res.saturated_s[p]),
-            'max_rate': float(res.max_rate[p]),
-            'latency_ms': None,
-        })
-    return rows
+def fly(client, base, args, gain_sets, progress=None):
+    """Fly every run of every gain set on the cluster; (columns sorted by gain set and run,
+    whether it was interrupted, seconds spent drawing the runs on the workers).
+    """
+    groups = {}
+    for i in range(args.runs):
+        groups.setdefault(manoeuvres.cone_count(args.seed, i), []).append(i)
+    workers = max(1, len(client.scheduler_info().get('workers', {})))
+    jobs = []
+    for k, gains in enumerate(gain_sets, 1):
+        for indices in plan(list(groups.values()), workers, args.batch):
+            jobs.append((base, args.seed, args.duration, args.disturbance_max, k, gains, indices))
+    parts = []
+    interrupted = False
+    try:
+        cluster.run_tasks(client, fly_batch, jobs, lambda i, r: parts.append(r), progress,
+                          weights=[len(j[-1]) for j in jobs])
+    except KeyboardInterrupt:
+        interrupted = True
+    columns = {c: np.concatenate([p[c] for p in parts]) if parts else np.array([])
+               for c in COLUMNS}
+    order = np.lexsort((columns['run'], columns['gain_set']))
+    columns = {c: v[order] for c, v in columns.items()}
+    seen = set(zip(columns['gain_set'].tolist(), columns['run'].tolist()))
+    assert len(seen) == len(order), 'a run was flown twice'
+    return columns, interrupted, sum(p['draw_s'] for p in parts)
+
+
+def write_runs(path, columns, with_gain_set):
+    """runs.csv: a row per run, floats exact (repr)."""
+    keys = [c for c in COLUMNS if with_gain_set or c != 'gain_set']
+    with open(path, 'w') as f:
+        f.write(','.join(keys) + '\n')
+        for row in zip(*(columns[k].tolist() for k in keys)):
+            f.write(','.join(map(repr, row)) + '\n')
+
+
+def replay(paths):
+    """Fly scenario files written by a campaign, each alone; exit code 1 if any entered a cone."""
+    violated = False
+    for path in paths:
+        res = run_batch([from_sections(load_parameter_file(path), os.path.basename(path))])
+        violated |= bool(res.violated[0])
+        print('%s: closest approach %r deg, %s, final error %.3f deg, saturated %.2f s'
+              % (path, float(res.min_margin_deg[0].min()),
+                 'VIOLATED' if res.violated[0] else 'kept', res.final_error_deg[0],
+                 res.saturated_s[0]))
+    return 1 if violated else 0
+
+
+def worst_runs(columns, base, args, gain_sets, out_dir, count):
+    """Write the worst runs as scenario files, fly them again for worst_runs.png (and check that
+    they fly to their figures); their labels.
+    """
+    draw = manoeuvres.Manoeuvres(base, args.duration, args.disturbance_max)
+    picked = np.argsort(columns['closest_deg'], kind='stable')[:count]
+    os.makedirs(os.path.join(out_dir, 'worst'), exist_ok=True)
+    flown, labels = [], []
+    for p in picked:
+        k, i = int(columns['gain_set'][p]), int(columns['run'][p])
+        sections = draw.sections(args.seed, i, gain_sets[k - 1])
+        name = ('set_%d_run_%04d' % (k, i)) if len(gain_sets) > 1 else 'run_%04d' % i
+        manoeuvres.write_scenario_file(sections, os.path.join(out_dir, 'worst', name + '.yaml'))
+        res = run_batch([from_sections(sections, name)])
+        if res.min_margin_deg[0].min() != columns['closest_deg'][p]:
+            print('campaign: warning: %s flew again to %r deg, not %r' % (
+                name, float(res.min_margin_deg[0].min()), float(columns['closest_deg'][p])),
+                file=sys.stderr)
+        flown.append((name, res, sections['controller']))
+        labels.append('%s (%.2f deg)' % (name.replace('_', ' '), columns['closest_deg'][p]))
+    plots.worst_runs_figure(flown, os.path.join(out_dir, 'worst_runs.png'))
+    return labels
+
+
+def progress_printer(total):
+    tty = sys.stderr.isatty()
+    shown = [-1]
+
+    def report(done, seconds):
+        percent = 100.0 * done / total
+        line = 'campaign: %5.1f %% of %d runs flown, %.0f s' % (percent, total, seconds)
+        if tty:
+            print('\r' + line, end='', file=sys.stderr, flush=True)
+        elif int(percent // 10) > shown[0]:          # a log file: a line every 10 %
+            shown[0] = int(percent // 10)
+            print(line, file=sys.stderr, flush=True)
+    return report
 
 
 def main(argv=None):
@@ -145,10 +176,21 @@ def main(argv=None):
     parser.add_argument('--runs', type=int, default=1000, help='number of manoeuvres (1000)')
     parser.add_argument('--seed', type=int, default=1, help='campaign seed (1)')
     parser.add_argument('--out', required=True, help='output directory')
-    parser.add_argument('--jobs', type=int, default=os.cpu_count() or 1,
-                        help='worker processes (default: one per core)')
+    parser.add_argument('--workers', '--jobs', type=int, default=os.cpu_count() or 1,
+                        dest='workers', help='local cluster: worker processes (one per core)')
+    parser.add_argument('--scheduler', metavar='tcp://HOST:PORT', default=None,
+                        help='fly on this Dask scheduler instead of a local cluster')
+    parser.add_argument('--dashboard', action='store_true',
+                        help='local cluster: serve the Dask dashboard on 127.0.0.1:8787')
+    parser.add_argument('--batch', type=int, default=BATCH,
+                        help='runs flown together at most (%d)' % BATCH)
+    parser.add_argument('--grid', action='append', default=[], metavar='NAME=V1,V2,...',
+                        help='a gain study: fly every run with each combination of these '
+                             'controller parameters')
     parser.add_argument('--duration', type=float, default=20.0, help='seconds per run (20)')
     parser.add_argument('--worst', type=int, default=5, help='worst runs written out (5)')
+    parser.add_argument('--best', type=int, default=3,
+                        help='gain study: non-dominated gain sets written out, at most (3)')
     parser.add_argument('--disturbance-max', type=float, default=manoeuvres.DISTURBANCE_MAX,
                         help='largest constant disturbance, N m (%g)' % manoeuvres.DISTURBANCE_MAX)
     parser.add_argument('--params-file', default=None,
@@ -156,84 +198,62 @@ def main(argv=None):
     parser.add_argument('--replay', nargs='+', metavar='FILE',
                         help='fly these scenario files (written by a campaign) instead')
     args = parser.parse_args(argv)
-    if args.runs < 1 or args.jobs < 1 or not args.duration > 0:
-        parser.error('--runs, --jobs and --duration must be positive')
-    try:
-        os.makedirs(args.out, exist_ok=True)
-    except OSError as e:
-        print('campaign: --out %s: %s' % (args.out, e.strerror or e), file=sys.stderr)
-        return 2
+    if args.runs < 1 or args.workers < 1 or args.batch < 1 or not args.duration > 0:
+        parser.error('--runs, --workers, --batch and --duration must be positive')
     try:
         if args.replay:
-            sections = {i: load_parameter_file(p) for i, p in enumerate(args.replay)}
-        else:
-            base = load_parameter_file(args.params_file or os.path.join(config_dir(),
-                                                                        'testbed.yaml'))
-            sections = {i: manoeuvres.run_sections(base, args.seed, i, args.duration,
-                                                   args.disturbance_max)
-                        for i in range(args.runs)}
+            return replay(args.replay)
+        os.makedirs(args.out, exist_ok=True)
+        base = load_parameter_file(args.params_file or os.path.join(config_dir(), 'testbed.yaml'))
+        gain_sets = study.parse_grid(args.grid) if args.grid else [{}]
+        study.check_gain_sets(base, gain_sets)
     except ConfigError as e:
         print('campaign: %s' % e, file=sys.stderr)
         return 2
-    n = len(sections)
-    t0 = time.monotonic()
-
-    tty = sys.stderr.isatty()
-    shown = [-1]
-
-    def report(done, seconds):
-        percent = 100.0 * done / n
-        if tty:
-            print('\rcampaign: %5.1f %% of %d runs flown, %.0f s' % (percent, n, seconds),
-                  end='', file=sys.stderr, flush=True)
-        elif int(percent // 10) > shown[0]:          # a log file: a line every 10 %
-            shown[0] = int(percent // 10)
-            print('campaign: %5.1f %% of %d runs flown, %.0f s' % (percent, n, seconds),
-                  file=sys.stderr, flush=True)
-    try:
-        flown = fly(sections, args.jobs, report)
-    except (ConfigError, ValueError) as e:
-        print('\ncampaign: %s' % e, file=sys.stderr)
+    except OSError as e:
+        print('campaign: %s: %s' % (e.filename or args.out, e.strerror or e), file=sys.stderr)
         return 2
-    wall = time.monotonic() - t0
+    total = args.runs * len(gain_sets)
+    t0 = time.monotonic()
+    with cluster.connect(args.scheduler, args.workers, args.dashboard) as (client, where):
+        started = time.monotonic() - t0
+        print('campaign: %d runs on %s (started in %.1f s)' % (total, where, started),
+              file=sys.stderr, flush=True)
+        t1 = time.monotonic()
+        columns, interrupted, draw_s = fly(client, base, args, gain_sets,
+                                                    progress_printer(total))
+        workers = max(1, len(client.scheduler_info().get('workers', {})))
+    wall = time.monotonic() - t1
     print('', file=sys.stderr)
-    rows = rows_of(flown)
-    for r in rows:
-        r['latency_ms'] = int(round(1000 * sections[r['run']]['scenario']['latency']))
-        constant = sections[r['run']]['sim']['disturbance.constant']
-        r['disturbance_Nm'] = float(np.linalg.norm(constant))
-    if args.replay:
-        for r, path in zip(rows, args.replay):
-            print('%s: closest approach %.6f deg, %s, final error %.3f deg, saturated %.2f s'
-                  % (path, r['closest_deg'], 'VIOLATED' if r['violated'] else 'kept',
-                     r['final_error_deg'], r['saturated_s']))
-        return 1 if any(r['violated'] for r in rows) else 0
-    with open(os.path.join(args.out, 'runs.csv'), 'w') as f:
-        keys = list(rows[0])
-        f.write(','.join(keys) + '\n')
-        for r in rows:
-            f.write(','.join(('%.6f' % r[k]) if isinstance(r[k], float) else str(r[k])
-                             for k in keys) + '\n')
-    worst = [r['run'] for r in sorted(rows, key=lambda r: r['closest_deg'])[:args.worst]]
-    os.makedirs(os.path.join(args.out, 'worst'), exist_ok=True)
-    for i in worst:
-        manoeuvres.write_scenario_file(sections[i],
-                                       os.path.join(args.out, 'worst', 'run_%04d.yaml' % i))
-    summary = table(rows)
-    summary['wall time [s]'] = '%.1f (%d worker processes)' % (wall, args.jobs)
-    sim_seconds = n * args.duration
+    n = len(columns['run'])
+    if not n:
+        print('campaign: interrupted before any run was flown; nothing written', file=sys.stderr)
+        return 130
+    write_runs(os.path.join(args.out, 'runs.csv'), columns, len(gain_sets) > 1)
+    if interrupted:
+        print('campaign: interrupted: %d of %d runs flown, written to %s'
+              % (n, total, os.path.join(args.out, 'runs.csv')), file=sys.stderr)
+    summary = study.summary_table(columns)
+    summary['wall time [s]'] = '%.1f on %d workers (cluster start %.1f s before it)' % (
+        wall, workers, started)
+    summary['drawing the runs [s, all workers]'] = '%.1f' % draw_s
     summary['simulated / wall time (per worker)'] = '%.0f (%.0f)' % (
-        sim_seconds / wall, sim_seconds / wall / args.jobs)
-    lines = ['| campaign seed %d | |' % args.seed, '|---|---|']
+        n * args.duration / wall, n * args.duration / wall / workers)
+    worst = worst_runs(columns, base, args, gain_sets, args.out, args.worst)
+    lines = ['| campaign seed %d%s | |' % (args.seed, ' (interrupted)' if interrupted else ''),
+             '|---|---|']
     lines += ['| %s | %s |' % (k, v) for k, v in summary.items()]
-    lines += ['', 'worst runs: ' + ', '.join(
-        'run %d (%.2f deg)' % (i, next(r['closest_deg'] for r in rows if r['run'] == i))
-        for i in worst)]
+    lines += ['', 'worst runs: ' + ', '.join(worst)]
+    if len(gain_sets) > 1:
+        lines += [''] + study.write_study(columns, base, gain_sets, args.out, args.best)
     with open(os.path.join(args.out, 'summary.md'), 'w') as f:
         f.write('\n'.join(lines) + '\n')
-    plots.campaign_figures(rows, flown, sections, args.out, worst)
+    plots.closest_approach_figure(columns['closest_deg'],
+                                  os.path.join(args.out, 'closest_approach.png'))
     print('\n'.join(lines))
     print('wrote %s' % args.out)
+    if interrupted:
+        return 130
     return 1 if summary['violations'] else 0
 
 

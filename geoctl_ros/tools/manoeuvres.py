@@ -1,13 +1,15 @@
 """The campaign's random manoeuvres, and each as an ordinary scenario (``run_sections``) or a
 scenario file (``write_scenario_file``); flown by ``geoctl_ros.tools.campaign``.
 
-The distribution (run i of seed S draws from numpy's default_rng([S, i]), so a run does not depend
-on how many others there are):
+The distribution (run i of seed S draws from its own seed, ``SeedSequence(S).spawn(N)[i]``, for
+any N > i: a run does not depend on how many others there are, nor on where or with which it is
+flown; its first child seed draws the number of cones, so that a campaign can batch its runs by
+cone count without drawing them, and its second everything else):
 
-- cones: 1-4 (uniform), half-angles uniform in 10-35 deg, axes at a uniform azimuth and an
-  elevation uniform within +-20 deg of the horizon (where a body-fixed sensor of a testbed on a
-  joint can point), every two cones at least 10 deg apart (edge to edge), so there is always a way
-  round;
+- cones: 1-4 (uniform: the count is drawn once, then the cones are placed until they fit),
+  half-angles uniform in 10-35 deg, axes at a uniform azimuth and an elevation uniform within
+  +-20 deg of the horizon (where a body-fixed sensor of a testbed on a joint can point), every two
+  cones at least 10 deg apart (edge to edge), so there is always a way round;
 - the manoeuvre: the sensor starts 5-30 deg outside the first cone (uniform, at a uniform azimuth
   round its axis) and its goal is 5-30 deg outside the same cone on the far side (azimuth 150-210
   deg away), so the straight way crosses the cone and the controller must go round; start and goal
@@ -47,6 +49,8 @@ from geoctl_ros.params import (
 CLEAR_DEG = 5.0                    # start and goal at least this far outside every cone
 GAP_DEG = 10.0                     # edge-to-edge distance between two cones, at least
 UP = np.array([0.0, 0.0, 1.0])
+_I3 = np.eye(3)
+_ARC = np.linspace(0.0, 1.0, 41)      # points on the straight way from start to goal
 TILT_DEG = 40.0                    # the body's z axis within this of vertical at start and goal
 TWIST_DEG = 15.0                   # turn about the sensor axis from the most upright attitude
 CONE_ELEVATION_DEG = 20.0          # cone axes within this of the horizon
@@ -55,20 +59,20 @@ MODEL_ERROR = 0.2                  # true mass, inertia stretch and centre of ma
 
 
 def unit(v):
-    return v / np.linalg.norm(v)
+    return v / math.sqrt(float(v @ v))
 
 
 def direction(axis, angle, azimuth):
     """The unit vector at angle from axis, at azimuth round it."""
-    e1 = unit(np.cross(axis, np.eye(3)[int(np.argmin(np.abs(axis)))]))
-    e2 = np.cross(axis, e1)
+    e1 = unit(so3.cross(axis, _I3[int(np.argmin(np.abs(axis)))]))
+    e2 = so3.cross(axis, e1)
     return (math.cos(angle) * axis
             + math.sin(angle) * (math.cos(azimuth) * e1 + math.sin(azimuth) * e2))
 
 
 def _aligning(r, d):
     """The rotation by the shortest arc that takes r to d (unit vectors, not opposite)."""
-    axis = np.cross(r, d)
+    axis = so3.cross(r, d)
     return so3.exp(axis / max(np.linalg.norm(axis), 1e-12)
                    * math.atan2(np.linalg.norm(axis), float(r @ d)))
 
@@ -90,14 +94,26 @@ def _attitude(rng, r, d):
     return R if _angle_deg(R @ UP, UP) <= TILT_DEG else None
 
 
+def run_seeds(seed, index):
+    """The two seeds of run index of campaign seed: the children of SeedSequence(seed).spawn(N)
+    [index] (the cone count's, and everything else's).
+    """
+    return np.random.SeedSequence(seed, spawn_key=(index,)).spawn(2)
+
+
+def cone_count(seed, index):
+    """The number of cones of run index (cheap: without drawing the rest of the run)."""
+    return int(np.random.default_rng(run_seeds(seed, index)[0]).integers(1, 5))
+
+
 def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None):
     """The random part of run index of campaign seed: a dict of per-run values. goal_ok(cones,
     R_d) (cones as [(axis, half-angle deg)]), if given, must accept the goal (else redrawn).
     """
-    rng = np.random.default_rng([seed, index])
+    n = cone_count(seed, index)
+    rng = np.random.default_rng(run_seeds(seed, index)[1])
     r = unit(np.asarray(sensor_axis, dtype=float))
     while True:
-        n = int(rng.integers(1, 5))
         theta = rng.uniform(10.0, 35.0, n)
         axes = [direction(UP, math.radians(90.0 - rng.uniform(-CONE_ELEVATION_DEG,
                                                                 CONE_ELEVATION_DEG)),
@@ -112,8 +128,9 @@ def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None):
                         azimuth + math.pi + math.radians(rng.uniform(-30.0, 30.0)))
         if any(_angle_deg(d, v) < t + CLEAR_DEG for d in (d0, d1) for v, t in zip(axes, theta)):
             continue
-        arc = [unit((1.0 - s) * d0 + s * d1) for s in np.linspace(0.0, 1.0, 41)]
-        if min(_angle_deg(p, v0) for p in arc) >= theta[0]:
+        arc = (1.0 - _ARC[:, None]) * d0 + _ARC[:, None] * d1
+        cos_arc = (arc @ v0) / np.sqrt(np.sum(arc * arc, axis=1))
+        if math.degrees(math.acos(min(1.0, float(cos_arc.max())))) >= theta[0]:
             continue                                    # the straight way misses the cone
         R0, R_d = _attitude(rng, r, d0), _attitude(rng, r, d1)
         if R0 is not None and R_d is not None and (
@@ -147,49 +164,65 @@ def unmodelled_moment(nominal_sim, disturbance_max=DISTURBANCE_MAX):
                  * math.sin(math.radians(TILT_DEG)))
 
 
-def run_sections(base, seed, index, duration=20.0, disturbance_max=DISTURBANCE_MAX):
-    """The scenario file's sections ({'/**' or node: flat parameters}) of run index."""
-    nominal_c = resolve(CONTROLLER, node_overrides(base, CONTROLLER))
-    nominal_s = resolve(SIM, node_overrides(base, SIM))
-    unmodelled = unmodelled_moment(nominal_s, disturbance_max)
-    probe = AttitudeController(controller_config(dict(nominal_c,
-                                                      unmodelled_moment_max=unmodelled)))
+class Manoeuvres:
+    """The runs of campaigns on one testbed (base: a parameter file's sections): ``sections(seed,
+    index)`` is run index of seed as a scenario file's sections, with ``gains`` (controller
+    parameters) put over the testbed's. The manoeuvre does not depend on the gains: the goal is
+    the one the testbed's own controller accepts, so every gain set of a study flies the same runs.
+    """
 
-    def goal_ok(cones, R_d):                    # the controller's own set-point check
-        values = dict(nominal_c, **{'cones.names': ['c%d' % i for i in range(len(cones))]})
+    def __init__(self, base, duration=20.0, disturbance_max=DISTURBANCE_MAX):
+        self.base, self.duration, self.disturbance_max = base, float(duration), disturbance_max
+        self.nominal_c = resolve(CONTROLLER, node_overrides(base, CONTROLLER))
+        self.nominal_s = resolve(SIM, node_overrides(base, SIM))
+        self.unmodelled = unmodelled_moment(self.nominal_s, disturbance_max)
+        self._probe = AttitudeController(controller_config(
+            dict(self.nominal_c, unmodelled_moment_max=self.unmodelled)))
+
+    def _goal_ok(self, cones, R_d):             # the controller's own set-point check
+        values = dict(self.nominal_c, **{'cones.names': ['c%d' % i for i in range(len(cones))]})
         for i, (axis, half_angle) in enumerate(cones):
             values['cones.c%d.axis' % i] = axis
             values['cones.c%d.half_angle_deg' % i] = half_angle
-        return probe.setpoint_problem(R_d, cone_set(values)) is None
+        return self._probe.setpoint_problem(R_d, cone_set(values)) is None
 
-    m = draw_manoeuvre(seed, index, nominal_c['sensor_axis'], goal_ok)
-    controller = {k: v for k, v in base.get('controller', {}).items()
-                  if not k.startswith(('cones.', 'setpoint'))}
-    controller['unmodelled_moment_max'] = unmodelled
-    names = ['c%d' % (i + 1) for i in range(len(m['cones']))]
-    controller['cones.names'] = names
-    for name, (axis, half_angle) in zip(names, m['cones']):
-        controller['cones.%s.axis' % name] = axis
-        controller['cones.%s.half_angle_deg' % name] = half_angle
-    controller['setpoint'] = _floats(so3.rot_to_quat(m['R_d']))
-    S = np.diag(np.sqrt(m['inertia_factors']))
-    J = nominal_s['inertia'].reshape(3, 3)
-    E = S @ (0.5 * np.trace(J) * np.eye(3) - J) @ S            # second moment of the mass
-    rho = nominal_s['cog_offset']
-    sim = dict(base.get('sim', {}))
-    sim.update({
-        'initial_attitude': _floats(so3.rot_to_quat(m['R0'])),
-        'mass': float(nominal_s['mass'] * m['mass_factor']),
-        'inertia': _floats(np.trace(E) * np.eye(3) - E),
-        'cog_offset': _floats(rho * m['cog_factor']),
-        'disturbance.constant': _floats(m['disturbance'] * disturbance_max),
-        'noise.seed': m['noise_seed'],
-    })
-    return {
-        '/**': dict(base.get('/**', {})), 'controller': controller, 'sim': sim,
-        'scenario': {'title': 'campaign seed %d, run %d' % (seed, index),
-                     'duration': float(duration), 'latency': m['latency_ms'] / 1000.0},
-    }
+    def sections(self, seed, index, gains=None):
+        """The scenario file's sections ({'/**' or node: flat parameters}) of run index."""
+        m = draw_manoeuvre(seed, index, self.nominal_c['sensor_axis'], self._goal_ok)
+        base = self.base
+        controller = {k: v for k, v in base.get('controller', {}).items()
+                      if not k.startswith(('cones.', 'setpoint'))}
+        controller['unmodelled_moment_max'] = self.unmodelled
+        controller.update(gains or {})
+        names = ['c%d' % (i + 1) for i in range(len(m['cones']))]
+        controller['cones.names'] = names
+        for name, (axis, half_angle) in zip(names, m['cones']):
+            controller['cones.%s.axis' % name] = axis
+            controller['cones.%s.half_angle_deg' % name] = half_angle
+        controller['setpoint'] = _floats(so3.rot_to_quat(m['R_d']))
+        S = np.diag(np.sqrt(m['inertia_factors']))
+        J = self.nominal_s['inertia'].reshape(3, 3)
+        E = S @ (0.5 * np.trace(J) * np.eye(3) - J) @ S            # second moment of the mass
+        rho = self.nominal_s['cog_offset']
+        sim = dict(base.get('sim', {}))
+        sim.update({
+            'initial_attitude': _floats(so3.rot_to_quat(m['R0'])),
+            'mass': float(self.nominal_s['mass'] * m['mass_factor']),
+            'inertia': _floats(np.trace(E) * np.eye(3) - E),
+            'cog_offset': _floats(rho * m['cog_factor']),
+            'disturbance.constant': _floats(m['disturbance'] * self.disturbance_max),
+            'noise.seed': m['noise_seed'],
+        })
+        return {
+            '/**': dict(base.get('/**', {})), 'controller': controller, 'sim': sim,
+            'scenario': {'title': 'campaign seed %d, run %d' % (seed, index),
+                         'duration': self.duration, 'latency': m['latency_ms'] / 1000.0},
+        }
+
+
+def run_sections(base, seed, index, duration=20.0, disturbance_max=DISTURBANCE_MAX):
+    """The scenario file's sections of run index (one run of ``Manoeuvres``)."""
+    return Manoeuvres(base, duration, disturbance_max).sections(seed, index)
 
 
 def write_scenario_file(sections, path):

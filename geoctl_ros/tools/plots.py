@@ -139,34 +139,66 @@ def sphere_path(ax, path, cones):
     ax.legend(loc='upper left')
 
 
-def campaign_figures(rows, flown, sections_by_index, out_dir, worst):
-    """closest_approach.png (histogram) and worst_runs.png (margins in time, sensor paths)."""
-    margins = np.array([r['closest_deg'] for r in rows])
+def closest_approach_figure(closest_deg, path):
+    """A campaign's histogram of the closest approach per run."""
     fig, ax = _subplots(figsize=(7, 3.5))
-    ax.hist(margins, bins=40, color='tab:blue', alpha=0.8)
+    ax.hist(closest_deg, bins=40, color='tab:blue', alpha=0.8)
     ax.axvline(0.0, color='tab:red', lw=1.5, label='cone boundary')
     ax.set(xlabel='closest approach to a cone [deg] (negative: inside)', ylabel='runs',
-           title='%d manoeuvres: closest approach of the sensor to any cone' % len(rows))
+           title='%d runs: closest approach of the sensor to any cone' % len(closest_deg))
     ax.legend()
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
-    fig.savefig(os.path.join(out_dir, 'closest_approach.png'), dpi=110)
+    fig.savefig(path, dpi=110)
 
+
+def worst_runs_figure(flown, path):
+    """A campaign's worst runs (flown again with their series: [(name, BatchResult of the run
+    alone, its controller parameters)]): cone margin in time, and the worst one's sensor path.
+    """
     fig, (a1, a2) = _subplots(1, 2, figsize=(11, 4))
-    for i in worst:
-        res, p = flown[i]
+    for name, res, _ in flown:
         t = np.arange(res.margin_series.shape[0]) * res.dt
-        a1.plot(t, res.margin_series[:, p], lw=1, label='run %d' % i)
+        a1.plot(t, res.margin_series[:, 0], lw=1, label=name.replace('_', ' '))
     a1.axhline(0.0, color='k', lw=0.8)
-    a1.set(xlabel='t [s]', ylabel='cone margin [deg]', title='the %d worst runs' % len(worst))
+    a1.set(xlabel='t [s]', ylabel='cone margin [deg]', title='the %d worst runs' % len(flown))
     a1.legend(fontsize=7)
     a1.grid(True, alpha=0.3)
-    i = worst[0]
-    res, p = flown[i]
-    path = res.sensor_series[:, p].astype(float)
-    _sky(a2, path, sections_by_index[i]['controller'], 'run %d: sensor path' % i)
+    name, res, controller = flown[0]
+    _sky(a2, res.sensor_series[:, 0].astype(float), controller,
+         '%s: sensor path' % name.replace('_', ' '))
     fig.tight_layout()
-    fig.savefig(os.path.join(out_dir, 'worst_runs.png'), dpi=110)
+    fig.savefig(path, dpi=110)
+
+
+def gain_study_figure(figures, labels, front, path):
+    """A gain study: each gain set's closest approach (p1) against its median settle time, the
+    non-dominated sets marked (``geoctl_ros.tools.study``).
+    """
+    fig, ax = _subplots(figsize=(8, 5))
+    settle = np.array([f['settle_median_s'] for f in figures])
+    finite = settle[np.isfinite(settle)]
+    cap = (finite.max() * 1.1) if len(finite) else 1.0
+    x = np.where(np.isfinite(settle), settle, cap)
+    y = np.array([f['closest_p1_deg'] for f in figures])
+    bad = np.array([f['violations'] > 0 for f in figures])
+    on = np.isin(np.arange(len(figures)), front)
+    ax.scatter(x[~on & ~bad], y[~on & ~bad], color='tab:gray', label='dominated')
+    ax.scatter(x[bad], y[bad], color='tab:red', marker='x', label='with violations')
+    order = [k for k in np.argsort(x) if on[k]]
+    ax.plot(x[order], y[order], 'o-', color='tab:green', label='non-dominated')
+    for k, text in enumerate(labels):
+        ax.annotate('%d: %s' % (k + 1, text), (x[k], y[k]), fontsize=7,
+                    textcoords='offset points', xytext=(4, 4))
+    if not np.all(np.isfinite(settle)):
+        ax.axvline(cap, color='k', lw=0.8, ls=':', label='not settled (median)')
+    ax.set(xlabel='median settle time [s] (Psi < 1e-3 from then on)',
+           ylabel='closest approach, 1st percentile [deg]',
+           title='gain study: %d gain sets, %d runs each' % (len(figures), figures[0]['runs']))
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
 
 
 def _sky(ax, path, controller, title):
