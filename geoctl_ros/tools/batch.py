@@ -25,7 +25,6 @@ import numpy as np
 from geoctl_ros.core import so3
 from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.core.control import AttitudeController
-from geoctl_ros.core.stats import SETTLE_PSI
 from geoctl_ros.core.step import ControlTick
 from geoctl_ros.params import (
     CONTROLLER,
@@ -38,9 +37,11 @@ from geoctl_ros.params import (
 from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
 from geoctl_ros.sim.testbed import RotorActuator
 
+SETTLED_DEG = 5.0       # attitude error below which a run has converged (at the end) or settled
+
 # What may differ between the runs of a batch (everything else must be equal).
 PER_RUN = {
-    CONTROLLER: ('setpoint',),
+    CONTROLLER: ('setpoint', 'unmodelled_moment_max'),     # (a set-point check, not in flight)
     SIM: ('initial_attitude', 'initial_angular_velocity', 'mass', 'inertia', 'cog_offset',
           'disturbance.constant', 'noise.seed', 'noise.gyro_bias'),
 }
@@ -58,9 +59,9 @@ class BatchResult:
     final_psi: np.ndarray          # (runs,)
     saturated_s: np.ndarray        # (runs,): time with the allocation saturated
     max_rate: np.ndarray           # (runs,): largest measured |Omega| (rad/s)
-    settle_s: np.ndarray           # (runs,): the time from which Psi stays below SETTLE_PSI
-                                   # (core.stats.settle_time of the control steps' Psi; NaN:
-                                   # not settled at the end)
+    settle_s: np.ndarray           # (runs,): the time from which the attitude error stays below
+                                   # SETTLED_DEG (core.stats.settle_time's rule on the control
+                                   # steps; NaN: not below at the end)
     margin_series: np.ndarray      # (steps, runs): min cone margin at each control step (None
                                    # unless asked for: series=True)
     sensor_series: np.ndarray      # (steps, runs, 3): sensor direction R r, world frame (float32;
@@ -87,6 +88,11 @@ def _differing(scenarios):
         if len(s.controller['cones.names']) != len(first.controller['cones.names']):
             return 'the number of cones (%s and %s)' % (first.name, s.name)
     return None
+
+
+def _cos_error(R_d, R):
+    """The cosine of the attitude error angle between R_d and R, per run."""
+    return 0.5 * (np.trace(so3.transpose(R_d) @ R, axis1=-2, axis2=-1) - 1.0)
 
 
 def run_batch(scenarios, progress=None, series=True):
@@ -160,7 +166,8 @@ def run_batch(scenarios, progress=None, series=True):
     min_margin = cones.margins_deg(plant.R)
     margin_series = np.empty((steps, n)) if series else None
     sensor_series = np.empty((steps, n, 3), dtype=np.float32) if series else None
-    last_unsettled = np.full(n, -1)                # the last control step with Psi >= SETTLE_PSI
+    last_unsettled = np.full(n, -1)        # the last control step with the error >= SETTLED_DEG
+    cos_settled = math.cos(math.radians(SETTLED_DEG))
     saturated = np.zeros(n)
     max_rate = np.zeros(n)
     j = 0                                                     # integration steps so far
@@ -172,7 +179,7 @@ def run_batch(scenarios, progress=None, series=True):
         max_rate = np.maximum(max_rate, np.linalg.norm(W_seen, axis=-1))
         out, motors = tick(R_seen, W_seen, dt)
         saturated += motors.allocation.saturated
-        last_unsettled[out.psi >= SETTLE_PSI] = k
+        last_unsettled[_cos_error(controller.R_d, plant.R) <= cos_settled] = k
         if series:
             margin_series[k] = cones.margins_deg(plant.R).min(axis=-1)
             sensor_series[k] = so3.matvec(plant.R, cones.r)
@@ -184,8 +191,7 @@ def run_batch(scenarios, progress=None, series=True):
         if progress is not None and (k + 1) % 100 == 0:
             progress((k + 1) / steps)
     final = controller.step(plant.R, plant.Omega, dt, adapt=False)
-    RdtR = so3.transpose(controller.R_d) @ plant.R
-    cos_err = np.clip(0.5 * (np.trace(RdtR, axis1=-2, axis2=-1) - 1.0), -1.0, 1.0)
+    cos_err = np.clip(_cos_error(controller.R_d, plant.R), -1.0, 1.0)
     return BatchResult(
         names=[s.name for s in scenarios], min_margin_deg=min_margin,
         violated=np.any(min_margin <= 0.0, axis=-1),

@@ -176,18 +176,31 @@ class Manoeuvres:
         self.nominal_c = resolve(CONTROLLER, node_overrides(base, CONTROLLER))
         self.nominal_s = resolve(SIM, node_overrides(base, SIM))
         self.unmodelled = unmodelled_moment(self.nominal_s, disturbance_max)
-        self._probe = AttitudeController(controller_config(
-            dict(self.nominal_c, unmodelled_moment_max=self.unmodelled)))
+        self._probes = {}
 
-    def _goal_ok(self, cones, R_d):             # the controller's own set-point check
+    def _goal_ok(self, cones, R_d, gains=None):     # the controller's own set-point check
+        key = tuple(sorted((gains or {}).items()))
+        if key not in self._probes:
+            self._probes[key] = AttitudeController(controller_config(dict(
+                self.nominal_c, unmodelled_moment_max=self.unmodelled, **(gains or {}))))
         values = dict(self.nominal_c, **{'cones.names': ['c%d' % i for i in range(len(cones))]})
         for i, (axis, half_angle) in enumerate(cones):
             values['cones.c%d.axis' % i] = axis
             values['cones.c%d.half_angle_deg' % i] = half_angle
-        return self._probe.setpoint_problem(R_d, cone_set(values)) is None
+        return self._probes[key].setpoint_problem(R_d, cone_set(values)) is None
+
+    def goal_refused(self, sections):
+        """Whether the run's goal is one its gain set's controller refuses (see ``sections``)."""
+        return self.unmodelled > 0.0 and sections['controller']['unmodelled_moment_max'] == 0.0
 
     def sections(self, seed, index, gains=None):
-        """The scenario file's sections ({'/**' or node: flat parameters}) of run index."""
+        """The scenario file's sections ({'/**' or node: flat parameters}) of run index.
+
+        A goal that the gain set's controller refuses (its barrier cannot hold the unmodelled
+        moment there: ``unmodelled_moment_max``, a check that is not part of the control law) is
+        flown all the same, with the check off (0), so that every gain set flies every run;
+        ``goal_refused`` tells.
+        """
         m = draw_manoeuvre(seed, index, self.nominal_c['sensor_axis'], self._goal_ok)
         base = self.base
         controller = {k: v for k, v in base.get('controller', {}).items()
@@ -200,6 +213,8 @@ class Manoeuvres:
             controller['cones.%s.axis' % name] = axis
             controller['cones.%s.half_angle_deg' % name] = half_angle
         controller['setpoint'] = _floats(so3.rot_to_quat(m['R_d']))
+        if gains and not self._goal_ok(m['cones'], m['R_d'], gains):
+            controller['unmodelled_moment_max'] = 0.0
         S = np.diag(np.sqrt(m['inertia_factors']))
         J = self.nominal_s['inertia'].reshape(3, 3)
         E = S @ (0.5 * np.trace(J) * np.eye(3) - J) @ S            # second moment of the mass

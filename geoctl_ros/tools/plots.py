@@ -191,8 +191,8 @@ def gain_study_figure(figures, labels, front, path):
         ax.annotate('%d: %s' % (k + 1, text), (x[k], y[k]), fontsize=7,
                     textcoords='offset points', xytext=(4, 4))
     if not np.all(np.isfinite(settle)):
-        ax.axvline(cap, color='k', lw=0.8, ls=':', label='not settled (median)')
-    ax.set(xlabel='median settle time [s] (Psi < 1e-3 from then on)',
+        ax.axvline(cap, color='k', lw=0.8, ls=':', label='median not settled (drawn here)')
+    ax.set(xlabel='median settle time [s] (attitude error < 5 deg from then on)',
            ylabel='closest approach, 1st percentile [deg]',
            title='gain study: %d gain sets, %d runs each' % (len(figures), figures[0]['runs']))
     ax.grid(True, alpha=0.3)

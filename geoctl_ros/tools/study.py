@@ -6,11 +6,15 @@ the campaign's seed). A gain set the controller would refuse (the schema's check
 cross-checks of ``controller_setup``: a set point or scheduled one its barrier cannot hold, ...)
 is refused before anything flies, with the reason.
 
+Every gain set flies every run: a goal that a gain set's controller would refuse (its barrier
+cannot hold ``unmodelled_moment_max`` there) is flown with that check off and counted as refused.
+
 Per gain set: violations, the closest approach's 1st percentile, the share of runs that converge
-(attitude error below CONVERGED_DEG at the end), the median settle time (``core.stats``'s rule;
-a run that has not settled counts as never), and the mean time with the allocation saturated.
-The non-dominated gain sets (no other set with no more violations has both more margin and an
-earlier settle time) are written out as parameter files the controller accepts.
+(attitude error below CONVERGED_DEG, 5 deg, at the end), the median settle time (from when the
+error stays below it; a run that has not settled counts as never), and the mean time with the
+allocation saturated. The non-dominated gain sets (no other set with no more violations has both
+more margin and an earlier settle time) are written out as parameter files the controller
+accepts.
 """
 import itertools
 import math
@@ -28,8 +32,8 @@ from geoctl_ros.params import (
     resolve,
 )
 from geoctl_ros.tools import plots
+from geoctl_ros.tools.batch import SETTLED_DEG as CONVERGED_DEG
 
-CONVERGED_DEG = 5.0                # attitude error at the end below which a run has converged
 # what a gain set may not change: what each run draws for itself
 PER_RUN = ('setpoint', 'setpoint_schedule.times', 'setpoint_schedule.quaternions', 'cones.names')
 
@@ -52,7 +56,10 @@ def parse_grid(specs):
         elif name in (a for a, _ in axes):
             errors.append((name, 'given twice'))
         else:
-            axes.append((name, [yaml.safe_load(v) for v in values.split(',')]))
+            parsed = [yaml.safe_load(v) for v in values.split(',')]
+            if p.type == 'double':      # alpha=4 on a command line means 4.0
+                parsed = [float(v) if type(v) is int else v for v in parsed]
+            axes.append((name, parsed))
     if errors:
         raise ConfigError(errors)
     names = [a for a, _ in axes]
@@ -100,6 +107,7 @@ def set_figures(columns):
         'converged_share': float(np.mean(columns['converged'])) if len(settle) else math.nan,
         'settle_median_s': float(np.median(settle)) if len(settle) else math.nan,
         'saturated_mean_s': float(np.mean(columns['saturated_s'])) if len(settle) else math.nan,
+        'goals_refused': int(np.sum(columns['goal_refused'])),
     }
 
 
@@ -131,8 +139,8 @@ def summary_table(columns):
         'runs': len(margins),
         'violations': int(np.sum(columns['violated'])),
         'converged (error < %g deg at the end)' % CONVERGED_DEG: int(np.sum(columns['converged'])),
-        'settled (Psi < 1e-3 to the end): runs, median time [s]': '%d, %s' % (
-            len(settled), '%.1f' % np.median(settled) if len(settled) else '-'),
+        'settled (error < %g deg to the end): runs, median time [s]' % CONVERGED_DEG:
+            '%d, %s' % (len(settled), '%.1f' % np.median(settled) if len(settled) else '-'),
         'final attitude error median / p95 [deg]': '%.1f / %.1f' % (
             np.median(final), np.percentile(final, 95)),
         'closest approach min / p1 / p5 / median [deg]': '%.2f / %.2f / %.2f / %.2f' % (
@@ -174,13 +182,13 @@ def write_study(columns, base, gain_sets, out_dir, best):
                              os.path.join(out_dir, 'best', 'gain_set_%d.yaml' % (k + 1)),
                              'gain set %d of a gain study (%s)' % (k + 1, label(gain_sets[k])))
     lines = ['| gain set | runs | violations | closest p1 [deg] | converged | settle median [s] '
-             '| saturated mean [s] |', '|---|---|---|---|---|---|---|']
+             '| saturated mean [s] | goals it refuses |', '|---|---|---|---|---|---|---|---|']
     for k, (gains, fig) in enumerate(zip(gain_sets, figures)):
-        lines.append('| %d: %s%s | %d | %d | %.2f | %.0f %% | %s | %.3f |' % (
+        lines.append('| %d: %s%s | %d | %d | %.2f | %.0f %% | %s | %.3f | %d |' % (
             k + 1, label(gains), ' (front)' if k in front else '', fig['runs'],
             fig['violations'], fig['closest_p1_deg'], 100 * fig['converged_share'],
             '%.1f' % fig['settle_median_s'] if math.isfinite(fig['settle_median_s'])
-            else 'not settled', fig['saturated_mean_s']))
+            else 'not settled', fig['saturated_mean_s'], fig['goals_refused']))
     lines += ['', 'best gain sets written: ' + ', '.join(
         'best/gain_set_%d.yaml' % (k + 1) for k in chosen)]
     return lines
