@@ -58,20 +58,26 @@ def plan(groups, workers, batch=BATCH):
 
 def fly_batch(job):
     """Worker: fly one batch of runs of one gain set; their figures (arrays, one entry per run).
-    job: (base sections, seed, duration, disturbance max, gain set number, gains, run indices).
+    job: (base sections, seed, duration, disturbance max, gain set number, gains, run indices,
+    how many of its worst runs to keep the series of).
     """
-    base, seed, duration, disturbance_max, gain_set, gains, indices = job
+    base, seed, duration, disturbance_max, gain_set, gains, indices, worst = job
     t0 = time.perf_counter()
     draw = manoeuvres.Manoeuvres(base, duration, disturbance_max)
     sections = [draw.sections(seed, i, gains) for i in indices]
     scenarios = [from_sections(s, 'run_%d' % i) for i, s in zip(indices, sections)]
     drawn = time.perf_counter() - t0
-    res = run_batch(scenarios, cluster.report_progress, series=False)
+    res = run_batch(scenarios, cluster.report_progress, series=worst > 0)
     n = len(indices)
+    closest = res.min_margin_deg.min(axis=1)
+    kept = [(float(closest[p]), gain_set, indices[p], res.margin_series[:, p].copy(),
+             res.sensor_series[:, p].copy(), res.dt)
+            for p in np.argsort(closest, kind='stable')[:worst]]
     return {
+        'worst': kept,
         'gain_set': np.full(n, gain_set), 'run': np.array(indices),
         'cones': np.full(n, res.min_margin_deg.shape[1]),
-        'closest_deg': res.min_margin_deg.min(axis=1), 'violated': res.violated,
+        'closest_deg': closest, 'violated': res.violated,
         'final_error_deg': res.final_error_deg,
         'converged': res.final_error_deg < study.CONVERGED_DEG,
         'settle_s': res.settle_s, 'saturated_s': res.saturated_s, 'max_rate': res.max_rate,
@@ -84,7 +90,8 @@ def fly_batch(job):
 
 
 def fly(client, base, args, gain_sets, progress=None):
-    """Fly every run of every gain set on the cluster; (columns sorted by gain set and run,
+    """Fly every run of every gain set on the cluster; (columns sorted by gain set and run, the
+    worst runs' series [(closest approach, gain set, run, margins, sensor directions, dt)],
     whether it was interrupted, seconds spent drawing the runs on the workers).
     """
     groups = {}
@@ -94,12 +101,18 @@ def fly(client, base, args, gain_sets, progress=None):
     jobs = []
     for k, gains in enumerate(gain_sets, 1):
         for indices in plan(list(groups.values()), workers, args.batch):
-            jobs.append((base, args.seed, args.duration, args.disturbance_max, k, gains, indices))
-    parts = []
+            jobs.append((base, args.seed, args.duration, args.disturbance_max, k, gains, indices,
+                         args.worst))
+    parts, worst = [], []
+
+    def take(i, part):               # keep the figures, and the series of the worst runs only
+        worst[:] = sorted(worst + part.pop('worst'), key=lambda w: w[:3])[:args.worst]
+        parts.append(part)
+
     interrupted = False
     try:
-        cluster.run_tasks(client, fly_batch, jobs, lambda i, r: parts.append(r), progress,
-                          weights=[len(j[-1]) for j in jobs])
+        cluster.run_tasks(client, fly_batch, jobs, take, progress,
+                          weights=[len(j[-2]) for j in jobs])
     except KeyboardInterrupt:
         interrupted = True
     columns = {c: np.concatenate([p[c] for p in parts]) if parts else np.array([])
@@ -108,7 +121,7 @@ def fly(client, base, args, gain_sets, progress=None):
     columns = {c: v[order] for c, v in columns.items()}
     seen = set(zip(columns['gain_set'].tolist(), columns['run'].tolist()))
     assert len(seen) == len(order), 'a run was flown twice'
-    return columns, interrupted, sum(p['draw_s'] for p in parts)
+    return columns, worst, interrupted, sum(p['draw_s'] for p in parts)
 
 
 def write_runs(path, columns, with_gain_set):
@@ -133,27 +146,19 @@ def replay(paths):
     return 1 if violated else 0
 
 
-def worst_runs(columns, base, args, gain_sets, out_dir, count):
-    """Write the worst runs as scenario files, fly them again for worst_runs.png (and check that
-    they fly to their figures); their labels.
-    """
+def worst_runs(worst, base, args, gain_sets, out_dir):
+    """Write the worst runs as scenario files and draw worst_runs.png; their labels."""
     draw = manoeuvres.Manoeuvres(base, args.duration, args.disturbance_max)
-    picked = np.argsort(columns['closest_deg'], kind='stable')[:count]
     os.makedirs(os.path.join(out_dir, 'worst'), exist_ok=True)
     flown, labels = [], []
-    for p in picked:
-        k, i = int(columns['gain_set'][p]), int(columns['run'][p])
+    for closest, k, i, margins, sensor, dt in worst:
         sections = draw.sections(args.seed, i, gain_sets[k - 1])
         name = ('set_%d_run_%04d' % (k, i)) if len(gain_sets) > 1 else 'run_%04d' % i
         manoeuvres.write_scenario_file(sections, os.path.join(out_dir, 'worst', name + '.yaml'))
-        res = run_batch([from_sections(sections, name)])
-        if res.min_margin_deg[0].min() != columns['closest_deg'][p]:
-            print('campaign: warning: %s flew again to %r deg, not %r' % (
-                name, float(res.min_margin_deg[0].min()), float(columns['closest_deg'][p])),
-                file=sys.stderr)
-        flown.append((name, res, sections['controller']))
-        labels.append('%s (%.2f deg)' % (name.replace('_', ' '), columns['closest_deg'][p]))
-    plots.worst_runs_figure(flown, os.path.join(out_dir, 'worst_runs.png'))
+        flown.append((name.replace('_', ' '), margins, sensor, dt, sections['controller']))
+        labels.append('%s (%.2f deg)' % (name.replace('_', ' '), closest))
+    if flown:
+        plots.worst_runs_figure(flown, os.path.join(out_dir, 'worst_runs.png'))
     return labels
 
 
@@ -222,7 +227,7 @@ def main(argv=None):
               file=sys.stderr, flush=True)
         t1 = time.monotonic()
         try:
-            columns, interrupted, draw_s = fly(client, base, args, gain_sets,
+            columns, worst, interrupted, draw_s = fly(client, base, args, gain_sets,
                                                progress_printer(total))
         except (ConfigError, ValueError) as e:          # a run the batch cannot fly
             print('\ncampaign: %s' % e, file=sys.stderr)
@@ -244,11 +249,11 @@ def main(argv=None):
     summary['drawing the runs [s, all workers]'] = '%.1f' % draw_s
     summary['simulated / wall time (per worker)'] = '%.0f (%.0f)' % (
         n * args.duration / wall, n * args.duration / wall / workers)
-    worst = worst_runs(columns, base, args, gain_sets, args.out, args.worst)
+    labels = worst_runs(worst, base, args, gain_sets, args.out)
     lines = ['| campaign seed %d%s | |' % (args.seed, ' (interrupted)' if interrupted else ''),
              '|---|---|']
     lines += ['| %s | %s |' % (k, v) for k, v in summary.items()]
-    lines += ['', 'worst runs: ' + ', '.join(worst)]
+    lines += ['', 'worst runs: ' + ', '.join(labels)]
     if len(gain_sets) > 1:
         lines += [''] + study.write_study(columns, base, gain_sets, args.out, args.best)
     with open(os.path.join(args.out, 'summary.md'), 'w') as f:

@@ -153,20 +153,18 @@ def closest_approach_figure(closest_deg, path):
 
 
 def worst_runs_figure(flown, path):
-    """A campaign's worst runs (flown again with their series: [(name, BatchResult of the run
-    alone, its controller parameters)]): cone margin in time, and the worst one's sensor path.
+    """A campaign's worst runs ([(name, margin at each control step, sensor direction at each,
+    dt, controller parameters)]): cone margin in time, and the worst one's sensor path.
     """
     fig, (a1, a2) = _subplots(1, 2, figsize=(11, 4))
-    for name, res, _ in flown:
-        t = np.arange(res.margin_series.shape[0]) * res.dt
-        a1.plot(t, res.margin_series[:, 0], lw=1, label=name.replace('_', ' '))
+    for name, margins, _, dt, _ in flown:
+        a1.plot(np.arange(len(margins)) * dt, margins, lw=1, label=name)
     a1.axhline(0.0, color='k', lw=0.8)
     a1.set(xlabel='t [s]', ylabel='cone margin [deg]', title='the %d worst runs' % len(flown))
     a1.legend(fontsize=7)
     a1.grid(True, alpha=0.3)
-    name, res, controller = flown[0]
-    _sky(a2, res.sensor_series[:, 0].astype(float), controller,
-         '%s: sensor path' % name.replace('_', ' '))
+    name, _, sensor, _, controller = flown[0]
+    _sky(a2, sensor.astype(float), controller, '%s: sensor path' % name)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 

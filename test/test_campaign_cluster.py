@@ -1,0 +1,165 @@
+"""Campaigns on a real Dask cluster (127.0.0.1 only): the same runs.csv on 2 workers as on 1
+worker in another batch size, none lost or doubled when a worker is killed mid-campaign, Ctrl-C
+writes the runs flown so far, and a small gain study whose best parameter file the controller
+accepts.
+"""
+import csv
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+from distributed import Client, LocalCluster
+import numpy as np
+import pytest
+
+from geoctl_ros.params import (
+    CONTROLLER,
+    controller_setup,
+    load_parameter_file,
+    node_overrides,
+    resolve,
+)
+from geoctl_ros.tools import campaign
+
+pytestmark = pytest.mark.headless
+
+RUNS, DURATION = '40', '2'
+
+
+def read(path):
+    with open(path) as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.fixture(scope='module')
+def reference(tmp_path_factory):
+    """The 40-run campaign on one worker, in batches of 7: its runs.csv."""
+    out = tmp_path_factory.mktemp('one_worker')
+    code = campaign.main(['--runs', RUNS, '--duration', DURATION, '--workers', '1',
+                          '--batch', '7', '--worst', '1', '--out', str(out)])
+    assert code == 0
+    return out / 'runs.csv'
+
+
+def test_two_workers_give_the_runs_csv_of_one_worker_in_another_batch_size(
+        reference, tmp_path, capsys):
+    out = tmp_path / 'two_workers'
+    code = campaign.main(['--runs', RUNS, '--duration', DURATION, '--workers', '2',
+                          '--out', str(out)])
+    printed = capsys.readouterr()
+    assert code == 0, printed.out
+    assert 'a local cluster of 2 worker processes on 127.0.0.1' in printed.err
+    assert '100.0 % of 40 runs flown' in printed.err                   # progress was shown
+    assert (out / 'runs.csv').read_bytes() == reference.read_bytes()
+    rows = read(out / 'runs.csv')
+    assert [int(r['run']) for r in rows] == list(range(40))
+    assert all(r['violated'] == 'False' and float(r['closest_deg']) > 0.0 for r in rows)
+    assert len({r['cones'] for r in rows}) == 4
+    assert '| violations | 0 |' in printed.out
+    for png in ('closest_approach.png', 'worst_runs.png'):
+        assert (out / png).stat().st_size > 10_000
+    # the worst runs' files fly again to the figures in runs.csv
+    assert len(os.listdir(out / 'worst')) == 5
+    worst = min(rows, key=lambda r: float(r['closest_deg']))
+    replay = campaign.main(['--replay', str(out / 'worst' / ('run_%04d.yaml' % int(worst['run']))),
+                            '--out', str(tmp_path)])
+    assert replay == 0
+    assert 'closest approach %s deg' % worst['closest_deg'] in capsys.readouterr().out
+
+
+def test_a_worker_killed_mid_campaign_loses_no_run_and_doubles_none(reference, tmp_path):
+    """A cluster of its own (as `dask scheduler` and `dask worker` would make one), the campaign
+    on it through --scheduler; one worker process is SIGKILLed while it flies a batch.
+    """
+    out = tmp_path / 'killed'
+    with LocalCluster(n_workers=2, threads_per_worker=1, host='127.0.0.1',
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        result = {}
+        flying = threading.Thread(target=lambda: result.setdefault('code', campaign.main(
+            ['--scheduler', cluster.scheduler_address, '--runs', RUNS, '--duration', DURATION,
+             '--batch', '4', '--worst', '1', '--out', str(out)])))
+        flying.start()
+        pids = client.run(os.getpid)
+        victim = None
+        deadline = time.monotonic() + 60
+        while victim is None and time.monotonic() < deadline:
+            busy = [w for w, tasks in client.processing().items() if tasks]
+            victim = busy[0] if busy else None
+            time.sleep(0.05)
+        assert victim is not None, 'no batch was ever in flight'
+        os.kill(pids[victim], signal.SIGKILL)
+        flying.join(120)
+        assert not flying.is_alive()
+        assert victim not in client.scheduler_info()['workers']        # it did die
+    assert result['code'] == 0
+    assert (out / 'runs.csv').read_bytes() == reference.read_bytes()
+
+
+def test_ctrl_c_writes_the_runs_flown_so_far(tmp_path):
+    out = tmp_path / 'interrupted'
+    proc = subprocess.Popen([sys.executable, '-m', 'geoctl_ros.tools.campaign', '--runs', '60',
+                             '--duration', '2', '--batch', '2', '--worst', '1',
+                             '--out', str(out)], stderr=subprocess.PIPE, text=True)
+    seen = []
+    for line in proc.stderr:                 # progress every 10 % (not a terminal)
+        seen.append(line)
+        if ' % of 60 runs flown' in line and float(line.split()[1]) >= 20.0:
+            proc.send_signal(signal.SIGINT)
+            break
+    rest = proc.communicate(timeout=60)[1]
+    assert proc.returncode == 130, ''.join(seen) + rest
+    flown = read(out / 'runs.csv')
+    assert 'interrupted: %d of 60 runs flown' % len(flown) in rest
+    assert 10 <= len(flown) < 60
+    runs = [int(r['run']) for r in flown]
+    assert runs == sorted(set(runs))
+
+
+def test_a_gain_study_flies_every_set_on_the_same_runs_and_writes_files_the_controller_takes(
+        tmp_path, capsys):
+    out = tmp_path / 'study'
+    code = campaign.main(['--runs', '8', '--duration', '4', '--grid', 'k_R=0.4,0.8',
+                          '--grid', 'alpha=8', '--worst', '1', '--out', str(out)])
+    printed = capsys.readouterr()
+    assert code == 0, printed.err
+    rows = read(out / 'runs.csv')
+    by_set = {}
+    for r in rows:
+        by_set.setdefault(r['gain_set'], []).append(r)
+    assert sorted(by_set) == ['1', '2'] and all(len(v) == 8 for v in by_set.values())
+    for a, b in zip(by_set['1'], by_set['2']):                # the same manoeuvres
+        assert (a['run'], a['cones'], a['latency_ms'], a['disturbance_Nm']) == (
+            b['run'], b['cones'], b['latency_ms'], b['disturbance_Nm'])
+    assert by_set['1'] != by_set['2']                         # flown with other gains
+    sets = read(out / 'gain_sets.csv')
+    assert [(s['k_R'], s['alpha']) for s in sets] == [('0.4', '8.0'), ('0.8', '8.0')]
+    for s in sets:                     # each set's figures are its runs'
+        mine = by_set[s['gain_set']]
+        assert int(s['violations']) == sum(r['violated'] == 'True' for r in mine)
+        assert float(s['converged_share']) == np.mean([r['converged'] == 'True' for r in mine])
+    assert (out / 'gain_study.png').stat().st_size > 10_000
+    best = sorted(os.listdir(out / 'best'))
+    assert best and all(s['non_dominated'] == 'True' for s in sets
+                        if 'gain_set_%s.yaml' % s['gain_set'] in best)
+    for name in best:                  # the controller takes it as it is
+        sections = load_parameter_file(str(out / 'best' / name))
+        setup = controller_setup(resolve(CONTROLLER, node_overrides(sections, CONTROLLER)))
+        k = int(name.split('_')[-1].split('.')[0])
+        assert setup.values['k_R'] == float(sets[k - 1]['k_R'])
+        assert setup.config.cones.names == ['obstacle']       # the testbed's own cone
+    assert '| gain set |' in printed.out
+
+
+def test_a_gain_set_the_controller_would_refuse_is_refused_before_anything_flies(
+        tmp_path, capsys):
+    code = campaign.main(['--runs', '8', '--grid', 'k_R=0.4,-1', '--grid', 'alpha=8',
+                          '--out', str(tmp_path)])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert 'gain set 2 (k_R=-1.0 alpha=8.0)' in err and 'k_R: must be > 0' in err
+    assert 'local cluster' not in err and not os.path.exists(tmp_path / 'runs.csv')
+    assert campaign.main(['--runs', '8', '--grid', 'setpoint=1', '--out', str(tmp_path)]) == 2
+    assert 'setpoint: each run of a campaign sets it' in capsys.readouterr().err
