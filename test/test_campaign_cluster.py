@@ -1,7 +1,7 @@
 """Campaigns on a real Dask cluster (127.0.0.1 only): the same runs.csv on 2 workers as on 1
 worker in another batch size, none lost or doubled when a worker is killed mid-campaign, Ctrl-C
 writes the runs flown so far, and a small gain study whose best parameter file the controller
-accepts.
+accepts. The first and the last run on the vehicle's stack too (Ubuntu 24.04's Dask 2023.12).
 """
 import csv
 import os
@@ -44,6 +44,7 @@ def reference(tmp_path_factory):
     return out / 'runs.csv'
 
 
+@pytest.mark.odroid
 def test_two_workers_give_the_runs_csv_of_one_worker_in_another_batch_size(
         reference, tmp_path, capsys):
     out = tmp_path / 'two_workers'
@@ -153,6 +154,7 @@ def test_a_gain_study_flies_every_set_on_the_same_runs_and_writes_files_the_cont
     assert '| gain set |' in printed.out
 
 
+@pytest.mark.odroid
 def test_a_gain_set_the_controller_would_refuse_is_refused_before_anything_flies(
         tmp_path, capsys):
     code = campaign.main(['--runs', '8', '--grid', 'k_R=0.4,-1', '--grid', 'alpha=8',

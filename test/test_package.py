@@ -104,7 +104,8 @@ def test_launch_files_name_only_what_exists(name):
 # (keys from rosdistro's rosdep/python.yaml; pymavlink has no Ubuntu package, its key is pip's)
 ROSDEP_KEYS = {'numpy': 'python3-numpy', 'yaml': 'python3-yaml',
                'matplotlib': 'python3-matplotlib', 'pymavlink': 'python3-pymavlink-pip',
-               'pytest': 'python3-pytest', 'rosbags': 'python3-rosbags-pip'}
+               'pytest': 'python3-pytest', 'rosbags': 'python3-rosbags-pip',
+               'dask': 'python3-dask', 'distributed': 'python3-distributed'}
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python', 'std_msgs',
                 'geometry_msgs', 'sensor_msgs', 'std_srvs', 'diagnostic_msgs', 'rosgraph_msgs',
                 'launch_ros', 'visualization_msgs'}
