@@ -51,6 +51,8 @@ GAP_DEG = 10.0                     # edge-to-edge distance between two cones, at
 UP = np.array([0.0, 0.0, 1.0])
 _I3 = np.eye(3)
 _ARC = np.linspace(0.0, 1.0, 41)      # points on the straight way from start to goal
+_TWISTS = np.radians(np.arange(-180.0, 180.0, 2.0))     # turns about the sensor axis tried
+PLACEMENTS = 64                    # candidate placements of the cones drawn at once
 TILT_DEG = 40.0                    # the body's z axis within this of vertical at start and goal
 TWIST_DEG = 15.0                   # turn about the sensor axis from the most upright attitude
 CONE_ELEVATION_DEG = 20.0          # cone axes within this of the horizon
@@ -87,9 +89,8 @@ def _attitude(rng, r, d):
     TILT_DEG (the joint's range).
     """
     base = _aligning(r, d)
-    twists = np.radians(np.arange(-180.0, 180.0, 2.0))
-    ups = so3.exp(d * twists[:, None]) @ (base @ UP)            # body z for each twist
-    twist = twists[int(np.argmax(ups[:, 2]))] + math.radians(rng.uniform(-TWIST_DEG, TWIST_DEG))
+    ups = so3.exp_apply(d * _TWISTS[:, None], base @ UP)        # body z for each twist
+    twist = _TWISTS[int(np.argmax(ups[:, 2]))] + math.radians(rng.uniform(-TWIST_DEG, TWIST_DEG))
     R = so3.exp(d * twist) @ base
     return R if _angle_deg(R @ UP, UP) <= TILT_DEG else None
 
@@ -106,6 +107,26 @@ def cone_count(seed, index):
     return int(np.random.default_rng(run_seeds(seed, index)[0]).integers(1, 5))
 
 
+def _place_cones(rng, n):
+    """n cones that fit (half-angles in deg, unit axes): the first that fits of blocks of
+    PLACEMENTS candidate placements drawn at once.
+    """
+    upper = np.triu(np.ones((n, n), dtype=bool), 1)
+    while True:
+        theta = rng.uniform(10.0, 35.0, (PLACEMENTS, n))
+        elevation = np.radians(rng.uniform(-CONE_ELEVATION_DEG, CONE_ELEVATION_DEG,
+                                           (PLACEMENTS, n)))
+        azimuth = rng.uniform(0.0, 2.0 * math.pi, (PLACEMENTS, n))
+        axes = np.stack([np.cos(elevation) * np.cos(azimuth),
+                         np.cos(elevation) * np.sin(azimuth), np.sin(elevation)], axis=-1)
+        between = np.degrees(np.arccos(np.clip(axes @ axes.transpose(0, 2, 1), -1.0, 1.0)))
+        fits = np.all((between >= theta[:, :, None] + theta[:, None, :] + GAP_DEG) | ~upper,
+                      axis=(1, 2))
+        if fits.any():
+            k = int(np.argmax(fits))
+            return theta[k], list(axes[k])
+
+
 def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None):
     """The random part of run index of campaign seed: a dict of per-run values. goal_ok(cones,
     R_d) (cones as [(axis, half-angle deg)]), if given, must accept the goal (else redrawn).
@@ -114,13 +135,7 @@ def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None):
     rng = np.random.default_rng(run_seeds(seed, index)[1])
     r = unit(np.asarray(sensor_axis, dtype=float))
     while True:
-        theta = rng.uniform(10.0, 35.0, n)
-        axes = [direction(UP, math.radians(90.0 - rng.uniform(-CONE_ELEVATION_DEG,
-                                                                CONE_ELEVATION_DEG)),
-                           rng.uniform(0.0, 2.0 * math.pi)) for _ in range(n)]
-        if any(_angle_deg(axes[i], axes[j]) < theta[i] + theta[j] + GAP_DEG
-               for i in range(n) for j in range(i)):
-            continue
+        theta, axes = _place_cones(rng, n)
         v0, th0 = axes[0], math.radians(theta[0])
         azimuth = rng.uniform(0.0, 2.0 * math.pi)
         d0 = direction(v0, th0 + math.radians(rng.uniform(5.0, 30.0)), azimuth)
