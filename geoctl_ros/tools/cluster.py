@@ -105,7 +105,7 @@ def run_tasks(client, fn, tasks, on_result, progress=None, weights=None):
                 progress(done + running, now - t0)
                 shown = now
             if not batch:
-                time.sleep(0.05)
+                time.sleep(0.2)
     except KeyboardInterrupt:
         client.cancel([f for f in futures if not f.done()])
         raise
