@@ -92,7 +92,8 @@ def fly_batch(job):
 def fly(client, base, args, gain_sets, progress=None):
     """Fly every run of every gain set on the cluster; (columns sorted by gain set and run, the
     worst runs' series [(closest approach, gain set, run, margins, sensor directions, dt)],
-    whether it was interrupted, seconds spent drawing the runs on the workers).
+    whether it was interrupted, (seconds spent drawing the runs, and flying them, on the
+    workers)).
     """
     groups = {}
     for i in range(args.runs):
@@ -121,7 +122,8 @@ def fly(client, base, args, gain_sets, progress=None):
     columns = {c: v[order] for c, v in columns.items()}
     seen = set(zip(columns['gain_set'].tolist(), columns['run'].tolist()))
     assert len(seen) == len(order), 'a run was flown twice'
-    return columns, worst, interrupted, sum(p['draw_s'] for p in parts)
+    return columns, worst, interrupted, (sum(p['draw_s'] for p in parts),
+                                         sum(p['fly_s'] for p in parts))
 
 
 def write_runs(path, columns, with_gain_set):
@@ -227,7 +229,7 @@ def main(argv=None):
               file=sys.stderr, flush=True)
         t1 = time.monotonic()
         try:
-            columns, worst, interrupted, draw_s = fly(client, base, args, gain_sets,
+            columns, worst, interrupted, (draw_s, fly_s) = fly(client, base, args, gain_sets,
                                                progress_printer(total))
         except (ConfigError, ValueError) as e:          # a run the batch cannot fly
             print('\ncampaign: %s' % e, file=sys.stderr)
@@ -246,7 +248,7 @@ def main(argv=None):
     summary = study.summary_table(columns)
     summary['wall time [s]'] = '%.1f on %d workers (cluster start %.1f s before it)' % (
         wall, workers, started)
-    summary['drawing the runs [s, all workers]'] = '%.1f' % draw_s
+    summary['drawing / flying the runs [s, all workers]'] = '%.1f / %.1f' % (draw_s, fly_s)
     summary['simulated / wall time (per worker)'] = '%.0f (%.0f)' % (
         n * args.duration / wall, n * args.duration / wall / workers)
     labels = worst_runs(worst, base, args, gain_sets, args.out)
