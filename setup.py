@@ -36,6 +36,7 @@ setup(
             'record = geoctl_ros.nodes.recorder:main',
             'report = geoctl_ros.tools.report:main',
             'view = geoctl_ros.nodes.view:main',
+            'esc_i2c = geoctl_ros.nodes.esc_i2c:main',
         ],
     },
 )

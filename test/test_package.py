@@ -22,7 +22,7 @@ pytestmark = pytest.mark.odroid
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PKG = os.path.join(ROOT, 'geoctl_ros')
-LAYERS = ['core', 'sim', 'records', 'params', 'mavlink', 'nodes', 'tools']      # lowest first
+LAYERS = ['core', 'sim', 'records', 'params', 'esc', 'mavlink', 'nodes', 'tools']      # lowest first
 
 
 def test_core_sim_params_and_mavlink_import_without_rclpy():
@@ -35,7 +35,7 @@ def test_core_sim_params_and_mavlink_import_without_rclpy():
             '            raise ImportError("blocked: " + name)\n'
             'sys.meta_path.insert(0, Block())\n'
             'import pkgutil, importlib, geoctl_ros\n'
-            'for sub in ("core", "sim", "params", "mavlink", "records"):\n'
+            'for sub in ("core", "sim", "params", "mavlink", "records", "esc"):\n'
             '    pkg = importlib.import_module("geoctl_ros." + sub)\n'
             '    for m in pkgutil.iter_modules(pkg.__path__):\n'
             '        importlib.import_module("geoctl_ros.%s.%s" % (sub, m.name))\n'
@@ -105,7 +105,8 @@ def test_launch_files_name_only_what_exists(name):
 ROSDEP_KEYS = {'numpy': 'python3-numpy', 'yaml': 'python3-yaml',
                'matplotlib': 'python3-matplotlib', 'pymavlink': 'python3-pymavlink-pip',
                'pytest': 'python3-pytest', 'rosbags': 'python3-rosbags-pip',
-               'dask': 'python3-dask', 'distributed': 'python3-distributed'}
+               'dask': 'python3-dask', 'distributed': 'python3-distributed',
+               'smbus2': 'python3-smbus2'}
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python', 'std_msgs',
                 'geometry_msgs', 'sensor_msgs', 'std_srvs', 'diagnostic_msgs', 'rosgraph_msgs',
                 'launch_ros', 'visualization_msgs'}

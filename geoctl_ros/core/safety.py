@@ -35,6 +35,17 @@ def quaternion_problem(q):
     return None
 
 
+def motor_commands_problem(data, n):
+    """Why a motor_commands message cannot be actuated (a sentence), or None: it must hold n
+    finite values in [0, 1] (the sim and the ESC node refuse it the same way).
+    """
+    if len(data) != n or not all(math.isfinite(x) for x in data):
+        return 'expected %d finite values, got %r' % (n, [round(x, 4) for x in list(data)[:8]])
+    if min(data) < 0.0 or max(data) > 1.0:
+        return 'values outside [0, 1]'
+    return None
+
+
 def angular_velocity_problem(w, limit):
     """Why w is not an acceptable angular velocity, or None."""
     if not all(math.isfinite(v) for v in w):

@@ -39,7 +39,7 @@ ROS_TYPE = {
     'integer_array': Parameter.Type.INTEGER_ARRAY,
 }
 # Changing these needs a restart (timers, frames, links); ROS refuses them at run time. So do all
-# of the MAVLink bridge's (mavlink.*).
+# of the MAVLink bridge's (mavlink.*) and of the ESC node's (esc.*; its motor_test.* may change).
 READ_ONLY = {'rate_hz', 'integration_rate_hz', 'pose_rate_hz', 'imu_rate_hz', 'publish_clock',
              'real_time_factor', 'frame_id', 'world_frame_id', 'actuation'}
 ROS_OWN = ('use_sim_time', 'start_type_description_service', 'qos_overrides.')
@@ -47,7 +47,8 @@ ROS_OWN = ('use_sim_time', 'start_type_description_service', 'qos_overrides.')
 
 def _descriptor(p):
     return ParameterDescriptor(description='%s [%s]' % (p.doc, p.unit),
-                               read_only=p.name in READ_ONLY or p.name.startswith('mavlink.'))
+                               read_only=(p.name in READ_ONLY
+                                          or p.name.startswith(('mavlink.', 'esc.'))))
 
 
 def _declare(node, p, errors):

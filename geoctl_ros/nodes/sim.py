@@ -8,8 +8,12 @@ them; with ``actuation: torque``, from the torque of the latest ``control_wrench
 clock times ``real_time_factor``: one timer, at the faster of the two sensor rates, integrates as
 many steps as are due and publishes what is due.
 
-Commands older than ``command_timeout`` stop the motors (as the ESCs do when the I2C bus goes
-quiet; ``geoctl_ros.sim.testbed.EscWatchdog``, which does not count the sim's own stalls); a
+With ``esc.virtual_bus`` set the sim is the ESCs instead: it reads each one's set point from that
+virtual I2C bus (written by ``esc_i2c`` through the real encoding) and answers their telemetry.
+
+Commands (or bus writes) older than ``command_timeout`` stop the motors (as the ESCs do when the
+I2C bus goes quiet; ``geoctl_ros.sim.testbed.EscWatchdog``, which does not count the sim's own
+stalls); a
 malformed command message (wrong length, not finite, outside [0, 1]) is refused with a warning and
 the previous one stays.
 """
@@ -24,10 +28,13 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 
 from geoctl_ros.core import so3
+from geoctl_ros.core.safety import motor_commands_problem
+from geoctl_ros.esc.protocol import current_raw, decode
+from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg, vector
 from geoctl_ros.nodes.runtime import spin
-from geoctl_ros.params import SIM, settings, testbed_sim
+from geoctl_ros.params import SIM, ConfigError, settings, testbed_sim
 from geoctl_ros.sim.testbed import EscWatchdog
 
 LATE = 0.05     # s behind real time before the sim warns
@@ -47,7 +54,7 @@ class SimNode(Node):
         self.command_timeout = cfg.command_timeout
         self.esc = EscWatchdog(self.command_timeout, LATE)
         self.publish_clock = cfg.publish_clock
-        self.commands = np.zeros(self.n_rotors, dtype=int)
+        self.commands = np.zeros(self.n_rotors)
         self.torque = np.zeros(3)
         self.ever_commanded = False
         self.commands_fresh = False
@@ -56,7 +63,19 @@ class SimNode(Node):
         self.imu_period = 1.0 / cfg.imu_rate_hz
         self.next_pose = self.next_imu = 0.0
 
-        if self.n_rotors:
+        self.esc_bus = None
+        if self.n_rotors and values['esc.virtual_bus']:      # the ESCs on a virtual I2C bus
+            addresses = values['esc.addresses']
+            if len(addresses) != self.n_rotors:
+                raise ConfigError([('esc.addresses', 'expected %d (one per rotor), got %d'
+                                    % (self.n_rotors, len(addresses)))])
+            try:
+                self.esc_bus = VirtualEscBus(values['esc.virtual_bus'], addresses)
+            except (OSError, ValueError) as e:
+                raise ConfigError([('esc.virtual_bus', str(e))]) from None
+            self.esc_bus.power(True)
+            self._bus_writes = -1.0
+        elif self.n_rotors:
             self.create_subscription(Float64MultiArray, 'motor_commands', self._on_commands,
                                      qos.COMMAND)
         else:                          # ideal actuation: the controller's moment itself
@@ -80,17 +99,13 @@ class SimNode(Node):
                                                          self.rtf))
 
     def _on_commands(self, msg):
+        problem = motor_commands_problem(msg.data, self.n_rotors)
+        if problem:
+            self.get_logger().warning('motor_commands refused: ' + problem,
+                                      throttle_duration_sec=1.0)
+            return
         data = np.asarray(msg.data, dtype=float)
-        if data.shape != (self.n_rotors,) or not np.all(np.isfinite(data)):
-            self.get_logger().warning('motor_commands refused: expected %d finite values, got %r'
-                                      % (self.n_rotors, list(msg.data)[:8]),
-                                      throttle_duration_sec=1.0)
-            return
-        if data.min() < 0.0 or data.max() > 1.0:
-            self.get_logger().warning('motor_commands refused: values outside [0, 1]',
-                                      throttle_duration_sec=1.0)
-            return
-        self.commands = np.rint(data * self.command_max).astype(int)
+        self.commands = np.rint(data * self.command_max)
         self.esc.received(time.monotonic())
         self.ever_commanded = True
 
@@ -104,6 +119,26 @@ class SimNode(Node):
         self.esc.received(time.monotonic())
         self.ever_commanded = True
 
+    def _read_esc_bus(self, now):
+        """The set points the ESC node last wrote (the ESCs' view of the bus); telemetry back."""
+        bus = self.esc_bus
+        written = bus.setpoints()
+        latest = max(t for _, t in written)
+        if latest > self._bus_writes:
+            self._bus_writes = latest
+            self.esc.received(now)
+            self.ever_commanded = True
+        self.commands = np.array([decode(data, self.command_max) * self.command_max
+                                  if data else 0.0 for data, _ in written])
+        for i, f in enumerate(self.sim.actuator.thrusts):      # a crude ESC: 2 A per newton
+            running = self.commands[i] > 0.0 and self.commands_fresh
+            bus.answer(i, current_raw(2.0 * f), 255 if running else 250, 35.0)
+
+    def on_shutdown(self):
+        if self.esc_bus is not None:
+            self.esc_bus.power(False)
+            self.esc_bus.close()
+
     def _stamp(self, t_sim):
         return time_msg(t_sim) if self.publish_clock else self.get_clock().now().to_msg()
 
@@ -115,6 +150,8 @@ class SimNode(Node):
         if behind > LATE:       # the process did not get the CPU (or was stopped): say so
             self.get_logger().warning('sim %.0f ms behind real time: its measurements come late'
                                       % (behind * 1e3), throttle_duration_sec=1.0)
+        if self.esc_bus is not None:
+            self._read_esc_bus(now)
         fresh = self.esc.fresh(now)
         if fresh != self.commands_fresh:
             self.commands_fresh = fresh

@@ -31,6 +31,7 @@ from geoctl_ros.params.schema import (
                                      CONE_KEY,
                                      CONE_SCHEMA,
                                      CONTROLLER,
+                                     ESC,
                                      LAB_INERTIA,
                                      MAVLINK,
                                      RECORD,
@@ -45,7 +46,7 @@ from geoctl_ros.params.schema import (
 )
 from geoctl_ros.params.validate import check_value, resolve
 
-__all__ = ['BOTH', 'BY_NAME', 'CONE_KEY', 'CONE_SCHEMA', 'CONTROLLER', 'ConfigError',
+__all__ = ['BOTH', 'BY_NAME', 'CONE_KEY', 'CONE_SCHEMA', 'CONTROLLER', 'ConfigError', 'ESC',
            'ControllerSetup', 'LAB_INERTIA', 'MAVLINK', 'Param', 'RECORD', 'SCENARIO', 'SCHEMA',
            'SIM', 'VIEW',
            'airframe',

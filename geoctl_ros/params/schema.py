@@ -16,8 +16,8 @@ from geoctl_ros.core.control import DISTURBANCE_MODELS
 from geoctl_ros.core.safety import quaternion_problem
 from geoctl_ros.records.bag import TOPICS as _RECORDED
 
-CONTROLLER, SIM, SCENARIO, MAVLINK, RECORD, VIEW = (
-    'controller', 'sim', 'scenario', 'mavlink_bridge', 'record', 'view')
+CONTROLLER, SIM, SCENARIO, MAVLINK, RECORD, VIEW, ESC = (
+    'controller', 'sim', 'scenario', 'mavlink_bridge', 'record', 'view', 'esc_i2c')
 BOTH = (CONTROLLER, SIM)
 RECORD_TOPICS = tuple(t.name for t in _RECORDED)
 
@@ -78,6 +78,12 @@ def _inertia(vals):
     if eig[0] + eig[1] < eig[2] * (1.0 - 1e-9):
         return 'violates the triangle inequality of principal moments (not a physical body)'
     return None
+
+
+def _addresses(v):
+    if not len(v) or any(not 0x03 <= a <= 0x77 for a in v):
+        return 'must be 7-bit addresses 0x03 to 0x77'
+    return None if len(set(v)) == len(v) else 'must be different'
 
 
 def _rate(v):
@@ -238,7 +244,8 @@ SCHEMA = [
        BOTH),
     _p('motor.voltage_scale', 'double', 1.1261, '-',
        'battery-voltage scale of the command (12.5 V / 11.1 V)', BOTH, check=_positive),
-    _p('motor.command_max', 'integer', 240, '-', 'largest ESC command', BOTH,
+    _p('motor.command_max', 'integer', 240, '-', 'largest ESC command (the set point of a '
+       'normalised command of 1)', (CONTROLLER, SIM, ESC),
        check=lambda v: None if 1 <= v <= 65535 else 'must be in 1..65535'),
     _p('thrust_min', 'double', 0.2, 'N', 'least thrust per rotor while armed', CONTROLLER,
        check=_nonnegative),
@@ -335,6 +342,44 @@ SCHEMA = [
        'to it (or inside)', VIEW, check=_nonnegative),
     _p('view.controller', 'string', 'controller', '-', 'the controller node whose cones are '
        'drawn', VIEW),
+    # ESCs on I2C (geoctl_ros.nodes.esc_i2c; README "ESCs on I2C").
+    _p('esc.bus', 'integer', 1, '-', 'the I2C bus: /dev/i2c-<bus>', ESC,
+       check=lambda v: None if v >= 0 else 'must be >= 0'),
+    _p('esc.addresses', 'integer_array', [0x29, 0x2A, 0x2B, 0x2C, 0x2D, 0x2E], '-',
+       "7-bit I2C address of each rotor's ESC, in rotor order (the lab's 0x29-0x2E)", (ESC, SIM),
+       check=_addresses),
+    _p('esc.resolution', 'integer', 8, 'bit', 'set point per write: 8 (one byte, 0..command_max) '
+       'or 11 (two bytes, 8 times finer)', ESC,
+       check=lambda v: None if v in (8, 11) else 'must be 8 or 11'),
+    _p('esc.timeout', 'double', 0.1, 's', 'motor_commands older than this (or malformed, or none '
+       'yet) give zero on every ESC', ESC,
+       check=lambda v: None if 0.0 < v <= 1.0 else 'must be in (0, 1]'),
+    _p('esc.rate_hz', 'double', 100.0, 'Hz', 'least write rate: each ESC gets its set point on '
+       'every command and at least this often', ESC,
+       check=lambda v: None if 10.0 <= v <= 1000.0 else 'must be in [10, 1000]'),
+    _p('esc.telemetry_rate_hz', 'double', 20.0, 'Hz', 'ESC reads per second (one ESC at a time, '
+       'in turn), for esc/telemetry and the diagnostics', ESC,
+       check=lambda v: None if 0.0 <= v <= 200.0 else 'must be in [0, 200]'),
+    _p('esc.retries', 'integer', 2, '-', 'retries of a failed transfer within a write cycle',
+       ESC, check=lambda v: None if 0 <= v <= 10 else 'must be 0 to 10'),
+    _p('esc.ignore', 'integer_array', [], '-', 'rotors (1-based) whose ESC may be missing at '
+       'start-up: then never written', ESC),
+    _p('esc.probe_timeout', 'double', 3.0, 's', 'at start-up, how long every ESC has to answer',
+       ESC, check=_nonnegative),
+    _p('esc.temperature_warn', 'double', 80.0, 'deg C', 'an ESC this hot is reported WARN', ESC),
+    _p('esc.temperature_error', 'double', 100.0, 'deg C', 'an ESC this hot is reported ERROR',
+       ESC),
+    _p('esc.controller', 'string', 'controller', '-', 'the controller node whose diagnostics '
+       'say whether it is armed (the motor test is refused while it is)', ESC),
+    _p('esc.virtual_bus', 'string', '', '-', 'a virtual ESC bus file (e.g. /dev/shm/geoctl_esc): '
+       'esc_i2c writes it instead of /dev/i2c-<bus>, and the sim reads its set points instead '
+       'of motor_commands (empty: none)', (ESC, SIM)),
+    _p('motor_test.rotor', 'integer', 1, '-', "the motor test's rotor (1-based)", ESC,
+       check=lambda v: None if v >= 1 else 'must be >= 1'),
+    _p('motor_test.command', 'double', 0.1, '-', "the motor test's normalised command",
+       ESC, check=lambda v: None if 0.0 <= v <= 0.3 else 'must be in [0, 0.3]'),
+    _p('motor_test.duration', 'double', 2.0, 's', 'how long the motor test runs', ESC,
+       check=lambda v: None if 0.0 < v <= 10.0 else 'must be in (0, 10]'),
     # Headless runner.
     _p('duration', 'double', 20.0, 's', 'simulated time of a scenario run', SCENARIO,
        check=_positive),

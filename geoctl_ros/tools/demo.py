@@ -24,9 +24,11 @@ import rclpy
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.diagnostics import aggregate_ms
+from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.nodes.recorder import default_path
 from geoctl_ros.params import (
     CONTROLLER,
+    ESC,
     cone_set,
     controller_setup,
     load_parameter_file,
@@ -72,9 +74,13 @@ def _diag_stats(diags, name):
     return None if w is None else {k + '_ms': v for k, v in w._asdict().items()}
 
 
-def fly(params_file, out, duration, monitor_factory=None, mavlink=None, record=True):
+def fly(params_file, out, duration, monitor_factory=None, mavlink=None, record=True,
+        esc=False):
     """Run sim + controller as processes, arm, fly duration seconds; returns the summary. With
     record, ``record`` writes the flight to a bag under out/records (its path in the summary).
+    With esc, the ``esc_i2c`` node writes the commands to a virtual ESC bus (out/esc_bus) that
+    the sim reads instead of ``motor_commands``: the flight goes through the ESCs' byte encoding
+    and the node's watchdog, and the summary says what the ESCs were told after the disarm.
     """
     use_node_env()
     values = resolve(CONTROLLER, node_overrides(load_parameter_file(params_file), CONTROLLER))
@@ -82,8 +88,17 @@ def fly(params_file, out, duration, monitor_factory=None, mavlink=None, record=T
     cones = cone_set(values)
     final_setpoint = (setup.schedule.rotations[-1] if len(setup.schedule) else setup.setpoint)
     os.makedirs(out, exist_ok=True)
-    procs = [NodeProcess('sim', params_file, log_dir=out),
+    bus_args = ()
+    if esc:
+        bus_path = os.path.abspath(os.path.join(out, 'esc_bus'))
+        if os.path.exists(bus_path):
+            os.unlink(bus_path)
+        bus_args = ('-p', 'esc.virtual_bus:=' + bus_path)
+    procs = [NodeProcess('sim', params_file, bus_args, log_dir=out),
              NodeProcess('controller', params_file, log_dir=out)]
+    if esc:
+        procs.append(NodeProcess('esc_i2c', params_file,
+                                 bus_args + ('-p', 'esc.probe_timeout:=20.0'), log_dir=out))
     if mavlink:        # a ground station on this machine can watch the flight
         procs.append(NodeProcess('mavlink_bridge', None, ('-p', 'mavlink.url:=' + mavlink),
                                  log_dir=out))
@@ -107,6 +122,10 @@ def fly(params_file, out, duration, monitor_factory=None, mavlink=None, record=T
         mon.arm(False)
         mon.spin_for(0.5)
         after_disarm = mon.last('motors')
+        if esc:             # what the ESCs were told last, from the bus itself
+            bus = VirtualEscBus(bus_path, resolve(ESC, {})['esc.addresses'])
+            after_disarm = [data[0] for data, _ in bus.setpoints()]
+            bus.close()
     finally:
         mon.destroy_node()
         rclpy.try_shutdown()
@@ -141,6 +160,7 @@ def fly(params_file, out, duration, monitor_factory=None, mavlink=None, record=T
         'commands_zero_after_disarm': bool(after_disarm is not None and not any(after_disarm)),
         'node_exit_codes': codes,
         'record': bag_path,
+        'through': 'virtual ESC bus' if esc else 'motor_commands',
     }
     with open(os.path.join(out, 'sil_summary.json'), 'w') as f:
         json.dump(summary, f, indent=2)
@@ -162,6 +182,9 @@ def main(argv=None):
     parser.add_argument('--mavlink', metavar='URL', nargs='?', const='udpout:127.0.0.1:14550',
                         help='also run the MAVLink bridge to a ground station on this machine '
                              '(default URL udpout:127.0.0.1:14550, where QGroundControl listens)')
+    parser.add_argument('--esc', action='store_true',
+                        help="fly through the esc_i2c node and a virtual ESC bus (the ESCs' "
+                             'byte encoding and watchdog) instead of motor_commands to the sim')
     args = parser.parse_args(argv)
     if args.headless:
         return headless(args.out)
@@ -170,9 +193,10 @@ def main(argv=None):
             and args.mavlink.startswith(('udp', 'tcp')):
         parser.error('--mavlink: the demo talks to this machine only (127.0.0.1)')
     s = fly(params_file, args.out, args.duration, mavlink=args.mavlink,
-            record=not args.no_record)
+            record=not args.no_record, esc=args.esc)
     lp, lat, sub = s['loop_period'], s['pose_to_command_latency'], s['commands_seen_by_subscriber']
-    print('sim-in-the-loop: %s, %.0f s armed' % (os.path.basename(params_file), s['flight_s']))
+    print('sim-in-the-loop: %s, %.0f s armed, commands through %s'
+          % (os.path.basename(params_file), s['flight_s'], s['through']))
     for n, a in s['min_cone_angle_deg'].items():
         print('  cone %-10s closest %.2f deg (half-angle %.1f): margin %.2f deg'
               % (n, a, s['cone_half_angle_deg'][n], a - s['cone_half_angle_deg'][n]))
@@ -188,8 +212,8 @@ def main(argv=None):
               % (lat['mean_ms'], lat['max_ms']))
     print('  commands at subscriber %.1f Hz, gap std %.2f ms, max %.1f ms'
           % (sub['rate_hz'], sub['gap_std_ms'], sub['gap_max_ms']))
-    print('  commands after disarm  %s' % ('all zero' if s['commands_zero_after_disarm']
-                                          else 'NOT ZERO'))
+    print('  commands after disarm  %s%s' % ('all zero' if s['commands_zero_after_disarm']
+                                            else 'NOT ZERO', ' (at the ESCs)' if args.esc else ''))
     print('  wrote %s/sil_summary.json, %s/sil.png' % (args.out, args.out))
     if s['record']:
         print('  recorded the flight   %s (./run report %s)' % (s['record'], s['record']))

@@ -1,0 +1,257 @@
+"""What the ESC node decides, without rclpy: the last line of defence between the controller and
+the motors.
+
+- At start: zero to every ESC, and every ESC must answer (a write and a telemetry read) within
+  ``probe_timeout``; one that does not stops the start with its rotor and address, unless its
+  rotor is in ``ignore`` (then it is never written).
+- The watchdog: the ESCs get the latest valid ``motor_commands`` while it is younger than
+  ``timeout`` (received time, this process's clock), zero otherwise: before the first command,
+  after a malformed one (wrong length, not finite, outside [0, 1]; the previous one is dropped
+  too), and when the commands stop. It needs nothing from the controller: a controller that dies
+  or hangs stops its commands, and the ESCs get zero one timeout later.
+- Every write cycle writes every ESC; a failed transfer is retried up to ``retries`` times in the
+  cycle and counted (by ESC and kind); the next cycle writes again.
+- At stop: zero to every ESC, each retried.
+- The motor test: one rotor at a given command for a given time, refused while the controller is
+  armed, while valid commands arrive, while another test runs, or beyond ``test_command_max``. An
+  arming or a command during the test ends it (the commands take over at once).
+"""
+from dataclasses import dataclass
+import threading
+import time
+
+import numpy as np
+
+from geoctl_ros.core.safety import motor_commands_problem
+from geoctl_ros.core.stats import WindowStats
+from geoctl_ros.esc import protocol
+from geoctl_ros.esc.bus import BusError
+
+TEST_DURATION_MAX = 10.0          # s, the longest motor test
+
+
+class EscStartError(Exception):
+    """An ESC did not answer at start-up (the message names its rotor and address)."""
+
+
+@dataclass(frozen=True)
+class EscConfig:
+    addresses: tuple                  # 7-bit address per rotor, in rotor order
+    command_max: int                  # the set point of a normalised command of 1 (one byte)
+    resolution: int = 8               # 8: one byte per write; 11: two
+    timeout: float = 0.1              # s: older commands give zero
+    ignore: frozenset = frozenset()   # rotors (1-based) whose ESC may be missing
+    retries: int = 2                  # retries of a failed write within a cycle
+    probe_timeout: float = 3.0        # s: how long start-up waits for every ESC to answer
+    test_command_max: float = 0.3     # the largest motor-test command
+
+
+@dataclass
+class Test:
+    rotor: int                        # 1-based
+    command: float
+    until: float
+
+
+class EscDriver:
+    """The ESCs of config on bus. ``offer`` (commands) and ``start_test`` may be called from any
+    thread; ``start``, ``write``, ``read_next`` and ``stop`` from the one that owns the bus.
+    """
+
+    def __init__(self, config, bus, clock=time.monotonic):
+        self.config, self.bus, self.clock = config, bus, clock
+        n = len(config.addresses)
+        self.n = n
+        self.missing = set()              # rotor indices (0-based) ignored at start-up
+        self.command = np.zeros(n)
+        self.command_time = None          # receipt time of the valid command in force
+        self.received = None              # receipt time not yet written (for the latency)
+        self.refusal = None               # why the last message was refused (None: it was not)
+        self.refused = 0
+        self.test = None
+        self.output = np.zeros(n)         # what the last cycle wrote (normalised)
+        self.reason = 'no command yet'    # why it wrote that
+        self.telemetry = [None] * n
+        self.errors = [dict(nack=0, timeout=0, io=0) for _ in range(n)]
+        self.last_ok = [None] * n         # time of each ESC's last successful transfer
+        self.latency = WindowStats()      # command received -> its last byte on the bus (s)
+        self._zero = protocol.encode(np.zeros(n), config.command_max, config.resolution)
+        self._next_read = 0
+        self._lock = threading.Lock()
+
+    # --- start and stop ----------------------------------------------------------------------
+    def start(self):
+        """Zero to every ESC, and a read of each; EscStartError if one does not answer within
+        probe_timeout and its rotor is not ignored.
+        """
+        deadline = self.clock() + self.config.probe_timeout
+        pending, why = set(range(self.n)), {}
+        while True:
+            for i in sorted(pending):
+                try:
+                    self._transfer(i, self._zero[i])
+                    self._read(i)
+                    pending.discard(i)
+                except (BusError, ValueError) as e:
+                    why[i] = str(e)
+            if not pending or self.clock() >= deadline:
+                break
+            time.sleep(0.05)
+        fatal = [i for i in sorted(pending) if i + 1 not in self.config.ignore]
+        if fatal:
+            raise EscStartError('; '.join(
+                'the ESC of rotor %d at 0x%02x did not answer (%s)'
+                % (i + 1, self.config.addresses[i], why[i]) for i in fatal)
+                + '; add the rotor to esc.ignore to run without it')
+        self.missing = pending
+
+    def stop(self):
+        """Zero to every ESC (each retried); the addresses that could not be written."""
+        failed = []
+        for i in range(self.n):
+            if i in self.missing:
+                continue
+            for _ in range(1 + max(self.config.retries, 2)):
+                try:
+                    self._transfer(i, self._zero[i])
+                    break
+                except BusError:
+                    continue
+            else:
+                failed.append(self.config.addresses[i])
+        self.output = np.zeros(self.n)
+        self.reason = 'stopped'
+        return failed
+
+    # --- commands ----------------------------------------------------------------------------
+    def offer(self, data, now=None):
+        """A motor_commands message arrived (its data); the refusal reason, or None."""
+        now = self.clock() if now is None else now
+        problem = motor_commands_problem(data, self.n)
+        with self._lock:
+            if problem:
+                self.refusal, self.command_time = problem, None
+                self.refused += 1
+                return problem
+            self.command = np.array(data, dtype=float)
+            self.command_time = self.received = now
+            self.refusal = None
+            if self.test is not None:           # commands take over from a test
+                self.test = None
+        return None
+
+    def commands_fresh(self, now=None):
+        now = self.clock() if now is None else now
+        t = self.command_time
+        return t is not None and now - t <= self.config.timeout
+
+    def targets(self, now=None):
+        """(normalised command per rotor, why) for the next write."""
+        now = self.clock() if now is None else now
+        with self._lock:
+            test = self.test
+            if test is not None and now >= test.until:
+                self.test = test = None
+            if test is not None:
+                out = np.zeros(self.n)
+                out[test.rotor - 1] = test.command
+                return out, 'motor test of rotor %d' % test.rotor
+            if self.command_time is None:
+                return np.zeros(self.n), ('refused: ' + self.refusal if self.refusal
+                                          else 'no command yet')
+            if now - self.command_time > self.config.timeout:
+                return np.zeros(self.n), 'commands stale (older than %g s)' % self.config.timeout
+            return self.command, 'commanded'
+
+    def write(self):
+        """One write cycle: every ESC gets its set point; failed transfers are retried and
+        counted. Returns why it wrote what it wrote.
+        """
+        targets, why = self.targets()
+        with self._lock:
+            received, self.received = self.received, None
+        encoded = protocol.encode(targets, self.config.command_max, self.config.resolution)
+        for i, data in enumerate(encoded):
+            if i in self.missing:
+                continue
+            for _ in range(1 + self.config.retries):
+                try:
+                    self._transfer(i, data)
+                    break
+                except BusError:
+                    continue
+        if received is not None and why == 'commanded':
+            self.latency.add(self.clock() - received)
+        self.output, self.reason = targets, why
+        return why
+
+    def read_next(self):
+        """Read the telemetry of the next ESC (round robin); its index, or None if none."""
+        live = [i for i in range(self.n) if i not in self.missing]
+        if not live:
+            return None
+        i = live[self._next_read % len(live)]
+        self._next_read += 1
+        try:
+            self._read(i)
+        except (BusError, ValueError):
+            pass
+        return i
+
+    # --- the motor test ----------------------------------------------------------------------
+    def start_test(self, rotor, command, duration, armed, now=None):
+        """Start a motor test; the refusal (a sentence) or None."""
+        now = self.clock() if now is None else now
+        if armed:
+            return 'refused: the controller is armed'
+        if self.commands_fresh(now) and np.any(self.command > 0.0):
+            return 'refused: motor_commands are arriving (a controller commands the motors)'
+        if not 1 <= rotor <= self.n:
+            return 'refused: there is no rotor %d (1 to %d)' % (rotor, self.n)
+        if rotor - 1 in self.missing:
+            return 'refused: the ESC of rotor %d is missing (esc.ignore)' % rotor
+        if not 0.0 <= command <= self.config.test_command_max:
+            return 'refused: command %g is outside [0, %g]' % (command,
+                                                                self.config.test_command_max)
+        if not 0.0 < duration <= TEST_DURATION_MAX:
+            return 'refused: duration %g s is outside (0, %g]' % (duration, TEST_DURATION_MAX)
+        with self._lock:
+            if self.test is not None and now < self.test.until:
+                return 'refused: the test of rotor %d runs for %.1f s more' % (
+                    self.test.rotor, self.test.until - now)
+            self.test = Test(rotor, command, now + duration)
+        return None
+
+    def abort_test(self):
+        """End a running test (the motors get zero, or the commands, at the next cycle)."""
+        with self._lock:
+            running, self.test = self.test, None
+        return running is not None
+
+    # --- the bus -----------------------------------------------------------------------------
+    def _transfer(self, i, data):
+        try:
+            self.bus.write(self.config.addresses[i], data)
+        except BusError as e:
+            self.errors[i][e.kind] += 1
+            raise
+        self.last_ok[i] = self.clock()
+
+    def _read(self, i):
+        try:
+            data = self.bus.read(self.config.addresses[i], protocol.TELEMETRY_BYTES)
+        except BusError as e:
+            self.errors[i][e.kind] += 1
+            raise
+        self.last_ok[i] = self.clock()
+        self.telemetry[i] = protocol.parse(data)
+
+
+def config_of(values):
+    """The EscConfig of resolved esc_i2c parameters (``geoctl_ros.params``)."""
+    return EscConfig(addresses=tuple(int(a) for a in values['esc.addresses']),
+                     command_max=int(values['motor.command_max']),
+                     resolution=int(values['esc.resolution']), timeout=values['esc.timeout'],
+                     ignore=frozenset(int(r) for r in values['esc.ignore']),
+                     retries=int(values['esc.retries']),
+                     probe_timeout=values['esc.probe_timeout'])

@@ -1,0 +1,178 @@
+"""The ESC node: ``ros2 run geoctl_ros esc_i2c`` writes ``motor_commands`` to the BL-Ctrl ESCs on
+I2C (``esc.*`` and ``motor_test.*`` in the README's table; README "ESCs on I2C").
+
+A thin shell over ``geoctl_ros.esc.driver.EscDriver``, which decides everything: zero at start,
+on shutdown and on SIGINT/SIGTERM; the watchdog (commands older than ``esc.timeout``, malformed,
+or none yet give zero); retries; the motor test's refusals. The bus belongs to one thread of its
+own: it writes every ESC when a command arrives and at least ``esc.rate_hz`` times a second, and
+reads one ESC's telemetry ``esc.telemetry_rate_hz`` times a second, so nothing on the bus waits
+for the executor and the executor never waits for the bus. The subscription only hands the
+command over and wakes that thread.
+
+Publishes ``esc/telemetry`` (Float64MultiArray: current A, state byte, temperature deg C per
+rotor; NaN where not read) and ``/diagnostics`` (``geoctl_ros: esc_i2c``, every 0.5 s). Services
+``~/motor_test`` (std_srvs/Trigger: rotor ``motor_test.rotor`` at ``motor_test.command`` for
+``motor_test.duration``; refused while the controller is armed) and ``~/motor_test_stop``.
+"""
+import sys
+import threading
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_srvs.srv import Trigger
+
+from geoctl_ros.esc import health
+from geoctl_ros.esc.bus import I2cBus
+from geoctl_ros.esc.driver import EscDriver, EscStartError, config_of
+from geoctl_ros.esc.virtual import VirtualEscBus
+from geoctl_ros.nodes import qos, ros_params
+from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
+from geoctl_ros.nodes.conversions import status_of
+from geoctl_ros.nodes.runtime import spin
+from geoctl_ros.params import ESC, ConfigError, resolve
+
+REPORT_PERIOD = 0.5             # s between diagnostics and telemetry messages
+
+
+class EscNode(Node):
+    def __init__(self, **kwargs):
+        super().__init__('esc_i2c', **kwargs)
+        values = ros_params.load(self, ESC)
+        self.values = values
+        config = config_of(values)
+        path = values['esc.virtual_bus']
+        try:
+            bus = (VirtualEscBus(path, config.addresses) if path
+                   else I2cBus(values['esc.bus']))
+        except (OSError, ValueError) as e:
+            raise ConfigError([('esc.virtual_bus' if path else 'esc.bus',
+                                'cannot open the bus: %s (README "ESCs on I2C")' % e)]) from None
+        self.bus = bus
+        self.driver = EscDriver(config, bus)
+        try:
+            self.driver.start()
+        except EscStartError as e:
+            bus.close()
+            raise ConfigError([('esc.addresses', str(e))]) from None
+        self.armed = False
+        self._report_base = (0, 0)
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+        self.create_subscription(Float64MultiArray, 'motor_commands', self._on_commands,
+                                 qos.COMMAND)
+        self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics,
+                                 qos.EVENT)
+        self.pub_telemetry = self.create_publisher(Float64MultiArray, 'esc/telemetry',
+                                                   qos.TELEMETRY)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
+        self.create_service(Trigger, '~/motor_test', self._on_motor_test)
+        self.create_service(Trigger, '~/motor_test_stop', self._on_motor_test_stop)
+        ros_params.watch(self, ESC, lambda v: resolve(ESC, v), self._on_params)
+        self.create_timer(REPORT_PERIOD, self._report)
+        self._thread = threading.Thread(target=self._bus_loop, name='esc bus', daemon=True)
+        self._thread.start()
+        missing = sorted(i + 1 for i in self.driver.missing)
+        self.get_logger().info('esc_i2c: %d ESCs on %s (%s), %d-bit set points, timeout %g s%s'
+                               % (len(config.addresses), bus.name,
+                                  ' '.join('0x%02x' % a for a in config.addresses),
+                                  config.resolution, config.timeout,
+                                  ', rotors %s missing (ignored)' % missing if missing else ''))
+
+    # --- the bus thread ---------------------------------------------------------------------
+    def _bus_loop(self):
+        period = 1.0 / self.values['esc.rate_hz']
+        rate = self.values['esc.telemetry_rate_hz']
+        next_read = time.monotonic()
+        while not self._stop.is_set():
+            self._wake.wait(period)
+            self._wake.clear()
+            if self._stop.is_set():
+                break
+            self.driver.write()
+            now = time.monotonic()
+            if rate > 0.0 and now >= next_read:
+                self.driver.read_next()
+                next_read = max(next_read + 1.0 / rate, now)
+
+    def on_shutdown(self):
+        """Zero to every ESC (the runtime calls this on SIGINT/SIGTERM and at exit)."""
+        self._stop.set()
+        self._wake.set()
+        self._thread.join(1.0)
+        failed = self.driver.stop()
+        if failed:
+            self.get_logger().error('zero not written to %s' % ' '.join('0x%02x' % a
+                                                                      for a in failed))
+        else:
+            self.get_logger().info('esc_i2c: zero written to every ESC')
+        self.bus.close()
+
+    # --- callbacks ---------------------------------------------------------------------------
+    def _on_commands(self, msg):
+        problem = self.driver.offer(msg.data)
+        self._wake.set()
+        if problem:
+            self.get_logger().warning('motor_commands refused: %s; every ESC gets zero'
+                                      % problem, throttle_duration_sec=1.0)
+
+    def _on_diagnostics(self, msg):
+        for s in msg.status:
+            if s.name == CONTROLLER_STATUS:
+                armed = status_of(s).figures.armed
+                if armed and not self.armed and self.driver.abort_test():
+                    self.get_logger().warning('motor test ended: the controller armed')
+                self.armed = armed
+
+    def _on_params(self, values, changed):
+        self.values = values
+
+    def _on_motor_test(self, request, response):
+        v = self.values
+        rotor, command = v['motor_test.rotor'], v['motor_test.command']
+        duration = v['motor_test.duration']
+        why = self.driver.start_test(rotor, command, duration, self.armed)
+        response.success = why is None
+        response.message = why or ('rotor %d at %g for %g s' % (rotor, command, duration))
+        self._wake.set()
+        log = self.get_logger().info if why is None else self.get_logger().warning
+        log('motor test: ' + response.message)
+        return response
+
+    def _on_motor_test_stop(self, request, response):
+        response.success = self.driver.abort_test()
+        response.message = 'stopped' if response.success else 'no motor test was running'
+        self._wake.set()
+        return response
+
+    def _report(self):
+        d = self.driver
+        r = health.report(d, time.monotonic(), self.values['esc.temperature_warn'],
+                          self.values['esc.temperature_error'], *self._report_base)
+        self._report_base = (r.i2c_errors, r.refused)
+        d.latency.reset()
+        status = DiagnosticStatus(level=bytes([r.level]), name=health.NAME,
+                                  hardware_id=self.bus.name, message=r.message,
+                                  values=[KeyValue(key=k, value=v)
+                                          for k, v in health.to_values(r).items()])
+        out = DiagnosticArray(status=[status])
+        out.header.stamp = self.get_clock().now().to_msg()
+        self.pub_diag.publish(out)
+        msg = Float64MultiArray()
+        msg.layout.dim = [MultiArrayDimension(label='rotor', size=d.n, stride=3 * d.n),
+                          MultiArrayDimension(label='current_A state temperature_C', size=3,
+                                              stride=3)]
+        nan = float('nan')
+        for tel in d.telemetry:
+            msg.data.extend([nan, nan, nan] if tel is None else
+                            [tel.current, float(tel.state), tel.temperature])
+        self.pub_telemetry.publish(msg)
+
+
+def main():
+    sys.exit(spin(EscNode, 'esc_i2c'))
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,171 @@
+"""The ESC driver on a recording bus (no rclpy, no hardware): the protocol's bytes, zero at start
+and stop, the watchdog, NACKs and missing ESCs, the motor test; and the virtual ESC bus.
+"""
+import numpy as np
+import pytest
+
+from geoctl_ros.esc import protocol
+from geoctl_ros.esc.bus import RecordingBus
+from geoctl_ros.esc.driver import EscConfig, EscDriver, EscStartError
+from geoctl_ros.esc.virtual import VirtualEscBus
+
+pytestmark = pytest.mark.odroid
+
+LAB = (0x29, 0x2A, 0x2B, 0x2C, 0x2D, 0x2E)
+HOVER = [0.49] * 6
+
+
+class Clock:
+    def __init__(self):
+        self.t = 100.0
+
+    def __call__(self):
+        return self.t
+
+
+def driver(present=LAB, **kw):
+    clock = Clock()
+    bus = RecordingBus(present, clock)
+    d = EscDriver(EscConfig(LAB, 240, probe_timeout=0.0, **kw), bus, clock)
+    return d, bus, clock
+
+
+def written(bus, since=0):
+    """{address: [bytes, ...]} of the writes from number `since` on."""
+    out = {}
+    for _, a, data in list(bus.writes)[since:]:
+        out.setdefault(a, []).append(data)
+    return out
+
+
+def test_the_set_points_are_encoded_as_the_protocol_says():
+    c = [0.0, 118 / 240, 1.0, 0.5, 1e-9, 0.9999]
+    assert protocol.encode(c, 240) == [bytes((v,)) for v in (0, 118, 240, 120, 0, 240)]
+    # 11 bits: sp = c * 240 * 8, written as sp / 8 then sp % 8
+    eleven = protocol.encode([118.375 / 240, 1.0, 0.0], 240, resolution=11)
+    assert eleven == [bytes((118, 3)), bytes((240, 0)), bytes((0, 0))]
+    for data in eleven + protocol.encode(c, 240):
+        again = protocol.encode([protocol.decode(data, 240)], 240, len(data) * 3 + 5)
+        assert again == [data]
+    # telemetry: 0.1 A to 20 A, then 1 A steps; the state byte's meanings
+    assert protocol.parse(bytes((15, 255, 41))) == protocol.Telemetry(1.5, 255, 41.0)
+    assert protocol.current_amps(201) == 21.0 and np.isnan(protocol.current_amps(255))
+    assert [protocol.current_amps(protocol.current_raw(a)) for a in (0.0, 7.3, 35.0)] == [
+        0.0, 7.3, 35.0]
+    assert protocol.state_problem(255)[0] == protocol.OK
+    assert protocol.state_problem(39) == (protocol.ERROR, 'start failed')
+    assert protocol.state_problem(7) == (protocol.ERROR, 'self-test error 7')
+    assert protocol.state_problem(120)[0] == protocol.WARN
+    with pytest.raises(ValueError, match='2 bytes'):
+        protocol.parse(b'\x01\x02')
+
+
+def test_zero_is_written_to_every_esc_at_start_and_at_stop():
+    d, bus, clock = driver()
+    d.start()
+    assert {a: v[0] for a, v in written(bus).items()} == {a: b'\x00' for a in LAB}
+    d.offer(HOVER)
+    d.write()
+    assert all(v == [b'\x76'] for v in written(bus, 6).values())       # 0.49 * 240 = 118
+    n = len(bus.writes)
+    assert d.stop() == []
+    assert {a: v for a, v in written(bus, n).items()} == {a: [b'\x00'] for a in LAB}
+
+
+def test_the_watchdog_gives_zero_after_the_timeout_and_after_a_malformed_command():
+    d, bus, clock = driver(timeout=0.1)
+    d.start()
+    assert d.write() == 'no command yet' and not d.output.any()
+    d.offer(HOVER)
+    clock.t += 0.1                              # exactly the timeout: still in force
+    assert d.write() == 'commanded' and bus.last(0x29) == b'\x76'
+    clock.t += 0.001
+    assert d.write().startswith('commands stale') and bus.last(0x29) == b'\x00'
+    d.offer(HOVER)
+    assert d.write() == 'commanded'
+    for bad, why in (([0.5] * 5, 'expected 6 finite values'), ([np.nan] * 6, 'finite'),
+                     ([1.5] * 6, 'outside [0, 1]'), ([-0.1] + [0.5] * 5, 'outside [0, 1]')):
+        assert why in d.offer(bad)
+        assert d.write() == 'refused: ' + d.refusal          # at once, not after the timeout
+        assert all(bus.last(a) == b'\x00' for a in LAB)
+        d.offer(HOVER)
+        d.write()
+    assert d.refused == 4
+
+
+def test_a_nack_is_retried_and_counted_by_address_and_a_missing_esc_stops_the_start():
+    d, bus, clock = driver()
+    d.start()
+    d.offer(HOVER)
+    bus.fail(0x2B, 'nack', 2)                   # two NACKs: the second retry gets through
+    bus.fail(0x2C, 'timeout', 5)                # more than the retries: this cycle misses it
+    d.write()
+    assert d.errors[2] == dict(nack=2, timeout=0, io=0) and bus.last(0x2B) == b'\x76'
+    assert d.errors[3]['timeout'] == 3 and bus.last(0x2C) == b'\x00'    # still the start's zero
+    d.write()
+    assert bus.last(0x2C) == b'\x76'
+    # an ESC that does not answer at start: refused with its rotor and address ...
+    d, bus, _ = driver(present=LAB[:4] + LAB[5:])
+    with pytest.raises(EscStartError, match='rotor 5 at 0x2d did not answer .*nack'):
+        d.start()
+    # ... unless its rotor is ignored: then it is never written, and cannot be tested
+    d, bus, clock = driver(present=LAB[:4] + LAB[5:], ignore=frozenset({5}))
+    d.start()
+    d.offer(HOVER)
+    d.write()
+    assert 0x2D not in written(bus) and len(written(bus)) == 5
+    clock.t += 1.0
+    assert 'missing' in d.start_test(5, 0.1, 1.0, armed=False)
+
+
+def test_the_motor_test_is_refused_while_armed_or_commanded_and_ends_by_itself():
+    d, bus, clock = driver()
+    d.start()
+    assert d.start_test(2, 0.1, 1.0, armed=True) == 'refused: the controller is armed'
+    d.offer(HOVER)
+    assert 'motor_commands are arriving' in d.start_test(2, 0.1, 1.0, armed=False)
+    clock.t += 0.2                                          # the commands went stale
+    assert 'outside [0, 0.3]' in d.start_test(2, 0.5, 1.0, armed=False)
+    assert 'no rotor 7' in d.start_test(7, 0.1, 1.0, armed=False)
+    assert d.start_test(2, 0.1, 1.0, armed=False) is None
+    assert 'runs for 1.0 s more' in d.start_test(3, 0.1, 1.0, armed=False)
+    assert d.write() == 'motor test of rotor 2'
+    assert [bus.last(a) for a in LAB] == [b'\x00', b'\x18', b'\x00', b'\x00', b'\x00', b'\x00']
+    clock.t += 1.0
+    assert d.write() == 'no command yet' or d.write().startswith('commands stale')
+    assert bus.last(0x2A) == b'\x00'
+    # a command during a test ends it at once
+    assert d.start_test(1, 0.1, 5.0, armed=False) is None
+    d.offer(HOVER)
+    assert d.write() == 'commanded' and d.test is None
+
+
+def test_the_telemetry_is_read_round_robin():
+    d, bus, clock = driver()
+    d.start()
+    bus.telemetry[0x2A] = bytes((31, 39, 72))
+    seen = [d.read_next() for _ in range(6)]
+    assert sorted(seen) == list(range(6))
+    assert d.telemetry[1] == protocol.Telemetry(3.1, 39, 72.0)
+
+
+def test_the_virtual_bus_carries_the_bytes_between_processes_views(tmp_path):
+    path = str(tmp_path / 'bus')
+    node_side, sim_side = VirtualEscBus(path, LAB), VirtualEscBus(path, LAB)
+    d = EscDriver(EscConfig(LAB, 240, probe_timeout=0.0), node_side)
+    with pytest.raises(EscStartError, match='rotor 1 at 0x29'):
+        d.start()                                           # the sim has not powered them
+    sim_side.power(True)
+    d.start()
+    d.offer(HOVER)
+    d.write()
+    got = sim_side.setpoints()
+    assert [protocol.decode(b, 240) for b, _ in got] == [118 / 240] * 6
+    sim_side.answer(2, protocol.current_raw(4.2), 255, 38.0)
+    d._read(2)
+    assert d.telemetry[2] == protocol.Telemetry(4.2, 255, 38.0)
+    log = sim_side.log()
+    assert len(log) == 12 and set(log['address'][:6]) == set(LAB)
+    assert list(log['b0'][6:]) == [118] * 6 and np.all(np.diff(log['t']) >= 0)
+    with pytest.raises(ValueError, match='not a virtual ESC bus of 4'):
+        VirtualEscBus(path, LAB[:4])
