@@ -22,7 +22,7 @@ pytestmark = pytest.mark.odroid
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PKG = os.path.join(ROOT, 'geoctl_ros')
-LAYERS = ['core', 'sim', 'records', 'params', 'esc', 'mavlink', 'nodes', 'tools']      # lowest first
+LAYERS = ['core', 'sim', 'records', 'params', 'esc', 'mavlink', 'nodes', 'tools']  # lowest first
 
 
 def test_core_sim_params_and_mavlink_import_without_rclpy():

@@ -96,9 +96,9 @@ def fly(params_file, out, duration, monitor_factory=None, mavlink=None, record=T
         bus_args = ('-p', 'esc.virtual_bus:=' + bus_path)
     procs = [NodeProcess('sim', params_file, bus_args, log_dir=out),
              NodeProcess('controller', params_file, log_dir=out)]
-    if esc:
-        procs.append(NodeProcess('esc_i2c', params_file,
-                                 bus_args + ('-p', 'esc.probe_timeout:=20.0'), log_dir=out))
+    if esc:             # first in the list: stopped (zero to every ESC) before the sim goes
+        procs.insert(0, NodeProcess('esc_i2c', params_file,
+                                    bus_args + ('-p', 'esc.probe_timeout:=20.0'), log_dir=out))
     if mavlink:        # a ground station on this machine can watch the flight
         procs.append(NodeProcess('mavlink_bridge', None, ('-p', 'mavlink.url:=' + mavlink),
                                  log_dir=out))
