@@ -104,6 +104,11 @@ def test_a_nack_is_retried_and_counted_by_address_and_a_missing_esc_stops_the_st
     assert d.errors[3]['timeout'] == 3 and bus.last(0x2C) == b'\x00'    # still the start's zero
     d.write()
     assert bus.last(0x2C) == b'\x76'
+    bus.stuck.add(0x2E)                          # an ESC holding the bus: the others fly on
+    d.offer([0.3] * 6)
+    d.write()
+    assert d.errors[5]['timeout'] == 3 and bus.last(0x2E) == b'\x76'
+    assert [bus.last(a) for a in LAB[:5]] == [bytes((72,))] * 5
     # an ESC that does not answer at start: refused with its rotor and address ...
     d, bus, _ = driver(present=LAB[:4] + LAB[5:])
     with pytest.raises(EscStartError, match='rotor 5 at 0x2d did not answer .*nack'):

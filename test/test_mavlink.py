@@ -95,6 +95,25 @@ def test_heartbeat_identity_and_state():
     assert not hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED
 
 
+def test_the_motor_test_goes_to_the_esc_node_and_is_refused_while_armed():
+    """MAV_CMD_DO_MOTOR_TEST as QGroundControl sends it: motor 3 at 12 % for 2 s."""
+    v = vehicle()
+    g = encoder(255, 190)
+
+    def motor_test(throttle_type=mav.MOTOR_TEST_THROTTLE_PERCENT, count=0):
+        return v.handle(g.command_long_encode(7, 1, mav.MAV_CMD_DO_MOTOR_TEST, 0, 3,
+                                              throttle_type, 12.0, 2.0, count, 0, 0))
+    v.view.diagnostics = Status(OK, '', Figures(armed=False, state='disarmed'))
+    assert motor_test() == [('motor_test', 3, 0.12, 2.0, mav.MAV_CMD_DO_MOTOR_TEST)]
+    v.view.diagnostics = Status(OK, '', Figures(armed=True, state='armed'))
+    ack, text = (parse(a[1]) for a in motor_test())
+    assert ack.result == mav.MAV_RESULT_TEMPORARILY_REJECTED
+    assert text.text == 'motor test refused: the controller is armed'
+    v.view.diagnostics = Status(OK, '', Figures(armed=False, state='disarmed'))
+    for refused in (motor_test(throttle_type=mav.MOTOR_TEST_THROTTLE_PWM), motor_test(count=6)):
+        assert parse(refused[0][1]).result == mav.MAV_RESULT_UNSUPPORTED
+
+
 def test_attitude_and_target_go_out_in_ned_frd():
     v = vehicle(R=np.eye(3), omega=np.array([0.0, 0.0, 0.2]), R_d=yaw(90.0))
     att = parse(v.attitude(0.0))

@@ -14,10 +14,12 @@ from rclpy.parameter import Parameter
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 from rosgraph_msgs.msg import Clock
+from std_srvs.srv import Trigger
 from support import FakeInputs
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.diagnostics import ERROR, OK, WARN, aggregate_ms
+from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.nodes import qos
 from geoctl_ros.nodes.controller import ControllerNode
 from geoctl_ros.nodes.conversions import stamp_seconds
@@ -29,7 +31,7 @@ from geoctl_ros.params import (
     resolve,
 )
 from geoctl_ros.records import bag
-from geoctl_ros.tools import report
+from geoctl_ros.tools import report, scenario
 from geoctl_ros.tools.processes import NodeProcess
 from geoctl_ros.tools.soak import ros2_command, start_loads, stop_loads
 
@@ -188,6 +190,64 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     assert s['final_psi'] == pytest.approx(psi[-1], rel=0.25)      # settled: Psi ~0.006 here
     assert s['gaps_ridden']['pose'] >= diag.figures.pose_gaps.count     # counters: the record
     assert s['gaps_ridden']['imu'] >= diag.figures.imu_gaps.count       # ends a little later
+
+
+@pytest.mark.realtime
+def test_the_testbed_flies_through_the_esc_node_and_a_dead_controller_gives_zero_at_the_escs(
+        ros, tmp_path):
+    """The sim as the six ESCs on a virtual I2C bus, written by esc_i2c through the real byte
+    encoding: the manoeuvre keeps the cone as the headless twin of the topic path does (which the
+    recorded topic-path flights match to 0.1 deg: README "Flight records"); the motor test is
+    refused while armed; and when the controller is SIGKILLed, every ESC is written zero within
+    the watchdog's timeout, as the bus itself recorded.
+    """
+    mon, launch = ros
+    path = str(tmp_path / 'esc_bus')
+    launch('sim', TESTBED, '-p', 'esc.virtual_bus:=' + path)
+    esc = launch('esc_i2c', TESTBED, '-p', 'esc.virtual_bus:=' + path,
+                 '-p', 'esc.probe_timeout:=20.0')
+    controller = launch('controller')
+    mon.wait_for(mon.controller_has_inputs, 30.0, 'the sim and the controller')
+    mon.wait_for(lambda: '6 ESCs on virtual ESC bus' in esc.output(), 30.0, 'the ESC node')
+    addresses = resolve('esc_i2c', {})['esc.addresses']
+    bus = VirtualEscBus(path, addresses)
+    try:
+        assert [data for data, _ in bus.setpoints()] == [b'\x00'] * 6      # disarmed: zero
+        reply = mon.arm_when_ready()
+        assert reply.success, reply.message
+        t0 = time.monotonic()
+        refused = mon._call(mon.create_client(Trigger, '/esc_i2c/motor_test'), Trigger.Request())
+        assert not refused.success and 'armed' in refused.message, refused.message
+        mon.spin_for(8.0)                   # round the cone (closest about 7 s after arming)
+        assert mon.last_diagnostic().figures.armed
+        cones = cone_set(resolve('controller', node_overrides(load_parameter_file(TESTBED),
+                                                              'controller')))
+        margins = [cones.margins_deg(so3.quat_to_rot(q))[0]
+                   for _, q in mon.between('true_pose', t0, time.monotonic())]
+        twin = scenario.run(scenario.load(TESTBED)).summary
+        headless = twin['min_cone_angle_deg']['obstacle'] - twin['cone_half_angle_deg'][
+            'obstacle']
+        assert len(margins) > 100 and abs(min(margins) - headless) < 0.5, (min(margins),
+                                                                           headless)
+        assert all(0 < data[0] < 240 for data, _ in bus.setpoints())        # flying
+        # the controller dies: the ESC node's watchdog, alone, stops every motor
+        first = bus.count()
+        t_kill = time.monotonic()
+        controller.kill()
+        mon.wait_for(lambda: all(data == b'\x00' for data, _ in bus.setpoints()), 2.0,
+                     'zero at every ESC')
+        log = bus.log(first)
+        for a in addresses:
+            mine = log[log['address'] == a]
+            zero = mine['t'][mine['b0'] == 0].min()
+            # the last command came at most a control period (10 ms) before the kill; the ESC
+            # holds it for the timeout (0.1 s), and zero goes out at the next write cycle (10 ms)
+            assert 0.1 - 0.01 < zero - t_kill <= 0.1 + 0.01 + 0.005, (hex(a), zero - t_kill)
+            assert np.all(mine['b0'][mine['t'] > zero] == 0)
+    finally:
+        bus.close()
+    assert esc.stop() == 0
+    assert 'zero written to every ESC' in esc.output()
 
 
 @pytest.mark.realtime

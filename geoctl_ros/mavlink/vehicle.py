@@ -230,6 +230,8 @@ class Vehicle:
         ack = self.command_ack
         if cmd == m_const('MAV_CMD_COMPONENT_ARM_DISARM'):
             return [('arm', msg.param1 > 0.5, cmd)]
+        if cmd == m_const('MAV_CMD_DO_MOTOR_TEST'):
+            return self._motor_test(msg)
         if cmd in (m_const('MAV_CMD_REQUEST_MESSAGE'),
                    m_const('MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES')):
             wanted = int(msg.param1) if cmd == m_const('MAV_CMD_REQUEST_MESSAGE') else 148
@@ -239,6 +241,28 @@ class Vehicle:
             if wanted == m_const('MAVLINK_MSG_ID_HEARTBEAT'):
                 return [('send', ack(cmd, 'MAV_RESULT_ACCEPTED')), ('send', self.heartbeat())]
         return [('send', ack(cmd, 'MAV_RESULT_UNSUPPORTED'))]
+
+    def _motor_test(self, msg):
+        """MAV_CMD_DO_MOTOR_TEST (QGroundControl's motor test): one motor, throttle in percent,
+        for param4 seconds -> ('motor_test', rotor, normalised command, seconds, command), carried
+        out by the ESC node (which refuses it too while armed); refused here while armed.
+        """
+        cmd = msg.command
+        why = None
+        if self.armed:
+            why = 'refused: the controller is armed'
+        elif int(msg.param2) != m_const('MOTOR_TEST_THROTTLE_PERCENT'):
+            why = 'refused: only a throttle in percent (type %d) is supported' % (
+                m_const('MOTOR_TEST_THROTTLE_PERCENT'))
+        elif int(msg.param5) > 1:
+            why = 'refused: one motor at a time'
+        if why:
+            result = ('MAV_RESULT_TEMPORARILY_REJECTED' if self.armed
+                      else 'MAV_RESULT_UNSUPPORTED')
+            return [('send', self.command_ack(cmd, result)),
+                    ('send', self.statustext('motor test ' + why, 'MAV_SEVERITY_WARNING'))]
+        return [('motor_test', int(msg.param1), float(msg.param3) / 100.0, float(msg.param4),
+                 cmd)]
 
     def command_ack(self, command, result):
         return self.mav.command_ack_encode(command, m_const(result))

@@ -4,7 +4,8 @@ station.
 A thin shell: topics of the controller feed ``geoctl_ros.mavlink.vehicle.Vehicle``, its messages go
 out through ``geoctl_ros.mavlink.link.Link`` (a thread of its own), and what a ground station asks
 is carried out through the controller's own services: ``~/arm`` for MAV_CMD_COMPONENT_ARM_DISARM,
-``set_parameters`` for PARAM_SET (validated exactly as ``ros2 param set`` is). Optionally a second
+``set_parameters`` for PARAM_SET (validated exactly as ``ros2 param set`` is); and the ESC node's
+``~/motor_test`` for MAV_CMD_DO_MOTOR_TEST (refused while armed). Optionally a second
 link reads a PX4/ArduPilot board's HIGHRES_IMU and publishes it on ``imu`` (FLU). Its own health
 goes to /diagnostics. Parameters: ``mavlink.*`` in the README's table.
 """
@@ -17,12 +18,12 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, QuaternionStamped
 from rcl_interfaces.msg import Parameter as ParameterMsg
-from rcl_interfaces.srv import GetParameters, SetParameters
+from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64, Float64MultiArray
-from std_srvs.srv import SetBool
+from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.diagnostics import ERROR, WARN
@@ -112,6 +113,10 @@ class MavlinkBridge(Node):
         self.arm_client = self.create_client(SetBool, ctl + '/arm')
         self.get_client = self.create_client(GetParameters, ctl + '/get_parameters')
         self.set_client = self.create_client(SetParameters, ctl + '/set_parameters')
+        esc = '/' + cfg.esc.strip('/')
+        self.esc_set = self.create_client(SetParametersAtomically,
+                                          esc + '/set_parameters_atomically')
+        self.esc_test = self.create_client(Trigger, esc + '/motor_test')
 
         send = self.link.send
         now = time.monotonic
@@ -231,6 +236,8 @@ class MavlinkBridge(Node):
             self._arm(action[1], action[2])
         elif what == 'set':
             self._set_param(*action[1:])
+        elif what == 'motor_test':
+            self._motor_test(*action[1:])
 
     def _arm(self, on, command):
         self.counts[health.ARM_REQUESTS] += 1
@@ -249,6 +256,39 @@ class MavlinkBridge(Node):
             if not ok:
                 self._text(r.message if r is not None else 'arm: no answer', 'MAV_SEVERITY_ERROR')
         future.add_done_callback(done)
+
+    def _motor_test(self, rotor, command, duration, mav_command):
+        """MAV_CMD_DO_MOTOR_TEST through the ESC node: its motor_test.* parameters, then its
+        ~/motor_test service (which refuses while armed, or with a value out of its range).
+        """
+        ack = self.vehicle.command_ack
+        if not (self.esc_set.service_is_ready() and self.esc_test.service_is_ready()):
+            self.link.send(ack(mav_command, 'MAV_RESULT_TEMPORARILY_REJECTED'))
+            self._text('motor test: the ESC node is not reachable', 'MAV_SEVERITY_ERROR')
+            return
+        self.link.send(ack(mav_command, 'MAV_RESULT_IN_PROGRESS'))
+        params = [Parameter('motor_test.rotor', value=rotor).to_parameter_msg(),
+                  Parameter('motor_test.command', value=command).to_parameter_msg(),
+                  Parameter('motor_test.duration', value=duration).to_parameter_msg()]
+
+        def answer(ok, why):
+            self.link.send(ack(mav_command, 'MAV_RESULT_ACCEPTED' if ok else 'MAV_RESULT_DENIED'))
+            self._text('motor test: ' + why, 'MAV_SEVERITY_INFO' if ok
+                       else 'MAV_SEVERITY_WARNING')
+
+        def tested(f):
+            r = f.result()
+            answer(r is not None and r.success, r.message if r is not None else 'no answer')
+
+        def set_done(f):
+            r = f.result()
+            if r is None or not r.result.successful:
+                answer(False, ' '.join((r.result.reason if r is not None else 'no answer')
+                                       .split()))
+                return
+            self.esc_test.call_async(Trigger.Request()).add_done_callback(tested)
+        self.esc_set.call_async(SetParametersAtomically.Request(
+            parameters=params)).add_done_callback(set_done)
 
     def _set_param(self, name, value, index):
         self.counts[health.PARAM_SETS] += 1

@@ -306,6 +306,8 @@ SCHEMA = [
        MAVLINK, check=lambda v: None if 1 <= v <= 255 else 'must be 1..255'),
     _p('mavlink.controller', 'string', 'controller', '-', 'name of the controller node to bridge',
        MAVLINK),
+    _p('mavlink.esc', 'string', 'esc_i2c', '-', 'name of the ESC node that carries out '
+       'MAV_CMD_DO_MOTOR_TEST', MAVLINK),
     _p('mavlink.heartbeat_rate_hz', 'double', 1.0, 'Hz', 'HEARTBEAT rate', MAVLINK,
        check=_positive),
     _p('mavlink.status_rate_hz', 'double', 1.0, 'Hz', 'SYS_STATUS rate', MAVLINK, check=_positive),
