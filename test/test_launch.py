@@ -24,6 +24,7 @@ from geoctl_ros.core import so3
 from geoctl_ros.nodes import qos
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector
 from geoctl_ros.params import cone_set, load_parameter_file, node_overrides, resolve
+from geoctl_ros.tools import scenario
 from geoctl_ros.tools.processes import process_sockets
 
 pytestmark = pytest.mark.dds
@@ -132,6 +133,12 @@ def test_sil_launch_flies_the_testbed_on_loopback_and_keeps_the_cone(installed, 
         margins = [cones.margins_deg(so3.quat_to_rot(q))[0]
                    for t, (_, q) in mon.log['true_pose'] if t >= t0]
         assert len(margins) > 100 and min(margins) > 0.0, min(margins)
+        # as its headless twin does (test_nodes.py flies the same through the ESC node and
+        # checks it against the same twin)
+        twin = scenario.run(scenario.load(os.path.join(ROOT, 'config', 'testbed.yaml'))).summary
+        headless = twin['min_cone_angle_deg']['obstacle'] - twin['cone_half_angle_deg'][
+            'obstacle']
+        assert abs(min(margins) - headless) < 0.5, (min(margins), headless)
         assert mon.arm(False).success
     finally:
         launch.stop()

@@ -18,6 +18,7 @@ from sensor_msgs.msg import Imu
 from support import FakeInputs
 
 from geoctl_ros.core import so3
+from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.mavlink import frames, health
 from geoctl_ros.mavlink.params import TABLE
 from geoctl_ros.nodes import qos
@@ -363,3 +364,64 @@ def test_with_a_key_only_the_station_holding_it_reads_sets_arms_and_disarms(tmp_
         for p in procs:
             p.stop()
         gcs.conn.close()
+
+
+def test_a_ground_stations_motor_test_spins_one_motor_through_the_esc_node(tmp_path):
+    """MAV_CMD_DO_MOTOR_TEST from a ground station, through the bridge, to esc_i2c, on a virtual
+    ESC bus that this process powers (no controller: disarmed): rotor 3 gets 12 % for 1 s, as the
+    bus itself recorded, and the others zero; out of range it is denied with the ESC node's reason.
+    """
+    path = str(tmp_path / 'esc_bus')
+    addresses = (0x29, 0x2A, 0x2B, 0x2C, 0x2D, 0x2E)
+    escs = VirtualEscBus(path, addresses)
+    escs.power(True)
+    gcs_port = free_udp_port()
+    gcs = Endpoint('udpin:127.0.0.1:%d' % gcs_port, 255, 190)
+    procs = [NodeProcess('esc_i2c', TESTBED, ('-p', 'esc.virtual_bus:=' + path), log_dir=tmp_path),
+             NodeProcess('mavlink_bridge', None, (
+                 '-p', 'mavlink.url:=udpout:127.0.0.1:%d' % gcs_port,
+                 '-p', 'mavlink.system_id:=%d' % SYSID), log_dir=tmp_path)]
+    try:
+        gcs.wait(lambda m: m.get_type() == 'HEARTBEAT' and is_ours(m), 30.0, 'the bridge')
+
+        def motor_test(rotor, percent, seconds):
+            t0 = time.monotonic()
+            for _ in range(60):             # until the ESC node's services are up
+                gcs.conn.mav.command_long_send(SYSID, 1, mav.MAV_CMD_DO_MOTOR_TEST, 0, rotor,
+                                               mav.MOTOR_TEST_THROTTLE_PERCENT, percent,
+                                               seconds, 0, 0, 0)
+                ack = gcs.wait(lambda m: m.get_type() == 'COMMAND_ACK' and
+                               m.result != mav.MAV_RESULT_IN_PROGRESS, 10.0, 'the answer',
+                               since=t0)
+                if ack.result != mav.MAV_RESULT_TEMPORARILY_REJECTED:
+                    return ack.result, t0
+                t0 = time.monotonic()
+                gcs.poll(0.5)
+            return ack.result, t0
+        result, t0 = motor_test(3, 12.0, 1.0)
+        assert result == mav.MAV_RESULT_ACCEPTED
+        gcs.wait(lambda m: m.get_type() == 'STATUSTEXT' and 'rotor 3 at 0.12' in m.text, 5.0,
+                 'the ESC node saying so', since=t0)
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline:  # the test ends by itself: zero again
+            log = escs.log()
+            spun = log[(log['address'] == 0x2B) & (log['b0'] > 0)]
+            if len(spun) and log['b0'][log['address'] == 0x2B][-1] == 0:
+                break
+            time.sleep(0.1)
+        assert set(spun['b0']) == {round(0.12 * 240)}                      # 29 of 240
+        assert 0.9 < spun['t'][-1] - spun['t'][0] < 1.2
+        others = log[log['address'] != 0x2B]
+        assert len(others) and not others['b0'].any()
+        n = escs.count()
+        result, t0 = motor_test(3, 50.0, 1.0)                              # beyond 0.3
+        assert result == mav.MAV_RESULT_DENIED
+        gcs.poll(0.5)
+        said = ''.join(m.text for m in gcs.since(t0, 'STATUSTEXT'))      # (in 50-char chunks)
+        assert 'motor_test.command: must be in [0, 0.3]' in said, said
+        assert not escs.log(n)['b0'].any()
+    finally:
+        for p in procs:
+            p.stop()
+        escs.close()
+        Endpoint.close_all()

@@ -120,15 +120,24 @@ FLIGHT_S = 16.0        # the schedule's last step is at 12 s; Psi is down to 2 %
 @pytest.mark.odroid          # the one flight over DDS on the vehicle's stack too
 @pytest.mark.realtime
 def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
-    """The testbed's manoeuvre, sim and controller as two processes, watched and recorded as
-    the lab does it: where the ``ros2`` command is installed, the README's monitoring commands
+    """The testbed's manoeuvre, sim, controller and ESC node as processes, watched and recorded
+    as the lab does it: where the ``ros2`` command is installed, the README's monitoring commands
     run in a loop all through the flight (tools/soak.py's ``cli`` load), and ``record`` writes
     the flight to a bag, which reads back with rosbags' own reader and whose report finds the
     closest approach the recorded true attitude has.
+
+    The motors are driven as on the vehicle: ``esc_i2c`` writes the commands to the six ESCs,
+    here a virtual I2C bus that the sim reads (the real byte encoding, the node's watchdog). The
+    manoeuvre keeps the cone as its headless twin does (test_launch.py flies the topic path
+    against the same twin); the motor test is refused while armed; and at the end the controller
+    is SIGKILLed: every ESC is written zero one watchdog timeout later, from the bus's own record.
     """
     mon, launch = ros
-    launch('sim')
-    launch('controller')
+    path = str(tmp_path / 'esc_bus')
+    launch('sim', TESTBED, '-p', 'esc.virtual_bus:=' + path)
+    esc = launch('esc_i2c', TESTBED, '-p', 'esc.virtual_bus:=' + path,
+                 '-p', 'esc.probe_timeout:=20.0')
+    controller = launch('controller')
     recorder = launch('record', None, '-p', 'record.path:=%s' % (tmp_path / 'flight'))
     mon.wait_for(mon.controller_has_inputs, 30.0, 'the sim and the controller')
     mon.wait_for(lambda: 'first message on /sim/true_pose' in recorder.output(), 20.0,
@@ -137,9 +146,15 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     mon.wait_for(lambda: mon.last('motors') is not None, 10.0, 'a first motor command')
     assert zero_commands(mon)                                  # disarmed at start-up
     assert mon.last_diagnostic().figures.armed is False
+    mon.wait_for(lambda: '6 ESCs on virtual ESC bus' in esc.output(), 30.0, 'the ESC node')
+    addresses = resolve('esc_i2c', {})['esc.addresses']
+    bus = VirtualEscBus(path, addresses)
+    assert [data for data, _ in bus.setpoints()] == [b'\x00'] * 6           # disarmed: zero
     reply = mon.arm_when_ready()
     assert reply.success, reply.message
     t0, wall0 = time.monotonic(), time.time()
+    refused = mon._call(mon.create_client(Trigger, '/esc_i2c/motor_test'), Trigger.Request())
+    assert not refused.success and 'armed' in refused.message, refused.message
     loads = start_loads(('cli',), os.environ) if ros2_command() else []
     try:
         mon.spin_for(FLIGHT_S)
@@ -150,8 +165,12 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     cones = cone_set(values)
     true = [so3.quat_to_rot(q) for _, q in mon.between('true_pose', t0, t1)]
     margins = [cones.margins_deg(R)[0] for R in true]
-    # kept the cone (13.6 deg clear headless; live latency and CPU load take some of that)
-    assert min(margins) > 0.0, min(margins)
+    # kept the cone as the headless twin does (13.8 deg clear; live latency and CPU load take
+    # some of that)
+    twin = scenario.run(scenario.load(TESTBED)).summary
+    headless = twin['min_cone_angle_deg']['obstacle'] - twin['cone_half_angle_deg']['obstacle']
+    assert min(margins) > 0.0 and abs(min(margins) - headless) < 0.5, (min(margins), headless)
+    assert all(0 < data[0] < 240 for data, _ in bus.setpoints())             # flying
     psi = mon.between('psi', t0, t1)
     assert psi[-1] < 0.05 * max(psi)
     final = controller_setup(values).schedule.rotations[-1]
@@ -173,8 +192,22 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     # the flight (best effort ones at least half their rate), and the report's closest approach
     # that of the recorded true attitude
     assert recorder.stop() == 0, recorder.output()
-    assert mon.arm(False).success
-    mon.wait_for(lambda: zero_commands(mon), 2.0, 'zero commands after disarming')
+    # the controller dies armed: the ESC node's watchdog, alone, stops every motor
+    first = bus.count()
+    t_kill = time.monotonic()
+    controller.kill()
+    mon.wait_for(lambda: all(data == b'\x00' for data, _ in bus.setpoints()), 2.0,
+                 'zero at every ESC')
+    log = bus.log(first)
+    bus.close()
+    for a in addresses:
+        mine = log[log['address'] == a]
+        zero = mine['t'][mine['b0'] == 0].min()
+        # the last command came at most a control period (10 ms) before the kill; the ESC node
+        # holds it for its timeout (0.1 s), and zero goes out at the next write cycle (10 ms)
+        assert 0.1 - 0.01 < zero - t_kill <= 0.1 + 0.01 + 0.005, (hex(a), zero - t_kill)
+        assert np.all(mine['b0'][mine['t'] > zero] == 0)
+    assert esc.stop() == 0 and 'zero written to every ESC' in esc.output()
     axis = cones.V[0]
     counts, first, last, angles = read_back(tmp_path / 'flight', axis)
     assert first < wall0 and last > wall1
@@ -186,68 +219,43 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     closest = s['closest_approach_deg']['obstacle']
     assert closest['angle'] == pytest.approx(angles.min(), abs=0.01)
     assert closest['margin'] == pytest.approx(min(margins), abs=0.05)    # as this monitor saw
-    assert s['failsafes'] == 0 and s['armed_s'][1] - s['armed_s'][0] > FLIGHT_S
+    # (the armed span begins at the recorder's first controller diagnostics, which discovery can
+    # delay by most of a second: 0.73 s in one CI run)
+    assert s['failsafes'] == 0 and s['armed_s'][1] - s['armed_s'][0] > FLIGHT_S - 1.0
     assert s['final_psi'] == pytest.approx(psi[-1], rel=0.25)      # settled: Psi ~0.006 here
     assert s['gaps_ridden']['pose'] >= diag.figures.pose_gaps.count     # counters: the record
     assert s['gaps_ridden']['imu'] >= diag.figures.imu_gaps.count       # ends a little later
 
 
-@pytest.mark.realtime
-def test_the_testbed_flies_through_the_esc_node_and_a_dead_controller_gives_zero_at_the_escs(
-        ros, tmp_path):
-    """The sim as the six ESCs on a virtual I2C bus, written by esc_i2c through the real byte
-    encoding: the manoeuvre keeps the cone as the headless twin of the topic path does (which the
-    recorded topic-path flights match to 0.1 deg: README "Flight records"); the motor test is
-    refused while armed; and when the controller is SIGKILLed, every ESC is written zero within
-    the watchdog's timeout, as the bus itself recorded.
+def test_the_esc_node_refuses_to_start_without_its_escs_unless_told_to_ignore_one(ros, tmp_path):
+    """No sim on the virtual bus: nobody answers, and esc_i2c stops naming the first address.
+    With five ESCs powered and the sixth's rotor in esc.ignore it runs, and never writes it.
     """
     mon, launch = ros
     path = str(tmp_path / 'esc_bus')
-    launch('sim', TESTBED, '-p', 'esc.virtual_bus:=' + path)
-    esc = launch('esc_i2c', TESTBED, '-p', 'esc.virtual_bus:=' + path,
-                 '-p', 'esc.probe_timeout:=20.0')
-    controller = launch('controller')
-    mon.wait_for(mon.controller_has_inputs, 30.0, 'the sim and the controller')
-    mon.wait_for(lambda: '6 ESCs on virtual ESC bus' in esc.output(), 30.0, 'the ESC node')
     addresses = resolve('esc_i2c', {})['esc.addresses']
     bus = VirtualEscBus(path, addresses)
     try:
-        assert [data for data, _ in bus.setpoints()] == [b'\x00'] * 6      # disarmed: zero
-        reply = mon.arm_when_ready()
-        assert reply.success, reply.message
-        t0 = time.monotonic()
-        refused = mon._call(mon.create_client(Trigger, '/esc_i2c/motor_test'), Trigger.Request())
-        assert not refused.success and 'armed' in refused.message, refused.message
-        mon.spin_for(8.0)                   # round the cone (closest about 7 s after arming)
-        assert mon.last_diagnostic().figures.armed
-        cones = cone_set(resolve('controller', node_overrides(load_parameter_file(TESTBED),
-                                                              'controller')))
-        margins = [cones.margins_deg(so3.quat_to_rot(q))[0]
-                   for _, q in mon.between('true_pose', t0, time.monotonic())]
-        twin = scenario.run(scenario.load(TESTBED)).summary
-        headless = twin['min_cone_angle_deg']['obstacle'] - twin['cone_half_angle_deg'][
-            'obstacle']
-        assert len(margins) > 100 and abs(min(margins) - headless) < 0.5, (min(margins),
-                                                                           headless)
-        assert all(0 < data[0] < 240 for data, _ in bus.setpoints())        # flying
-        # the controller dies: the ESC node's watchdog, alone, stops every motor
-        first = bus.count()
-        t_kill = time.monotonic()
-        controller.kill()
-        mon.wait_for(lambda: all(data == b'\x00' for data, _ in bus.setpoints()), 2.0,
-                     'zero at every ESC')
-        log = bus.log(first)
-        for a in addresses:
-            mine = log[log['address'] == a]
-            zero = mine['t'][mine['b0'] == 0].min()
-            # the last command came at most a control period (10 ms) before the kill; the ESC
-            # holds it for the timeout (0.1 s), and zero goes out at the next write cycle (10 ms)
-            assert 0.1 - 0.01 < zero - t_kill <= 0.1 + 0.01 + 0.005, (hex(a), zero - t_kill)
-            assert np.all(mine['b0'][mine['t'] > zero] == 0)
+        alone = launch('esc_i2c', TESTBED, '-p', 'esc.virtual_bus:=' + path,
+                       '-p', 'esc.probe_timeout:=0.0')
+        assert alone.proc.wait(30) == 2
+        assert 'the ESC of rotor 1 at 0x29 did not answer (I2C nack at 0x29)' in alone.output()
+        bus.power(True)
+        bus.slots['present'][5] = 0                                  # rotor 6 missing
+        esc = launch('esc_i2c', TESTBED, '-p', 'esc.virtual_bus:=' + path,
+                     '-p', 'esc.probe_timeout:=0.0', '-p', 'esc.ignore:=[6]')
+        mon.wait_for(lambda: 'rotors [6] missing (ignored)' in esc.output(), 30.0, 'esc_i2c')
+
+        def commanded():              # (published until the subscription is matched)
+            mon.publish_commands([0.2] * 6)
+            return bus.log()['b0'].max() > 0
+        mon.wait_for(commanded, 10.0, 'a command at the ESCs')
+        assert esc.stop() == 0
+        log = bus.log()
+        assert 0x2E not in set(log['address']) and len(set(log['address'])) == 5
+        assert all(data == b'\x00' for data, _ in bus.setpoints()[:5])       # zero at the stop
     finally:
         bus.close()
-    assert esc.stop() == 0
-    assert 'zero written to every ESC' in esc.output()
 
 
 @pytest.mark.realtime

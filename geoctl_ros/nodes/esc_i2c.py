@@ -30,7 +30,7 @@ from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
 from geoctl_ros.nodes.conversions import status_of
-from geoctl_ros.nodes.runtime import spin
+from geoctl_ros.nodes.runtime import RefusalLog, spin
 from geoctl_ros.params import ESC, ConfigError, resolve
 
 REPORT_PERIOD = 0.5             # s between diagnostics and telemetry messages
@@ -57,6 +57,7 @@ class EscNode(Node):
             bus.close()
             raise ConfigError([('esc.addresses', str(e))]) from None
         self.armed = False
+        self.refusals = RefusalLog(self.get_logger())
         self._report_base = (0, 0)
         self._stop = threading.Event()
         self._wake = threading.Event()
@@ -114,8 +115,7 @@ class EscNode(Node):
         problem = self.driver.offer(msg.data)
         self._wake.set()
         if problem:
-            self.get_logger().warning('motor_commands refused: %s; every ESC gets zero'
-                                      % problem, throttle_duration_sec=1.0)
+            self.refusals.warn('motor_commands refused (every ESC gets zero): ', problem)
 
     def _on_diagnostics(self, msg):
         for s in msg.status:

@@ -1,8 +1,10 @@
 """Running a node: events executor, clean stop on SIGINT/SIGTERM, exit code 2 for bad
 parameters.
 """
+import math
 import signal
 import sys
+import time
 
 import rclpy
 from rclpy._rclpy_pybind11 import RCLError
@@ -64,3 +66,22 @@ def spin(node_class, name, args=None):
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+class RefusalLog:
+    """Warnings about refused input: each kind of refusal is logged when it first comes, then at
+    most once a period while it goes on (rclpy's own throttle is per call site, so one kind would
+    hide another).
+    """
+
+    def __init__(self, logger, period=1.0):
+        self.logger, self.period = logger, period
+        self._last = {}
+
+    def warn(self, prefix, reason):
+        """Log prefix + reason; the kind is the reason up to its first comma (the values vary)."""
+        kind = reason.split(',')[0]
+        now = time.monotonic()
+        if now - self._last.get(kind, -math.inf) >= self.period:
+            self._last[kind] = now
+            self.logger.warning(prefix + reason)

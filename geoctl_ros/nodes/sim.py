@@ -33,7 +33,7 @@ from geoctl_ros.esc.protocol import current_raw, decode
 from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg, vector
-from geoctl_ros.nodes.runtime import spin
+from geoctl_ros.nodes.runtime import RefusalLog, spin
 from geoctl_ros.params import SIM, ConfigError, settings, testbed_sim
 from geoctl_ros.sim.testbed import EscWatchdog
 
@@ -64,6 +64,7 @@ class SimNode(Node):
         self.next_pose = self.next_imu = 0.0
 
         self.esc_bus = None
+        self.refusals = RefusalLog(self.get_logger())
         if self.n_rotors and values['esc.virtual_bus']:      # the ESCs on a virtual I2C bus
             addresses = values['esc.addresses']
             if len(addresses) != self.n_rotors:
@@ -101,8 +102,7 @@ class SimNode(Node):
     def _on_commands(self, msg):
         problem = motor_commands_problem(msg.data, self.n_rotors)
         if problem:
-            self.get_logger().warning('motor_commands refused: ' + problem,
-                                      throttle_duration_sec=1.0)
+            self.refusals.warn('motor_commands refused: ', problem)
             return
         data = np.asarray(msg.data, dtype=float)
         self.commands = np.rint(data * self.command_max)
