@@ -136,6 +136,9 @@ class SimNode(Node):
 
     def on_shutdown(self):
         if self.esc_bus is not None:
+            # the ESCs stay powered a moment: an esc_i2c stopped at the same time (ros2 launch
+            # stops every node at once) gets its zeros through before they go
+            time.sleep(0.3)
             self.esc_bus.power(False)
             self.esc_bus.close()
 
