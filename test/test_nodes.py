@@ -133,6 +133,8 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     is SIGKILLed: every ESC is written zero one watchdog timeout later, from the bus's own record.
     """
     mon, launch = ros
+    twin = scenario.run(scenario.load(TESTBED)).summary          # (before: it takes a second)
+    headless = twin['min_cone_angle_deg']['obstacle'] - twin['cone_half_angle_deg']['obstacle']
     path = str(tmp_path / 'esc_bus')
     launch('sim', TESTBED, '-p', 'esc.virtual_bus:=' + path)
     esc = launch('esc_i2c', TESTBED, '-p', 'esc.virtual_bus:=' + path,
@@ -167,8 +169,6 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     margins = [cones.margins_deg(R)[0] for R in true]
     # kept the cone as the headless twin does (13.8 deg clear; live latency and CPU load take
     # some of that)
-    twin = scenario.run(scenario.load(TESTBED)).summary
-    headless = twin['min_cone_angle_deg']['obstacle'] - twin['cone_half_angle_deg']['obstacle']
     assert min(margins) > 0.0 and abs(min(margins) - headless) < 0.5, (min(margins), headless)
     assert all(0 < data[0] < 240 for data, _ in bus.setpoints())             # flying
     psi = mon.between('psi', t0, t1)

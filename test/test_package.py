@@ -82,13 +82,16 @@ def test_launch_files_name_only_what_exists(name):
     nodes = list(root.iter('node'))
     assert nodes
     subscribed = {'controller': {'pose', 'imu', 'attitude_setpoint'},
-                  'sim': {'motor_commands', 'control_wrench'}}
+                  'sim': {'motor_commands', 'control_wrench'}, 'esc_i2c': {'motor_commands'}}
     for node in nodes:
         assert node.get('pkg') == 'geoctl_ros'
         assert node.get('exec') in _console_scripts(), node.get('exec')
         # the parameter file is passed as --params-file (a missing one then stops the node)
         assert not list(node.iter('param')), 'a param element only warns on a missing file'
-        src = re.fullmatch(r'--params-file (.+)', node.get('ros_args')).group(1)
+        # (followed by -p overrides of the launch's arguments, at most)
+        src = re.fullmatch(r'--params-file (\$\(var \w+\)|\S+)'
+                           r'(?: -p [\w.]+:=(?:\$\(var \w+\)|[\w.]+))*',
+                           node.get('ros_args')).group(1)
         m = re.fullmatch(r'\$\(var (\w+)\)', src)
         src = args[m.group(1)] if m else src
         path = src.replace('$(find-pkg-share geoctl_ros)', ROOT)

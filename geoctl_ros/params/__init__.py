@@ -24,7 +24,12 @@ from geoctl_ros.params.build import (
                                      settings,
                                      testbed_sim,
 )
-from geoctl_ros.params.files import flatten, load_parameter_file, node_overrides
+from geoctl_ros.params.files import (
+    flatten,
+    load_parameter_file,
+    node_overrides,
+    write_parameter_file,
+)
 from geoctl_ros.params.schema import (
                                      BOTH,
                                      BY_NAME,
@@ -52,4 +57,5 @@ __all__ = ['BOTH', 'BY_NAME', 'CONE_KEY', 'CONE_SCHEMA', 'CONTROLLER', 'ConfigEr
            'airframe',
            'check_value', 'cone_param', 'cone_set', 'controller_config', 'controller_setup',
            'flatten', 'load_parameter_file', 'mixer', 'node_overrides', 'plant_config', 'resolve',
+           'write_parameter_file',
            'schema_for', 'setpoint_rotation', 'settings', 'testbed_sim']

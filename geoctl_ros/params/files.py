@@ -16,6 +16,25 @@ def flatten(tree, prefix=''):
     return out
 
 
+def write_parameter_file(sections, path, comment):
+    """Write sections ({node or '/**': flat parameters}) as a ROS 2 parameter file (nested keys,
+    floats exact) under a first line of comment.
+    """
+    doc = {}
+    for node, flat in sections.items():
+        tree = {}
+        for key, value in flat.items():
+            *parents, leaf = key.split('.')
+            d = tree
+            for p in parents:
+                d = d.setdefault(p, {})
+            d[leaf] = value.tolist() if hasattr(value, 'tolist') else value
+        doc[node] = {'ros__parameters': tree}
+    with open(path, 'w') as f:
+        f.write('# %s\n' % comment)
+        yaml.safe_dump(doc, f, sort_keys=False, default_flow_style=None, width=100)
+
+
 def load_parameter_file(path):
     """Read a ROS 2 parameter YAML file: {node name or '/**': flat parameter dict}."""
     try:

@@ -33,7 +33,6 @@ import math
 import os
 
 import numpy as np
-import yaml
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.control import AttitudeController
@@ -44,6 +43,7 @@ from geoctl_ros.params import (
     controller_config,
     node_overrides,
     resolve,
+    write_parameter_file,
 )
 
 CLEAR_DEG = 5.0                    # start and goal at least this far outside every cone
@@ -257,21 +257,9 @@ def run_sections(base, seed, index, duration=20.0, disturbance_max=DISTURBANCE_M
 
 def write_scenario_file(sections, path):
     """Write sections as a ROS 2 parameter file (nested keys, floats exact)."""
-    doc = {}
-    for node, flat in sections.items():
-        tree = {}
-        for key, value in flat.items():
-            *parents, leaf = key.split('.')
-            d = tree
-            for p in parents:
-                d = d.setdefault(p, {})
-            d[leaf] = value.tolist() if isinstance(value, np.ndarray) else value
-        doc[node] = {'ros__parameters': tree}
-    with open(path, 'w') as f:
-        f.write('# Written by `campaign`; fly it again with `campaign --replay %s` or '
-                '`scenario %s '
-                '--out DIR`.\n' % (os.path.basename(path), os.path.basename(path)))
-        yaml.safe_dump(doc, f, sort_keys=False, default_flow_style=None, width=100)
+    name = os.path.basename(path)
+    write_parameter_file(sections, path, 'Written by `campaign`; fly it again with `campaign '
+                         '--replay %s` or `scenario %s --out DIR`.' % (name, name))
 
 
 # --- flying -----------------------------------------------------------------------------------

@@ -30,6 +30,7 @@ from geoctl_ros.params import (
     controller_setup,
     node_overrides,
     resolve,
+    write_parameter_file,
 )
 from geoctl_ros.tools import plots
 from geoctl_ros.tools.batch import SETTLED_DEG as CONVERGED_DEG
@@ -180,7 +181,8 @@ def write_study(columns, base, gain_sets, out_dir, best):
     for k in chosen:
         write_parameter_file(parameter_file(base, gain_sets[k]),
                              os.path.join(out_dir, 'best', 'gain_set_%d.yaml' % (k + 1)),
-                             'gain set %d of a gain study (%s)' % (k + 1, label(gain_sets[k])))
+                             'gain set %d of a gain study (%s): written by `campaign --grid`'
+                             % (k + 1, label(gain_sets[k])))
     lines = ['| gain set | runs | violations | closest p1 [deg] | converged | settle median [s] '
              '| saturated mean [s] | goals it refuses |', '|---|---|---|---|---|---|---|---|']
     for k, (gains, fig) in enumerate(zip(gain_sets, figures)):
@@ -192,20 +194,3 @@ def write_study(columns, base, gain_sets, out_dir, best):
     lines += ['', 'best gain sets written: ' + ', '.join(
         'best/gain_set_%d.yaml' % (k + 1) for k in chosen)]
     return lines
-
-
-def write_parameter_file(sections, path, title):
-    """Sections as a ROS 2 parameter file the nodes take (--params-file)."""
-    doc = {}
-    for node, flat in sections.items():
-        tree = {}
-        for key, value in flat.items():
-            *parents, leaf = key.split('.')
-            d = tree
-            for p in parents:
-                d = d.setdefault(p, {})
-            d[leaf] = value.tolist() if isinstance(value, np.ndarray) else value
-        doc[node] = {'ros__parameters': tree}
-    with open(path, 'w') as f:
-        f.write('# %s: written by `campaign --grid`\n' % title)
-        yaml.safe_dump(doc, f, sort_keys=False, default_flow_style=None, width=100)
