@@ -4,7 +4,7 @@ and stop, the watchdog, NACKs and missing ESCs, the motor test; and the virtual 
 import numpy as np
 import pytest
 
-from geoctl_ros.esc import protocol
+from geoctl_ros.esc import health, protocol
 from geoctl_ros.esc.bus import RecordingBus
 from geoctl_ros.esc.driver import EscConfig, EscDriver, EscStartError
 from geoctl_ros.esc.virtual import VirtualEscBus
@@ -174,3 +174,45 @@ def test_the_virtual_bus_carries_the_bytes_between_processes_views(tmp_path):
     assert list(log['b0'][6:]) == [118] * 6 and np.all(np.diff(log['t']) >= 0)
     with pytest.raises(ValueError, match='not a virtual ESC bus of 4'):
         VirtualEscBus(path, LAB[:4])
+
+
+def test_the_diagnostics_say_what_is_wrong_with_which_esc():
+    d, bus, clock = driver()
+    d.start()
+    d.offer(HOVER)
+    clock.t += 0.004
+    d.write()
+    r = health.report(d, clock.t, 80.0, 100.0)
+    assert r.level == protocol.OK and r.message == 'ESCs commanded'
+    assert r.latency is not None and r.latency.max == pytest.approx(0.004)   # receipt -> bus
+    bus.telemetry[0x2A] = bytes((31, 7, 40))                     # self-test error
+    bus.telemetry[0x2B] = bytes((31, 120, 85))                   # limiting, and hot
+    for _ in range(6):
+        d.read_next()
+    bus.present.discard(0x2C)                                    # rotor 4 stops answering
+    clock.t += 1.0
+    d.offer(HOVER)
+    d.write()
+    r = health.report(d, clock.t, 80.0, 100.0)
+    assert r.level == protocol.ERROR
+    assert 'ESC 2 (0x2a) self-test error 7' in r.message
+    assert 'ESC 4 (0x2c) does not answer' in r.message
+    assert r.i2c_errors == 3                                     # the write and its 2 retries
+    warn = health.report(d, clock.t, 80.0, 100.0, errors_before=0)
+    assert warn.level == protocol.ERROR                          # the worst decides
+    values = health.to_values(r)
+    output, set_points, refused, errors, latency, test, escs = health.from_values(
+        values.items())
+    assert output == 'commanded' and set_points == tuple(HOVER) and errors == 3
+    assert escs[1] == '0x2a: 3.1 A, self-test error 7, 40 C, 0 errors'
+    assert 'limited by temperature or current' in escs[2] and '85 C' in escs[2]
+    assert 'no answer for 1.0 s' in escs[3]
+    # a refused command on healthy ESCs: WARN, saying why
+    d, bus, clock = driver()
+    d.start()
+    d.offer([np.nan] * 6)
+    d.write()
+    r = health.report(d, clock.t, 80.0, 100.0)
+    assert r.level == protocol.WARN and r.refused == 1
+    assert r.message.startswith('motor_commands refused: expected 6 finite values')
+    assert r.output.startswith('refused: expected 6 finite values')
