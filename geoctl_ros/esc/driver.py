@@ -26,8 +26,7 @@ from geoctl_ros.core.safety import motor_commands_problem
 from geoctl_ros.core.stats import WindowStats
 from geoctl_ros.esc import protocol
 from geoctl_ros.esc.bus import BusError
-
-TEST_DURATION_MAX = 10.0          # s, the longest motor test
+from geoctl_ros.params.schema import MOTOR_TEST_COMMAND_MAX, MOTOR_TEST_DURATION_MAX
 
 
 class EscStartError(Exception):
@@ -43,7 +42,7 @@ class EscConfig:
     ignore: frozenset = frozenset()   # rotors (1-based) whose ESC may be missing
     retries: int = 2                  # retries of a failed write within a cycle
     probe_timeout: float = 3.0        # s: how long start-up waits for every ESC to answer
-    test_command_max: float = 0.3     # the largest motor-test command
+    test_command_max: float = MOTOR_TEST_COMMAND_MAX      # the largest motor-test command
 
 
 @dataclass
@@ -109,15 +108,8 @@ class EscDriver:
         """Zero to every ESC (each retried); the addresses that could not be written."""
         failed = []
         for i in range(self.n):
-            if i in self.missing:
-                continue
-            for _ in range(1 + max(self.config.retries, 2)):
-                try:
-                    self._transfer(i, self._zero[i])
-                    break
-                except BusError:
-                    continue
-            else:
+            if i not in self.missing and not self._write(i, self._zero[i],
+                                                         max(self.config.retries, 2)):
                 failed.append(self.config.addresses[i])
         self.output = np.zeros(self.n)
         self.reason = 'stopped'
@@ -172,14 +164,8 @@ class EscDriver:
             received, self.received = self.received, None
         encoded = protocol.encode(targets, self.config.command_max, self.config.resolution)
         for i, data in enumerate(encoded):
-            if i in self.missing:
-                continue
-            for _ in range(1 + self.config.retries):
-                try:
-                    self._transfer(i, data)
-                    break
-                except BusError:
-                    continue
+            if i not in self.missing:
+                self._write(i, data, self.config.retries)
         if received is not None and why == 'commanded':
             self.latency.add(self.clock() - received)
         self.output, self.reason = targets, why
@@ -213,8 +199,9 @@ class EscDriver:
         if not 0.0 <= command <= self.config.test_command_max:
             return 'refused: command %g is outside [0, %g]' % (command,
                                                                 self.config.test_command_max)
-        if not 0.0 < duration <= TEST_DURATION_MAX:
-            return 'refused: duration %g s is outside (0, %g]' % (duration, TEST_DURATION_MAX)
+        if not 0.0 < duration <= MOTOR_TEST_DURATION_MAX:
+            return 'refused: duration %g s is outside (0, %g]' % (duration,
+                                                                  MOTOR_TEST_DURATION_MAX)
         with self._lock:
             if self.test is not None and now < self.test.until:
                 return 'refused: the test of rotor %d runs for %.1f s more' % (
@@ -229,6 +216,16 @@ class EscDriver:
         return running is not None
 
     # --- the bus -----------------------------------------------------------------------------
+    def _write(self, i, data, retries):
+        """Write ESC i, retrying a failed transfer up to retries times; whether it went through."""
+        for _ in range(1 + retries):
+            try:
+                self._transfer(i, data)
+                return True
+            except BusError:
+                continue
+        return False
+
     def _transfer(self, i, data):
         try:
             self.bus.write(self.config.addresses[i], data)

@@ -19,6 +19,8 @@ from geoctl_ros.records.bag import TOPICS as _RECORDED
 CONTROLLER, SIM, SCENARIO, MAVLINK, RECORD, VIEW, ESC = (
     'controller', 'sim', 'scenario', 'mavlink_bridge', 'record', 'view', 'esc_i2c')
 BOTH = (CONTROLLER, SIM)
+MOTOR_TEST_COMMAND_MAX = 0.3       # the largest motor-test command (normalised)
+MOTOR_TEST_DURATION_MAX = 10.0     # s, the longest motor test
 RECORD_TOPICS = tuple(t.name for t in _RECORDED)
 
 # The lab's inertia about the centre of mass is given in its code's forward-right-down body frame;
@@ -379,9 +381,11 @@ SCHEMA = [
     _p('motor_test.rotor', 'integer', 1, '-', "the motor test's rotor (1-based)", ESC,
        check=lambda v: None if v >= 1 else 'must be >= 1'),
     _p('motor_test.command', 'double', 0.1, '-', "the motor test's normalised command",
-       ESC, check=lambda v: None if 0.0 <= v <= 0.3 else 'must be in [0, 0.3]'),
+       ESC, check=lambda v: None if 0.0 <= v <= MOTOR_TEST_COMMAND_MAX
+       else 'must be in [0, %g]' % MOTOR_TEST_COMMAND_MAX),
     _p('motor_test.duration', 'double', 2.0, 's', 'how long the motor test runs', ESC,
-       check=lambda v: None if 0.0 < v <= 10.0 else 'must be in (0, 10]'),
+       check=lambda v: None if 0.0 < v <= MOTOR_TEST_DURATION_MAX
+       else 'must be in (0, %g]' % MOTOR_TEST_DURATION_MAX),
     # Headless runner.
     _p('duration', 'double', 20.0, 's', 'simulated time of a scenario run', SCENARIO,
        check=_positive),
