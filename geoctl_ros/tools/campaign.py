@@ -98,7 +98,7 @@ def fly(client, base, args, gain_sets, progress=None):
     groups = {}
     for i in range(args.runs):
         groups.setdefault(manoeuvres.cone_count(args.seed, i), []).append(i)
-    workers = max(1, len(client.scheduler_info().get('workers', {})))
+    workers = cluster.worker_count(client)
     jobs = []
     for k, gains in enumerate(gain_sets, 1):
         for indices in plan(list(groups.values()), workers, args.batch):
@@ -234,7 +234,7 @@ def main(argv=None):
         except (ConfigError, ValueError) as e:          # a run the batch cannot fly
             print('\ncampaign: %s' % e, file=sys.stderr)
             return 2
-        workers = max(1, len(client.scheduler_info().get('workers', {})))
+        workers = cluster.worker_count(client)
     wall = time.monotonic() - t1
     print('', file=sys.stderr)
     n = len(columns['run'])

@@ -38,8 +38,7 @@ def connect(scheduler=None, workers=None, dashboard=False):
     if scheduler:
         client = Client(scheduler, timeout='20s')
         try:
-            n = len(client.scheduler_info().get('workers', {}))
-            yield client, 'scheduler %s (%d workers now)' % (scheduler, n)
+            yield client, 'scheduler %s (%d workers now)' % (scheduler, worker_count(client))
         finally:
             client.close()
         return
@@ -57,6 +56,11 @@ def connect(scheduler=None, workers=None, dashboard=False):
             yield client, where
     finally:
         cluster.close()
+
+
+def worker_count(client):
+    """How many workers the cluster has now (at least 1, for planning)."""
+    return max(1, len(client.scheduler_info().get('workers', {})))
 
 
 def report_progress(fraction):
