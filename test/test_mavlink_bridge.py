@@ -158,12 +158,19 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     g.mission_request_list_send(SYSID, 1)
     assert gcs.wait(lambda m: m.get_type() == 'MISSION_COUNT', 5.0, 'MISSION_COUNT').count == 0
     # telemetry at its rates, in NED/FRD
+    # (the rate from the bridge's own stamps, over the first 40 messages: a fixed 2 s window
+    # judged this machine instead, when the bridge was starved beside the other DDS tests)
     t0 = time.monotonic()
-    gcs.poll(2.0)
+    deadline = t0 + 20.0
+    while len([m for m in gcs.since(t0, 'ATTITUDE_QUATERNION') if is_ours(m)]) < 40:
+        assert time.monotonic() < deadline, 'fewer than 40 ATTITUDE_QUATERNION in 20 s'
+        gcs.poll(0.1)
     mon.spin_for(0.2)
     atts = [m for m in gcs.since(t0, 'ATTITUDE_QUATERNION') if is_ours(m)]
-    assert 27 <= len(atts) <= 53                                   # 20 Hz for 2 s
-    assert 1 <= len([m for m in gcs.since(t0, 'HEARTBEAT') if is_ours(m)]) <= 3
+    spacing = np.median(np.diff([m.time_boot_ms for m in atts]))
+    assert 45 <= spacing <= 55, spacing                             # 20 Hz
+    beats = [m for m in gcs.since(t0, 'HEARTBEAT') if is_ours(m)]
+    assert 1 <= len(beats) <= time.monotonic() - t0 + 2              # 1 Hz
     R_true = so3.quat_to_rot(mon.last('true_pose')[1])
     R_mav = frames.from_wxyz((atts[-1].q1, atts[-1].q2, atts[-1].q3, atts[-1].q4))
     assert math.degrees(so3.angle(frames.ned_frd(R_true).T @ R_mav)) < 3.0
