@@ -140,34 +140,55 @@ class ConeSet:
         """Barrier values, gradients and flags at attitude R."""
         return self.evaluate_terms(self.terms(R))
 
-    def evaluate_terms(self, sc):
-        """Barrier values, gradients and flags from ``terms(R)``."""
+    def widened(self, extra_rad):
+        """The barrier's constants for every cone widened by extra_rad more (an array of one
+        angle per cone, or per run and cone): cos, floor gap, B offset, 1 / (alpha g0) and the
+        inside field's magnitude, as ``evaluate_terms`` takes them.
+        """
+        theta_b = self.theta_b + extra_rad
+        cos_theta = np.cos(theta_b)
+        g0 = cos_theta - np.cos(theta_b + self.floor)
+        return (cos_theta, g0, 1.0 + np.log(1.0 + cos_theta) * self._inv_alpha,
+                1.0 / (self.alpha * g0), np.sin(theta_b) / (self.alpha * g0))
+
+    def evaluate_terms(self, sc, widened=None):
+        """Barrier values, gradients and flags from ``terms(R)``; widened: None, or the constants
+        of ``widened(extra)`` for a barrier on wider cones (margins and violations are still
+        against the real cones).
+        """
         s, cross = sc[..., 0], sc[..., 1:]
-        g = self.cos_theta - s
-        saturated = g < self.g0
+        if widened is None:
+            cos_theta, g0, B_offset, inv_alpha_g0, inside_norm = (
+                self.cos_theta, self.g0, self._B_offset, self._inv_alpha_g0, self.e_RB_inside)
+        else:
+            cos_theta, g0, B_offset, inv_alpha_g0, inside_norm = widened
+        g = cos_theta - s
+        saturated = g < g0
         any_saturated = saturated.any(axis=-1)
         if not any_flag(any_saturated):
             # the usual case: the paper's barrier, nothing to flag
-            return ConeEval(s, self._B_offset - np.log(g) * self._inv_alpha, cross,
+            return ConeEval(s, B_offset - np.log(g) * self._inv_alpha, cross,
                             -self._inv_alpha / g, saturated, saturated, any_saturated)
-        g_eff = np.maximum(g, self.g0)
+        g_eff = np.maximum(g, g0)
         # log barrier at g_eff, plus the tangent-line extension below the floor (zero above it)
-        B = (self._B_offset - np.log(g_eff) * self._inv_alpha
-             + (g_eff - g) * self._inv_alpha_g0)       # g_eff - g = max(g0 - g, 0)
+        B = (B_offset - np.log(g_eff) * self._inv_alpha
+             + (g_eff - g) * inv_alpha_g0)       # g_eff - g = max(g0 - g, 0)
         weight = -self._inv_alpha / g_eff
         e_RB = cross * weight[..., None]
         inside = g <= 0.0                         # inside the barrier's (guarded) cone
         if inside.any():
-            e_RB[inside] = self._inside_field(cross[inside], inside)
-        violated = inside if self.guard == 0.0 else s >= self.cos_real
+            e_RB[inside] = self._inside_field(cross[inside],
+                                              np.broadcast_to(inside_norm, g.shape)[inside])
+        violated = (inside if self.guard == 0.0 and widened is None
+                    else s >= self.cos_real)
         return ConeEval(s, B, cross, weight, violated, saturated, any_saturated, e_RB)
 
-    def _inside_field(self, cross, inside):
-        """e_RB for cones the sensor is in: boundary magnitude, away from the axis."""
+    def _inside_field(self, cross, magnitude):
+        """e_RB for cones the sensor is in: the boundary's magnitude, away from the axis."""
         n = np.linalg.norm(cross, axis=-1)
         unit = np.where((n > 1e-12)[:, None], cross / np.maximum(n, 1e-12)[:, None],
                         self._r_perp[None, :])
-        return -unit * self.e_RB_inside[inside][:, None]
+        return -unit * magnitude[:, None]
 
     def angles_deg(self, R):
         """Angle between the sensor's world direction R r and each cone axis, degrees."""

@@ -69,6 +69,7 @@ class ControllerConfig:
     delta_bar_max: float = 0.0       # bound on |constant estimate| (N m); 0 = none
     cog_estimate_max: float = 0.0    # bound on |m rho estimate| (kg m); 0 = none
     unmodelled_moment_max: float = 0.0   # what a set point must be held against (N m); 0 = none
+    blind_guard_max: float = 0.0     # rad, the most a blind loop widens a cone's barrier
     J: np.ndarray = field(init=False, repr=False)        # inertia about the pivot
     m_rho: np.ndarray = field(init=False, repr=False)    # mass times pivot -> centre of mass
 
@@ -148,6 +149,25 @@ def linear_terms(R, R_d, config):
     parts = [A[..., None], e_RA, sc.reshape(sc.shape[:-2] + (-1,)), M_g]
     batch = np.broadcast_shapes(*(p.shape[:-1] for p in parts))
     return np.concatenate([np.broadcast_to(p, batch + p.shape[-1:]) for p in parts], axis=-1)
+
+
+def approach_rates(sc, Omega):
+    """Per cone, how fast the sensor's angle to the cone's axis is closing (rad/s; negative when
+    it opens), from ``ConeSet.terms`` (s_i, (R^T v_i) x r) and Omega: with s_i = cos(phi_i),
+    d/dt s_i = -Omega . ((R^T v_i) x r) and sin(phi_i) = |(R^T v_i) x r|.
+    """
+    cross = sc[..., 1:]
+    sin_phi = np.sqrt(np.einsum('...ij,...ij->...i', cross, cross))
+    return -np.einsum('...ij,...j->...i', cross, Omega) / np.maximum(sin_phi, 1e-9)
+
+
+def blind_widening(sc, Omega, blind, widening_max):
+    """How much wider (rad) the barrier's cones are for a loop blind for ``blind`` seconds (one
+    per run of a batch): what the sensor travels towards each cone in that time at its present
+    approach rate, at most widening_max.
+    """
+    travel = approach_rates(sc, Omega) * np.asarray(blind)[..., None]
+    return np.clip(travel, 0.0, widening_max)
 
 
 class LinearMap:
@@ -244,17 +264,24 @@ class AttitudeController:
         Y = cog_regressor(R, self.config.gravity)
         return np.concatenate((np.broadcast_to(np.eye(3), Y.shape), Y), axis=-1)
 
-    def step(self, R, Omega, dt, adapt=True):
+    def step(self, R, Omega, dt, adapt=True, blind=0.0):
         """One control step at attitude R and body angular velocity Omega.
 
         dt is the time until the next step (the control period); adapt=False holds the estimate
-        (e.g. while disarmed).
+        (e.g. while disarmed). blind: the time (s; one per run of a batch) over which the loop
+        cannot see or correct what the vehicle does beyond its nominal period: the barrier then
+        acts on each cone widened by how far the sensor travels towards it in that time
+        (``blind_widening``).
         """
         cfg = self.config
         y = self._linear(R)                     # A, e_RA, the cones' terms, M_g (linear_terms)
         A, e_RA = y[..., 0:1], y[..., 1:4]
         n = self._linear.n_cones
-        ev = cfg.cones.evaluate_terms(y[..., 4:4 + 4 * n].reshape(y.shape[:-1] + (n, 4)))
+        sc = y[..., 4:4 + 4 * n].reshape(y.shape[:-1] + (n, 4))
+        widened = None
+        if n and any_flag(np.asarray(blind) > 0.0):
+            widened = cfg.cones.widened(blind_widening(sc, Omega, blind, cfg.blind_guard_max))
+        ev = cfg.cones.evaluate_terms(sc, widened)
         psi, e_R = with_cones(A, e_RA, ev)
         e_Omega = Omega
         tracking = self._tracking

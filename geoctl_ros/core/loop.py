@@ -53,7 +53,8 @@ class LoopSettings:
     imu_ride_through: float
     pose_rate_window: float        # s: the poses a rate is differenced from during an imu gap
     max_angular_velocity: float    # rad/s: an imu sample faster than this is refused
-    measurement_delay: float       # s: the inputs' latency the prediction makes up for
+    measurement_delay: float       # s: the inputs' latency when their stamps do not give it
+    age_from_stamps: bool          # the inputs' ages from their capture stamps (synced clocks)
     allow_default_configuration: bool   # may arm without a parameter file (the opt-in)
     frame_id: str                  # the body frame of the published vectors
     world_frame_id: str
@@ -87,8 +88,9 @@ class ControlLoop:
         self.controller = AttitudeController(setup.config)
         self.controller.set_setpoint(setup.setpoint)
         s = setup.loop
-        self.pose = Stream('pose', s.pose_timeout, s.pose_ride_through)
-        self.rate = Stream('angular velocity', s.imu_timeout, s.imu_ride_through)
+        self.pose = Stream('pose', s.pose_timeout, s.pose_ride_through, s.measurement_delay)
+        self.rate = Stream('angular velocity', s.imu_timeout, s.imu_ride_through,
+                           s.measurement_delay)
         self.supervisor = Supervisor([self.pose, self.rate])
         self.bridge = GapBridge(s.pose_rate_window)
         self.R = None                   # last accepted measurements
@@ -96,7 +98,8 @@ class ControlLoop:
         self.setpoint_note = None       # last set-point refusal, for diagnostics
         self._pose_stamp = None         # the last accepted pose's stamp, as given
         self.last_tick = None
-        self.step = ControlTick(self.controller, setup.mixer, setup.loop.measurement_delay)
+        # (the inputs' ages, measurement_delay included, are the streams': see tick)
+        self.step = ControlTick(self.controller, setup.mixer, 0.0)
         self._schedule_index = -1
         # per diagnostics window: input ages at the ticks, armed ticks saturated / bridging
         self.pose_age = WindowStats()
@@ -105,13 +108,15 @@ class ControlLoop:
         self.gaps = {'pose': [0, 0.0], 'angular velocity': [0, 0.0]}   # count, longest (s)
 
     # --- inputs ------------------------------------------------------------------------------
-    def offer_pose(self, q, stamp, receipt, stamp_as_given=None):
+    def offer_pose(self, q, stamp, receipt, stamp_as_given=None, delay=None):
         """A motion-capture attitude (x, y, z, w) of stamp (s) received at receipt (s, the loop's
         clock); None if accepted, else why it was refused. stamp_as_given: the stamp in the
-        caller's own form, handed back on the ticks that use this pose (default: stamp).
+        caller's own form, handed back on the ticks that use this pose (default: stamp). delay:
+        the stamp's age at receipt against this computer's clock (s; None: not known, the
+        stream's ``measurement_delay`` is assumed; see ``core.safety.Stream``).
         """
         previous = self.pose.last_receipt
-        problem = self.pose.offer(stamp, receipt, quaternion_problem(q))
+        problem = self.pose.offer(stamp, receipt, quaternion_problem(q), self._delay(delay))
         if problem is None:
             self._pose_stamp = stamp if stamp_as_given is None else stamp_as_given
             self._end_gap(self.pose, previous, receipt)
@@ -119,16 +124,23 @@ class ControlLoop:
             self.bridge.pose(self.R, stamp, receipt)
         return problem
 
-    def offer_angular_velocity(self, w, stamp, receipt):
-        """A body angular velocity (rad/s); None if accepted, else why it was refused."""
+    def offer_angular_velocity(self, w, stamp, receipt, delay=None):
+        """A body angular velocity (rad/s); None if accepted, else why it was refused (delay: as
+        offer_pose's).
+        """
         previous = self.rate.last_receipt
         problem = self.rate.offer(
-            stamp, receipt, angular_velocity_problem(w, self.setup.loop.max_angular_velocity))
+            stamp, receipt, angular_velocity_problem(w, self.setup.loop.max_angular_velocity),
+            self._delay(delay))
         if problem is None:
             self._end_gap(self.rate, previous, receipt)
             self.Omega = np.array(w, dtype=float)
             self.bridge.gyro(self.Omega)
         return problem
+
+    def _delay(self, delay):
+        """The delay a sample's stamp gives, if this loop takes ages from stamps."""
+        return delay if self.setup.loop.age_from_stamps else None
 
     def _end_gap(self, stream, previous, receipt):
         """Count a gap (a stale spell) of stream that the sample received at receipt ends."""
@@ -176,8 +188,9 @@ class ControlLoop:
             return str(e)
         setup.mixer.adopt_state(self.setup.mixer)
         self.setup = setup
-        self.step.reconfigure(setup.mixer, setup.loop.measurement_delay)
+        self.step.reconfigure(setup.mixer, 0.0)
         s = setup.loop
+        self.pose.fallback_delay = self.rate.fallback_delay = s.measurement_delay
         self.pose.timeout, self.pose.ride_through = s.pose_timeout, s.pose_ride_through
         self.rate.timeout, self.rate.ride_through = s.imu_timeout, s.imu_ride_through
         self.bridge.rate_window = s.pose_rate_window
@@ -211,8 +224,8 @@ class ControlLoop:
             # the measurements' ages by the onboard clock only; a bridged state is already
             # propagated (and one of its streams may never have come), and the estimate learns
             # only from measurements
-            ages = (0.0, 0.0) if bridging else (max(now - self.pose.last_receipt, 0.0),
-                                                max(now - self.rate.last_receipt, 0.0))
+            ages = (0.0, 0.0) if bridging else (self.pose.capture_age(now),
+                                                self.rate.capture_age(now))
             out, motors = self.step(R, Omega, dt, now, ages, armed=armed,
                                     adapt=armed and not bridging, predict=not bridging)
             if out is None:

@@ -1,11 +1,84 @@
 """Delay compensation: the attitude and rate at the control tick from measurements that are some
-time old, by the controller's own model of the testbed (``DelayPredictor``).
+time old, by the controller's own model of the testbed and the moments it has already commanded
+(``DelayPredictor``, after the predictor-based designs for input and measurement delay, e.g.
+Molnar, Kiss, Ames & Orosz, arXiv 2112.08445).
+
+A measurement captured ``age`` seconds before the tick shows the vehicle as it was then; since
+then the rotors have been told to produce the moments of the ticks in between, each held until
+the next. The predictor integrates the model's rigid-body dynamics about the pivot over that
+window, piece by piece, with the moment in force at each instant (``CommandHistory``):
+
+    J Omega' = M_cmd(t) + M_g(R) + W Delta_bar - Omega x J Omega - J a_slow,   R' = R hat(Omega)
+
+a_slow is the slow part of the model's own error (the low-passed model acceleration at the
+measurements: at rest the true acceleration is zero, while the model's is J^-1 times the moment
+not yet learnt). Predicting with a constant rate, or with only the last moment, is what let a
+50 ms delay tip the testbed over (docs/safety.md, "Delay").
 """
+import math
+
+import numpy as np
+
 from geoctl_ros.core import so3
 from geoctl_ros.core.mechanics import gravity_moment
 from geoctl_ros.core.so3 import cross, matvec
 
 PREDICT_SLOW_S = 0.25     # s, what delay compensation counts as the model's slow error
+SUBSTEP_MAX_S = 0.01      # s, the longest piece of the prediction's integration
+
+
+class CommandHistory:
+    """The moments the rotors were told to produce, with the time each command was sent: a ring
+    of the last ``size`` ticks (one moment per run of a batch).
+
+    With a motor lag (the rotors' first-order thrust time constant ``lag``, s) a command does not
+    act at once: each entry holds the moment the rotors produced when it was sent (``start``) and
+    the one it asks for (``end``), and the moment in force a time s after sending is
+    end + exp(-s / lag) (start - end). Without one, start = end. ``at(t)`` is the moment in force
+    at t (zero before the first entry).
+    """
+
+    def __init__(self, size, lag=0.0):
+        self.size = int(size)
+        self.lag = float(lag)
+        self.times = np.full(self.size, -math.inf)    # oldest first
+        self.start = self.end = None
+
+    def push(self, t, end, start=None):
+        end = np.asarray(end, dtype=float)
+        start = end if start is None else np.asarray(start, dtype=float)
+        if self.end is None or self.end.shape[1:] != end.shape:
+            self.start = np.zeros((self.size,) + end.shape)
+            self.end = np.zeros((self.size,) + end.shape)
+            self.times[:] = -math.inf
+        # shift by one (the ring is short; this keeps lookups a plain searchsorted)
+        self.times[:-1] = self.times[1:]
+        self.start[:-1] = self.start[1:]
+        self.end[:-1] = self.end[1:]
+        self.times[-1] = t
+        self.start[-1] = start
+        self.end[-1] = end
+
+    def at(self, t):
+        """The moment in force at times t (a scalar, or one per run of a batch: (N,))."""
+        if self.end is None:
+            return 0.0
+        i = np.searchsorted(self.times, t, side='right') - 1      # -1: before the first
+        if np.ndim(t) == 0:
+            if i < 0:
+                return np.zeros(self.end.shape[1:])
+            start, end = self.start[i], self.end[i]
+        else:                                                       # each run its own entry
+            runs = np.arange(len(i))
+            k = np.maximum(i, 0)
+            start, end = self.start[k, runs], self.end[k, runs]
+        if self.lag > 0.0:
+            since = np.maximum(t - self.times[np.maximum(i, 0)], 0.0)
+            decay = np.exp(-since / self.lag)
+            m = end + (decay * (start - end).T).T
+        else:
+            m = end
+        return m if np.ndim(t) == 0 else np.where((i >= 0)[:, None], m, 0.0)
 
 
 class DelayPredictor:
@@ -18,30 +91,46 @@ class DelayPredictor:
         self.controller = controller
         self._acc_slow = 0.0
 
-    def __call__(self, R, Omega, age_R, age_Omega, moment, dt):
-        """Delay compensation: the attitude and rate at the control tick from measurements age_R
-        and age_Omega seconds old (scalars, or one per run of a batch), given the moment the rotors
-        produce (the last allocation's). Ages of 0 return the measurements unchanged.
-
-        The angular acceleration is the model's, J^-1 (moment + M_g(R) + W Delta_bar - Omega x J
-        Omega) (Delta_bar standing for the disturbance it estimates), less its own slow part
-        (low-pass, time constant PREDICT_SLOW_S; dt is the time since the last call), held over the
-        age: Omega <- Omega + age_Omega Omega', R <- R exp(hat(Omega + age_R Omega' / 2) age_R).
-        The slow part is what the model gets wrong at rest: there the true acceleration is zero
-        while the model's is J^-1 times the moment not yet learnt (k_R e_R of the steady error);
-        predicting with it would soften the attitude loop (the demo's final error went from 5.5 to
-        15 deg). The fast part, which the delay turns into lost damping, is kept. A measurement 10
-        ms old on the testbed, with its 40 ms motor lag, otherwise costs the rate loop most of its
-        phase margin (README, "Safety campaign").
-        """
+    def acceleration(self, R, Omega, moment):
+        """The model's angular acceleration at (R, Omega) under the rotors' moment."""
         c = self.controller
         cfg = c.config
         W = c.regressor(R)
-        acc = matvec(c.J_inv, moment + gravity_moment(R, cfg.m_rho, cfg.gravity)
-                     + (c.delta_bar if W is None else matvec(W, c.delta_bar))
-                     - cross(Omega, matvec(cfg.J, Omega)))
-        self._acc_slow = self._acc_slow + (acc - self._acc_slow) * (dt / (PREDICT_SLOW_S + dt))
-        acc = acc - self._acc_slow
-        acc_R = (acc.T * age_R).T
-        Omega_now = Omega + (acc.T * age_Omega).T
-        return R @ so3.exp(((Omega + 0.5 * acc_R).T * age_R).T), Omega_now
+        return matvec(c.J_inv, moment + gravity_moment(R, cfg.m_rho, cfg.gravity)
+                      + (c.delta_bar if W is None else matvec(W, c.delta_bar))
+                      - cross(Omega, matvec(cfg.J, Omega)))
+
+    def __call__(self, R, Omega, age_R, age_Omega, history, now, dt):
+        """The attitude and rate at ``now`` from measurements age_R and age_Omega seconds old
+        (scalars, or one per run of a batch), given the moments commanded before now (a
+        CommandHistory on the same clock as now). dt is the time since the last call (the low-pass
+        of the slow part). Ages of 0 return the measurements unchanged.
+
+        The window from the older measurement to now is integrated in S equal pieces of at most
+        SUBSTEP_MAX_S: in each, the moment in force at its midpoint; the rate is advanced only in
+        the part of the window after its own capture, the attitude only after its own (the
+        attitude with the mean of the rates at either end of the piece).
+        """
+        acc0 = self.acceleration(R, Omega, history.at(now))
+        self._acc_slow = self._acc_slow + (acc0 - self._acc_slow) * (dt / (PREDICT_SLOW_S + dt))
+        age_R = np.asarray(age_R, dtype=float)
+        age_Omega = np.asarray(age_Omega, dtype=float)
+        horizon = np.maximum(age_R, age_Omega)
+        longest = float(np.max(horizon))
+        if longest <= 0.0:
+            return R, Omega
+        pieces = max(1, int(math.ceil(longest / SUBSTEP_MAX_S - 1e-9)))
+        h = horizon / pieces                              # per run
+        start = now - horizon
+        slow = self._acc_slow
+        for j in range(pieces):
+            mid = start + (j + 0.5) * h
+            moment = history.at(mid)
+            acc = self.acceleration(R, Omega, moment) - slow
+            # each measurement moves only after its own capture time
+            hw = np.where(mid > now - age_Omega, h, 0.0)
+            hr = np.where(mid > now - age_R, h, 0.0)
+            Omega_next = Omega + (acc.T * hw).T
+            R = R @ so3.exp(((0.5 * (Omega + Omega_next)).T * hr).T)
+            Omega = Omega_next
+        return R, Omega

@@ -56,37 +56,76 @@ def angular_velocity_problem(w, limit):
     return None
 
 
+STAMP_AHEAD_TOLERANCE = 0.01   # s: a stamp this far ahead of this computer's clock is taken as now
+STAMP_AGE_MAX = 0.5            # s: a stamp older than this at receipt is not believed for the age
+REANCHOR_AFTER = 3             # consecutive good samples refused as not newer: the clock stepped
+
+
 class Stream:
-    """Freshness, ordering and refusal counts of one input stream.
+    """Freshness, ordering, ages and refusal counts of one input stream.
 
     timeout: older than this (by receipt), the stream is stale. ride_through: older than this, it
     is lost (0: lost as soon as it is stale).
+
+    Ordering: a sample whose stamp is not newer than the last accepted one is refused, unless
+    REANCHOR_AFTER such samples in a row were otherwise good: the stream's clock stepped back (or
+    one sample's stamp was an outlier ahead), and the stream re-anchors on the new stamps rather
+    than staying refused until a restart.
+
+    Age: each sample's delay from capture to receipt is its stamp against this computer's clock
+    (``delay``, when the caller gives it and it lies within -STAMP_AHEAD_TOLERANCE..
+    STAMP_AGE_MAX), else the configured ``fallback_delay`` (the stamp's clock is not this one's;
+    counted in ``untrusted_stamps``). At a tick the input's age is that delay plus the time since
+    receipt.
     """
 
-    def __init__(self, name, timeout, ride_through=0.0):
+    def __init__(self, name, timeout, ride_through=0.0, fallback_delay=0.0):
         self.name = name
         self.timeout = timeout
         self.ride_through = ride_through
+        self.fallback_delay = fallback_delay
         self.last_stamp = -math.inf
         self.last_receipt = None
+        self.last_delay = 0.0           # capture to receipt of the last accepted sample (s)
         self.accepted = 0
         self.refused = 0
+        self.untrusted_stamps = 0       # samples whose stamp did not give their delay
+        self.reanchored = 0             # times the stream's clock was found to have stepped
+        self._not_newer = 0             # good samples refused as not newer, in a row
         self.recent_refusals = []     # distinct reasons since take_refusals(), at most 5
 
-    def offer(self, stamp, receipt, problem=None):
-        """Record a sample; returns None if accepted, else the reason it was refused."""
+    def offer(self, stamp, receipt, problem=None, delay=None):
+        """Record a sample; returns None if accepted, else the reason it was refused. delay: its
+        stamp against this computer's clock at receipt (s), or None if unknown.
+        """
         if problem is None and stamp <= self.last_stamp:
-            problem = 'stamp %.6f is not newer than the last accepted %.6f' % (stamp,
-                                                                              self.last_stamp)
+            self._not_newer += 1
+            if self._not_newer < REANCHOR_AFTER:
+                problem = 'stamp %.6f is not newer than the last accepted %.6f' % (
+                    stamp, self.last_stamp)
+            else:
+                self.reanchored += 1
         if problem is not None:
             self.refused += 1
             if problem not in self.recent_refusals and len(self.recent_refusals) < 5:
                 self.recent_refusals.append(problem)
             return problem
+        self._not_newer = 0
         self.last_stamp = stamp
         self.last_receipt = receipt
+        if delay is not None and -STAMP_AHEAD_TOLERANCE <= delay <= STAMP_AGE_MAX:
+            self.last_delay = max(delay, 0.0)
+        else:
+            self.last_delay = self.fallback_delay
+            self.untrusted_stamps += delay is not None
         self.accepted += 1
         return None
+
+    def capture_age(self, now):
+        """How old the last accepted sample's content is at now (s): its delay from capture to
+        receipt plus the time since receipt.
+        """
+        return self.last_delay + max(now - self.last_receipt, 0.0)
 
     def take_refusals(self):
         """The distinct refusal reasons since the last call (and forget them)."""

@@ -10,7 +10,20 @@ from typing import NamedTuple
 
 import numpy as np
 
-from geoctl_ros.core.prediction import DelayPredictor
+from geoctl_ros.core.prediction import CommandHistory, DelayPredictor
+from geoctl_ros.core.so3 import matvec
+
+HISTORY_TICKS = 64     # the commands remembered for prediction (0.64 s at 100 Hz)
+
+
+def blind_time(delay, ages, dt, held):
+    """How long the loop is blind beyond its nominal period (s; one per run of a batch): the age
+    of its older input (measurement_delay plus the ages from capture) plus how much later than
+    the period this step comes. The barrier widens each cone by the sensor's travel towards it
+    over this time (``core.control.blind_widening``); it is 0 for fresh inputs on time.
+    """
+    age = delay + np.maximum(ages[0], ages[1])
+    return age if held is None else age + np.maximum(held - dt, 0.0)
 
 
 class TickResult(NamedTuple):
@@ -35,11 +48,14 @@ class ControlTick:
         self.mixer = mixer
         self.measurement_delay = measurement_delay
         self.moment = np.zeros(3)       # what the rotors were last told to produce
+        self.history = CommandHistory(HISTORY_TICKS, mixer.lag)   # and what before, with when
         self._last_now = None
+        self._clock = 0.0               # the tick's time: now, or (untimed) periods counted
 
     def reconfigure(self, mixer, measurement_delay):
         """A new mixer (that has adopted the old one's lag model) and delay, at run time."""
         self.mixer, self.measurement_delay = mixer, measurement_delay
+        self.history.lag = mixer.lag
 
     def _held(self, now):
         """How long the last command was held: the time since the last tick, or None (a period)
@@ -49,6 +65,16 @@ class ControlTick:
         if now is not None:
             self._last_now = now
         return held
+
+    def _time(self, now, dt):
+        """The tick's time on the history's clock: now, or for untimed ticks the periods so
+        far.
+        """
+        if now is None:
+            self._clock = self._clock + dt if self.history.end is not None else 0.0
+        else:
+            self._clock = now
+        return self._clock
 
     def __call__(self, R, Omega, dt, now=None, ages=(0.0, 0.0), armed=True, adapt=True,
                  predict=True):
@@ -64,10 +90,14 @@ class ControlTick:
         caller then disarms; a batch raises FloatingPointError, as a diverged simulation does.
         """
         held = self._held(now)
+        t = self._time(now, dt)
         if predict:
-            d = self.measurement_delay
-            R, Omega = self.predict(R, Omega, d + ages[0], d + ages[1], self.moment, dt)
-        out = self.controller.step(R, Omega, dt, adapt=adapt)
+            # with a model of the motors' lag, aimed at the middle of the command's hold
+            d = self.measurement_delay + (0.5 * dt if self.mixer.lag > 0.0 else 0.0)
+            R, Omega = self.predict(R, Omega, d + ages[0], d + ages[1], self.history, t,
+                                    dt if held is None else held)
+        blind = blind_time(self.measurement_delay, ages, dt, held)
+        out = self.controller.step(R, Omega, dt, adapt=adapt, blind=blind)
         if not np.isfinite(out.u).all():           # a last line of defence: never command it
             if np.ndim(out.u) > 1:
                 raise FloatingPointError('a run of the batch produced a non-finite moment')
@@ -75,11 +105,25 @@ class ControlTick:
         motors = self.mixer.mix(np.zeros(3) if out is None else out.u, armed=armed, dt=dt,
                                 held=held)
         self.moment = motors.allocation.moment if armed else np.zeros(3)
+        self.history.push(t, *self._produced(motors, armed))
         return TickResult(out, motors)
+
+    def _produced(self, motors, armed):
+        """The moments the rotors make from this tick on: the one they settle to and the one they
+        make now (by the mixer's lag model, if it keeps one), about the pivot.
+        """
+        mixer = self.mixer
+        if not armed:
+            return np.zeros(3), None
+        if mixer.sent_thrusts is None:
+            return self.moment, None
+        B = mixer.allocator.B_full[3:]
+        return matvec(B, mixer.sent_thrusts), matvec(B, mixer.modelled_thrusts)
 
     def idle(self, dt, now=None):
         """A tick without a state to control from (before the first pose and rate): zero
         commands, and the time noted.
         """
         self._held(now)
+        self.history.push(self._time(now, dt), np.zeros(3))
         return TickResult(None, self.mixer.mix(np.zeros(3), armed=False, dt=dt))

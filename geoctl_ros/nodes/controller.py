@@ -138,17 +138,25 @@ class ControllerNode(Node):
     # --- inputs ------------------------------------------------------------------------------
     def _on_pose(self, msg):
         now = self._now()
-        problem = self.loop.offer_pose(quaternion(msg.pose.orientation),
-                                       stamp_seconds(msg.header.stamp), now, msg.header.stamp)
+        stamp = stamp_seconds(msg.header.stamp)
+        problem = self.loop.offer_pose(quaternion(msg.pose.orientation), stamp, now,
+                                       msg.header.stamp, self._stamp_delay(stamp))
         if problem:
             self.get_logger().warning('pose refused: ' + problem, throttle_duration_sec=1.0)
         elif self.loop.settings.step_on == 'pose':
             self._tick(now)
 
+    def _stamp_delay(self, stamp):
+        """How old a header stamp is by this computer's ROS clock (the system clock, or /clock
+        with use_sim_time): the capture-to-receipt delay, if the stamping clock is in sync.
+        """
+        return self.get_clock().now().nanoseconds * 1e-9 - stamp
+
     def _on_imu(self, msg):
         now = self._now()
-        problem = self.loop.offer_angular_velocity(vector(msg.angular_velocity),
-                                                   stamp_seconds(msg.header.stamp), now)
+        stamp = stamp_seconds(msg.header.stamp)
+        problem = self.loop.offer_angular_velocity(vector(msg.angular_velocity), stamp, now,
+                                                   self._stamp_delay(stamp))
         if problem:
             self.get_logger().warning('imu refused: ' + problem, throttle_duration_sec=1.0)
         elif self.loop.settings.step_on == 'imu':

@@ -59,6 +59,7 @@ class SimNode(Node):
         self.ever_commanded = False
         self.commands_fresh = False
         self.wall0 = time.monotonic()
+        self.ros0 = self.get_clock().now().nanoseconds * 1e-9   # the ROS clock at wall0
         self.pose_period = 1.0 / cfg.pose_rate_hz
         self.imu_period = 1.0 / cfg.imu_rate_hz
         self.next_pose = self.next_imu = 0.0
@@ -143,7 +144,13 @@ class SimNode(Node):
             self.esc_bus.close()
 
     def _stamp(self, t_sim):
-        return time_msg(t_sim) if self.publish_clock else self.get_clock().now().to_msg()
+        """The capture stamp of the state at sim time t_sim: the ROS clock's time at which real
+        time reached it (as a motion-capture system stamps capture time), so a sim that falls
+        behind real time publishes honestly old stamps; sim time itself with publish_clock.
+        """
+        if self.publish_clock:
+            return time_msg(t_sim)
+        return time_msg(self.ros0 + t_sim / self.rtf)
 
     def _on_timer(self):
         now = time.monotonic()

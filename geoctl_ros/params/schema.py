@@ -147,14 +147,25 @@ SCHEMA = [
     _p('sensor_axis', 'double_array', [1.0, 0.0, 0.0], '-',
        'body-fixed sensor axis r (normalised)', CONTROLLER, length=3, check=_nonzero_vector),
     _p('measurement_delay', 'double', 0.0, 's',
-       'latency of the pose and imu chain from capture to receipt; each tick predicts the '
-       'measurements forward by it plus their wait since receipt, with the model and the last '
-       'moment (see README, "Latency")', CONTROLLER,
+       'latency of the pose and imu chain from capture to receipt, where the stamps do not give '
+       'it (age_from_stamps); each tick predicts the measurements forward by their age with the '
+       'model and the moments commanded since (docs/safety.md, "Delay")', CONTROLLER,
        check=lambda v: None if 0.0 <= v <= 0.05 else 'must be in [0, 0.05]'),
+    _p('age_from_stamps', 'bool', True, '-',
+       "each input's age from its header stamp against this computer's clock (the motion-capture "
+       'host and the IMU driver must stamp capture time on a clock synchronised with this one, '
+       'e.g. by chrony or PTP, to a few ms); a stamp ahead of this clock by more than 10 ms or '
+       'older than 0.5 s at receipt counts as measurement_delay old instead (docs/safety.md, '
+       '"Delay"); false: always measurement_delay', CONTROLLER),
     _p('cone_guard_deg', 'double', 0.0, 'deg',
        'the barrier acts on every cone widened by this (margins and violations are still those of '
        'the real cones; set points must clear the widened cone)', CONTROLLER,
        check=lambda v: None if 0.0 <= v <= 10.0 else 'must be in [0, 10]'),
+    _p('blind_guard_max_deg', 'double', 10.0, 'deg',
+       'the most the barrier widens a cone for a blind loop (inputs old, or steps later than the '
+       'control period): each cone is widened by what the sensor travels towards it in that '
+       'time (docs/safety.md, "Delay"); 0 = never', CONTROLLER,
+       check=lambda v: None if 0.0 <= v <= 30.0 else 'must be in [0, 30]'),
     _p('motor_lag_compensation', 'double', 0.0, 's',
        "the motors' thrust time constant the mixer compensates (commands the thrust that brings "
        'a model of the lagged rotors to the allocated thrust by the next step; README, "Safety '

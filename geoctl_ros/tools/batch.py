@@ -160,9 +160,12 @@ def run_batch(scenarios, progress=None, series=True):
     W_past = np.repeat(plant.Omega[None], ring, axis=0)
     runs = np.arange(n)
 
-    # the control tick of ControlLoop's (geoctl_ros.core.step), every step on time; the
-    # controller assumes measurement_delay (the truth: latency), each sample received at the tick
-    tick = ControlTick(controller, setup.mixer, setup.loop.measurement_delay)
+    # the control tick of ControlLoop's (geoctl_ros.core.step), every step on time, each sample
+    # received at the tick: its age the latency, from its stamp (age_from_stamps), else the
+    # measurement_delay the controller assumes
+    stamped = setup.loop.age_from_stamps
+    tick = ControlTick(controller, setup.mixer, 0.0 if stamped else setup.loop.measurement_delay)
+    ages = (0.0, 0.0)
     min_margin = cones.margins_deg(plant.R)
     margin_series = np.empty((steps, n)) if series else None
     sensor_series = np.empty((steps, n, 3), dtype=np.float32) if series else None
@@ -177,7 +180,9 @@ def run_batch(scenarios, progress=None, series=True):
         R_seen = R_past[seen, runs] @ so3.exp(noise[0, k])
         W_seen = W_past[seen, runs] + gyro_bias + noise[1, k]
         max_rate = np.maximum(max_rate, np.linalg.norm(W_seen, axis=-1))
-        out, motors = tick(R_seen, W_seen, dt)
+        if stamped:                 # (the first samples are the initial state's, as old as it)
+            ages = (np.minimum(delay, j) * h,) * 2
+        out, motors = tick(R_seen, W_seen, dt, ages=ages)
         saturated += motors.allocation.saturated
         last_unsettled[_cos_error(controller.R_d, plant.R) <= cos_settled] = k
         if series:

@@ -163,8 +163,10 @@ def run(scenario, duration=None):
         R, t = plant.R, plant.t
         R_seen, Omega_seen = past[0]
         stamp = max(t - delay * h, 0.0)
-        loop.offer_pose(so3.rot_to_quat(sim.measure_attitude(R_seen)), stamp, t)
-        loop.offer_angular_velocity(sim.measure_angular_velocity(Omega_seen), stamp, t)
+        loop.offer_pose(so3.rot_to_quat(sim.measure_attitude(R_seen)), stamp, t,
+                        delay=t - stamp)
+        loop.offer_angular_velocity(sim.measure_angular_velocity(Omega_seen), stamp, t,
+                                    delay=t - stamp)
         if k == 0:
             loop.arm(t)                  # armed from the start; the schedule runs from here
         tick = loop.tick(t, dt)
