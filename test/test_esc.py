@@ -23,11 +23,40 @@ class Clock:
         return self.t
 
 
-def driver(present=LAB, **kw):
+SESSION = 0x5EC0
+
+
+def driver(present=LAB, armed=True, **kw):
+    """A driver on a recording bus, following an armed controller of SESSION (or disarmed)."""
     clock = Clock()
     bus = RecordingBus(present, clock)
     d = EscDriver(EscConfig(LAB, 240, probe_timeout=0.0, **kw), bus, clock)
+    d.follow(armed, SESSION)
     return d, bus, clock
+
+
+def test_only_the_armed_controllers_session_moves_a_motor():
+    """The gate (issue: the ESCs obeyed any publisher): disarmed, the controller's own non-zero
+    commands write zero; a message of another session or none (a plain publisher, a recorded
+    flight) is refused, counted, and leaves the controller's command in force.
+    """
+    d, bus, clock = driver(armed=False)
+    d.start()
+    assert d.offer(HOVER, session=SESSION) is None
+    d.write()
+    assert set(written(bus)[LAB[0]][-1:]) == {b'\x00'}
+    d.follow(True, SESSION)
+    assert d.offer(HOVER, session=SESSION) is None
+    d.write()
+    hover = d.output.tolist()
+    assert min(hover) > 0.48
+    for other in (0, SESSION + 1):
+        assert 'not from the controller' in d.offer([0.9] * 6, session=other)
+    d.write()
+    assert d.output.tolist() == hover and d.foreign == 2
+    d.follow(False, SESSION)
+    d.write()
+    assert d.output.tolist() == [0.0] * 6
 
 
 def written(bus, since=0):

@@ -17,6 +17,8 @@ Rules (the README's "Safety behaviour" section says the same to users):
 """
 from dataclasses import dataclass
 import math
+import secrets
+from typing import NamedTuple
 
 import numpy as np
 
@@ -164,6 +166,22 @@ class Stream:
                 'ride-through limit' if self.ride_through > self.timeout else 'timeout',
                 self.limit)
         return None
+
+
+class ArmedState(NamedTuple):
+    """What the controller tells the nodes that drive its motors (esc_i2c): whether it is armed,
+    and its session number, the random nonzero 32-bit number it drew at start and stamps on each
+    of its motor_commands (their ``layout.data_offset``), so commands from anything else (a
+    second publisher, a recorded flight played back) are told apart and refused.
+    """
+
+    armed: bool
+    session: int
+
+
+def new_session():
+    """A controller's session number: random, nonzero, 32 bits."""
+    return secrets.randbelow(2 ** 32 - 1) + 1
 
 
 @dataclass

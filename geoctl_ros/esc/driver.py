@@ -74,6 +74,10 @@ class EscDriver:
         self.errors = [dict(nack=0, timeout=0, io=0) for _ in range(n)]
         self.last_ok = [None] * n         # time of each ESC's last successful transfer
         self.latency = WindowStats()      # command received -> its last byte on the bus (s)
+        self.armed = False                # the followed controller's state (follow)
+        self.session = 0
+        self.foreign = 0                  # messages refused as not the controller's
+        self.foreign_refusal = None
         self._zero = protocol.encode(np.zeros(n), config.command_max, config.resolution)
         self._next_read = 0
         self._lock = threading.Lock()
@@ -116,11 +120,36 @@ class EscDriver:
         return failed
 
     # --- commands ----------------------------------------------------------------------------
-    def offer(self, data, now=None):
-        """A motor_commands message arrived (its data); the refusal reason, or None."""
+    def follow(self, armed, session):
+        """The armed state of the controller this node follows, and its session number (the
+        nonzero number it stamps on its motor_commands; 0: no controller heard). Disarmed, every
+        ESC gets zero whatever the commands say.
+        """
+        with self._lock:
+            self.armed, self.session = bool(armed), int(session)
+            if not self.armed:
+                self.command = np.zeros(self.n)
+
+    def offer(self, data, now=None, session=None):
+        """A motor_commands message arrived (its data, and the session number it carries; None:
+        not checked); the refusal reason, or None.
+
+        A message from anything but the followed controller's session (a second publisher, a
+        recorded flight played back, a controller that restarted without saying so) is refused,
+        counted in ``foreign`` and leaves the controller's commands in force: the flight goes on.
+        A message the controller sent while disarmed is taken as zero.
+        """
         now = self.clock() if now is None else now
+        if session is not None and (session == 0 or session != self.session):
+            self.foreign += 1
+            self.foreign_refusal = ('not from the controller%s (session %d, expected %s)'
+                                    % ('' if self.session else ' (none heard yet)', session,
+                                       self.session or 'none'))
+            return self.foreign_refusal
         problem = motor_commands_problem(data, self.n)
         with self._lock:
+            if not problem and not self.armed:
+                data = np.zeros(self.n)
             if problem:
                 self.refusal, self.command_time = problem, None
                 self.refused += 1

@@ -14,16 +14,19 @@ from geometry_msgs.msg import PoseStamped, QuaternionStamped, Vector3Stamped, Wr
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import Imu
-from std_msgs.msg import Float64, Float64MultiArray
+from std_msgs.msg import Float64, Float64MultiArray, UInt32MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.diagnostics import FAILSAFE, failsafe
 from geoctl_ros.core.gains import gain_condition
 from geoctl_ros.core.loop import ControlLoop, step_period
+from geoctl_ros.core.safety import ArmedState, new_session
 from geoctl_ros.core.stats import WindowStats
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.conversions import (
+    armed_state_msg,
+    motor_commands_msg,
     quaternion,
     set_quaternion,
     set_vector,
@@ -97,13 +100,17 @@ class ControllerNode(Node):
                                               qos.TELEMETRY)
         self.pub_margins = self.create_publisher(Float64MultiArray, 'cone_margins', qos.TELEMETRY)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
+        # the armed state and session the ESC node follows (core.safety.ArmedState)
+        self.session = new_session()
+        self.pub_armed = self.create_publisher(UInt32MultiArray, '~/armed', qos.LATCHED)
+        self._armed_sent = None
         self.pub_setpoint = self.create_publisher(QuaternionStamped, 'active_setpoint',
                                                   qos.LATCHED)
         self._published_R_d = None
         self.create_service(SetBool, '~/arm', self._on_arm)
         self.create_service(Trigger, '~/reset_adaptation', self._on_reset)
 
-        self._msgs = {'motors': Float64MultiArray(), 'wrench': WrenchStamped(),
+        self._msgs = {'motors': motor_commands_msg(self.session), 'wrench': WrenchStamped(),
                       'eR': Vector3Stamped(), 'eW': Vector3Stamped(), 'psi': Float64(),
                       'dbar': Float64MultiArray(), 'margins': Float64MultiArray()}
         for key in ('wrench', 'eR', 'eW'):
@@ -133,7 +140,16 @@ class ControllerNode(Node):
         self._publish_zero()
 
     def _publish_zero(self):
-        self.pub_motors.publish(Float64MultiArray(data=[0.0] * self.loop.rotor_count))
+        msg = motor_commands_msg(self.session)
+        msg.data = [0.0] * self.loop.rotor_count
+        self.pub_motors.publish(msg)
+        self._publish_armed(False)
+
+    def _publish_armed(self, armed):
+        """The typed armed state, when it changes (and with every diagnostics message)."""
+        if armed != self._armed_sent:
+            self.pub_armed.publish(armed_state_msg(ArmedState(armed, self.session)))
+            self._armed_sent = armed
 
     # --- inputs ------------------------------------------------------------------------------
     def _on_pose(self, msg):
@@ -248,7 +264,11 @@ class ControllerNode(Node):
         out = tick.control
         m = self._msgs
         m['motors'].data = tick.motors.normalised.tolist()
+        if tick.armed and self._armed_sent is not True:
+            self._publish_armed(True)            # the ESC node's gate opens before the command
         self.pub_motors.publish(m['motors'])
+        if not tick.armed and self._armed_sent is not False:
+            self._publish_armed(False)
         self._compute_stats.add(time.perf_counter() - t0)
         if tick.armed and tick.pose_receipt is not None:
             self._latency_stats.add(self._now() - tick.pose_receipt)
@@ -295,6 +315,8 @@ class ControllerNode(Node):
         st = replace(st, figures=st.figures.with_timing(self._period_stats.window(),
                                                         self._compute_stats.window(),
                                                         self._latency_stats.window()))
+        self._armed_sent = None
+        self._publish_armed(self.loop.supervisor.armed)
         msg = DiagnosticArray(status=[status_msg(st, STATUS_NAME, 'hexrotor')])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(msg)

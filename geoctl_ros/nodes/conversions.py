@@ -3,10 +3,42 @@ import array
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension, UInt32MultiArray
 
 from geoctl_ros.core.diagnostics import Status, from_values, to_values
+from geoctl_ros.core.safety import ArmedState
 from geoctl_ros.mavlink.health import Report as BridgeReport
 from geoctl_ros.mavlink.health import from_values as bridge_values
+
+ARMED_LABELS = ('armed', 'session')
+
+
+def armed_state_msg(state):
+    """ArmedState -> the controller's ``~/armed`` message (UInt32MultiArray [armed, session])."""
+    msg = UInt32MultiArray(data=[int(state.armed), state.session])
+    msg.layout.dim = [MultiArrayDimension(label=' '.join(ARMED_LABELS), size=2, stride=2)]
+    return msg
+
+
+def armed_state_of(msg):
+    """The ``~/armed`` message -> ArmedState, or None if it is not one."""
+    if len(msg.data) != 2 or msg.data[0] not in (0, 1):
+        return None
+    return ArmedState(bool(msg.data[0]), int(msg.data[1]))
+
+
+def motor_commands_msg(session):
+    """An empty motor_commands message of the controller of session: the session number in its
+    ``layout.data_offset`` (receivers that do not check it, as ``ros2 topic echo``, ignore it).
+    """
+    msg = Float64MultiArray()
+    msg.layout.data_offset = session
+    return msg
+
+
+def session_of(msg):
+    """The session number a motor_commands message carries (0: none)."""
+    return int(msg.layout.data_offset)
 
 
 def stamp_seconds(stamp):

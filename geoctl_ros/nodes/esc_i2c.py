@@ -20,7 +20,7 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension, UInt32MultiArray
 from std_srvs.srv import Trigger
 
 from geoctl_ros.esc import health
@@ -28,8 +28,7 @@ from geoctl_ros.esc.bus import I2cBus
 from geoctl_ros.esc.driver import EscDriver, EscStartError, config_of
 from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.nodes import qos, ros_params
-from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
-from geoctl_ros.nodes.conversions import status_of
+from geoctl_ros.nodes.conversions import armed_state_of, session_of
 from geoctl_ros.nodes.runtime import RefusalLog, spin
 from geoctl_ros.params import ESC, ConfigError, resolve
 
@@ -56,15 +55,14 @@ class EscNode(Node):
         except EscStartError as e:
             bus.close()
             raise ConfigError([('esc.addresses', str(e))]) from None
-        self.armed = False
         self.refusals = RefusalLog(self.get_logger())
         self._report_base = (0, 0)
         self._stop = threading.Event()
         self._wake = threading.Event()
         self.create_subscription(Float64MultiArray, 'motor_commands', self._on_commands,
                                  qos.COMMAND)
-        self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics,
-                                 qos.EVENT)
+        self.create_subscription(UInt32MultiArray, '%s/armed' % values['esc.controller'],
+                                 self._on_armed, qos.LATCHED)
         self.pub_telemetry = self.create_publisher(Float64MultiArray, 'esc/telemetry',
                                                    qos.TELEMETRY)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
@@ -112,18 +110,32 @@ class EscNode(Node):
 
     # --- callbacks ---------------------------------------------------------------------------
     def _on_commands(self, msg):
-        problem = self.driver.offer(msg.data)
+        foreign = self.driver.foreign
+        problem = self.driver.offer(msg.data, session=session_of(msg))
         self._wake.set()
-        if problem:
+        if problem and self.driver.foreign > foreign:
+            self.refusals.warn("motor_commands refused (the controller's stay in force): ",
+                               problem)
+        elif problem:
             self.refusals.warn('motor_commands refused (every ESC gets zero): ', problem)
 
-    def _on_diagnostics(self, msg):
-        for s in msg.status:
-            if s.name == CONTROLLER_STATUS:
-                armed = status_of(s).figures.armed
-                if armed and not self.armed and self.driver.abort_test():
-                    self.get_logger().warning('motor test ended: the controller armed')
-                self.armed = armed
+    def _on_armed(self, msg):
+        state = armed_state_of(msg)
+        if state is None:
+            self.refusals.warn('armed state refused: ', 'not [armed, session]')
+            return
+        if state.armed and not self.driver.armed and self.driver.abort_test():
+            self.get_logger().warning('motor test ended: the controller armed')
+        if state.armed != self.driver.armed:
+            self.get_logger().info('controller %s (session %d): ESC set points %s'
+                                   % ('armed' if state.armed else 'disarmed', state.session,
+                                      'follow its commands' if state.armed else 'zero'))
+        self.driver.follow(state.armed, state.session)
+        self._wake.set()
+
+    @property
+    def armed(self):
+        return self.driver.armed
 
     def _on_params(self, values, changed):
         self.values = values
