@@ -3,10 +3,16 @@ operator's set points and a rival controller.
 """
 from geometry_msgs.msg import PoseStamped, QuaternionStamped
 from sensor_msgs.msg import Imu
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, UInt32MultiArray
 
+from geoctl_ros.core.safety import ArmedState
 from geoctl_ros.nodes import qos
-from geoctl_ros.nodes.conversions import set_quaternion, set_vector
+from geoctl_ros.nodes.conversions import (
+    armed_state_msg,
+    motor_commands_msg,
+    set_quaternion,
+    set_vector,
+)
 from geoctl_ros.tools.processes import Monitor
 
 
@@ -55,12 +61,27 @@ class FakeInputs(Monitor):
         set_quaternion(msg.quaternion, q)
         self.pub_setpoint.publish(msg)
 
-    def publish_commands(self, data):
-        """Publish on motor_commands as if this were a controller (created on first use: while
-        it exists, the real controller refuses to arm).
+    def publish_commands(self, data, session=0):
+        """Publish on motor_commands as a plain publisher (session 0), or as the controller of
+        session (created on first use: while it exists, the real controller refuses to arm).
         """
-        if not hasattr(self, 'pub_commands'):
+        if getattr(self, 'pub_commands', None) is None:
             self.pub_commands = self.create_publisher(Float64MultiArray, 'motor_commands',
                                                       qos.COMMAND)
-        self.pub_commands.publish(Float64MultiArray(data=list(data)))
+        msg = motor_commands_msg(session)
+        msg.data = [float(x) for x in data]
+        self.pub_commands.publish(msg)
+
+    def stop_commands(self):
+        """Remove the motor_commands publisher (the real controller may arm again)."""
+        if getattr(self, 'pub_commands', None) is not None:
+            self.destroy_publisher(self.pub_commands)
+            self.pub_commands = None
+
+    def act_as_controller(self, armed, session):
+        """Publish the typed armed state a controller of session publishes (~/armed)."""
+        if getattr(self, 'pub_armed', None) is None:
+            self.pub_armed = self.create_publisher(UInt32MultiArray, '/controller/armed',
+                                                   qos.LATCHED)
+        self.pub_armed.publish(armed_state_msg(ArmedState(armed, session)))
 

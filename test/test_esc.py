@@ -191,6 +191,7 @@ def test_the_virtual_bus_carries_the_bytes_between_processes_views(tmp_path):
         d.start()                                           # the sim has not powered them
     sim_side.power(True)
     d.start()
+    d.follow(True, SESSION)
     d.offer(HOVER)
     d.write()
     got = sim_side.setpoints()

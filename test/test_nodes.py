@@ -152,6 +152,21 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     addresses = resolve('esc_i2c', {})['esc.addresses']
     bus = VirtualEscBus(path, addresses)
     assert [data for data, _ in bus.setpoints()] == [b'\x00'] * 6           # disarmed: zero
+    intruder = [1.0] * 6        # full throttle: the controller, never saturated, never sends it
+
+    def intrude(seconds):
+        """A plain publisher (a replayed record, a hand-typed command) on motor_commands; the
+        bus's own record of that time.
+        """
+        first, t_end = bus.count(), time.monotonic() + seconds
+        while time.monotonic() < t_end:
+            mon.publish_commands(intruder)
+            mon.spin_for(0.02)
+        mon.stop_commands()
+        return bus.log(first)
+    seen = intrude(0.5)                                   # 1. the controller disarmed
+    assert len(seen) > 0 and np.all(seen['b0'] == 0)
+    mon.wait_for(lambda: mon.arm(True).success, 20.0, 'arming once the publisher is gone')
     reply = mon.arm_when_ready()
     assert reply.success, reply.message
     t0, wall0 = time.monotonic(), time.time()
@@ -159,7 +174,10 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     assert not refused.success and 'armed' in refused.message, refused.message
     loads = start_loads(('cli',), os.environ) if ros2_command() else []
     try:
-        mon.spin_for(FLIGHT_S)
+        mon.spin_for(2.0)
+        seen = intrude(0.5)                               # 2. armed: a second publisher
+        assert len(seen) > 0 and np.all(seen['b0'] < 240) and np.all(seen['b0'] > 0)
+        mon.spin_for(FLIGHT_S - 2.5)                      # and the flight goes on
     finally:
         stop_loads(loads, os.environ)
     t1, wall1 = time.monotonic(), time.time()
@@ -176,6 +194,7 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     final = controller_setup(values).schedule.rotations[-1]
     assert math.degrees(so3.angle(final.T @ true[-1])) < 8.0
     cmds = np.array(mon.between('motors', t0, t1))
+    cmds = cmds[~np.all(cmds == intruder, axis=1)]         # (this monitor hears its own too)
     assert len(cmds) > 0.75 * 100 * FLIGHT_S and cmds.shape[1] == 6
     # armed: every rotor at least at thrust_min (0.2 N: command 21 of 240), none saturated
     # (the first few may be zeros published just before the arm took effect)
@@ -199,6 +218,8 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     mon.wait_for(lambda: all(data == b'\x00' for data, _ in bus.setpoints()), 2.0,
                  'zero at every ESC')
     log = bus.log(first)
+    seen = intrude(0.5)                                   # 3. the controller stopped
+    assert len(seen) > 0 and np.all(seen['b0'] == 0)
     bus.close()
     for a in addresses:
         mine = log[log['address'] == a]
@@ -247,8 +268,9 @@ def test_the_esc_node_refuses_to_start_without_its_escs_unless_told_to_ignore_on
         mon.wait_for(lambda: 'rotors [6] missing (ignored)' in esc.output(), 30.0, 'esc_i2c')
 
         def commanded():              # (published until the subscription is matched)
-            mon.publish_commands([0.2] * 6)
+            mon.publish_commands([0.2] * 6, session=77)
             return bus.log()['b0'].max() > 0
+        mon.act_as_controller(True, 77)   # this process plays an armed controller of session 77
         mon.wait_for(commanded, 10.0, 'a command at the ESCs')
         assert esc.stop() == 0
         log = bus.log()
