@@ -129,3 +129,34 @@ def test_an_input_is_as_old_as_its_capture_stamp_says_unless_the_stamp_is_not_be
     loop = ControlLoop(controller_setup(values))
     assert loop.offer_pose(q, 10.0, 100.0, delay=0.042) is None
     assert loop.pose.capture_age(100.0) == pytest.approx(0.007)
+
+
+@odroid
+def test_arming_is_refused_inside_a_cone_and_within_its_guard_naming_every_failing_check():
+    """As a preflight check: the sensor on the cone's axis (the issue's 45 deg yaw start), then
+    1 deg outside a 12 deg cone with a 2 deg guard, each refused with the cone named; with the
+    imu stale as well, both are named. Clear of the guard it arms.
+    """
+    values = resolve(CONTROLLER, {
+        'cones.names': ['obstacle'], 'cones.obstacle.axis': np.array([1.0, 1.0, 0.0]),
+        'cones.obstacle.half_angle_deg': 12.0, 'cone_guard_deg': 2.0,
+        'allow_default_configuration': True})
+    loop = ControlLoop(controller_setup(values))
+
+    def offer(yaw_deg, t, imu=True):
+        q = so3.rot_to_quat(so3.exp(np.array([0.0, 0.0, math.radians(yaw_deg)])))
+        assert loop.offer_pose(q, t, t) is None
+        if imu:
+            assert loop.offer_angular_velocity([0.0, 0.0, 0.0], t, t) is None
+    offer(45.0, 1.0)
+    refused = loop.arm(1.0)
+    assert not refused.ok and "inside cone 'obstacle' (12.00 deg in)" in refused.message
+    offer(45.0 - 13.0, 1.01)
+    refused = loop.arm(1.01)
+    assert not refused.ok and "within the guard of cone 'obstacle' (margin 1.00 deg" in (
+        refused.message)
+    offer(45.0 - 13.0, 2.0, imu=False)
+    refused = loop.arm(2.0)
+    assert 'angular velocity stale' in refused.message and "cone 'obstacle'" in refused.message
+    offer(0.0, 2.01)
+    assert loop.arm(2.01).ok

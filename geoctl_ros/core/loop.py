@@ -5,6 +5,7 @@ The node turns messages into calls of this class and its results into messages; 
 adaptation, the diagnostics level and its reasons) is made here, so it is tested without rclpy.
 """
 from dataclasses import dataclass
+import math
 
 import numpy as np
 
@@ -163,9 +164,30 @@ class ControlLoop:
         return problem
 
     # --- commands ----------------------------------------------------------------------------
+    def arm_problems(self, now, extra_problem=None):
+        """Every reason not to arm now (sentences; empty: it may), as a preflight check names
+        them: no configuration given, extra_problem (the caller's, e.g. another publisher of the
+        motor commands), each stale input, and the measured sensor inside a cone or within its
+        guard (the barrier's widening cone_guard_deg plus its floor band barrier_floor_deg).
+        """
+        problems = [p for p in (self.unconfigured, extra_problem) if p]
+        problems += [p for p in (s.staleness(now) for s in self.supervisor.streams) if p]
+        cones = self.setup.config.cones
+        if self.R is not None and len(cones):
+            guard = math.degrees(cones.guard + cones.floor)
+            margins = cones.margins_deg(self.R)
+            for name, margin in zip(cones.names, margins):
+                if margin <= 0.0:
+                    problems.append('sensor inside cone %r (%.2f deg in)' % (name, -margin))
+                elif margin < guard:
+                    problems.append('sensor within the guard of cone %r (margin %.2f deg, '
+                                    'guard %.2f deg)' % (name, margin, guard))
+        return problems
+
     def arm(self, now, extra_problem=None):
-        """Arm unless an input is stale or extra_problem (a sentence from the caller) says no."""
-        result = self.supervisor.arm(now, self.unconfigured or extra_problem)
+        """Arm unless arm_problems names a reason; the refusal names every one."""
+        problems = self.arm_problems(now, extra_problem)
+        result = self.supervisor.arm(now, '; '.join(problems) or None)
         if result.ok:
             self._schedule_index = -1
         return result
