@@ -28,6 +28,7 @@ from geoctl_ros.core.stats import WindowStats
 from geoctl_ros.core.step import ControlTick
 
 NEAR_CONE_DEG = 2.0           # a cone margin below this is reported (WARN)
+BLIND_BOUND_S = 0.12          # s: the blind time the delay guard is derived for (docs/safety.md)
 NON_FINITE = failsafe('non-finite control output')
 
 
@@ -333,6 +334,10 @@ class ControlLoop:
                               % (name, out.margins_deg[i]))
             elif out.margins_deg[i] < NEAR_CONE_DEG:
                 warnings.append('near cone %r (margin %.2f deg)' % (name, out.margins_deg[i]))
+        if sup.armed and self.step.blind > BLIND_BOUND_S:
+            warnings.append('loop blind %.0f ms (its inputs old or its steps late): beyond the '
+                            '%.0f ms the cone guard is derived for'
+                            % (1e3 * self.step.blind, 1e3 * BLIND_BOUND_S))
         w = self._window
         if w['saturated']:
             warnings.append('allocation saturated in %d of %d ticks'

@@ -50,6 +50,7 @@ class ControlTick:
         self.moment = np.zeros(3)       # what the rotors were last told to produce
         self.history = CommandHistory(HISTORY_TICKS, mixer.lag)   # and what before, with when
         self._last_now = None
+        self.blind = 0.0                # the last tick's blind time (blind_time)
         self._clock = 0.0               # the tick's time: now, or (untimed) periods counted
 
     def reconfigure(self, mixer, measurement_delay):
@@ -96,7 +97,7 @@ class ControlTick:
             d = self.measurement_delay + (0.5 * dt if self.mixer.lag > 0.0 else 0.0)
             R, Omega = self.predict(R, Omega, d + ages[0], d + ages[1], self.history, t,
                                     dt if held is None else held)
-        blind = blind_time(self.measurement_delay, ages, dt, held)
+        blind = self.blind = blind_time(self.measurement_delay, ages, dt, held)
         out = self.controller.step(R, Omega, dt, adapt=adapt, blind=blind)
         if not np.isfinite(out.u).all():           # a last line of defence: never command it
             if np.ndim(out.u) > 1:
