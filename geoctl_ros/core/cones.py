@@ -148,7 +148,7 @@ class ConeSet:
         theta_b = self.theta_b + extra_rad
         cos_theta = np.cos(theta_b)
         g0 = cos_theta - np.cos(theta_b + self.floor)
-        return (cos_theta, g0, 1.0 + np.log(1.0 + cos_theta) * self._inv_alpha,
+        return (cos_theta, g0, 1.0 + np.log(1.0 + cos_theta) / self.alpha,
                 1.0 / (self.alpha * g0), np.sin(theta_b) / (self.alpha * g0))
 
     def evaluate_terms(self, sc, widened=None):

@@ -116,15 +116,17 @@ class DelayPredictor:
         age_R = np.asarray(age_R, dtype=float)
         age_Omega = np.asarray(age_Omega, dtype=float)
         horizon = np.maximum(age_R, age_Omega)
-        longest = float(np.max(horizon))
-        if longest <= 0.0:
+        if float(np.max(horizon)) <= 0.0:
             return R, Omega
-        pieces = max(1, int(math.ceil(longest / SUBSTEP_MAX_S - 1e-9)))
-        h = horizon / pieces                              # per run
+        # each run in its own number of equal pieces (so a run's prediction does not depend on
+        # the other runs of its batch); a run with fewer pieces than the most idles (h = 0)
+        pieces = np.maximum(np.ceil(horizon / SUBSTEP_MAX_S - 1e-9), 1.0)
+        h_run = horizon / pieces
         start = now - horizon
         slow = self._acc_slow
-        for j in range(pieces):
-            mid = start + (j + 0.5) * h
+        for j in range(int(np.max(pieces))):
+            h = np.where(j < pieces, h_run, 0.0)
+            mid = start + (j + 0.5) * h_run
             moment = history.at(mid)
             acc = self.acceleration(R, Omega, moment) - slow
             # each measurement moves only after its own capture time

@@ -13,6 +13,7 @@ import numpy as np
 from geoctl_ros.core.prediction import CommandHistory, DelayPredictor
 from geoctl_ros.core.so3 import matvec
 
+ON_TIME_S = 1e-6       # a step less late than this is on time (the clock's rounding)
 HISTORY_TICKS = 64     # the commands remembered for prediction (0.64 s at 100 Hz)
 
 
@@ -23,7 +24,9 @@ def blind_time(delay, ages, dt, held):
     over this time (``core.control.blind_widening``); it is 0 for fresh inputs on time.
     """
     age = delay + np.maximum(ages[0], ages[1])
-    return age if held is None else age + np.maximum(held - dt, 0.0)
+    if held is None or held - dt < ON_TIME_S:
+        return age
+    return age + (held - dt)
 
 
 class TickResult(NamedTuple):

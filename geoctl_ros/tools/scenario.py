@@ -162,11 +162,12 @@ def run(scenario, duration=None):
     for k in range(steps):
         R, t = plant.R, plant.t
         R_seen, Omega_seen = past[0]
-        stamp = max(t - delay * h, 0.0)
+        seen_delay = (len(past) - 1) * h        # the state seen is this old (the first: less)
+        stamp = t - seen_delay
         loop.offer_pose(so3.rot_to_quat(sim.measure_attitude(R_seen)), stamp, t,
-                        delay=t - stamp)
+                        delay=seen_delay)
         loop.offer_angular_velocity(sim.measure_angular_velocity(Omega_seen), stamp, t,
-                                    delay=t - stamp)
+                                    delay=seen_delay)
         if k == 0:
             loop.arm(t)                  # armed from the start; the schedule runs from here
         tick = loop.tick(t, dt)
