@@ -35,50 +35,48 @@ class CommandHistory:
     act at once: each entry holds the moment the rotors produced when it was sent (``start``) and
     the one it asks for (``end``), and the moment in force a time s after sending is
     end + exp(-s / lag) (start - end). Without one, start = end. ``at(t)`` is the moment in force
-    at t (zero before the first entry).
+    at t: zero before the first entry, and the oldest one's for a time older than a full ring.
+
+    Only the times move at a push (``size`` floats, kept sorted for the lookup); the moments stay
+    in their slots: the k-th oldest entry is in slot (newest + 1 + k) % size.
     """
 
     def __init__(self, size, lag=0.0):
         self.size = int(size)
         self.lag = float(lag)
-        self.times = np.full(self.size, -math.inf)    # oldest first
+        self.times = np.full(self.size, -math.inf)    # oldest first; -inf: empty
         self.start = self.end = None
+        self._newest = -1                             # the slot of the newest entry
 
     def push(self, t, end, start=None):
         end = np.asarray(end, dtype=float)
-        start = end if start is None else np.asarray(start, dtype=float)
         if self.end is None or self.end.shape[1:] != end.shape:
             self.start = np.zeros((self.size,) + end.shape)
             self.end = np.zeros((self.size,) + end.shape)
             self.times[:] = -math.inf
-        # shift by one (the ring is short; this keeps lookups a plain searchsorted)
+        self._newest = w = (self._newest + 1) % self.size
+        self.end[w] = end
+        self.start[w] = end if start is None else start
         self.times[:-1] = self.times[1:]
-        self.start[:-1] = self.start[1:]
-        self.end[:-1] = self.end[1:]
         self.times[-1] = t
-        self.start[-1] = start
-        self.end[-1] = end
 
     def at(self, t):
         """The moment in force at times t (a scalar, or one per run of a batch: (N,))."""
         if self.end is None:
             return 0.0
-        i = np.searchsorted(self.times, t, side='right') - 1      # -1: before the first
+        # (before the first entry: an empty slot, all zeros, of time -inf; before a full ring's
+        # oldest: i = -1, that oldest)
+        i = np.maximum(np.searchsorted(self.times, t, side='right') - 1, 0)
+        slot = (self._newest + 1 + i) % self.size
         if np.ndim(t) == 0:
-            if i < 0:
-                return np.zeros(self.end.shape[1:])
-            start, end = self.start[i], self.end[i]
+            start, end = self.start[slot], self.end[slot]
         else:                                                       # each run its own entry
-            runs = np.arange(len(i))
-            k = np.maximum(i, 0)
-            start, end = self.start[k, runs], self.end[k, runs]
-        if self.lag > 0.0:
-            since = np.maximum(t - self.times[np.maximum(i, 0)], 0.0)
-            decay = np.exp(-since / self.lag)
-            m = end + (decay * (start - end).T).T
-        else:
-            m = end
-        return m if np.ndim(t) == 0 else np.where((i >= 0)[:, None], m, 0.0)
+            runs = np.arange(len(slot))
+            start, end = self.start[slot, runs], self.end[slot, runs]
+        if self.lag <= 0.0:
+            return end
+        decay = np.exp(-np.maximum(t - self.times[i], 0.0) / self.lag)
+        return end + (decay * (start - end).T).T
 
 
 class DelayPredictor:

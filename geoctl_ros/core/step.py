@@ -14,7 +14,7 @@ from geoctl_ros.core.prediction import CommandHistory, DelayPredictor
 from geoctl_ros.core.so3 import matvec
 
 ON_TIME_S = 1e-6       # a step less late than this is on time (the clock's rounding)
-HISTORY_TICKS = 64     # the commands remembered for prediction (0.64 s at 100 Hz)
+HISTORY_TICKS = 128    # the commands remembered for prediction (1.28 s at 100 Hz, 0.26 at 500)
 
 
 def blind_time(delay, ages, dt, held):
@@ -37,9 +37,9 @@ class TickResult(NamedTuple):
 
 
 class ControlTick:
-    """One control tick, with the state that ties a tick to the one before: the moment the rotors
-    were last told to produce (the prediction's input) and when the last command went out (the
-    lag compensation's real hold).
+    """One control tick, with the state that ties a tick to the one before: the moments the rotors
+    were told to produce, with when (the prediction's input), and when the last command went out
+    (the lag compensation's real hold).
     """
 
     def __init__(self, controller, mixer, measurement_delay):
@@ -50,11 +50,12 @@ class ControlTick:
         self.predict = DelayPredictor(controller)
         self.mixer = mixer
         self.measurement_delay = measurement_delay
-        self.moment = np.zeros(3)       # what the rotors were last told to produce
-        self.history = CommandHistory(HISTORY_TICKS, mixer.lag)   # and what before, with when
+        # what the rotors were told to produce, with when (the prediction's input)
+        self.history = CommandHistory(HISTORY_TICKS, mixer.lag)
         self._last_now = None
         self.blind = 0.0                # the last tick's blind time (blind_time)
         self._clock = 0.0               # the tick's time: now, or (untimed) periods counted
+        self._ticked = False
 
     def reconfigure(self, mixer, measurement_delay):
         """A new mixer (that has adopted the old one's lag model) and delay, at run time."""
@@ -74,10 +75,11 @@ class ControlTick:
         """The tick's time on the history's clock: now, or for untimed ticks the periods so
         far.
         """
-        if now is None:
-            self._clock = self._clock + dt if self.history.end is not None else 0.0
-        else:
+        if now is not None:
             self._clock = now
+        elif self._ticked:
+            self._clock += dt
+        self._ticked = True
         return self._clock
 
     def __call__(self, R, Omega, dt, now=None, ages=(0.0, 0.0), armed=True, adapt=True,
@@ -108,7 +110,6 @@ class ControlTick:
             out, armed = None, False
         motors = self.mixer.mix(np.zeros(3) if out is None else out.u, armed=armed, dt=dt,
                                 held=held)
-        self.moment = motors.allocation.moment if armed else np.zeros(3)
         self.history.push(t, *self._produced(motors, armed))
         return TickResult(out, motors)
 
@@ -120,7 +121,7 @@ class ControlTick:
         if not armed:
             return np.zeros(3), None
         if mixer.sent_thrusts is None:
-            return self.moment, None
+            return motors.allocation.moment, None
         B = mixer.allocator.B_full[3:]
         return matvec(B, mixer.sent_thrusts), matvec(B, mixer.modelled_thrusts)
 

@@ -17,6 +17,7 @@ the motors.
   arming or a command during the test ends it (the commands take over at once).
 """
 from dataclasses import dataclass
+from enum import Enum
 import threading
 import time
 
@@ -50,6 +51,16 @@ class Test:
     rotor: int                        # 1-based
     command: float
     until: float
+
+
+class Output(Enum):
+    """What a write cycle sends (``EscDriver.targets``)."""
+
+    COMMANDED = 'commanded'        # the controller's fresh command (zero while it is disarmed)
+    TEST = 'test'                  # a motor test
+    REFUSED = 'refused'            # zero: the last message was malformed
+    NONE_YET = 'none yet'          # zero: no command yet
+    STALE = 'stale'                # zero: the command is older than the timeout
 
 
 class EscDriver:
@@ -167,7 +178,9 @@ class EscDriver:
         return t is not None and now - t <= self.config.timeout
 
     def targets(self, now=None):
-        """(normalised command per rotor, why) for the next write."""
+        """(normalised command per rotor, what it is (an Output), why in words) for the next
+        write.
+        """
         now = self.clock() if now is None else now
         with self._lock:
             test = self.test
@@ -176,26 +189,28 @@ class EscDriver:
             if test is not None:
                 out = np.zeros(self.n)
                 out[test.rotor - 1] = test.command
-                return out, 'motor test of rotor %d' % test.rotor
+                return out, Output.TEST, 'motor test of rotor %d' % test.rotor
             if self.command_time is None:
-                return np.zeros(self.n), ('refused: ' + self.refusal if self.refusal
-                                          else 'no command yet')
+                if self.refusal:
+                    return np.zeros(self.n), Output.REFUSED, 'refused: ' + self.refusal
+                return np.zeros(self.n), Output.NONE_YET, 'no command yet'
             if now - self.command_time > self.config.timeout:
-                return np.zeros(self.n), 'commands stale (older than %g s)' % self.config.timeout
-            return self.command, 'commanded'
+                return np.zeros(self.n), Output.STALE, ('commands stale (older than %g s)'
+                                                        % self.config.timeout)
+            return self.command, Output.COMMANDED, 'commanded'
 
     def write(self):
         """One write cycle: every ESC gets its set point; failed transfers are retried and
-        counted. Returns why it wrote what it wrote.
+        counted. Returns why it wrote what it wrote (in words).
         """
-        targets, why = self.targets()
+        targets, output, why = self.targets()
         with self._lock:
             received, self.received = self.received, None
         encoded = protocol.encode(targets, self.config.command_max, self.config.resolution)
         for i, data in enumerate(encoded):
             if i not in self.missing:
                 self._write(i, data, self.config.retries)
-        if received is not None and why == 'commanded':
+        if received is not None and output is Output.COMMANDED:
             self.latency.add(self.clock() - received)
         self.output, self.reason = targets, why
         return why
