@@ -1,6 +1,8 @@
 """Test support (not installed): a monitor that also plays the motion capture, the IMU, an
 operator's set points and a rival controller.
 """
+import math
+
 from geometry_msgs.msg import PoseStamped, QuaternionStamped
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray, UInt32MultiArray
@@ -85,3 +87,22 @@ class FakeInputs(Monitor):
                                                    qos.LATCHED)
         self.pub_armed.publish(armed_state_msg(ArmedState(armed, session)))
 
+
+
+def past_bounds(p):
+    """The values a numeric schema parameter p must refuse, each with a label: NaN, +-inf,
+    +-1e30 and just past each of its bounds (for an array, in its first element, the rest its
+    default). Integers get the integers just past their bounds; the non-integers are refused as
+    the wrong type.
+    """
+    if p.type.startswith('integer'):
+        scalars = [('lo - 1', p.lo - 1), ('hi + 1', p.hi + 1)]
+    else:
+        scalars = [('lo - eps', p.lo - 1e-6 * max(1.0, abs(p.lo))),
+                   ('hi + eps', p.hi + 1e-6 * max(1.0, abs(p.hi)))]
+    scalars += [('nan', math.nan), ('inf', math.inf), ('-inf', -math.inf), ('1e30', 1e30),
+                ('-1e30', -1e30)]
+    if not p.type.endswith('_array'):
+        return scalars
+    base = list(p.default) if p.default else [0.0 if p.type == 'double_array' else 0]
+    return [(label, [v] + base[1:]) for label, v in scalars]

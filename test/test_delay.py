@@ -9,6 +9,7 @@ import pytest
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.control import AttitudeController, approach_rates, blind_widening
+from geoctl_ros.core.diagnostics import ERROR
 from geoctl_ros.core.loop import ControlLoop
 from geoctl_ros.core.prediction import CommandHistory, DelayPredictor
 from geoctl_ros.core.safety import REANCHOR_AFTER, Stream
@@ -160,3 +161,35 @@ def test_arming_is_refused_inside_a_cone_and_within_its_guard_naming_every_faili
     assert 'angular velocity stale' in refused.message and "cone 'obstacle'" in refused.message
     offer(0.0, 2.01)
     assert loop.arm(2.01).ok
+
+
+@odroid
+def test_entering_a_cone_is_an_error_latched_until_disarm_and_counted():
+    """Armed, the sensor taken 3 deg into the cone, out again, and 1 deg in: the diagnostics stay
+    ERROR after it came out, naming the cone and the deepest entry, with 2 entries counted;
+    disarmed, the latch is gone, and the next arming starts the count again.
+    """
+    values = resolve(CONTROLLER, {
+        'cones.names': ['obstacle'], 'cones.obstacle.axis': np.array([1.0, 1.0, 0.0]),
+        'cones.obstacle.half_angle_deg': 12.0, 'allow_default_configuration': True})
+    loop = ControlLoop(controller_setup(values))
+    t = [1.0]
+
+    def fly(yaw_deg):
+        t[0] += 0.01
+        q = so3.rot_to_quat(so3.exp(np.array([0.0, 0.0, math.radians(yaw_deg)])))
+        assert loop.offer_pose(q, t[0], t[0]) is None
+        assert loop.offer_angular_velocity([0.0, 0.0, 0.0], t[0], t[0]) is None
+        loop.tick(t[0], 0.01)
+        return loop.status(t[0])
+    fly(0.0)
+    assert loop.arm(t[0]).ok
+    for yaw in (45.0 - 9.0, 20.0, 45.0 - 11.0):           # 3 deg in, out, 1 deg in
+        fly(yaw)
+    st = fly(0.0)                                         # well clear again
+    assert st.level == ERROR and st.figures.cone_entries == 2
+    assert "sensor entered cone 'obstacle', 3.00 deg deep (2 entries since arming)" in (
+        st.message)
+    loop.disarm()
+    assert 'entered cone' not in fly(0.0).message
+    assert loop.arm(t[0]).ok and fly(0.0).figures.cone_entries == 0

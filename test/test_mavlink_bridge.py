@@ -14,14 +14,18 @@ import rclpy
 os.environ['MAVLINK20'] = '1'
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mav
+from rcl_interfaces.msg import Parameter as Parameter_msg
+from rcl_interfaces.srv import GetParameters
+from rclpy.parameter import Parameter
 from sensor_msgs.msg import Imu
-from support import FakeInputs
+from support import FakeInputs, past_bounds
 
 from geoctl_ros.core import so3
 from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.mavlink import frames, health
 from geoctl_ros.mavlink.params import TABLE
 from geoctl_ros.nodes import qos
+from geoctl_ros.params import BY_NAME, CONTROLLER, cone_param, schema_for
 from geoctl_ros.tools.processes import NodeProcess
 from geoctl_ros.tools.rosenv import config_dir
 
@@ -274,6 +278,70 @@ def key_file(tmp_path, mode=0o600):
     f.write_text(PASSPHRASE + '\n')
     f.chmod(mode)
     return str(f)
+
+
+def _as_sent(value):
+    """A value as a ROS parameter can carry it: a list mixing ints and floats as floats."""
+    if isinstance(value, list) and any(isinstance(v, float) for v in value):
+        return [float(v) for v in value]
+    return value
+
+
+def test_every_numeric_parameter_refuses_hostile_values_through_the_service_and_mavlink(rig):
+    """The issue's table: every numeric parameter of the controller (its cone's too) set to NaN,
+    +-inf, +-1e30 and just past each bound, through the parameter service (as `ros2 param set`)
+    and, for those a ground station edits, through MAVLink PARAM_SET. Each is refused with a
+    reason, and nothing changes. Then, armed, only gains and goals may change.
+    """
+    mon, gcs, _, _, _ = rig
+    g = gcs.conn.mav
+    gcs.wait(lambda m: m.get_type() == 'HEARTBEAT' and is_ours(m), 40.0, 'a heartbeat')
+    numeric = [p for p in schema_for(CONTROLLER)
+               + [cone_param('obstacle', 'axis'), cone_param('obstacle', 'half_angle_deg')]
+               if p.type in ('double', 'double_array', 'integer', 'integer_array')]
+    getter = mon.create_client(GetParameters, '/controller/get_parameters')
+
+    def current():
+        reply = mon._call(getter, GetParameters.Request(names=[p.name for p in numeric]))
+        return [Parameter.from_parameter_msg(Parameter_msg(name=p.name, value=v)).value
+                for p, v in zip(numeric, reply.values)]
+    before = current()
+    tried = 0
+    for p in numeric:
+        for label, value in past_bounds(p):
+            r = mon.set_parameter(p.name, _as_sent(value))
+            assert not r.successful and r.reason, (p.name, label, value)
+            tried += 1
+    assert tried >= 7 * 40
+    assert [np.asarray(v).tolist() for v in current()] == [np.asarray(v).tolist()
+                                                            for v in before]
+    # through MAVLink: the value sent back is the old one, and a STATUSTEXT says why
+    was = dict(zip([p.name for p in numeric], before))
+    for ros, pid, kind in TABLE:
+        if kind != 'REAL32':
+            continue
+        for label, value in past_bounds(BY_NAME[ros]):
+            t0 = time.monotonic()
+            g.param_set_send(SYSID, 1, pid.encode(), value, mav.MAV_PARAM_TYPE_REAL32)
+            back = gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE' and m.param_id == pid, 5.0,
+                            'PARAM_VALUE %s' % pid, mon, since=t0)
+            assert back.param_value == pytest.approx(was[ros], rel=1e-6), (pid, label)
+            gcs.wait(lambda m: m.get_type() == 'STATUSTEXT' and m.text.startswith(
+                pid + ' refused'), 5.0, 'the refusal of %s %s' % (pid, label), mon, since=t0)
+    assert [np.asarray(v).tolist() for v in current()] == [np.asarray(v).tolist()
+                                                            for v in before]
+    # armed: a gain may change, a timeout may not (neither way in)
+    assert mon.arm_when_ready().success
+    refused = mon.set_parameter('pose_timeout', 0.2)
+    assert not refused.successful and 'pose_timeout may change while disarmed only' in (
+        refused.reason)
+    assert mon.set_parameter('k_R', 0.45).successful
+    t0 = time.monotonic()
+    g.param_set_send(SYSID, 1, b'GC_POSE_TO', 0.2, mav.MAV_PARAM_TYPE_REAL32)
+    back = gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE' and m.param_id == 'GC_POSE_TO', 5.0,
+                    'PARAM_VALUE GC_POSE_TO', mon, since=t0)
+    assert back.param_value == pytest.approx(0.1)
+    assert mon.arm(False).success
 
 
 def test_a_key_file_others_can_read_stops_the_bridge(tmp_path):

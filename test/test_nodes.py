@@ -14,7 +14,7 @@ from rclpy.parameter import Parameter
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 from rosgraph_msgs.msg import Clock
-from std_srvs.srv import Trigger
+from std_srvs.srv import SetBool, Trigger
 from support import FakeInputs
 
 from geoctl_ros.core import so3
@@ -243,7 +243,9 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     # (the armed span begins at the recorder's first controller diagnostics, which discovery can
     # delay by most of a second: 0.73 s in one CI run)
     assert s['failsafes'] == 0 and s['armed_s'][1] - s['armed_s'][0] > FLIGHT_S - 1.0
-    assert s['final_psi'] == pytest.approx(psi[-1], rel=0.25)      # settled: Psi ~0.006 here
+    # settled, as this monitor saw it (two samples of a decaying, oscillating Psi taken at
+    # different instants are not compared with each other)
+    assert 0.0 < s['final_psi'] < 0.05 * max(psi)
     assert s['gaps_ridden']['pose'] >= diag.figures.pose_gaps.count     # counters: the record
     assert s['gaps_ridden']['imu'] >= diag.figures.imu_gaps.count       # ends a little later
 
@@ -472,6 +474,20 @@ def test_without_a_parameter_file_every_arm_is_refused_until_the_opt_in(ros):
     assert reply.success, reply.message
     mon.wait_for(lambda: not zero_commands(mon), 2.0, 'the motors running on the defaults')
     assert mon.arm(False).success
+
+
+def test_a_controller_whose_file_does_not_address_its_namespace_is_not_configured(ros):
+    """The issue's case: `controller --ros-args -r __ns:=/hex --params-file testbed.yaml` got the
+    file's /** values (mass, gravity) and armed with 0 cones. Those alone no longer count: it
+    says it has no configuration of its own, naming itself, and refuses every arm.
+    """
+    mon, launch = ros
+    hexed = launch('controller', TESTBED, '-r', '__ns:=/hex')
+    mon.wait_for(lambda: 'no configuration given for /hex/controller' in hexed.output(), 30.0,
+                 'the namespaced controller')
+    arm = mon.create_client(SetBool, '/hex/controller/arm')
+    reply = mon._call(arm, SetBool.Request(data=True))
+    assert not reply.success and 'no configuration given for /hex/controller' in reply.message
 
 
 def test_sim_refuses_garbage_motor_commands(ros):

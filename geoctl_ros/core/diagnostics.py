@@ -100,6 +100,7 @@ class Figures:
     imu_gaps: Gaps = Gaps(0, 0.0)
     ticks_bridging: int = 0
     ticks: int = 0
+    cone_entries: int = 0          # times the sensor entered a cone since arming (latched)
     psi: Optional[float] = None
     min_cone_margin_deg: Optional[float] = None
     motor_commands: Optional[tuple] = None
@@ -176,6 +177,7 @@ KEYS = {
     'imu_gaps': ('imu gaps ridden through', '%d (longest %.3f s)'.__mod__, _gaps_value),
     'ticks_bridging': ('ticks bridging a gap', str, int),
     'ticks': ('ticks', str, int),
+    'cone_entries': ('cone entries since arming', str, int),
     'loop_period': ('loop period [ms]', _window_text, _window_value),
     'tick_to_command': ('tick to motor command [ms]', _window_text, _window_value),
     'pose_to_command_latency': ('pose-to-command latency [ms]', _window_text, _window_value),

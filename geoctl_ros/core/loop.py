@@ -106,7 +106,12 @@ class ControlLoop:
         # per diagnostics window: input ages at the ticks, armed ticks saturated / bridging
         self.pose_age = WindowStats()
         self.rate_age = WindowStats()
-        self._window = {'ticks': 0, 'saturated': 0, 'bridging': 0}
+        self._window = {'ticks': 0, 'saturated': 0, 'bridging': 0, 'blind_ms': 0}
+        # the sensor inside a cone while armed, latched until the next arming: entries counted,
+        # the deepest (cone name, depth deg)
+        self.cone_entries = 0
+        self.entry = None
+        self._inside = False
         self.gaps = {'pose': [0, 0.0], 'angular velocity': [0, 0.0]}   # count, longest (s)
 
     # --- inputs ------------------------------------------------------------------------------
@@ -188,9 +193,12 @@ class ControlLoop:
     def arm(self, now, extra_problem=None):
         """Arm unless arm_problems names a reason; the refusal names every one."""
         problems = self.arm_problems(now, extra_problem)
+        was_armed = self.supervisor.armed
         result = self.supervisor.arm(now, '; '.join(problems) or None)
         if result.ok:
             self._schedule_index = -1
+            if not was_armed:
+                self.cone_entries, self.entry, self._inside = 0, None, False
         return result
 
     def disarm(self, reason='disarm requested'):
@@ -254,6 +262,10 @@ class ControlLoop:
             if out is None:
                 self.disarm(NON_FINITE)
                 armed = False
+            elif armed and out.violated:
+                self._note_entry(out)
+            else:
+                self._inside = False
             tick = self._result(out, motors, armed, bridging)
         if self.pose.last_receipt is not None:
             self.pose_age.add(self.pose.age(now))
@@ -263,8 +275,23 @@ class ControlLoop:
         w['ticks'] += 1
         w['saturated'] += bool(armed and tick.motors.allocation.saturated)
         w['bridging'] += bool(armed and tick.bridging)
+        if armed:
+            w['blind_ms'] = max(w['blind_ms'], int(1e3 * self.step.blind))
         self.last_tick = tick
         return tick
+
+    def _note_entry(self, out):
+        """The sensor is inside a cone while armed: count the entry, keep the deepest (latched
+        until the next arming).
+        """
+        margins = out.margins_deg
+        i = int(np.argmin(margins))
+        depth = -float(margins[i])
+        if not self._inside:
+            self.cone_entries += 1
+            self._inside = True
+        if self.entry is None or depth > self.entry[1]:
+            self.entry = (self.setup.config.cones.names[i], depth)
 
     def _result(self, out, motors, armed, bridging):
         b = self.bridge
@@ -326,19 +353,28 @@ class ControlLoop:
                                                                  s.refused))
         tick = self.last_tick
         out = tick.control if tick else None
+        if sup.armed and self.entry is not None:
+            errors.append('sensor entered cone %r, %.2f deg deep (%d entr%s since arming)'
+                          % (self.entry[0], self.entry[1], self.cone_entries,
+                             'y' if self.cone_entries == 1 else 'ies'))
         if out is not None and len(out.margins_deg):
             i = int(np.argmin(out.margins_deg))
             name = self.setup.config.cones.names[i]
+            cones = self.setup.config.cones
+            near = max(NEAR_CONE_DEG, math.degrees(cones.guard + cones.floor))
             if out.violated:
                 errors.append('sensor inside cone %r (margin %.2f deg)'
                               % (name, out.margins_deg[i]))
-            elif out.margins_deg[i] < NEAR_CONE_DEG:
+            elif out.margins_deg[i] < near:
                 warnings.append('near cone %r (margin %.2f deg)' % (name, out.margins_deg[i]))
-        if sup.armed and self.step.blind > BLIND_BOUND_S:
-            warnings.append('loop blind %.0f ms (its inputs old or its steps late): beyond the '
-                            '%.0f ms the cone guard is derived for'
-                            % (1e3 * self.step.blind, 1e3 * BLIND_BOUND_S))
         w = self._window
+        if sup.armed and w['blind_ms'] > 1e3 * BLIND_BOUND_S:
+            warnings.append('loop blind up to %d ms (inputs up to %.0f ms old by receipt, plus '
+                            'their delay to receipt and late steps): beyond the %.0f ms the cone '
+                            'guard is derived for' % (w['blind_ms'], 1e3 * max(
+                                np.max(self.pose_age.samples(), initial=0.0),
+                                np.max(self.rate_age.samples(), initial=0.0)),
+                                1e3 * BLIND_BOUND_S))
         if w['saturated']:
             warnings.append('allocation saturated in %d of %d ticks'
                             % (w['saturated'], w['ticks']))
@@ -357,7 +393,7 @@ class ControlLoop:
             imu_counts=Counts(self.rate.accepted, self.rate.refused),
             pose_age_at_tick=self.pose_age.window(), imu_age_at_tick=self.rate_age.window(),
             pose_gaps=Gaps(*self.gaps['pose']), imu_gaps=Gaps(*self.gaps['angular velocity']),
-            ticks_bridging=w['bridging'], ticks=w['ticks'],
+            ticks_bridging=w['bridging'], ticks=w['ticks'], cone_entries=self.cone_entries,
             psi=None if out is None else float(out.psi), min_cone_margin_deg=margin,
             motor_commands=None if out is None else tuple(int(c) for c in tick.motors.commands))
         message = '; '.join(errors + warnings) or 'armed, all inputs fresh'

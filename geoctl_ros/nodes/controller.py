@@ -35,7 +35,15 @@ from geoctl_ros.nodes.conversions import (
     vector,
 )
 from geoctl_ros.nodes.runtime import spin
-from geoctl_ros.params import CONTROLLER, ConfigError, controller_setup, resolve
+from geoctl_ros.params import (
+    CHANGE_WHILE_ARMED,
+    CONTROLLER,
+    ConfigError,
+    change_problem,
+    configuration_given,
+    controller_setup,
+    resolve,
+)
 
 DIAGNOSTICS_PERIOD = 0.5      # s: the fixed statistics window
 STATUS_NAME = 'geoctl_ros: controller'
@@ -50,15 +58,18 @@ def build(values):
 
 class ControllerNode(Node):
     def _unconfigured(self, setup):
-        """Why this node flies nothing it was given, or None: no parameter file and no override
-        reached it (a launch file's missing params_file only warns and passes none).
+        """Why this node flies nothing it was given, or None: no parameter of its own reached it
+        (no file, a launch file's missing params_file, which only warns and passes none, or a
+        file whose sections name another node or namespace: its ``/**`` values alone do not
+        configure a controller).
         """
-        given = set(self._parameter_overrides) - {'use_sim_time', 'allow_default_configuration'}
-        if given or setup.loop.allow_default_configuration:
+        if (configuration_given(CONTROLLER, ros_params.file_overrides(self))
+                or setup.loop.allow_default_configuration):
             return None
-        return ('no configuration given: started without a parameter file, so every arm '
-                'request is refused (give --params-file FILE, or -p '
-                'allow_default_configuration:=true to fly the built-in defaults deliberately)')
+        return ('no configuration given for %s: no parameter file (or none addressed to this '
+                'name and namespace), so every arm request is refused (give --params-file FILE '
+                'with a section for it, or -p allow_default_configuration:=true to fly the '
+                'built-in defaults deliberately)' % self.get_fully_qualified_name())
 
     def __init__(self, **kwargs):
         super().__init__('controller', allow_undeclared_parameters=True, **kwargs)
@@ -206,10 +217,15 @@ class ControllerNode(Node):
         response.success, response.message = True, 'disturbance estimate reset to zero'
         return response
 
-    def _validate(self, values):
-        """A run-time change: the whole configuration, and the set point now being flown (which
-        may have come in on the topic) against the new cones.
+    def _validate(self, values, changed):
+        """A run-time change: only gains and goals while armed (``CHANGE_WHILE_ARMED``), the
+        whole configuration, and the set point now being flown (which may have come in on the
+        topic) against the new cones.
         """
+        if self.loop.supervisor.armed:
+            problem = change_problem(changed, CHANGE_WHILE_ARMED, 'while disarmed')
+            if problem:
+                raise ConfigError([('armed', problem)])
         setup = build(values)
         problem = self.loop.reconfiguration_problem(setup)
         if problem:

@@ -30,7 +30,7 @@ from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.conversions import armed_state_of, session_of
 from geoctl_ros.nodes.runtime import RefusalLog, spin
-from geoctl_ros.params import ESC, ConfigError, resolve
+from geoctl_ros.params import ESC, ESC_LIVE, ConfigError, change_problem, resolve
 
 REPORT_PERIOD = 0.5             # s between diagnostics and telemetry messages
 
@@ -68,7 +68,7 @@ class EscNode(Node):
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
         self.create_service(Trigger, '~/motor_test', self._on_motor_test)
         self.create_service(Trigger, '~/motor_test_stop', self._on_motor_test_stop)
-        ros_params.watch(self, ESC, lambda v: resolve(ESC, v), self._on_params)
+        ros_params.watch(self, ESC, self._validate, self._on_params)
         self.create_timer(REPORT_PERIOD, self._report)
         self._thread = threading.Thread(target=self._bus_loop, name='esc bus', daemon=True)
         self._thread.start()
@@ -136,6 +136,13 @@ class EscNode(Node):
     @property
     def armed(self):
         return self.driver.armed
+
+    def _validate(self, values, changed):
+        """A run-time change: only of what this node applies live (``ESC_LIVE``)."""
+        problem = change_problem(changed, ESC_LIVE, 'at start (restart esc_i2c)')
+        if problem:
+            raise ConfigError([('esc_i2c', problem)])
+        return resolve(ESC, values)
 
     def _on_params(self, values, changed):
         self.values = values

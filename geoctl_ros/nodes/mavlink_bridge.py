@@ -91,6 +91,7 @@ class MavlinkBridge(Node):
         self._text_period = 1.0 / cfg.statustext_rate_hz
         self._last_text = -1e9
         self._last_diag = (None, None)
+        self._cone_entries = 0          # the controller's cone entries last reported
         ctl = '/' + cfg.controller.strip('/')
 
         view = self.vehicle.view
@@ -181,6 +182,10 @@ class MavlinkBridge(Node):
                 continue
             status = status_of(s)
             self.vehicle.view.diagnostics = status
+            entries = status.figures.cone_entries
+            if entries > self._cone_entries:      # the sensor entered a cone: never rate-limited
+                self._text(s.message, 'MAV_SEVERITY_CRITICAL')
+            self._cone_entries = entries
             if status.level >= WARN and (status.level, s.message) != self._last_diag:
                 self._text(s.message, 'MAV_SEVERITY_ERROR' if status.level >= ERROR else
                            'MAV_SEVERITY_WARNING', limited=True)

@@ -147,18 +147,19 @@ def values(node, kind, pending=()):
 
 
 def watch(node, kind, build, apply):
-    """Validate every parameter change with build(values) (raising ConfigError); after a change
-    is accepted, call apply(build(values), changed names).
+    """Validate every parameter change with build(values, changed names) (raising ConfigError);
+    after a change is accepted, call apply(build(values, changed), changed names).
     """
     def on_set(params):
         try:
-            build(values(node, kind, params))
+            build(values(node, kind, params), {p.name for p in params})
         except ConfigError as e:
             return SetParametersResult(successful=False, reason=str(e))
         return SetParametersResult(successful=True)
 
     def after_set(params):
-        apply(build(values(node, kind)), {p.name for p in params})
+        changed = {p.name for p in params}
+        apply(build(values(node, kind), changed), changed)
 
     node.add_on_set_parameters_callback(on_set)
     node.add_post_set_parameters_callback(after_set)

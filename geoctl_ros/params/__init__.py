@@ -33,10 +33,12 @@ from geoctl_ros.params.files import (
 from geoctl_ros.params.schema import (
                                      BOTH,
                                      BY_NAME,
+                                     CHANGE_WHILE_ARMED,
                                      CONE_KEY,
                                      CONE_SCHEMA,
                                      CONTROLLER,
                                      ESC,
+                                     ESC_LIVE,
                                      LAB_INERTIA,
                                      MAVLINK,
                                      RECORD,
@@ -49,13 +51,18 @@ from geoctl_ros.params.schema import (
                                      cone_param,
                                      schema_for,
 )
-from geoctl_ros.params.validate import check_value, resolve
+from geoctl_ros.params.validate import (
+    change_problem,
+    check_value,
+    configuration_given,
+    resolve,
+)
 
-__all__ = ['BOTH', 'BY_NAME', 'CONE_KEY', 'CONE_SCHEMA', 'CONTROLLER', 'ConfigError', 'ESC',
-           'ControllerSetup', 'LAB_INERTIA', 'MAVLINK', 'Param', 'RECORD', 'SCENARIO', 'SCHEMA',
-           'SIM', 'VIEW',
-           'airframe',
-           'check_value', 'cone_param', 'cone_set', 'controller_config', 'controller_setup',
-           'flatten', 'load_parameter_file', 'mixer', 'node_overrides', 'plant_config', 'resolve',
-           'write_parameter_file',
+__all__ = ['BOTH', 'BY_NAME', 'CHANGE_WHILE_ARMED', 'CONE_KEY', 'CONE_SCHEMA', 'CONTROLLER',
+           'ConfigError', 'ESC', 'ESC_LIVE', 'ControllerSetup', 'LAB_INERTIA', 'MAVLINK', 'Param',
+           'RECORD', 'SCENARIO', 'SCHEMA', 'SIM', 'VIEW',
+           'airframe', 'change_problem', 'check_value', 'cone_param',
+           'configuration_given', 'cone_set',
+           'controller_config', 'controller_setup', 'flatten', 'load_parameter_file', 'mixer',
+           'node_overrides', 'plant_config', 'resolve', 'write_parameter_file',
            'schema_for', 'setpoint_rotation', 'settings', 'testbed_sim']

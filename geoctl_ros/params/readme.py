@@ -4,17 +4,26 @@
 """
 import sys
 
-from geoctl_ros.params.schema import CONE_SCHEMA, LAB_INERTIA, SCHEMA
+from geoctl_ros.params.schema import (
+    CHANGE_WHILE_ARMED,
+    CONE_SCHEMA,
+    CONTROLLER,
+    LAB_INERTIA,
+    SCHEMA,
+)
 
 
 def markdown_table():
     """The README's parameter table."""
-    rows = ['| parameter | node | type | default | unit | meaning |', '|---|---|---|---|---|---|']
+    rows = ['| parameter | node | type | default | range | unit | meaning |',
+            '|---|---|---|---|---|---|---|']
     for p in SCHEMA + CONE_SCHEMA:
         default = '(required)' if p.default is None else _fmt_default(p.default)
-        rows.append('| `%s` | %s | %s%s | %s | %s | %s |' % (
+        rows.append('| `%s` | %s | %s%s | %s | %s | %s | %s%s |' % (
             p.name, ', '.join(p.nodes), p.type, '[%d]' % p.length if p.length else '', default,
-            p.unit, p.doc))
+            p.range_text, p.unit, p.doc,
+            '' if CONTROLLER not in p.nodes or p.name in CHANGE_WHILE_ARMED
+            else ' (not while armed)'))
     return '\n'.join(rows)
 
 

@@ -67,8 +67,20 @@ def check_value(p, value):
         out = list(value)
     else:  # pragma: no cover - schema error
         raise AssertionError('unknown parameter type %r' % t)
-    reason = p.check(out) if p.check else None
+    reason = (p.check(out) if p.check else None) or _range_problem(p, out)
     return (None, reason) if reason else (out, None)
+
+
+def _range_problem(p, value):
+    """Why a number (or an array's element) of p is outside its documented range, or None."""
+    if p.lo is None:
+        return None
+    values = np.atleast_1d(np.asarray(value, dtype=float))
+    if values.size and (values.min() < p.lo or values.max() > p.hi):
+        bad = values[(values < p.lo) | (values > p.hi)][0]
+        return 'must be in %s (got %r)' % (p.range_text, float(bad) if p.type.startswith(
+            'double') else int(bad))
+    return None
 
 
 def _describe(value):
@@ -130,3 +142,22 @@ def _suggest(key):
     return ' (did you mean %r?)' % close[0] if close else ''
 
 
+def change_problem(changed, allowed, when):
+    """Why changing the parameters changed is refused (a sentence naming them), or None: each
+    must be one of allowed, or a parameter no node reads; when says when they may change.
+    """
+    refused = sorted(n for n in changed if n not in allowed
+                     and (n in BY_NAME or CONE_KEY.match(n) or n == 'cones.names'))
+    if not refused:
+        return None
+    return '%s may change %s only' % (', '.join(refused), when)
+
+
+def configuration_given(node, names):
+    """Whether the parameters names, as given to node at start (files and -p), configure it: at
+    least one of them is a parameter only this node reads (a cone, for the controller). The
+    values a ``/**`` section shares with other nodes (mass, gravity, ...) do not count, so a
+    node started under a name or namespace its file does not address is not configured.
+    """
+    return any(CONE_KEY.match(n) or n == 'cones.names'
+               or (n in BY_NAME and BY_NAME[n].nodes == (node,)) for n in names)

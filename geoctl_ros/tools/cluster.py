@@ -14,6 +14,7 @@ on another; each task's result is handed over once, so no task is lost or counte
 import contextlib
 import logging
 import os
+import signal
 import threading
 import time
 import uuid
@@ -96,8 +97,15 @@ def run_tasks(client, fn, tasks, on_result, progress=None, weights=None):
     done = 0.0
     finished = as_completed(futures, with_results=False)
     shown = 0.0
+    # Ctrl-C sets a flag this loop polls (in the main thread): a KeyboardInterrupt raised inside
+    # the client's own waits can be swallowed there (a CI run flew on to 100 % after SIGINT)
+    interrupt = threading.Event()
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, lambda *_: interrupt.set()) if main else None
     try:
         while not finished.is_empty():
+            if interrupt.is_set():
+                raise KeyboardInterrupt
             batch = finished.next_batch(block=False)
             for future in batch:
                 i = index[future.key]
@@ -119,4 +127,6 @@ def run_tasks(client, fn, tasks, on_result, progress=None, weights=None):
         client.cancel([f for f in futures if not f.done()])
         raise
     finally:
+        if main:
+            signal.signal(signal.SIGINT, previous)
         client.unsubscribe_topic(PROGRESS_TOPIC)
