@@ -296,6 +296,11 @@ def test_every_numeric_parameter_refuses_hostile_values_through_the_service_and_
     mon, gcs, _, _, _ = rig
     g = gcs.conn.mav
     gcs.wait(lambda m: m.get_type() == 'HEARTBEAT' and is_ours(m), 40.0, 'a heartbeat')
+    g.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+    t0 = time.monotonic()
+    g.param_request_list_send(SYSID, 1)
+    gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE' and m.param_index == len(TABLE) - 1, 10.0,
+             'the whole parameter list', mon, since=t0)
     numeric = [p for p in schema_for(CONTROLLER)
                + [cone_param('obstacle', 'axis'), cone_param('obstacle', 'half_angle_deg')]
                if p.type in ('double', 'double_array', 'integer', 'integer_array')]

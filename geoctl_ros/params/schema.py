@@ -7,7 +7,7 @@ Each ``Param`` has its ROS 2 type, default, unit, one-line doc, the nodes that r
 (``geoctl_ros.params.readme``). Cones are parameters too: ``cones.names: [a, b]`` plus
 ``cones.<name>.axis`` and ``cones.<name>.half_angle_deg`` per name (``CONE_SCHEMA``).
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import re
 
 import numpy as np
@@ -455,7 +455,6 @@ def schema_for(node):
 def cone_param(name, field_):
     """The schema entry for cones.<name>.<field_> (field_ is 'axis' or 'half_angle_deg')."""
     template = {'axis': CONE_SCHEMA[0], 'half_angle_deg': CONE_SCHEMA[1]}[field_]
-    return Param(template.name.replace('<name>', name), template.type, None, template.unit,
-                 template.doc, template.nodes, template.length, template.check)
+    return replace(template, name=template.name.replace('<name>', name))
 
 
