@@ -280,7 +280,9 @@ class AttitudeController:
         sc = y[..., 4:4 + 4 * n].reshape(y.shape[:-1] + (n, 4))
         widened = None
         if n and any_flag(np.asarray(blind) > 0.0):
-            widened = cfg.cones.widened(blind_widening(sc, Omega, blind, cfg.blind_guard_max))
+            extra = blind_widening(sc, Omega, blind, cfg.blind_guard_max)
+            if extra.max() > 0.0:                  # (else no cone is being approached)
+                widened = cfg.cones.widened(extra)
         ev = cfg.cones.evaluate_terms(sc, widened)
         psi, e_R = with_cones(A, e_RA, ev)
         e_Omega = Omega

@@ -63,7 +63,7 @@ class CommandHistory:
     def at(self, t):
         """The moment in force at times t (a scalar, or one per run of a batch: (N,))."""
         if self.end is None:
-            return 0.0
+            return np.zeros(3)
         # (before the first entry: an empty slot, all zeros, of time -inf; before a full ring's
         # oldest: i = -1, that oldest)
         i = np.maximum(np.searchsorted(self.times, t, side='right') - 1, 0)
@@ -109,8 +109,12 @@ class DelayPredictor:
         the part of the window after its own capture, the attitude only after its own (the
         attitude with the mean of the rates at either end of the piece).
         """
-        acc0 = self.acceleration(R, Omega, history.at(now))
+        moment_now = history.at(now)
+        acc0 = self.acceleration(R, Omega, moment_now)
         self._acc_slow = self._acc_slow + (acc0 - self._acc_slow) * (dt / (PREDICT_SLOW_S + dt))
+        if np.ndim(age_R) == 0 and np.ndim(age_Omega) == 0:
+            return self._scalar_ages(R, Omega, float(age_R), float(age_Omega), history, now,
+                                     acc0, moment_now)
         age_R = np.asarray(age_R, dtype=float)
         age_Omega = np.asarray(age_Omega, dtype=float)
         horizon = np.maximum(age_R, age_Omega)
@@ -125,12 +129,41 @@ class DelayPredictor:
         for j in range(int(np.max(pieces))):
             h = np.where(j < pieces, h_run, 0.0)
             mid = start + (j + 0.5) * h_run
-            moment = history.at(mid)
-            acc = self.acceleration(R, Omega, moment) - slow
+            acc = self._piece_acceleration(j, R, Omega, history.at(mid), acc0, moment_now) - slow
             # each measurement moves only after its own capture time
             hw = np.where(mid > now - age_Omega, h, 0.0)
             hr = np.where(mid > now - age_R, h, 0.0)
             Omega_next = Omega + (acc.T * hw).T
             R = R @ so3.exp(((0.5 * (Omega + Omega_next)).T * hr).T)
+            Omega = Omega_next
+        return R, Omega
+
+    def _piece_acceleration(self, j, R, Omega, moment, acc0, moment_now):
+        """The model's acceleration in piece j under moment. The first piece starts at the
+        measured state, where it is acc0 under moment_now: under another moment it differs by
+        J^-1 times the difference (it is linear in the moment), which saves a model evaluation.
+        """
+        if j == 0:
+            return acc0 + matvec(self.controller.J_inv, moment - moment_now)
+        return self.acceleration(R, Omega, moment)
+
+    def _scalar_ages(self, R, Omega, age_R, age_Omega, history, now, acc0, moment_now):
+        """``__call__`` for ages shared by every run (one run, or a batch on one clock): the
+        same pieces, in plain floats (the node's tick; numpy on scalars costs more than the
+        arithmetic).
+        """
+        horizon = max(age_R, age_Omega)
+        if horizon <= 0.0:
+            return R, Omega
+        pieces = max(math.ceil(horizon / SUBSTEP_MAX_S - 1e-9), 1)
+        h = horizon / pieces
+        start = now - horizon
+        slow = self._acc_slow
+        for j in range(pieces):
+            mid = start + (j + 0.5) * h
+            acc = self._piece_acceleration(j, R, Omega, history.at(mid), acc0, moment_now) - slow
+            Omega_next = Omega + acc * h if mid > now - age_Omega else Omega
+            if mid > now - age_R:
+                R = R @ so3.exp((0.5 * (Omega + Omega_next)) * h)
             Omega = Omega_next
         return R, Omega
