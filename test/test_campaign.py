@@ -29,7 +29,8 @@ def test_the_distribution_is_what_the_readme_says():
     r = np.array([1.0, 0.0, 0.0])
     for i in range(40):
         m = manoeuvres.draw_manoeuvre(7, i, r)
-        assert 1 <= len(m['cones']) <= 4 and 0 <= m['latency_ms'] <= 10
+        assert 1 <= len(m['cones']) <= 4 and 0 <= m['latency_ms'] <= 80
+        assert all(0.01 <= length <= 0.04 for _, length in m['stalls'])
         axes = [np.array(v) for v, _ in m['cones']]
         for (v, theta) in m['cones']:
             assert 10.0 <= theta <= 35.0

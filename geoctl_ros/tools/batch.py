@@ -36,6 +36,7 @@ from geoctl_ros.params import (
 )
 from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
 from geoctl_ros.sim.testbed import RotorActuator
+from geoctl_ros.tools.scenario import stalled_steps
 
 SETTLED_DEG = 5.0       # attitude error below which a run has converged (at the end) or settled
 
@@ -166,6 +167,12 @@ def run_batch(scenarios, progress=None, series=True):
     stamped = setup.loop.age_from_stamps
     tick = ControlTick(controller, setup.mixer, 0.0 if stamped else setup.loop.measurement_delay)
     ages = (0.0, 0.0)
+    # input stalls: no new sample at a stalled step, the run flies on its last one (as the loop's
+    # streams age it: its delay at receipt plus the time since, on the plant's clock)
+    stalled = np.stack([stalled_steps(s.options, steps, dt) for s in scenarios], axis=1)
+    any_stall = bool(stalled.any())
+    receipt, last_delay = np.zeros(n), np.zeros(n)
+    R_seen, W_seen = plant.R, plant.Omega
     min_margin = cones.margins_deg(plant.R)
     margin_series = np.empty((steps, n)) if series else None
     sensor_series = np.empty((steps, n, 3), dtype=np.float32) if series else None
@@ -177,11 +184,22 @@ def run_batch(scenarios, progress=None, series=True):
     t0 = time.perf_counter()
     for k in range(steps):
         seen = np.maximum(j - delay, 0) % ring
-        R_seen = R_past[seen, runs] @ so3.exp(noise[0, k])
-        W_seen = W_past[seen, runs] + gyro_bias + noise[1, k]
+        R_new = R_past[seen, runs] @ so3.exp(noise[0, k])
+        W_new = W_past[seen, runs] + gyro_bias + noise[1, k]
+        if any_stall:
+            fresh = ~stalled[k]
+            R_seen = np.where(fresh[:, None, None], R_new, R_seen)
+            W_seen = np.where(fresh[:, None], W_new, W_seen)
+            receipt = np.where(fresh, plant.t, receipt)
+            last_delay = np.where(fresh, delay * h, last_delay)
+            age = (last_delay + np.maximum(plant.t - receipt, 0.0)) if stamped else (
+                plant.t - receipt)
+            ages = (age, age)
+        else:
+            R_seen, W_seen = R_new, W_new
+            if stamped:      # (before the start, the testbed sat at its initial state)
+                ages = (delay * h,) * 2
         max_rate = np.maximum(max_rate, np.linalg.norm(W_seen, axis=-1))
-        if stamped:                 # (the first samples are the initial state's, as old as it)
-            ages = (np.minimum(delay, j) * h,) * 2
         out, motors = tick(R_seen, W_seen, dt, ages=ages)
         saturated += motors.allocation.saturated
         last_unsettled[_cos_error(controller.R_d, plant.R) <= cos_settled] = k

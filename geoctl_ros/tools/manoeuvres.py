@@ -21,9 +21,12 @@ cone count without drawing them, and its second everything else):
 - the testbed (``config/testbed.yaml``): its gains, rotors, thrust curve, 40 ms motor lag and
   saturation, motion-capture (0.1 deg) and gyro (0.005 rad/s) noise, 100 Hz control, 1 kHz
   integration, 20 s;
-- per run: measurement latency 0-10 ms (whole ms, uniform); a constant disturbance of uniform
-  direction and magnitude up to 0.05 N m (``--disturbance-max``; with the gravity moment of the
-  errors below the estimate sees at most 0.40 N m, within its bound delta_bar_max = 1 N m); the
+- per run: measurement latency 0-80 ms (whole ms, uniform), and input stalls, 0.5 a second on
+  average (Poisson), each 10-40 ms (whole ms, uniform), so the controller's inputs are up to
+  120 ms old, as the sim-in-the-loop measured them on a busy machine; a constant disturbance of
+  uniform direction and magnitude up to 0.05 N m (``--disturbance-max``; with the gravity moment
+  of the errors below the estimate sees at most 0.40 N m, within its bound delta_bar_max =
+  1 N m); the
   true mass off by up to +-20 %; the true inertia's mass distribution stretched by up to +-20 %
   along each body axis (second moment E = tr(J)/2 I - J -> S E S, S = diag(sqrt(f)), f uniform
   0.8-1.2; J = tr(E) I - E stays a physical inertia); the true centre-of-mass offset scaled by
@@ -58,6 +61,9 @@ TWIST_DEG = 15.0                   # turn about the sensor axis from the most up
 CONE_ELEVATION_DEG = 20.0          # cone axes within this of the horizon
 DISTURBANCE_MAX = 0.05             # N m, largest constant disturbance (see the README)
 MODEL_ERROR = 0.2                  # true mass, inertia stretch and centre of mass within +-20 %
+LATENCY_MS_MAX = 80                # measurement latency 0..this (whole ms, uniform)
+STALL_RATE = 0.5                   # input stalls per second (Poisson)
+STALL_MS = (10, 40)                # each stall's length (whole ms, uniform)
 
 
 def unit(v):
@@ -127,7 +133,7 @@ def _place_cones(rng, n):
             return theta[k], list(axes[k])
 
 
-def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None):
+def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None, duration=20.0):
     """The random part of run index of campaign seed: a dict of per-run values. goal_ok(cones,
     R_d) (cones as [(axis, half-angle deg)]), if given, must accept the goal (else redrawn).
     """
@@ -155,13 +161,24 @@ def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None):
     return {
         'cones': [(list(map(float, v)), float(t)) for v, t in zip(axes, theta)],
         'R0': R0, 'R_d': R_d,
-        'latency_ms': int(rng.integers(0, 11)),
+        'latency_ms': int(rng.integers(0, LATENCY_MS_MAX + 1)),
         'disturbance': push * rng.uniform(0.0, 1.0),      # times --disturbance-max
         'mass_factor': rng.uniform(1.0 - MODEL_ERROR, 1.0 + MODEL_ERROR),
         'inertia_factors': rng.uniform(1.0 - MODEL_ERROR, 1.0 + MODEL_ERROR, 3),
         'cog_factor': rng.uniform(1.0 - MODEL_ERROR, 1.0 + MODEL_ERROR),
         'noise_seed': int(rng.integers(0, 2 ** 31)),
+        'stalls': _stalls(rng, duration),
     }
+
+
+def _stalls(rng, duration):
+    """Input stalls of a run: STALL_RATE a second on average (Poisson), each at a uniform time
+    and STALL_MS long (whole ms, uniform), as (start s, length s) pairs in time order.
+    """
+    count = int(rng.poisson(STALL_RATE * duration))
+    starts = np.sort(rng.uniform(0.0, duration, count))
+    lengths = rng.integers(STALL_MS[0], STALL_MS[1] + 1, count) / 1000.0
+    return [(float(a), float(b)) for a, b in zip(starts, lengths)]
 
 
 def _floats(a):
@@ -216,7 +233,8 @@ class Manoeuvres:
         flown all the same, with the check off (0), so that every gain set flies every run;
         ``goal_refused`` tells.
         """
-        m = draw_manoeuvre(seed, index, self.nominal_c['sensor_axis'], self._goal_ok)
+        m = draw_manoeuvre(seed, index, self.nominal_c['sensor_axis'], self._goal_ok,
+                           self.duration)
         base = self.base
         controller = {k: v for k, v in base.get('controller', {}).items()
                       if not k.startswith(('cones.', 'setpoint'))}
@@ -246,7 +264,9 @@ class Manoeuvres:
         return {
             '/**': dict(base.get('/**', {})), 'controller': controller, 'sim': sim,
             'scenario': {'title': 'campaign seed %d, run %d' % (seed, index),
-                         'duration': self.duration, 'latency': m['latency_ms'] / 1000.0},
+                         'duration': self.duration, 'latency': m['latency_ms'] / 1000.0,
+                         'stalls.start': [a for a, _ in m['stalls']],
+                         'stalls.duration': [b for _, b in m['stalls']]},
         }
 
 

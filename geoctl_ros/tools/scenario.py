@@ -8,8 +8,10 @@ per control step) and PNG plots like the paper's figures.
 
 ``scenario.latency`` delays the measurements: at each control step the controller sees the
 simulated state of ``latency`` seconds before (noise added to that state), as a motion-capture
-and IMU chain with that delay would deliver it. ``scenario.tick_jitter`` makes the control steps
-late, as a busy machine's timer does: each command is held until the next step comes.
+and IMU chain with that delay would deliver it; ``scenario.stalls`` hold samples back for a
+while (the controller flies on its last one, older by the stall). ``scenario.tick_jitter`` makes
+the control steps late, as a busy machine's timer does: each command is held until the next step
+comes.
 """
 import argparse
 import collections
@@ -77,6 +79,8 @@ def from_sections(sections, name):
         raise ConfigError([('sim: integration_rate_hz', 'must be an integer multiple of the '
                             'controller rate_hz (%g / %g)' % (resolved[SIM]['integration_rate_hz'],
                                                               resolved[CONTROLLER]['rate_hz']))])
+    if len(resolved[SCENARIO]['stalls.start']) != len(resolved[SCENARIO]['stalls.duration']):
+        raise ConfigError([('scenario: stalls.duration', 'needs one value per stalls.start')])
     delay = resolved[SCENARIO]['latency'] * resolved[SIM]['integration_rate_hz']
     if abs(delay - round(delay)) > 1e-6:
         raise ConfigError([('scenario: latency', 'must be a whole number of integration steps '
@@ -103,6 +107,17 @@ def hold_steps(steps, n_sub, jitter, seed):
     holds = n_sub + np.random.default_rng([seed, 1]).integers(0, int(round(jitter)) + 1, steps)
     starts = np.cumsum(holds) - holds
     return holds[starts < steps * n_sub]
+
+
+def stalled_steps(options, steps, dt):
+    """Per control step, whether the inputs stall there (scenario stalls.start and
+    .duration): no new sample reaches the controller at a step within [start, start + duration).
+    """
+    k = np.arange(steps) * dt
+    out = np.zeros(steps, dtype=bool)
+    for start, length in zip(options['stalls.start'], options['stalls.duration']):
+        out |= (k >= start) & (k < start + length)
+    return out
 
 
 @dataclass
@@ -158,16 +173,19 @@ def run(scenario, duration=None):
     # the states of the last `delay` integration steps: the oldest is what the sensors report
     delay = int(round(scenario.options['latency'] * scenario.sim['integration_rate_hz']))
     past = collections.deque([(plant.R, plant.Omega)], maxlen=delay + 1)
+    stalled = stalled_steps(scenario.options, steps, dt)
     t0 = time.perf_counter()
     for k in range(steps):
         R, t = plant.R, plant.t
         R_seen, Omega_seen = past[0]
-        seen_delay = (len(past) - 1) * h        # the state seen is this old (the first: less)
+        # captured `latency` before (before the start, the testbed sat at its initial state)
+        seen_delay = delay * h
         stamp = t - seen_delay
-        loop.offer_pose(so3.rot_to_quat(sim.measure_attitude(R_seen)), stamp, t,
-                        delay=seen_delay)
-        loop.offer_angular_velocity(sim.measure_angular_velocity(Omega_seen), stamp, t,
-                                    delay=seen_delay)
+        q_seen = so3.rot_to_quat(sim.measure_attitude(R_seen))         # (drawn even when the
+        w_seen = sim.measure_angular_velocity(Omega_seen)               # sample stalls)
+        if not stalled[k]:
+            loop.offer_pose(q_seen, stamp, t, delay=seen_delay)
+            loop.offer_angular_velocity(w_seen, stamp, t, delay=seen_delay)
         if k == 0:
             loop.arm(t)                  # armed from the start; the schedule runs from here
         tick = loop.tick(t, dt)

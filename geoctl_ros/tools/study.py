@@ -151,10 +151,10 @@ def summary_table(columns):
         'saturated time p99 / max [s]': '%.2f / %.2f' % (np.percentile(sat, 99), sat.max()),
     }
     bands = []
-    for band in (range(0, 4), range(4, 8), range(8, 11)):
+    for band in (range(0, 30), range(30, 60), range(60, 81)):
         picked = margins[np.isin(columns['latency_ms'], list(band))]
         bands.append('%.2f' % picked.min() if len(picked) else '-')
-    table['worst closest approach by latency 0-3 / 4-7 / 8-10 ms [deg]'] = ' / '.join(bands)
+    table['worst closest approach by latency 0-29 / 30-59 / 60-80 ms [deg]'] = ' / '.join(bands)
     return table
 
 
