@@ -161,12 +161,21 @@ def approach_rates(sc, Omega):
     return -np.einsum('...ij,...j->...i', cross, Omega) / np.maximum(sin_phi, 1e-9)
 
 
-def blind_widening(sc, Omega, blind, widening_max):
+WIDEN_GAP_SHARE = 0.5     # the widening takes at most this share of the gap to a cone's barrier
+
+
+def blind_widening(sc, Omega, blind, widening_max, theta_b=None):
     """How much wider (rad) the barrier's cones are for a loop blind for ``blind`` seconds (one
     per run of a batch): what the sensor travels towards each cone in that time at its present
-    approach rate, at most widening_max.
+    approach rate, at most widening_max and, given the barrier's half-angles theta_b, at most
+    WIDEN_GAP_SHARE of the sensor's gap to each: the barrier is evaluated where the sensor is
+    heading, but never at or past its edge, where a widened cone suddenly round the sensor would
+    kick it with the barrier's strongest field (a 19 N m yaw command in a campaign run).
     """
     travel = approach_rates(sc, Omega) * np.asarray(blind)[..., None]
+    if theta_b is not None:
+        gap = np.arccos(np.clip(sc[..., 0], -1.0, 1.0)) - theta_b
+        travel = np.minimum(travel, WIDEN_GAP_SHARE * gap)
     return np.clip(travel, 0.0, widening_max)
 
 
@@ -280,7 +289,7 @@ class AttitudeController:
         sc = y[..., 4:4 + 4 * n].reshape(y.shape[:-1] + (n, 4))
         widened = None
         if n and any_flag(np.asarray(blind) > 0.0):
-            extra = blind_widening(sc, Omega, blind, cfg.blind_guard_max)
+            extra = blind_widening(sc, Omega, blind, cfg.blind_guard_max, cfg.cones.theta_b)
             if extra.max() > 0.0:                  # (else no cone is being approached)
                 widened = cfg.cones.widened(extra)
         ev = cfg.cones.evaluate_terms(sc, widened)

@@ -199,6 +199,7 @@ class ControlLoop:
             self._schedule_index = -1
             if not was_armed:
                 self.cone_entries, self.entry, self._inside = 0, None, False
+                self.step.history.clear()
         return result
 
     def disarm(self, reason='disarm requested'):

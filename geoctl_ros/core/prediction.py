@@ -47,6 +47,20 @@ class CommandHistory:
         self.times = np.full(self.size, -math.inf)    # oldest first; -inf: empty
         self.start = self.end = None
         self._newest = -1                             # the slot of the newest entry
+        self.count = 0                                # entries held
+
+    def clear(self):
+        """Forget every command (at arming: the rotors were off, the vehicle on its stops)."""
+        self.times[:] = -math.inf
+        self.count = 0
+        if self.end is not None:
+            self.start[:] = 0.0
+            self.end[:] = 0.0
+
+    @property
+    def first(self):
+        """When the oldest command held was sent (inf: none yet)."""
+        return self.times[-self.count] if self.count else math.inf
 
     def push(self, t, end, start=None):
         end = np.asarray(end, dtype=float)
@@ -55,6 +69,7 @@ class CommandHistory:
             self.end = np.zeros((self.size,) + end.shape)
             self.times[:] = -math.inf
         self._newest = w = (self._newest + 1) % self.size
+        self.count = min(self.count + 1, self.size)
         self.end[w] = end
         self.start[w] = end if start is None else start
         self.times[:-1] = self.times[1:]
@@ -104,14 +119,19 @@ class DelayPredictor:
         CommandHistory on the same clock as now). dt is the time since the last call (the low-pass
         of the slow part). Ages of 0 return the measurements unchanged.
 
-        The window from the older measurement to now is integrated in S equal pieces of at most
-        SUBSTEP_MAX_S: in each, the moment in force at its midpoint; the rate is advanced only in
-        the part of the window after its own capture, the attitude only after its own (the
-        attitude with the mean of the rates at either end of the piece).
+        Only the part of the window since the first command held is predicted (none at the
+        first tick after arming). The window from the older measurement to now is integrated in
+        S equal pieces of at most SUBSTEP_MAX_S: in each, the moment in force at its midpoint;
+        the rate is advanced only in the part of the window after its own capture, the attitude
+        only after its own (the attitude with the mean of the rates at either end of the piece).
         """
         moment_now = history.at(now)
         acc0 = self.acceleration(R, Omega, moment_now)
         self._acc_slow = self._acc_slow + (acc0 - self._acc_slow) * (dt / (PREDICT_SLOW_S + dt))
+        # nothing is predicted from before the first command held: what moved the vehicle then
+        # (its stops, a hand) is not in the model
+        known = max(now - history.first, 0.0)
+        age_R, age_Omega = np.minimum(age_R, known), np.minimum(age_Omega, known)
         if np.ndim(age_R) == 0 and np.ndim(age_Omega) == 0:
             return self._scalar_ages(R, Omega, float(age_R), float(age_Omega), history, now,
                                      acc0, moment_now)
