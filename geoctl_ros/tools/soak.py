@@ -64,6 +64,7 @@ CASES = {
     'idle': ((), None, 'no load, no fault'),
     'monitoring': (('cli',), None, 'the README monitoring commands (ros2 CLI) in a loop'),
     'monitoring+cpu': (('cli', 'cpu'), None, 'the same, and one busy process per core'),
+    'monitoring+2cpu': (('cli', 'cpu', 'cpu'), None, 'the same, and two busy processes per core'),
     'churn+params': (('churn', 'params'), None,
                      'processes joining/leaving every second (1 in 3 SIGKILLed), full '
                      'parameter reads every 0.5 s'),
