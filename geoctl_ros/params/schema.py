@@ -396,8 +396,9 @@ SCHEMA = [
        lo=0.0, hi=150.0),
     _p('esc.temperature_error', 'double', 100.0, 'deg C', 'an ESC this hot is reported ERROR',
        ESC, lo=0.0, hi=150.0),
-    _p('esc.controller', 'string', 'controller', '-', 'the controller node whose diagnostics '
-       'say whether it is armed (the motor test is refused while it is)', ESC),
+    _p('esc.controller', 'string', 'controller', '-', 'the controller node this node follows: '
+       "its <name>/armed state and the session on its motor_commands (others' are refused; the "
+       'motor test is refused while it is armed)', ESC),
     _p('esc.virtual_bus', 'string', '', '-', 'a virtual ESC bus file (e.g. /dev/shm/geoctl_esc): '
        'esc_i2c writes it instead of /dev/i2c-<bus>, and the sim reads its set points instead '
        'of motor_commands (empty: none)', (ESC, SIM)),
