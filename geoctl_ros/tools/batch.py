@@ -171,7 +171,7 @@ def run_batch(scenarios, progress=None, series=True):
     # streams age it: its delay at receipt plus the time since, on the plant's clock)
     stalled = np.stack([stalled_steps(s.options, steps, dt) for s in scenarios], axis=1)
     any_stall = bool(stalled.any())
-    receipt, last_delay = np.zeros(n), np.zeros(n)
+    receipt = np.zeros(n)
     R_seen, W_seen = plant.R, plant.Omega
     min_margin = cones.margins_deg(plant.R)
     margin_series = np.empty((steps, n)) if series else None
@@ -191,9 +191,8 @@ def run_batch(scenarios, progress=None, series=True):
             R_seen = np.where(fresh[:, None, None], R_new, R_seen)
             W_seen = np.where(fresh[:, None], W_new, W_seen)
             receipt = np.where(fresh, plant.t, receipt)
-            last_delay = np.where(fresh, delay * h, last_delay)
-            age = (last_delay + np.maximum(plant.t - receipt, 0.0)) if stamped else (
-                plant.t - receipt)
+            waited = np.maximum(plant.t - receipt, 0.0)
+            age = delay * h + waited if stamped else waited
             ages = (age, age)
         else:
             R_seen, W_seen = R_new, W_new
