@@ -4,6 +4,7 @@ and stop, the watchdog, NACKs and missing ESCs, the motor test; and the virtual 
 import numpy as np
 import pytest
 
+from geoctl_ros.core.safety import EscHealth
 from geoctl_ros.esc import health, protocol
 from geoctl_ros.esc.bus import RecordingBus
 from geoctl_ros.esc.driver import EscConfig, EscDriver, EscStartError
@@ -227,6 +228,9 @@ def test_the_diagnostics_say_what_is_wrong_with_which_esc():
     assert r.level == protocol.ERROR
     assert 'ESC 2 (0x2a) self-test error 7' in r.message
     assert 'ESC 4 (0x2c) does not answer' in r.message
+    # what the controller reads of it (esc_health): rotor 2 at fault, rotor 4 lost
+    H = EscHealth
+    assert health.esc_health(d, clock.t, 100.0) == (H.OK, H.FAULT, H.OK, H.LOST, H.OK, H.OK)
     assert r.i2c_errors == 3                                     # the write and its 2 retries
     warn = health.report(d, clock.t, 80.0, 100.0, errors_before=0)
     assert warn.level == protocol.ERROR                          # the worst decides

@@ -283,6 +283,33 @@ def test_the_esc_node_refuses_to_start_without_its_escs_unless_told_to_ignore_on
 
 
 @pytest.mark.realtime
+def test_an_esc_that_stops_answering_fails_the_controller_safe_naming_it(ros, tmp_path):
+    """The sim as the six ESCs on the virtual bus, esc_i2c and the controller: armed, rotor 4's ESC
+    stops answering; esc_i2c's typed esc_health reaches the controller, which fails safe naming
+    it, and refuses to arm again until it answers.
+    """
+    mon, launch = ros
+    path = str(tmp_path / 'esc_bus')
+    launch('sim', TESTBED, '-p', 'esc.virtual_bus:=' + path)
+    esc = launch('esc_i2c', TESTBED, '-p', 'esc.virtual_bus:=' + path,
+                 '-p', 'esc.probe_timeout:=20.0')
+    launch('controller')
+    mon.wait_for(lambda: '6 ESCs on virtual ESC bus' in esc.output(), 30.0, 'the ESC node')
+    assert mon.arm_when_ready().success
+    bus = VirtualEscBus(path, resolve('esc_i2c', {})['esc.addresses'])
+    try:
+        bus.slots['present'][3] = 0                              # rotor 4's ESC goes quiet
+        mon.wait_for(lambda: mon.last_diagnostic().figures.state ==
+                     'failsafe: ESC of rotor 4 lost', 10.0, 'the failsafe')
+        refused = mon.arm(True)
+        assert not refused.success and 'ESC of rotor 4 lost' in refused.message
+        bus.slots['present'][3] = 1
+        mon.wait_for(lambda: mon.arm(True).success, 10.0, 'arming once it answers again')
+        assert mon.arm(False).success
+    finally:
+        bus.close()
+
+
 def test_arming_needs_fresh_inputs_and_disarming_zeroes_the_motors(ros):
     mon, launch = ros
     launch('controller', TESTBED, *FED)

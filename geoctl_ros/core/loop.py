@@ -23,7 +23,15 @@ from geoctl_ros.core.diagnostics import (
     failsafe,
 )
 from geoctl_ros.core.gaps import GYRO, POSE, GapBridge
-from geoctl_ros.core.safety import Stream, Supervisor, angular_velocity_problem, quaternion_problem
+from geoctl_ros.core.safety import (
+    EscHealth,
+    EscStatus,
+    Stream,
+    Supervisor,
+    angular_velocity_problem,
+    esc_problem,
+    quaternion_problem,
+)
 from geoctl_ros.core.stats import WindowStats
 from geoctl_ros.core.step import ControlTick
 
@@ -112,6 +120,7 @@ class ControlLoop:
         self.cone_entries = 0
         self.entry = None
         self._inside = False
+        self.esc = None                 # the ESC node's last EscStatus (None: no ESC node)
         self.gaps = {'pose': [0, 0.0], 'angular velocity': [0, 0.0]}   # count, longest (s)
 
     # --- inputs ------------------------------------------------------------------------------
@@ -145,6 +154,20 @@ class ControlLoop:
             self.bridge.gyro(self.Omega)
         return problem
 
+    def offer_esc_health(self, command_max, escs, receipt):
+        """The ESC node's report: its motor.command_max and each ESC's health (EscHealth values,
+        in rotor order); None if taken, else why not.
+        """
+        if len(escs) != self.rotor_count or any(e not in EscHealth._value2member_map_
+                                                 for e in escs):
+            return 'expected %d ESC health codes of 0-3, got %r' % (self.rotor_count,
+                                                                     list(escs)[:12])
+        self.esc = EscStatus(int(command_max), tuple(EscHealth(e) for e in escs), receipt)
+        return None
+
+    def _esc_problem(self, now):
+        return esc_problem(self.esc, now, self.setup.mixer.curve.command_max)
+
     def _delay(self, delay):
         """The delay a sample's stamp gives, if this loop takes ages from stamps."""
         return delay if self.setup.loop.age_from_stamps else None
@@ -176,7 +199,7 @@ class ControlLoop:
         motor commands), each stale input, and the measured sensor inside a cone or within its
         guard (the barrier's widening cone_guard_deg plus its floor band barrier_floor_deg).
         """
-        problems = [p for p in (self.unconfigured, extra_problem) if p]
+        problems = [p for p in (self.unconfigured, extra_problem, self._esc_problem(now)) if p]
         problems += [p for p in (s.staleness(now) for s in self.supervisor.streams) if p]
         cones = self.setup.config.cones
         if self.R is not None and len(cones):
@@ -240,6 +263,11 @@ class ControlLoop:
         the step's command is expected to be held).
         """
         armed = self.supervisor.check(now)
+        if armed and self.esc is not None:          # the documented action: fail safe
+            problem = self._esc_problem(now)
+            if problem:
+                self.disarm(failsafe(problem))
+                armed = False
         schedule = self.setup.schedule
         if armed and len(schedule):
             i = schedule.index_at(now - self.supervisor.armed_since)
@@ -342,6 +370,9 @@ class ControlLoop:
             stale = sup.input_problem(now)
             if stale:
                 warnings.append(stale)
+            escs = self._esc_problem(now)
+            if escs:
+                warnings.append(escs)
         else:
             lost = sup.input_loss(now)
             if lost:

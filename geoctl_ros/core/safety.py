@@ -16,6 +16,7 @@ Rules (the README's "Safety behaviour" section says the same to users):
   lost the supervisor disarms (failsafe) and says why. Motor commands are zero unless armed.
 """
 from dataclasses import dataclass
+from enum import IntEnum
 import math
 import secrets
 from typing import NamedTuple
@@ -177,6 +178,43 @@ class ArmedState(NamedTuple):
 
     armed: bool
     session: int
+
+
+class EscHealth(IntEnum):
+    """Each ESC's health as the ESC node reports it to the controller (its ``esc_health``)."""
+
+    OK = 0
+    IGNORED = 1          # missing at start-up, and in esc.ignore: never written
+    LOST = 2             # no successful transfer for a while (esc.health.LOST)
+    FAULT = 3            # a self-test error or a failed start, or at esc.temperature_error
+
+
+class EscStatus(NamedTuple):
+    """The ESC node's last report: its motor.command_max, each ESC's EscHealth, when received."""
+
+    command_max: int
+    escs: tuple
+    receipt: float
+
+
+ESC_SILENT_S = 1.5       # s without a report from an ESC node that has reported: it is gone
+
+
+def esc_problem(status, now, command_max):
+    """Why the ESCs cannot carry a flight (a sentence), or None: none reported (no ESC node:
+    nothing to judge), the node silent for ESC_SILENT_S, a command scale that is not the
+    controller's command_max, or an ESC lost or at fault.
+    """
+    if status is None:
+        return None
+    if now - status.receipt > ESC_SILENT_S:
+        return 'esc_i2c silent for %.1f s' % (now - status.receipt)
+    if status.command_max != command_max:
+        return ("esc_i2c's motor.command_max %d is not the controller's %d"
+                % (status.command_max, command_max))
+    bad = ['ESC of rotor %d %s' % (i + 1, h.name.lower()) for i, h in enumerate(status.escs)
+           if h in (EscHealth.LOST, EscHealth.FAULT)]
+    return '; '.join(bad) or None
 
 
 def new_session():

@@ -12,6 +12,7 @@ import math
 from typing import Optional, Tuple
 
 from geoctl_ros.core.diagnostics import Window, window
+from geoctl_ros.core.safety import EscHealth
 from geoctl_ros.esc import protocol
 
 NAME = 'geoctl_ros: esc_i2c'
@@ -24,6 +25,23 @@ _ERRORS = 'i2c errors'
 _LATENCY = 'command to last byte [ms]'
 _TEST = 'motor test'
 _ESC = 'esc %d'                   # % rotor number
+
+
+def esc_health(driver, now, temperature_error):
+    """Per rotor, the EscHealth of the driver's ESCs at now."""
+    out = []
+    for i in range(len(driver.config.addresses)):
+        ok_time, tel = driver.last_ok[i], driver.telemetry[i]
+        if i in driver.missing:
+            out.append(EscHealth.IGNORED)
+        elif ok_time is not None and now - ok_time > LOST:
+            out.append(EscHealth.LOST)
+        elif tel is not None and (protocol.state_problem(tel.state)[0] == protocol.ERROR
+                                  or tel.temperature >= temperature_error):
+            out.append(EscHealth.FAULT)
+        else:
+            out.append(EscHealth.OK)
+    return tuple(out)
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ from geometry_msgs.msg import PoseStamped, QuaternionStamped, Vector3Stamped, Wr
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import Imu
-from std_msgs.msg import Float64, Float64MultiArray, UInt32MultiArray
+from std_msgs.msg import Float64, Float64MultiArray, UInt16MultiArray, UInt32MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core import so3
@@ -26,6 +26,7 @@ from geoctl_ros.core.stats import WindowStats
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.conversions import (
     armed_state_msg,
+    esc_health_of,
     motor_commands_msg,
     quaternion,
     set_quaternion,
@@ -101,6 +102,8 @@ class ControllerNode(Node):
         self.create_subscription(Imu, 'imu', self._on_imu, qos.SENSOR)
         self.create_subscription(QuaternionStamped, 'attitude_setpoint', self._on_setpoint,
                                  qos.EVENT)
+        self.create_subscription(UInt16MultiArray, 'esc_health', self._on_esc_health,
+                                 qos.COMMAND)
         self.pub_motors = self.create_publisher(Float64MultiArray, 'motor_commands', qos.COMMAND)
         self.pub_wrench = self.create_publisher(WrenchStamped, 'control_wrench', qos.COMMAND)
         self.pub_eR = self.create_publisher(Vector3Stamped, 'attitude_error', qos.TELEMETRY)
@@ -188,6 +191,14 @@ class ControllerNode(Node):
             self.get_logger().warning('imu refused: ' + problem, throttle_duration_sec=1.0)
         elif self.loop.settings.step_on == 'imu':
             self._tick(now)
+
+    def _on_esc_health(self, msg):
+        report = esc_health_of(msg)
+        problem = ('empty' if report is None
+                   else self.loop.offer_esc_health(report[0], report[1], self._now()))
+        if problem:
+            self.get_logger().warning('esc_health refused: ' + problem,
+                                      throttle_duration_sec=1.0)
 
     def _on_setpoint(self, msg):
         problem = self.loop.request_setpoint(quaternion(msg.quaternion))

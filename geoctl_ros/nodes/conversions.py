@@ -3,7 +3,12 @@ import array
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension, UInt32MultiArray
+from std_msgs.msg import (
+    Float64MultiArray,
+    MultiArrayDimension,
+    UInt16MultiArray,
+    UInt32MultiArray,
+)
 
 from geoctl_ros.core.diagnostics import Status, from_values, to_values
 from geoctl_ros.core.safety import ArmedState
@@ -25,6 +30,22 @@ def armed_state_of(msg):
     if len(msg.data) != 2 or msg.data[0] not in (0, 1):
         return None
     return ArmedState(bool(msg.data[0]), int(msg.data[1]))
+
+
+def esc_health_msg(command_max, escs):
+    """The ESC node's ``esc_health``: UInt16MultiArray [motor.command_max, then each ESC's
+    EscHealth in rotor order].
+    """
+    msg = UInt16MultiArray(data=[int(command_max)] + [int(e) for e in escs])
+    msg.layout.dim = [MultiArrayDimension(label='command_max, then rotor', size=len(msg.data),
+                                          stride=len(msg.data))]
+    return msg
+
+
+def esc_health_of(msg):
+    """``esc_health`` -> (command_max, [health code per rotor]), or None if it is empty."""
+    data = list(msg.data)
+    return (data[0], data[1:]) if data else None
 
 
 def motor_commands_msg(session):

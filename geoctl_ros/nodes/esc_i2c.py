@@ -20,7 +20,12 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension, UInt32MultiArray
+from std_msgs.msg import (
+    Float64MultiArray,
+    MultiArrayDimension,
+    UInt16MultiArray,
+    UInt32MultiArray,
+)
 from std_srvs.srv import Trigger
 
 from geoctl_ros.esc import health
@@ -28,7 +33,7 @@ from geoctl_ros.esc.bus import I2cBus
 from geoctl_ros.esc.driver import EscDriver, EscStartError, config_of
 from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.nodes import qos, ros_params
-from geoctl_ros.nodes.conversions import armed_state_of, session_of
+from geoctl_ros.nodes.conversions import armed_state_of, esc_health_msg, session_of
 from geoctl_ros.nodes.runtime import RefusalLog, spin
 from geoctl_ros.params import ESC, ESC_LIVE, ConfigError, change_problem, resolve
 
@@ -66,6 +71,7 @@ class EscNode(Node):
         self.pub_telemetry = self.create_publisher(Float64MultiArray, 'esc/telemetry',
                                                    qos.TELEMETRY)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
+        self.pub_health = self.create_publisher(UInt16MultiArray, 'esc_health', qos.COMMAND)
         self.create_service(Trigger, '~/motor_test', self._on_motor_test)
         self.create_service(Trigger, '~/motor_test_stop', self._on_motor_test_stop)
         ros_params.watch(self, ESC, self._validate, self._on_params)
@@ -167,8 +173,11 @@ class EscNode(Node):
 
     def _report(self):
         d = self.driver
-        r = health.report(d, time.monotonic(), self.values['esc.temperature_warn'],
+        now = time.monotonic()
+        r = health.report(d, now, self.values['esc.temperature_warn'],
                           self.values['esc.temperature_error'], *self._report_base)
+        self.pub_health.publish(esc_health_msg(
+            d.config.command_max, health.esc_health(d, now, self.values['esc.temperature_error'])))
         self._report_base = (r.i2c_errors, r.refused)
         d.latency.reset()
         status = DiagnosticStatus(level=bytes([r.level]), name=health.NAME,

@@ -1,5 +1,6 @@
-"""The constraint under measured delay (docs/safety.md, "Delay"): the prediction over the commands
-already sent, the blind-time widening of the barrier, ages from capture stamps, stamps that step.
+"""The safety envelope without ROS (docs/safety.md): the constraint under measured delay (the
+prediction over the commands already sent, the blind-time widening, ages from capture stamps,
+stamps that step), the arming checks, cone entries latched, and the ESCs' health.
 """
 import math
 import os
@@ -193,3 +194,40 @@ def test_entering_a_cone_is_an_error_latched_until_disarm_and_counted():
     loop.disarm()
     assert 'entered cone' not in fly(0.0).message
     assert loop.arm(t[0]).ok and fly(0.0).figures.cone_entries == 0
+
+
+@odroid
+def test_a_lost_esc_fails_safe_and_arming_names_it_and_a_silent_esc_node_too():
+    """The ESC node's report reaches the loop as typed health: all OK arms; rotor 4 lost while
+    armed fails safe naming it; arming is then refused naming it; a report whose command scale
+    is not the controller's, or an ESC node gone silent, is refused at arming too. Without an ESC
+    node (no report) nothing is judged.
+    """
+    values = resolve(CONTROLLER, {'allow_default_configuration': True})
+    loop = ControlLoop(controller_setup(values))
+    t = [1.0]
+
+    def tick():
+        t[0] += 0.01
+        assert loop.offer_pose([0.0, 0.0, 0.0, 1.0], t[0], t[0]) is None
+        assert loop.offer_angular_velocity([0.0, 0.0, 0.0], t[0], t[0]) is None
+        return loop.tick(t[0], 0.01)
+    tick()
+    assert loop.arm(t[0]).ok                                   # no ESC node: nothing to judge
+    loop.disarm()
+    assert loop.offer_esc_health(240, [0, 0, 0, 0, 0, 1], t[0]) is None  # rotor 6 ignored
+    assert loop.arm(t[0]).ok
+    assert tick().armed
+    assert loop.offer_esc_health(240, [0, 0, 0, 2, 0, 1], t[0]) is None
+    assert not tick().armed
+    assert loop.supervisor.reason == 'failsafe: ESC of rotor 4 lost'
+    refused = loop.arm(t[0])
+    assert not refused.ok and 'ESC of rotor 4 lost' in refused.message
+    assert loop.offer_esc_health(255, [0] * 6, t[0]) is None
+    assert "esc_i2c's motor.command_max 255 is not the controller's 240" in loop.arm(t[0]).message
+    assert loop.offer_esc_health(240, [0] * 6, t[0]) is None
+    tick()
+    t[0] += 2.0
+    assert 'esc_i2c silent for 2.' in loop.arm(t[0]).message
+    assert loop.offer_esc_health(240, [0, 7, 0, 0, 0, 0], t[0]) == (
+        'expected 6 ESC health codes of 0-3, got [0, 7, 0, 0, 0, 0]')
