@@ -153,15 +153,15 @@ def test_arming_is_refused_inside_a_cone_and_within_its_guard_naming_every_faili
     offer(45.0, 1.0)
     refused = loop.arm(1.0)
     assert not refused.ok and "inside cone 'obstacle' (12.00 deg in)" in refused.message
-    offer(45.0 - 13.0, 1.01)
-    refused = loop.arm(1.01)
+    offer(45.0 - 13.0, 1.5)              # (poses that jump are spaced: they would be a spin)
+    refused = loop.arm(1.5)
     assert not refused.ok and "within the guard of cone 'obstacle' (margin 1.00 deg" in (
         refused.message)
     offer(45.0 - 13.0, 2.0, imu=False)
     refused = loop.arm(2.0)
     assert 'angular velocity stale' in refused.message and "cone 'obstacle'" in refused.message
-    offer(0.0, 2.01)
-    assert loop.arm(2.01).ok
+    offer(0.0, 2.5)
+    assert loop.arm(2.5).ok
 
 
 @odroid
@@ -231,3 +231,21 @@ def test_a_lost_esc_fails_safe_and_arming_names_it_and_a_silent_esc_node_too():
     assert 'esc_i2c silent for 2.' in loop.arm(t[0]).message
     assert loop.offer_esc_health(240, [0, 7, 0, 0, 0, 0], t[0]) == (
         'expected 6 ESC health codes of 0-3, got [0, 7, 0, 0, 0, 0]')
+
+
+@odroid
+def test_arming_is_refused_while_the_gyro_and_the_poses_disagree():
+    """A gyro whose axes are wrong (it reads 0.6 rad/s about z while the poses turn at 0.6 rad/s
+    about x) is named at arming; with the gyro that agrees, the same poses arm.
+    """
+    values = resolve(CONTROLLER, {'allow_default_configuration': True})
+    loop = ControlLoop(controller_setup(values))
+    for k in range(12):                        # 200 Hz poses turning at 0.6 rad/s about x
+        t = k * 0.005
+        q = so3.rot_to_quat(so3.exp(np.array([0.6 * t, 0.0, 0.0])))
+        assert loop.offer_pose(q, t, t) is None
+    assert loop.offer_angular_velocity([0.0, 0.0, 0.6], t, t) is None
+    refused = loop.arm(t)
+    assert not refused.ok and 'the gyro and the poses disagree by 0.85 rad/s' in refused.message
+    assert loop.offer_angular_velocity([0.6, 0.0, 0.0], t + 0.001, t) is None
+    assert loop.arm(t).ok

@@ -36,6 +36,7 @@ from geoctl_ros.core.stats import WindowStats
 from geoctl_ros.core.step import ControlTick
 
 NEAR_CONE_DEG = 2.0           # a cone margin below this is reported (WARN)
+ARM_RATE_DISAGREE = 0.3      # rad/s (+ half the poses' rate): gyro against poses, at arming
 BLIND_BOUND_S = 0.12          # s: the blind time the delay guard is derived for (docs/safety.md)
 NON_FINITE = failsafe('non-finite control output')
 
@@ -201,6 +202,19 @@ class ControlLoop:
         """
         problems = [p for p in (self.unconfigured, extra_problem, self._esc_problem(now)) if p]
         problems += [p for p in (s.staleness(now) for s in self.supervisor.streams) if p]
+        if self.Omega is not None:
+            w_poses = self.bridge.pose_rate()
+            # (judged only where the poses resolve the rate: at most 1 rad turned per window)
+            if w_poses is not None and self.bridge.rate_window * max(
+                    np.linalg.norm(self.Omega), np.linalg.norm(w_poses)) < 1.0:
+                gap = float(np.linalg.norm(self.Omega - w_poses))
+                # (the poses' rate is a mean over the window: it lags a turning vehicle)
+                if gap > ARM_RATE_DISAGREE + 0.5 * float(np.linalg.norm(w_poses)):
+                    problems.append('the gyro and the poses disagree by %.2f rad/s (the imu '
+                                    'frame or axes wrong?)' % gap)
+        setpoint = self.controller.setpoint_problem(self.controller.R_d)
+        if setpoint:
+            problems.append('set point: ' + setpoint)
         cones = self.setup.config.cones
         if self.R is not None and len(cones):
             guard = math.degrees(cones.guard + cones.floor)
