@@ -423,6 +423,7 @@ def test_parameters_change_at_run_time_and_bad_ones_are_refused(ros):
 def test_setpoint_inside_a_cone_is_rejected(ros):
     mon, launch = ros
     fed_controller(mon, launch)
+    mon.wait_for(lambda: mon.last('eR') is not None, 10.0, 'the attitude error')
     e_before = mon.last('eR')
     inside = so3.rot_to_quat(so3.axis_angle([0, 0, 1], math.radians(45.0)))
     mon.publish_setpoint(inside)
