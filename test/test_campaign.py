@@ -65,10 +65,12 @@ def test_a_batch_flies_each_run_as_the_scenario_runner_does():
         closest = min(single['min_cone_angle_deg'][n] - single['cone_half_angle_deg'][n]
                       for n in single['min_cone_angle_deg'])
         # the same formulas; only rounding differs (the node's quaternion round trip, math.sin
-        # against np.sin): agreement to a micro-degree after 4 s of closed loop
-        assert abs(batch.min_margin_deg[p].min() - closest) < 1e-6, (
+        # against np.sin, and the BLAS kernel of the CPU: OpenBLAS's Prescott one gave 3e-6 deg
+        # where others give 1e-7): agreement to 1e-4 deg after 4 s of closed loop, a thousandth
+        # of the motion capture's own noise (0.1 deg), which no difference of behaviour fits in
+        assert abs(batch.min_margin_deg[p].min() - closest) < 1e-4, (
             closest, batch.min_margin_deg[p])
-        assert abs(batch.final_error_deg[p] - single['final_attitude_error_deg']) < 1e-6
+        assert abs(batch.final_error_deg[p] - single['final_attitude_error_deg']) < 1e-4
         assert batch.saturated_s[p] == pytest.approx(single['saturated_fraction'] * 4.0)
 
 

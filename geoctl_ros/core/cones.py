@@ -39,7 +39,7 @@ ConeSet with axes (batch, n, 3) and half-angles (batch, n); it evaluates a stack
 import numpy as np
 
 from geoctl_ros.core.flags import any_flag
-from geoctl_ros.core.so3 import hat, matvec, vecmat
+from geoctl_ros.core.so3 import hat, vecmat
 
 
 def angle_deg(s):
@@ -191,8 +191,18 @@ class ConeSet:
         return -unit * magnitude[:, None]
 
     def angles_deg(self, R):
-        """Angle between the sensor's world direction R r and each cone axis, degrees."""
-        return angle_deg(matvec(self.V, matvec(R, self.r)))
+        """Angle between the sensor's world direction R r and each cone axis, degrees.
+
+        Written out element by element (not through matmul), so a run's figure is the same bits
+        whatever the batch it flies in: a stacked matmul may go to BLAS as one product, whose
+        kernel (OpenBLAS's Prescott one, for example) rounds a row by where it falls in its
+        blocks.
+        """
+        r = self.r
+        d = R[..., :, 0] * r[0] + R[..., :, 1] * r[1] + R[..., :, 2] * r[2]     # R r
+        V = self.V
+        return angle_deg(V[..., 0] * d[..., None, 0] + V[..., 1] * d[..., None, 1]
+                         + V[..., 2] * d[..., None, 2])
 
     def margins_deg(self, R):
         """Cone margins (angle to axis minus half-angle, degrees) at attitude R."""
