@@ -327,9 +327,17 @@ def test_every_numeric_parameter_refuses_hostile_values_through_the_service_and_
             continue
         for label, value in past_bounds(BY_NAME[ros]):
             t0 = time.monotonic()
-            g.param_set_send(SYSID, 1, pid.encode(), value, mav.MAV_PARAM_TYPE_REAL32)
-            back = gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE' and m.param_id == pid, 5.0,
-                            'PARAM_VALUE %s' % pid, mon, since=t0)
+            back = None
+            for _ in range(3):         # as a ground station does, sent again when unanswered
+                g.param_set_send(SYSID, 1, pid.encode(), value, mav.MAV_PARAM_TYPE_REAL32)
+                try:
+                    back = gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE'
+                                    and m.param_id == pid, 5.0, 'PARAM_VALUE %s' % pid, mon,
+                                    since=t0)
+                    break
+                except TimeoutError:
+                    continue
+            assert back is not None, (pid, label)
             assert back.param_value == pytest.approx(was[ros], rel=1e-6), (pid, label)
             gcs.wait(lambda m: m.get_type() == 'STATUSTEXT' and m.text.startswith(
                 pid + ' refused'), 5.0, 'the refusal of %s %s' % (pid, label), mon, since=t0)

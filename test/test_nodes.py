@@ -96,22 +96,25 @@ def zero_commands(mon):
 
 def read_back(path, axis):
     """A bag as rosbags' own reader (not the package's) sees it: message counts per topic,
-    first and last stamps (s since the epoch), and the angle of the recorded true sensor
-    direction to axis (deg, plain numpy).
+    first and last stamps (s since the epoch), the angle of the recorded true sensor direction
+    to axis (deg, plain numpy) and the stamps of those true poses.
     """
     with AnyReader([pathlib.Path(path)],
                    default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
         counts = dict.fromkeys((c.topic for c in reader.connections), 0)
-        angles = []
+        angles, stamps = [], []
         for conn, _, raw in reader.messages():
             counts[conn.topic] += 1
             if conn.topic == '/sim/true_pose':
-                q = reader.deserialize(raw, conn.msgtype).pose.orientation
+                msg = reader.deserialize(raw, conn.msgtype)
+                q = msg.pose.orientation
                 sensor = so3.quat_to_rot((q.x, q.y, q.z, q.w)) @ np.array([1.0, 0.0, 0.0])
                 angles.append(math.degrees(math.acos(np.clip(sensor @ axis, -1.0, 1.0))))
+                stamps.append(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
         # every message that metadata.yaml counts is there
         assert counts == {c.topic: c.msgcount for c in reader.connections}
-        return counts, reader.start_time * 1e-9, reader.end_time * 1e-9, np.array(angles)
+        return (counts, reader.start_time * 1e-9, reader.end_time * 1e-9, np.array(angles),
+                np.array(stamps))
 
 
 FLIGHT_S = 16.0        # the schedule's last step is at 12 s; Psi is down to 2 % of its peak by 16
@@ -230,7 +233,7 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
         assert np.all(mine['b0'][mine['t'] > zero] == 0)
     assert esc.stop() == 0 and 'zero written to every ESC' in esc.output()
     axis = cones.V[0]
-    counts, first, last, angles = read_back(tmp_path / 'flight', axis)
+    counts, first, last, angles, _ = read_back(tmp_path / 'flight', axis)
     assert first < wall0 and last > wall1
     assert counts['/motor_commands'] > 0.75 * 100 * FLIGHT_S, counts
     assert counts['/sim/true_pose'] > 0.5 * 200 * FLIGHT_S, counts
@@ -709,10 +712,11 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
             if m.ns == 'sensor':
                 tip = m.points[1]
                 assert math.isclose(math.hypot(tip.x, tip.y, tip.z), 1.0, abs_tol=1e-9)
-    reports = {}
+    reports, series = {}, {}
     for storage in recorders:
         path = tmp_path / storage
-        counts, first, last, angles = read_back(path, axis)
+        counts, first, last, angles, stamps = read_back(path, axis)
+        series[storage] = dict(zip(stamps.tolist(), angles.tolist()))
         assert first < t_start and t_start < last < t_end
         # every stream is in it (this test runs beside the flights at nice 19, so the rates are
         # not this test's to judge: the recorded flight of the sim-in-the-loop test judges them)
@@ -730,9 +734,11 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
         assert reports[storage]['failsafes'] == 0 and reports[storage]['gaps_ridden'] is not None
         for png in ('flight.png', 'sensor_path.png'):
             assert (out / png).stat().st_size > 10_000
-    # the same flight in both storages (each recorder heard it on its own: a sample or two apart)
-    assert reports['mcap']['closest_approach_deg']['obstacle']['angle'] == pytest.approx(
-        reports['sqlite3']['closest_approach_deg']['obstacle']['angle'], abs=0.5)
+    # the same flight in both storages: the same true poses, compared at the same stamps (the
+    # recorders stop a moment apart while the testbed falls fast, so their ends differ)
+    common = sorted(set(series['mcap']) & set(series['sqlite3']))
+    assert len(common) > 0.5 * min(len(series['mcap']), len(series['sqlite3']))
+    assert all(series['mcap'][t] == series['sqlite3'][t] for t in common)
     # the killed recorder's bag (no metadata.yaml, its file cut) reports what it had written:
     # the flight up to its last second, its cones from the bag itself
     assert not (tmp_path / 'killed' / 'metadata.yaml').exists()
