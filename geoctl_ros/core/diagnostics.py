@@ -20,6 +20,14 @@ OK, WARN, ERROR = 0, 1, 2
 FAILSAFE = 'failsafe'          # how the state of a vehicle that failed safe begins
 
 
+def state_kind(state):
+    """The kind of a supervisor state as the codec spells it: 'failsafe' for any failsafe, else
+    the state up to its first colon ('armed', 'disarmed at start-up', ...). The one place a state
+    is read back (the report's time in each state, Figures.failsafe).
+    """
+    return FAILSAFE if state.startswith(FAILSAFE) else state.split(':')[0]
+
+
 def failsafe(why):
     """The state (and disarm reason) of a vehicle that failed safe because of why."""
     return '%s: %s' % (FAILSAFE, why)
@@ -112,7 +120,7 @@ class Figures:
     @property
     def failsafe(self):
         """The vehicle failed safe (and is disarmed until someone arms it again)."""
-        return self.state.startswith(FAILSAFE)
+        return state_kind(self.state) == FAILSAFE
 
     def with_timing(self, loop_period, tick_to_command, pose_to_command_latency):
         return replace(self, loop_period=loop_period, tick_to_command=tick_to_command,

@@ -21,6 +21,7 @@ from geoctl_ros.core.diagnostics import (
     Gaps,
     Status,
     failsafe,
+    state_kind,
 )
 from geoctl_ros.core.gaps import GYRO, POSE, GapBridge
 from geoctl_ros.core.safety import (
@@ -378,7 +379,7 @@ class ControlLoop:
         errors, warnings = [], []
         sup = self.supervisor
         if not sup.armed:
-            (errors if sup.reason.startswith(FAILSAFE) else warnings).append(sup.reason)
+            (errors if state_kind(sup.reason) == FAILSAFE else warnings).append(sup.reason)
             if self.unconfigured:
                 warnings.append(self.unconfigured)
             stale = sup.input_problem(now)

@@ -18,7 +18,7 @@ from std_msgs.msg import Float64, Float64MultiArray, UInt16MultiArray, UInt32Mul
 from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core import so3
-from geoctl_ros.core.diagnostics import FAILSAFE, failsafe
+from geoctl_ros.core.diagnostics import FAILSAFE, failsafe, state_kind
 from geoctl_ros.core.gains import gain_condition
 from geoctl_ros.core.loop import ControlLoop, step_period
 from geoctl_ros.core.safety import ArmedState, new_session
@@ -328,7 +328,8 @@ class ControllerNode(Node):
             self.pub_setpoint.publish(sp)
         state = (tick.armed, tick.state, tick.sources)
         if state != self._last_state:
-            if self._last_state is not None and not tick.armed and tick.state.startswith(FAILSAFE):
+            failed = not tick.armed and state_kind(tick.state) == FAILSAFE
+            if self._last_state is not None and failed:
                 self.get_logger().error(tick.state)
             elif tick.bridging:
                 self.get_logger().warning('; '.join(self.loop.gap_notes(now)))

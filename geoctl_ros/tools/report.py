@@ -21,7 +21,7 @@ import numpy as np
 import yaml
 
 from geoctl_ros.core import so3
-from geoctl_ros.core.diagnostics import from_values
+from geoctl_ros.core.diagnostics import from_values, state_kind
 from geoctl_ros.core.stats import settle_time
 from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
 from geoctl_ros.nodes.conversions import quaternion, vector
@@ -175,7 +175,7 @@ def summary(f):
     out['final_eR_norm'] = float(np.linalg.norm(e_R[-1])) if len(e_R) else None
     durations = {}
     for (t, state), (t_next, _) in zip(f.states, f.states[1:]):
-        kind = 'failsafe' if state.startswith('failsafe') else state.split(':')[0]
+        kind = state_kind(state)
         durations[kind] = durations.get(kind, 0.0) + (t_next - t)
     out['time_in_state_s'] = {k: round(v, 3) for k, v in durations.items()}
     out['failsafes'] = len(f.failsafe_t)
