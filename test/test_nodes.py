@@ -329,9 +329,10 @@ def test_arming_needs_fresh_inputs_and_disarming_zeroes_the_motors(ros):
     assert reply.success, reply.message
     mon.spin_for(0.5)
     assert all(0.3 < c < 0.7 for c in mon.last('motors'))    # about hover (118/240)
-    mon.spin_for(1.0)                                         # 90 deg from R_d: the estimate grows
+    # 90 deg from R_d: the estimate grows (a condition: beside the flights at nice 19 this test's
+    # feeder stalls, and the controller learns nothing while it rides the gaps through)
+    mon.wait_for(lambda: np.linalg.norm(mon.last('dbar')) > 1e-3, 10.0, 'the estimate to grow')
     before = np.linalg.norm(mon.last('dbar'))
-    assert before > 1e-3
     assert mon.reset_adaptation().success
     t_reset = time.monotonic()
     mon.spin_for(0.2)
