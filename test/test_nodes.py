@@ -285,7 +285,6 @@ def test_the_esc_node_refuses_to_start_without_its_escs_unless_told_to_ignore_on
         bus.close()
 
 
-@pytest.mark.realtime
 def test_an_esc_that_stops_answering_fails_the_controller_safe_naming_it(ros, tmp_path):
     """The sim as the six ESCs on the virtual bus, esc_i2c and the controller: armed, rotor 4's ESC
     stops answering; esc_i2c's typed esc_health reaches the controller, which fails safe naming
@@ -313,6 +312,7 @@ def test_an_esc_that_stops_answering_fails_the_controller_safe_naming_it(ros, tm
         bus.close()
 
 
+@pytest.mark.realtime
 def test_arming_needs_fresh_inputs_and_disarming_zeroes_the_motors(ros):
     mon, launch = ros
     launch('controller', TESTBED, *FED)
