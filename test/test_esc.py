@@ -175,6 +175,26 @@ def test_the_motor_test_is_refused_while_armed_or_commanded_and_ends_by_itself()
     assert d.write() == 'commanded' and d.test is None
 
 
+def test_a_disarmed_controllers_zeros_leave_a_motor_test_running_and_its_first_command_ends_it():
+    """The controller publishes zeros every tick while disarmed: a motor test beside it runs.
+    When it arms, its armed state and its first command travel on two topics; the command may
+    come first (a CI flight saw a test start just after arming): it ends the test, and a test
+    asked for then is refused, though this node has not heard the arming yet.
+    """
+    d, bus, clock = driver(armed=False)
+    d.start()
+    d.offer([0.0] * 6)
+    assert d.start_test(2, 0.1, 1.0, armed=False) is None
+    for _ in range(5):
+        clock.t += 0.01
+        d.offer([0.0] * 6)
+        assert d.write() == 'motor test of rotor 2'
+    d.offer(HOVER)                                 # armed; the armed state not here yet
+    assert d.test is None and d.write() == 'commanded'
+    assert [bus.last(a) for a in LAB] == [b'\x00'] * 6     # not armed here: zero, not the test
+    assert 'motor_commands are arriving' in d.start_test(2, 0.1, 1.0, armed=False)
+
+
 def test_the_telemetry_is_read_round_robin():
     d, bus, clock = driver()
     d.start()

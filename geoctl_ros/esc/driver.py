@@ -13,8 +13,9 @@ the motors.
   cycle and counted (by ESC and kind); the next cycle writes again.
 - At stop: zero to every ESC, each retried.
 - The motor test: one rotor at a given command for a given time, refused while the controller is
-  armed, while valid commands arrive, while another test runs, or beyond ``test_command_max``. An
-  arming or a command during the test ends it (the commands take over at once).
+  armed, while it sends non-zero commands (armed, though its armed state may not have arrived
+  yet), while another test runs, or beyond ``test_command_max``. An arming or a non-zero command
+  during the test ends it (the commands take over at once); a disarmed controller's zeros do not.
 """
 from dataclasses import dataclass
 from enum import Enum
@@ -89,6 +90,7 @@ class EscDriver:
         self.session = 0
         self.foreign = 0                  # messages refused as not the controller's
         self.foreign_refusal = None
+        self.commanding = False           # the last valid command had a rotor above zero
         self._zero = protocol.encode(np.zeros(n), config.command_max, config.resolution)
         self._next_read = 0
         self._lock = threading.Lock()
@@ -159,17 +161,18 @@ class EscDriver:
             return self.foreign_refusal
         problem = motor_commands_problem(data, self.n)
         with self._lock:
-            if not problem and not self.armed:
-                data = np.zeros(self.n)
             if problem:
                 self.refusal, self.command_time = problem, None
                 self.refused += 1
                 return problem
-            self.command = np.array(data, dtype=float)
+            # the controller commands the motors (it armed, whether or not its armed state
+            # has reached this node yet): that ends a motor test; its zeros while disarmed do not
+            self.commanding = any(v > 0.0 for v in data)
+            if self.commanding:
+                self.test = None
+            self.command = (np.array(data, dtype=float) if self.armed else np.zeros(self.n))
             self.command_time = self.received = now
             self.refusal = None
-            if self.test is not None:           # commands take over from a test
-                self.test = None
         return None
 
     def commands_fresh(self, now=None):
@@ -234,7 +237,7 @@ class EscDriver:
         now = self.clock() if now is None else now
         if armed:
             return 'refused: the controller is armed'
-        if self.commands_fresh(now) and np.any(self.command > 0.0):
+        if self.commands_fresh(now) and self.commanding:
             return 'refused: motor_commands are arriving (a controller commands the motors)'
         if not 1 <= rotor <= self.n:
             return 'refused: there is no rotor %d (1 to %d)' % (rotor, self.n)

@@ -58,8 +58,9 @@ class SimNode(Node):
         self.torque = np.zeros(3)
         self.ever_commanded = False
         self.commands_fresh = False
-        self.wall0 = time.monotonic()
-        self.ros0 = self.get_clock().now().nanoseconds * 1e-9   # the ROS clock at wall0
+        # sim time 0 is the first step, not construction: on a loaded machine creating the
+        # publishers can take seconds, and the sim would start that far behind real time
+        self.wall0 = self.ros0 = None
         self.pose_period = 1.0 / cfg.pose_rate_hz
         self.imu_period = 1.0 / cfg.imu_rate_hz
         self.next_pose = self.next_imu = 0.0
@@ -154,6 +155,9 @@ class SimNode(Node):
 
     def _on_timer(self):
         now = time.monotonic()
+        if self.wall0 is None:
+            self.wall0 = now
+            self.ros0 = self.get_clock().now().nanoseconds * 1e-9   # the ROS clock at wall0
         target = (now - self.wall0) * self.rtf
         plant = self.sim.plant
         behind = (target - plant.t) / self.rtf
