@@ -513,3 +513,58 @@ def test_a_ground_stations_motor_test_spins_one_motor_through_the_esc_node(tmp_p
             p.stop()
         escs.close()
         Endpoint.close_all()
+
+
+def test_hostile_frames_and_messages_are_refused_and_never_end_the_bridge(tmp_path):
+    """Found by hand before the fuzzer (issue: hostile input): a signed-or-not COMMAND_LONG
+    REQUEST_MESSAGE with param1 NaN, a motor test with param1 inf, and a zero quaternion on
+    /pose each ended the bridge (exit 1); a NaN quaternion went out as a NaN ATTITUDE_QUATERNION;
+    and every start printed rclpy's "number of timers ... is large" warning. Now each bad command
+    is DENIED with its reason, the bad poses are refused and logged, only finite attitudes go out,
+    the next valid command is answered, and the bridge is still running at the end.
+    """
+    gcs_port = free_udp_port()
+    gcs = Endpoint('udpin:127.0.0.1:%d' % gcs_port, 255, 190)
+    bridge = NodeProcess('mavlink_bridge', None, (
+        '-p', 'mavlink.url:=udpout:127.0.0.1:%d' % gcs_port, '-p', 'mavlink.system_id:=%d' % SYSID,
+        '-p', 'mavlink.attitude_rate_hz:=50.0'), log_dir=tmp_path)
+    rclpy.init()
+    mon = FakeInputs()
+    try:
+        gcs.wait(lambda m: m.get_type() == 'HEARTBEAT' and is_ours(m), 30.0, 'the bridge')
+        level = (0.0, 0.0, 0.0, 1.0)
+        mon.wait_for(lambda: mon.count_subscribers('pose') > 0, 10.0, 'the bridge on /pose')
+        for q in ((0.0, 0.0, 0.0, 0.0), (math.nan, 0.0, 0.0, 1.0), (1e-310, 0.0, 0.0, 0.0)):
+            mon.publish_pose(q)
+            mon.spin_for(0.05)
+        hostile = ((mav.MAV_CMD_REQUEST_MESSAGE, (math.nan, 0, 0, 0, 0, 0, 0), 'param1 nan'),
+                   (mav.MAV_CMD_DO_MOTOR_TEST, (math.inf, mav.MOTOR_TEST_THROTTLE_PERCENT, 10, 1,
+                                                0, 0, 0), 'motor inf'),
+                   (mav.MAV_CMD_COMPONENT_ARM_DISARM, (math.nan, 0, 0, 0, 0, 0, 0), 'param1 nan'))
+        for command, params, reason in hostile:
+            t0 = time.monotonic()
+            gcs.conn.mav.command_long_send(SYSID, 1, command, 0, *params)
+            ack = gcs.wait(lambda m: m.get_type() == 'COMMAND_ACK' and m.command == command,
+                           10.0, 'the answer to %d' % command, since=t0)
+            assert ack.result == mav.MAV_RESULT_DENIED
+            gcs.wait(lambda m: m.get_type() == 'STATUSTEXT' and reason in m.text, 5.0,
+                     'the reason %r' % reason, since=t0)
+        t0 = time.monotonic()
+        mon.publish_pose(level)
+        gcs.conn.mav.command_long_send(SYSID, 1, mav.MAV_CMD_REQUEST_MESSAGE, 0,
+                                       mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0)
+        gcs.wait(lambda m: m.get_type() == 'AUTOPILOT_VERSION', 10.0, 'the next valid command',
+                 since=t0)
+        gcs.wait(lambda m: m.get_type() == 'ATTITUDE_QUATERNION', 10.0, 'the valid attitude',
+                 mon, since=t0)
+        attitudes = [m for _, m in gcs.got if m.get_type() == 'ATTITUDE_QUATERNION']
+        assert all(math.isfinite(v) for m in attitudes for v in (m.q1, m.q2, m.q3, m.q4))
+        assert bridge.proc.poll() is None, bridge.output()
+        log = bridge.output()
+        assert 'pose refused: quaternion is not' in log
+        assert 'number of timers' not in log
+    finally:
+        mon.destroy_node()
+        rclpy.try_shutdown()
+        bridge.stop()
+        Endpoint.close_all()

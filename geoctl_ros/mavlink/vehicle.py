@@ -19,9 +19,12 @@ import math
 import numpy as np
 from pymavlink.dialects.v20 import common
 
+from geoctl_ros.core import so3
 from geoctl_ros.core.diagnostics import ERROR, Status
+from geoctl_ros.core.safety import quaternion_problem
 from geoctl_ros.mavlink import frames
 from geoctl_ros.mavlink.params import BY_ID, TABLE, to_mavlink
+from geoctl_ros.params.schema import MOTOR_TEST_DURATION_MAX
 
 # DEBUG_FLOAT_ARRAY / NAMED_VALUE_FLOAT names (at most 10 characters; README, "MAVLink").
 NAME_PSI = 'GC_PSI'            # configuration error Psi
@@ -44,6 +47,44 @@ class ControllerView:
     dbar: list = field(default_factory=list)
     diagnostics: Status = None           # the controller's last diagnostics (typed figures)
     params: dict = field(default_factory=dict)     # ROS name -> value
+
+    # What arrives is checked here: a zero or NaN quaternion, a non-finite vector, never reaches
+    # a frame conversion or a ground station. Each returns why it refused the value, or None.
+    def take_attitude(self, q, setpoint=False):
+        """A pose's (or, setpoint, the active set point's) quaternion (x, y, z, w)."""
+        problem = quaternion_problem(q)
+        if problem is None:
+            R = so3.quat_to_rot(np.asarray(q, dtype=float))
+            if setpoint:
+                self.R_d = R
+            else:
+                self.R = R
+        return problem
+
+    def take_rate(self, w):
+        if not all(math.isfinite(x) for x in w):
+            return 'angular velocity is not finite'
+        self.omega = np.asarray(w, dtype=float)
+        return None
+
+    def take_commands(self, data):
+        if not all(math.isfinite(x) and 0.0 <= x <= 1.0 for x in data):
+            return 'motor commands not finite or outside [0, 1]'
+        self.commands = list(data)
+        return None
+
+    def take_psi(self, x):
+        if not math.isfinite(x):
+            return 'configuration error is not finite'
+        self.psi = float(x)
+        return None
+
+    def take_array(self, name, data):
+        """'margins' or 'dbar'."""
+        if not all(math.isfinite(x) for x in data):
+            return '%s not finite' % name
+        setattr(self, name, list(data))
+        return None
 
 
 class Vehicle:
@@ -225,16 +266,28 @@ class Vehicle:
                                                            getattr(msg, 'mission_type', 0)))]
         return []
 
+    def denied(self, command, why):
+        """COMMAND_ACK DENIED and a STATUSTEXT saying why: the answer to a malformed command."""
+        return [('send', self.command_ack(command, 'MAV_RESULT_DENIED')),
+                ('send', self.statustext(why, 'MAV_SEVERITY_WARNING'))]
+
     def _command(self, msg):
         cmd = msg.command
         ack = self.command_ack
         if cmd == m_const('MAV_CMD_COMPONENT_ARM_DISARM'):
-            return [('arm', msg.param1 > 0.5, cmd)]
+            if msg.param1 not in (0.0, 1.0):
+                return self.denied(cmd, 'arm refused: param1 %s is not 0 or 1' % _show(msg.param1))
+            return [('arm', msg.param1 == 1.0, cmd)]
         if cmd == m_const('MAV_CMD_DO_MOTOR_TEST'):
             return self._motor_test(msg)
         if cmd in (m_const('MAV_CMD_REQUEST_MESSAGE'),
                    m_const('MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES')):
-            wanted = int(msg.param1) if cmd == m_const('MAV_CMD_REQUEST_MESSAGE') else 148
+            wanted = 148
+            if cmd == m_const('MAV_CMD_REQUEST_MESSAGE'):
+                wanted = whole(msg.param1, 0, MESSAGE_ID_MAX)
+                if wanted is None:
+                    return self.denied(cmd, 'REQUEST_MESSAGE refused: param1 %s is not a '
+                                       'message id' % _show(msg.param1))
             if wanted == m_const('MAVLINK_MSG_ID_AUTOPILOT_VERSION'):
                 return [('send', ack(cmd, 'MAV_RESULT_ACCEPTED')),
                         ('send', self.autopilot_version())]
@@ -248,24 +301,51 @@ class Vehicle:
         out by the ESC node (which refuses it too while armed); refused here while armed.
         """
         cmd = msg.command
+        rotor = whole(msg.param1, 1, MOTORS_MAX)
+        kind, count = whole(msg.param2, 0, 255), whole(msg.param5, 0, MOTORS_MAX)
+        malformed = [why for bad, why in (
+            (rotor is None, 'motor %s is not 1 to %d' % (_show(msg.param1), MOTORS_MAX)),
+            (kind is None, 'throttle type %s is not a whole number' % _show(msg.param2)),
+            (not 0.0 <= msg.param3 <= 100.0, 'throttle %s is not 0 to 100 %%' % _show(msg.param3)),
+            (not 0.0 < msg.param4 <= MOTOR_TEST_DURATION_MAX,
+             'duration %s is not in (0, %g] s' % (_show(msg.param4), MOTOR_TEST_DURATION_MAX)),
+            (count is None, 'motor count %s is not a whole number' % _show(msg.param5))) if bad]
+        if malformed:
+            return self.denied(cmd, 'motor test refused: ' + '; '.join(malformed))
         why = None
         if self.armed:
             why = 'refused: the controller is armed'
-        elif int(msg.param2) != m_const('MOTOR_TEST_THROTTLE_PERCENT'):
+        elif kind != m_const('MOTOR_TEST_THROTTLE_PERCENT'):
             why = 'refused: only a throttle in percent (type %d) is supported' % (
                 m_const('MOTOR_TEST_THROTTLE_PERCENT'))
-        elif int(msg.param5) > 1:
+        elif count > 1:
             why = 'refused: one motor at a time'
         if why:
             result = ('MAV_RESULT_TEMPORARILY_REJECTED' if self.armed
                       else 'MAV_RESULT_UNSUPPORTED')
             return [('send', self.command_ack(cmd, result)),
                     ('send', self.statustext('motor test ' + why, 'MAV_SEVERITY_WARNING'))]
-        return [('motor_test', int(msg.param1), float(msg.param3) / 100.0, float(msg.param4),
-                 cmd)]
+        return [('motor_test', rotor, float(msg.param3) / 100.0, float(msg.param4), cmd)]
 
     def command_ack(self, command, result):
         return self.mav.command_ack_encode(command, m_const(result))
+
+
+MESSAGE_ID_MAX = (1 << 24) - 1      # MAVLink 2 message ids are 24 bits
+MOTORS_MAX = 32                     # a motor test's instance number (ACTUATOR_OUTPUT_STATUS: 32)
+
+
+def whole(x, lo, hi):
+    """x (a command's float parameter) as a whole number in [lo, hi], or None: NaN, inf and
+    fractions are not (int() of NaN or inf raises, which ended the bridge).
+    """
+    if not (math.isfinite(x) and lo <= x <= hi and x == math.floor(x)):
+        return None
+    return int(x)
+
+
+def _show(x):
+    return '%g' % x
 
 
 def m_const(name):

@@ -25,7 +25,6 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
-from geoctl_ros.core import so3
 from geoctl_ros.core.diagnostics import ERROR, WARN
 from geoctl_ros.mavlink import health, signing
 from geoctl_ros.mavlink.link import Link, encoder
@@ -35,7 +34,7 @@ from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.autopilot_imu import AutopilotImu
 from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
 from geoctl_ros.nodes.conversions import python_value, quaternion, status_of, vector
-from geoctl_ros.nodes.runtime import spin
+from geoctl_ros.nodes.runtime import Periodic, RefusalLog, spin
 from geoctl_ros.params import MAVLINK, ConfigError, settings
 
 GCS_TIMEOUT = 3.0          # s without a ground-station heartbeat: "no ground station"
@@ -44,6 +43,7 @@ TIMESTAMP_LEAD = 10 * 100_000   # signing units saved ahead of the last sent (10
 UNSIGNED_WARNING = 'MAVLink unsigned: anyone on the link can arm the vehicle'
 PARAM_REFRESH = 5.0        # s between reads of the controller's parameters
 STATUSTEXT_LEN = 50
+TICK = 0.01                # s: the bridge's one timer (the rates are at most 100 Hz)
 
 
 def _version():
@@ -77,9 +77,11 @@ class MavlinkBridge(Node):
         self.link = Link(cfg.url, self.sysid, m_const('MAV_COMP_ID_AUTOPILOT1'),
                          signing=None if key is None else
                          (key, self.link_id, self.timestamps.start()))
+        # one timer (TICK) runs the pump and every periodic job
+        self.jobs = Periodic()
         if key is not None:
             self._save_timestamp()
-            self.create_timer(1.0, self._save_timestamp)
+            self.jobs.every(1.0, self._save_timestamp)
         else:
             self.get_logger().warning(UNSIGNED_WARNING + ' (set mavlink.signing_key_file)')
         self._refusals_logged = 0
@@ -95,21 +97,31 @@ class MavlinkBridge(Node):
         ctl = '/' + cfg.controller.strip('/')
 
         view = self.vehicle.view
-        self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, qos.EVENT)
-        self.create_subscription(PoseStamped, 'pose', lambda m: setattr(
-            view, 'R', so3.quat_to_rot(quaternion(m.pose.orientation))), qos.SENSOR)
-        self.create_subscription(Imu, 'imu', lambda m: setattr(
-            view, 'omega', vector(m.angular_velocity)), qos.SENSOR)
-        self.create_subscription(QuaternionStamped, 'active_setpoint', lambda m: setattr(
-            view, 'R_d', so3.quat_to_rot(quaternion(m.quaternion))), qos.LATCHED)
-        self.create_subscription(Float64MultiArray, 'motor_commands', lambda m: setattr(
-            view, 'commands', list(m.data)), qos.COMMAND)
-        self.create_subscription(Float64, 'configuration_error', lambda m: setattr(
-            view, 'psi', m.data), qos.TELEMETRY)
-        self.create_subscription(Float64MultiArray, 'cone_margins', lambda m: setattr(
-            view, 'margins', list(m.data)), qos.TELEMETRY)
-        self.create_subscription(Float64MultiArray, 'disturbance_estimate', lambda m: setattr(
-            view, 'dbar', list(m.data)), qos.TELEMETRY)
+        self.refusals = RefusalLog(self.get_logger())
+
+        def taking(topic, take):
+            """A callback that hands a message's value to the view; a refusal is logged."""
+            def callback(msg):
+                problem = take(msg)
+                if problem:
+                    self.counts[health.REFUSED_INPUT] += 1
+                    self.refusals.warn('%s refused: ' % topic, problem)
+            return callback
+        for kind, topic, take, profile in (
+                (PoseStamped, 'pose',
+                 lambda m: view.take_attitude(quaternion(m.pose.orientation)), qos.SENSOR),
+                (Imu, 'imu', lambda m: view.take_rate(vector(m.angular_velocity)), qos.SENSOR),
+                (QuaternionStamped, 'active_setpoint',
+                 lambda m: view.take_attitude(quaternion(m.quaternion), setpoint=True),
+                 qos.LATCHED),
+                (Float64MultiArray, 'motor_commands', lambda m: view.take_commands(m.data),
+                 qos.COMMAND),
+                (Float64, 'configuration_error', lambda m: view.take_psi(m.data), qos.TELEMETRY),
+                (Float64MultiArray, 'cone_margins', lambda m: view.take_array('margins', m.data),
+                 qos.TELEMETRY),
+                (Float64MultiArray, 'disturbance_estimate',
+                 lambda m: view.take_array('dbar', m.data), qos.TELEMETRY)):
+            self.create_subscription(kind, topic, taking(topic, take), profile)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
         self.arm_client = self.create_client(SetBool, ctl + '/arm')
         self.get_client = self.create_client(GetParameters, ctl + '/get_parameters')
@@ -130,14 +142,14 @@ class MavlinkBridge(Node):
                             lambda: [self.vehicle.actuators(now())]),
                            (cfg.internals_rate_hz,
                             lambda: self.vehicle.internals(now()))):
-            self.create_timer(1.0 / rate, lambda make=make: [send(m) for m in make() if m])
-        self.create_timer(0.01, self._pump)
+            self.jobs.every(1.0 / rate, lambda make=make: [send(m) for m in make() if m])
         self._params_loaded = False
         self._list_pending = False      # a PARAM_REQUEST_LIST waiting for the first read
-        self.create_timer(0.5, lambda: None if self._params_loaded else self._read_params())
-        self.create_timer(PARAM_REFRESH, self._read_params)
-        self.create_timer(1.0, self._publish_diagnostics)
-        self.create_timer(1.0, self._log_refusals)
+        self.jobs.every(0.5, lambda: None if self._params_loaded else self._read_params())
+        self.jobs.every(PARAM_REFRESH, self._read_params)
+        self.jobs.every(1.0, self._publish_diagnostics)
+        self.jobs.every(1.0, self._log_refusals)
+        self.create_timer(TICK, self._on_tick)
         self._read_params()
         self.get_logger().info('mavlink_bridge: system %d component 1 on %s%s' % (
             self.sysid, cfg.url,
@@ -215,21 +227,36 @@ class MavlinkBridge(Node):
         future.add_done_callback(done)
 
     # --- from the ground station -------------------------------------------------------------
+    def _on_tick(self):
+        self._pump()
+        self.jobs.run()
+
     def _pump(self):
         for msg in self.link.receive():
-            kind = msg.get_type()
-            if kind == 'HEARTBEAT':
-                if msg.type == m_const('MAV_TYPE_GCS'):
-                    self.gcs_heartbeat = time.monotonic()
-                continue
-            if kind == 'PARAM_REQUEST_LIST' and not self._params_loaded:
-                self._list_pending = True          # answered when the controller has answered
-                self._read_params()
-                continue
-            for action in self.vehicle.handle(msg):
-                self._act(action, msg)
+            try:
+                self._take(msg)
+            except Exception as e:     # a defect must never end the bridge on one frame
+                self.counts[health.HANDLER_ERRORS] += 1
+                self.get_logger().error('%s not handled (%s: %s); the bridge goes on'
+                                        % (msg.get_type(), type(e).__name__, e),
+                                        throttle_duration_sec=1.0)
+                if msg.get_type() == 'COMMAND_LONG':
+                    self.link.send(self.vehicle.command_ack(msg.command, 'MAV_RESULT_FAILED'))
         if self.autopilot is not None:
             self.autopilot.pump()
+
+    def _take(self, msg):
+        kind = msg.get_type()
+        if kind == 'HEARTBEAT':
+            if msg.type == m_const('MAV_TYPE_GCS'):
+                self.gcs_heartbeat = time.monotonic()
+            return
+        if kind == 'PARAM_REQUEST_LIST' and not self._params_loaded:
+            self._list_pending = True          # answered when the controller has answered
+            self._read_params()
+            return
+        for action in self.vehicle.handle(msg):
+            self._act(action, msg)
 
     def _act(self, action, msg):
         what = action[0]

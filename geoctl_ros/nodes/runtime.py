@@ -85,3 +85,24 @@ class RefusalLog:
         if now - self._last.get(kind, -math.inf) >= self.period:
             self._last[kind] = now
             self.logger.warning(prefix + reason)
+
+
+class Periodic:
+    """Jobs at their own periods, run from one timer (``run`` at its tick): rclpy warns that "the
+    number of timers associated with this clock is large" past a handful of timers, and one
+    timer is cheaper too. A job late by more than its period runs once, not in a burst.
+    """
+
+    def __init__(self):
+        self._jobs = []                      # [next due, period, function]
+
+    def every(self, period, function, now=None):
+        """Run function every period (s), the first time at the next tick."""
+        self._jobs.append([time.monotonic() if now is None else now, period, function])
+
+    def run(self, now=None):
+        now = time.monotonic() if now is None else now
+        for job in self._jobs:
+            if now >= job[0]:
+                job[0] = max(job[0] + job[1], now)
+                job[2]()

@@ -15,11 +15,12 @@ from std_msgs.msg import ColorRGBA, Float64MultiArray
 from visualization_msgs.msg import Marker, MarkerArray
 
 from geoctl_ros.core import so3
+from geoctl_ros.core.safety import quaternion_problem
 from geoctl_ros.core.view import Trail, cone_triangles, in_warning
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.controller_params import ControllerParameters
 from geoctl_ros.nodes.conversions import quaternion
-from geoctl_ros.nodes.runtime import spin
+from geoctl_ros.nodes.runtime import RefusalLog, spin
 from geoctl_ros.params import CONTROLLER, VIEW, cone_set, resolve, settings
 
 CONE_COLOUR = ColorRGBA(r=1.0, g=0.6, b=0.0, a=0.35)
@@ -45,16 +46,36 @@ class View(Node):
         self.cones = None
         self.R = self.R_d = None
         self.margins = None
-        self.create_subscription(PoseStamped, 'pose', lambda m: setattr(
-            self, 'R', so3.quat_to_rot(quaternion(m.pose.orientation))), qos.SENSOR)
-        self.create_subscription(QuaternionStamped, 'active_setpoint', lambda m: setattr(
-            self, 'R_d', so3.quat_to_rot(quaternion(m.quaternion))), qos.LATCHED)
-        self.create_subscription(Float64MultiArray, 'cone_margins', lambda m: setattr(
-            self, 'margins', np.array(m.data)), qos.TELEMETRY)
+        self.refusals = RefusalLog(self.get_logger())
+        self.create_subscription(PoseStamped, 'pose', lambda m: self._take_attitude(
+            'R', 'pose', quaternion(m.pose.orientation)), qos.SENSOR)
+        self.create_subscription(QuaternionStamped, 'active_setpoint',
+                                 lambda m: self._take_attitude('R_d', 'active_setpoint',
+                                                               quaternion(m.quaternion)),
+                                 qos.LATCHED)
+        self.create_subscription(Float64MultiArray, 'cone_margins', self._on_margins,
+                                 qos.TELEMETRY)
         self.pub = self.create_publisher(MarkerArray, 'view/markers', qos.TELEMETRY)
         ControllerParameters(self, cfg.controller, self._on_controller)
         self.create_timer(1.0 / cfg.rate_hz, self._publish)
         self.get_logger().info('view/markers at %g Hz in frame %s' % (cfg.rate_hz, self.frame))
+
+    def _take_attitude(self, field, topic, q):
+        """A quaternion drawn as an attitude; a zero, non-unit or NaN one is refused and logged
+        (a zero one ended the view).
+        """
+        problem = quaternion_problem(q)
+        if problem:
+            self.refusals.warn('%s refused: ' % topic, problem)
+            return
+        setattr(self, field, so3.quat_to_rot(np.asarray(q, dtype=float)))
+
+    def _on_margins(self, msg):
+        margins = np.array(msg.data, dtype=float)
+        if not np.isfinite(margins).all():
+            self.refusals.warn('cone_margins refused: ', 'not finite')
+            return
+        self.margins = margins
 
     def _on_controller(self, values):
         self.cones = cone_set(resolve(CONTROLLER, values))
