@@ -45,7 +45,8 @@ def test_genuine_frames_pass_and_unsigned_wrong_key_and_replayed_ones_do_not():
     tampered[14] ^= 0x01                                     # a payload bit (the CRC aside)
     assert v.check(tampered) == 'bad signature'
     assert v.check(arm_frame(gcs)) is None
-    assert v.refused == {'unsigned': 1, 'bad signature': 2, 'replayed': 1, 'too old': 0}
+    assert v.refused == {'unsigned': 1, 'bad signature': 2, 'replayed': 1, 'too old': 0,
+                         'from the future': 0}
 
 
 def test_a_forged_frame_from_the_future_never_locks_the_stream_out():
@@ -105,3 +106,37 @@ def test_the_outgoing_timestamp_never_goes_backwards_across_restarts(tmp_path):
     store.save(ahead)
     assert store.start() == ahead + 1                        # the clock went back: keep going
     assert oct(os.stat(store.path).st_mode & 0o777) == '0o600'
+
+
+def test_a_frame_from_the_future_is_refused_and_never_moves_its_stream():
+    """Issue (hostile input): a validly signed frame dated a year ahead was accepted, and the
+    genuine station's next frames on its stream were then refused as replays until a restart.
+    """
+    v, gcs = Verifier(KEY), station()
+    assert v.check(arm_frame(gcs)) is None
+    year = 365 * 24 * 3600 * 100_000
+    ahead = station(timestamp=signing.now_timestamp() + year)         # the key, a wrong clock
+    assert v.check(arm_frame(ahead)) == 'from the future'
+    assert v.check(arm_frame(gcs)) is None                            # the genuine one goes on
+    within = station(timestamp=signing.now_timestamp() + signing.FUTURE_SLACK // 2, link_id=4)
+    assert v.check(arm_frame(within)) is None                         # a clock a little ahead
+    assert v.refused['from the future'] == 1
+
+
+def test_a_frame_captured_before_a_restart_is_still_a_replay_after_it(tmp_path):
+    """Issue (hostile input): incoming stream timestamps lived in memory only, so after a restart
+    a captured ARM up to a minute old was accepted again. They are saved as the outgoing one is.
+    """
+    store = signing.StreamStore(str(tmp_path / 'signing.timestamp.streams'))
+    v, gcs = Verifier(KEY), station()
+    captured = arm_frame(gcs)
+    assert v.check(captured) is None
+    assert v.check(arm_frame(gcs)) is None
+    store.save(v.streams.copy())
+    assert oct(os.stat(store.path).st_mode & 0o777) == '0o600'
+    restarted = Verifier(KEY, streams=store.load())
+    assert restarted.check(captured) == 'replayed'
+    assert restarted.check(arm_frame(gcs)) is None                    # the station goes on
+    assert Verifier(KEY).check(captured) is None      # (what a restart without them accepted)
+    (tmp_path / 'bad').write_text('1 2 x 4\n255 190 1 12\n\n')
+    assert signing.StreamStore(str(tmp_path / 'bad')).load() == {(255, 190, 1): 12}

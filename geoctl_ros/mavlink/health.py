@@ -21,7 +21,7 @@ _LINK_COUNT = 'link '          # + a Link counter's name
 _REFUSED = 'refused '          # + a Verifier refusal's name
 BRIDGE_COUNTS = IGNORED, ARM_REQUESTS, PARAM_SETS, STATUSTEXT, REFUSED_INPUT, HANDLER_ERRORS = (
     'ignored', 'arm requests', 'param sets', 'statustext',      # the bridge's own counters
-    'refused input', 'handler errors')
+    'inputs refused', 'handler errors')
 
 NO_GCS_HEARTBEAT = 'no ground station heartbeat'
 NO_AUTOPILOT_HEARTBEAT = 'no autopilot heartbeat'

@@ -48,8 +48,8 @@ class Link:
     """A MAVLink connection served by a thread; counters for the diagnostics."""
 
     def __init__(self, url, system_id, component_id, capacity=1000, signing=None):
-        """signing: None, or (key, link id, first outgoing timestamp): then every frame is
-        checked and signed from the first on.
+        """signing: None, or (key, link id, first outgoing timestamp, the incoming streams' last
+        timestamps of the previous run): then every frame is checked and signed from the first on.
         """
         self.url = url
         self.conn = mavutil.mavlink_connection(url, source_system=system_id,
@@ -77,13 +77,13 @@ class Link:
         self._thread = threading.Thread(target=self._run, name='mavlink ' + url, daemon=True)
         self._thread.start()
 
-    def _use_signing(self, key, link_id, first_timestamp):
+    def _use_signing(self, key, link_id, first_timestamp, streams=None):
         """Sign what goes out and check what comes in with key (32 bytes)."""
         tx = mavutil.mavlink.MAVLink(None, srcSystem=self.conn.mav.srcSystem,
                                      srcComponent=self.conn.mav.srcComponent)
         tx.signing.secret_key, tx.signing.sign_outgoing = key, True
         tx.signing.link_id, tx.signing.timestamp = link_id, first_timestamp
-        self.verifier, self._tx = Verifier(key), tx
+        self.verifier, self._tx = Verifier(key, streams=streams), tx
 
     @property
     def signing_timestamp(self):

@@ -5,7 +5,11 @@ and ends in 13 bytes, link id (1), timestamp (6, little-endian, 10 us units sinc
 2015-01-01 00:00 UTC) and signature (6): the first 48 bits of SHA-256(key + the frame up to and
 including the timestamp). A frame is accepted when its signature is the key's and its timestamp
 is newer than the last accepted one of its stream (system, component, link id); a stream not seen
-yet must be no more than a minute behind this side's clock.
+yet must be no more than a minute behind this side's clock, and no frame may be more than a
+minute ahead of it (``FUTURE_SLACK``): a validly signed frame dated a year ahead, from a station
+whose clock is wrong, would otherwise move its stream a year on and lock the genuine frames out as
+replays. The last accepted timestamp of each stream is kept across restarts (``StreamStore``),
+as the outgoing one is, so a frame captured before a restart is still a replay after it.
 
 pymavlink 2.4.50's own check (``MAVLink.check_signature``) stores a stream's timestamp before it
 verifies the signature, so one forged frame with a timestamp in the future makes every later
@@ -23,6 +27,7 @@ SIGNED = 0x01                       # incompat flag
 SIGNATURE_LEN = 13                  # link id, timestamp, signature
 EPOCH = 1420070400                  # 2015-01-01 00:00:00 UTC, the signing clock's zero
 NEW_STREAM_SLACK = 60 * 100_000     # a new stream may be a minute behind us (10 us units)
+FUTURE_SLACK = 60 * 100_000         # and no frame more than a minute ahead of us
 MAX_STREAMS = 256                   # streams remembered (the oldest is forgotten past this)
 # what an unsigned peer may still send when a key is set: nothing that changes anything
 UNSIGNED_ALLOWED = frozenset({'HEARTBEAT', 'RADIO_STATUS'})
@@ -68,11 +73,14 @@ def signature(key, frame_without_signature):
 class Verifier:
     """Checks incoming frames against the key; counts what it refused and why."""
 
-    def __init__(self, key, clock=now_timestamp):
+    def __init__(self, key, clock=now_timestamp, streams=None):
+        """streams: the last accepted timestamps of a previous run (``StreamStore.load``)."""
         self._key = key
         self._clock = clock
-        self.streams = {}               # (system, component, link id) -> last accepted timestamp
-        self.refused = {'unsigned': 0, 'bad signature': 0, 'replayed': 0, 'too old': 0}
+        # (system, component, link id) -> last accepted timestamp
+        self.streams = dict(streams or {})
+        self.refused = {'unsigned': 0, 'bad signature': 0, 'replayed': 0, 'too old': 0,
+                        'from the future': 0}
 
     def check(self, frame):
         """None if frame (the whole wire bytes of one message) is signed with the key and new;
@@ -89,8 +97,11 @@ class Verifier:
         last = self.streams.get(stream)
         if last is not None and timestamp <= last:
             return self._refuse('replayed')
-        if last is None and timestamp < self._clock() - NEW_STREAM_SLACK:
+        now = self._clock()
+        if last is None and timestamp < now - NEW_STREAM_SLACK:
             return self._refuse('too old')
+        if timestamp > now + FUTURE_SLACK:
+            return self._refuse('from the future')
         self.streams.pop(stream, None)
         self.streams[stream] = timestamp                # only after the signature passed
         while len(self.streams) > MAX_STREAMS:
@@ -121,8 +132,44 @@ class TimestampStore:
         return max(saved + 1, now_timestamp(now))
 
     def save(self, timestamp):
-        tmp = self.path + '.tmp'
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-        with os.fdopen(fd, 'w') as fh:
-            fh.write('%d\n' % timestamp)
-        os.replace(tmp, self.path)
+        _write_private(self.path, '%d\n' % timestamp)
+
+
+class StreamStore:
+    """The incoming streams' last accepted timestamps across restarts: one line per stream,
+    ``system component link timestamp``, written whole and renamed into place (mode 600).
+    Saved once a second by the bridge and at its stop: a frame accepted in the second before a
+    crash is the only one that could be played again after the restart.
+    """
+
+    def __init__(self, path):
+        self.path = path
+
+    def load(self):
+        """{(system, component, link): timestamp}; lines that cannot be read are skipped."""
+        streams = {}
+        try:
+            with open(self.path) as fh:
+                lines = fh.read().splitlines()
+        except OSError:
+            return streams
+        for line in lines:
+            parts = line.split()
+            if len(parts) == 4 and all(p.isdigit() for p in parts):
+                system, component, link, timestamp = map(int, parts)
+                streams[(system, component, link)] = timestamp
+        return dict(list(streams.items())[-MAX_STREAMS:])
+
+    def save(self, streams):
+        _write_private(self.path, ''.join('%d %d %d %d\n' % (*k, t)
+                                          for k, t in list(streams.items())))
+
+
+def _write_private(path, text):
+    tmp = path + '.tmp'
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, 'w') as fh:
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)

@@ -72,11 +72,11 @@ class MavlinkBridge(Node):
         self.vehicle = Vehicle(encoder(self.sysid, m_const('MAV_COMP_ID_AUTOPILOT1')), self.sysid,
                                _version(), _git_hash())
         # the key before the link: a key file that cannot be used stops the node first
-        self.timestamps, key = self._signing_key(cfg)
+        self.timestamps, self.streams, key = self._signing_key(cfg)
         self.link_id = cfg.signing_link_id
         self.link = Link(cfg.url, self.sysid, m_const('MAV_COMP_ID_AUTOPILOT1'),
                          signing=None if key is None else
-                         (key, self.link_id, self.timestamps.start()))
+                         (key, self.link_id, self.timestamps.start(), self.streams.load()))
         # one timer (TICK) runs the pump and every periodic job
         self.jobs = Periodic()
         if key is not None:
@@ -157,23 +157,24 @@ class MavlinkBridge(Node):
 
     # --- signing -----------------------------------------------------------------------------
     def _signing_key(self, cfg):
-        """(TimestampStore, key) when a key file is set, else (None, None); a key file that
-        cannot be used stops the node (exit 2) with the reason.
+        """(TimestampStore, StreamStore, key) when a key file is set, else Nones; a key file
+        that cannot be used stops the node (exit 2) with the reason.
         """
         path = cfg.signing_key_file
         if not path:
-            return None, None
+            return None, None, None
         try:
             key = signing.load_key(path)
         except signing.SigningKeyError as e:
             raise ConfigError([('mavlink.signing_key_file', str(e))]) from None
-        return (signing.TimestampStore(cfg.signing_timestamp_file or path + '.timestamp'),
-                key)
+        outgoing = cfg.signing_timestamp_file or path + '.timestamp'
+        return signing.TimestampStore(outgoing), signing.StreamStore(outgoing + '.streams'), key
 
     def _save_timestamp(self):
         if self.timestamps is not None:
             try:
                 self.timestamps.save(self.link.signing_timestamp + TIMESTAMP_LEAD)
+                self.streams.save(self.link.verifier.streams.copy())
             except OSError as e:
                 self.get_logger().error('signing timestamp not saved: %s' % e)
 

@@ -326,7 +326,8 @@ SCHEMA = [
        MAVLINK, lo=0, hi=255),
     _p('mavlink.signing_timestamp_file', 'string', '', '-',
        'where the outgoing signing timestamp is kept across restarts (empty: the key file '
-       'followed by .timestamp)', MAVLINK),
+       "followed by .timestamp); the incoming streams' last timestamps go beside it, in the "
+       'same name followed by .streams', MAVLINK),
     _p('mavlink.system_id', 'integer', 1, '-', 'MAVLink system id of the vehicle (component 1)',
        MAVLINK, lo=1, hi=255),
     _p('mavlink.controller', 'string', 'controller', '-', 'name of the controller node to bridge',
