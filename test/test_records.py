@@ -5,6 +5,8 @@ view's markers in it: test_nodes.py.)
 import json
 import math
 import os
+import subprocess
+import sys
 from typing import NamedTuple
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -155,3 +157,57 @@ def test_compare_flies_a_record_again_headless_and_finds_the_same_flight(tmp_pat
     never = tmp_path / 'never_armed'
     write(never, BY_NAME['/configuration_error'], [0.5, 0.4])
     assert report(never, '--out', tmp_path / 'o2', '--compare', TESTBED).returncode == 2
+
+
+def test_a_closed_bag_whose_file_was_cut_still_reports(tmp_path):
+    """Issue (hostile input): a bag closed and then cut (its metadata.yaml present, its MCAP file
+    short: a copy that stopped, a card pulled) was refused with "File end magic is invalid"; the
+    same cut without metadata.yaml was mended. Both are read up to the cut now.
+    """
+    path = tmp_path / 'cut'
+    psi = [0.5 - 0.001 * i for i in range(200)]
+    write(path, bag.BY_NAME['/configuration_error'], psi)
+    (mcap,) = path.glob('*.mcap')
+    data = mcap.read_bytes()
+    mcap.write_bytes(data[:len(data) - 40])                    # into its summary and footer
+    got = bag.read_bag(str(path), ['/configuration_error'])['/configuration_error']
+    assert [m.msg.data for m in got] == psi
+    mcap.write_bytes(data[:40])                                # nothing but a header is left
+    with pytest.raises(ValueError, match='cannot be read as a rosbag2 bag'):
+        bag.read_bag(str(path))
+
+
+FULL_DISK = """
+import resource, signal, sys, time
+from geoctl_ros.records import bag
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)   # a write past the limit fails, as on a full disk
+resource.setrlimit(resource.RLIMIT_FSIZE, (1_000_000, 1_000_000))
+w = bag.BagWriter(sys.argv[1], [bag.BY_NAME['/configuration_error']], 'mcap')
+t_end = time.monotonic() + 10.0
+psi = b'\\x00\\x01\\x00\\x00' + bytes(8)       # a std_msgs/Float64 of 0.0 in CDR
+while w.error is None and time.monotonic() < t_end:     # some 400 kB a second
+    for _ in range(100):
+        w.put('/configuration_error', time.time_ns(), psi)
+    time.sleep(0.01)
+for _ in range(100_500):         # more than the queue holds: close() must not wait on it
+    w.put('/configuration_error', time.time_ns(), psi)
+w.close()
+print('error:', w.error)
+print('dropped:', w.dropped)
+"""
+
+
+def test_a_full_disk_stops_the_bag_cleanly_and_what_was_written_reads_back(tmp_path):
+    """Issue (hostile input): a full disk ended the writer thread silently and close() could
+    wait forever on a full queue. Here a file size limit stands in for the full disk (the
+    writes fail with EFBIG as they would with ENOSPC): the writer reports the error, close()
+    returns, later messages are counted as dropped, and the bag's checkpoints read back.
+    """
+    path = tmp_path / 'full'
+    r = subprocess.run([sys.executable, '-c', FULL_DISK, str(path)], capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert 'error: [Errno 27] File too large' in r.stdout, r.stdout
+    assert int(r.stdout.split('dropped:')[1]) > 0
+    got = bag.read_bag(str(path), ['/configuration_error'])
+    assert len(got['/configuration_error']) > 0

@@ -12,18 +12,20 @@ import importlib
 import os
 import sys
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from std_msgs.msg import String
 import yaml
 
-from geoctl_ros.nodes import ros_params
+from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.controller_params import ControllerParameters
 from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.params import RECORD, ConfigError, settings
 from geoctl_ros.records import bag
 
+STATUS_NAME = 'geoctl_ros: record'
 DEPTH = 50          # a burst of this many per topic waits for the callback, none is lost
 
 
@@ -67,6 +69,7 @@ class Recorder(Node):
                                      _qos(topic), raw=True)
         ControllerParameters(self, cfg.controller, self._store_controller_parameters)
         self._error_said = False
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
         self.create_timer(1.0, self._check_writer)
         self.get_logger().info('recording %d topics to %s (%s)' % (len(topics), self.path,
                                                                     cfg.storage))
@@ -82,19 +85,35 @@ class Recorder(Node):
         self.get_logger().info("stored the controller's %d cone and sensor parameters"
                                % len(values))
 
-    def _check_writer(self):
-        """Say at once when the bag stopped (a full disk): what was written stays readable."""
-        if self.writer.error is not None and not self._error_said:
+    def _check_writer(self, publish=True):
+        """Say at once when the bag stopped (a full disk): what was written stays readable. Its
+        state goes to /diagnostics every second: ERROR once the bag stopped, else OK.
+        """
+        w = self.writer
+        if w.error is not None and not self._error_said:
             self._error_said = True
             self.get_logger().error('the bag stopped: %s (what was written up to then stays '
-                                    'readable: report reads it)' % self.writer.error)
+                                    'readable: report reads it)' % w.error)
+        if not publish:
+            return
+        if w.error is not None:
+            level, text = DiagnosticStatus.ERROR, 'the bag stopped: %s' % w.error
+        else:
+            level, text = DiagnosticStatus.OK, 'recording to %s' % self.path
+        status = DiagnosticStatus(level=level, name=STATUS_NAME, hardware_id='record',
+                                  message=text, values=[
+                                      KeyValue(key='messages', value=str(sum(w.counts.values()))),
+                                      KeyValue(key='dropped', value=str(w.dropped))])
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.pub_diag.publish(msg)
 
     def on_shutdown(self):
         self.writer.close()
         counts = ', '.join('%s %d' % (k, n) for k, n in self.writer.counts.items() if n)
         self.get_logger().info('wrote %s: %s%s' % (self.path, counts or 'no messages', (
-            '; %d dropped (queue full)' % self.writer.dropped) if self.writer.dropped else ''))
-        self._check_writer()
+            '; %d dropped' % self.writer.dropped) if self.writer.dropped else ''))
+        self._check_writer(publish=False)
 
 
 def main():

@@ -102,7 +102,12 @@ class BagWriter:
             raise ValueError('%s: cannot write a bag there: %s' % (path, problem))
 
     def put(self, topic, stamp_ns, data):
-        """Queue one serialised message received at stamp_ns (ns since the epoch)."""
+        """Queue one serialised message received at stamp_ns (ns since the epoch); counted as
+        dropped when the queue is full or the writer has stopped (a full disk).
+        """
+        if self.error is not None:
+            self.dropped += 1
+            return
         try:
             self._queue.put_nowait((topic, stamp_ns, bytes(data)))
         except queue.Full:
@@ -144,8 +149,15 @@ class BagWriter:
                 self.error = self.error or e
 
     def close(self):
-        """Write what is queued and close the bag (metadata.yaml with the counts)."""
-        self._queue.put(None)
+        """Write what is queued and close the bag (metadata.yaml with the counts). It never
+        waits on a writer that has stopped (a full disk): what was on disk stays readable.
+        """
+        while self._thread.is_alive():
+            try:
+                self._queue.put(None, timeout=0.1)
+                break
+            except queue.Full:
+                continue
         self._thread.join()
 
 
@@ -161,6 +173,7 @@ def _checkpoint(writer):
         if storage.chunk.bio.tell():
             storage.close_chunk()
         storage.bio.flush()
+        os.fsync(storage.bio.fileno())      # on the disk, not in the page cache
     elif hasattr(storage, 'conn'):
         storage.conn.commit()
 
@@ -179,26 +192,36 @@ def read_bag(path, topics=None):
     a bag.
     """
     with tempfile.TemporaryDirectory() as tmp:
-        source = _readable(path, tmp)
         try:
-            with AnyReader([source], default_typestore=TYPESTORE) as reader:
-                wanted = [c for c in reader.connections if topics is None or c.topic in topics]
-                out = {c.topic: [] for c in wanted}
-                for conn, stamp, raw in reader.messages(connections=wanted):
-                    msg = reader.deserialize(raw, conn.msgtype)
-                    out[conn.topic].append(Message(stamp * 1e-9, msg))
+            return _read(_readable(path, tmp), topics)
         except Exception as e:        # rosbags' reader errors name what is wrong with the file
-            raise ValueError('%s: cannot be read as a rosbag2 bag: %s' % (path, e)) from None
+            if not os.path.isfile(os.path.join(path, 'metadata.yaml')):
+                raise ValueError('%s: cannot be read as a rosbag2 bag: %s' % (path, e)) from None
+            first = e
+        try:         # metadata.yaml, and a storage file cut after it was written: mend that
+            return _read(_readable(path, tmp, metadata=False), topics)
+        except Exception as e:
+            raise ValueError('%s: cannot be read as a rosbag2 bag: %s (and without its '
+                             'metadata.yaml: %s)' % (path, first, e)) from None
+
+
+def _read(source, topics):
+    with AnyReader([source], default_typestore=TYPESTORE) as reader:
+        wanted = [c for c in reader.connections if topics is None or c.topic in topics]
+        out = {c.topic: [] for c in wanted}
+        for conn, stamp, raw in reader.messages(connections=wanted):
+            msg = reader.deserialize(raw, conn.msgtype)
+            out[conn.topic].append(Message(stamp * 1e-9, msg))
     return out
 
 
-def _readable(path, tmp):
-    """What rosbags can open for the bag at path: the folder when it has metadata.yaml, else its
-    storage file (an MCAP file cut short is mended into tmp first).
+def _readable(path, tmp, metadata=True):
+    """What rosbags can open for the bag at path: the folder when it has metadata.yaml (and
+    metadata is True), else its storage file (an MCAP file cut short is mended into tmp first).
     """
     if not os.path.isdir(path):
         raise ValueError('%s is not a rosbag2 bag (not a folder)' % path)
-    if os.path.isfile(os.path.join(path, 'metadata.yaml')):
+    if metadata and os.path.isfile(os.path.join(path, 'metadata.yaml')):
         return Path(path)
     files = sorted(f for f in os.listdir(path) if f.endswith(('.mcap', '.db3')))
     if not files:
