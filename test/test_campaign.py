@@ -105,3 +105,20 @@ def test_a_batch_refuses_runs_that_differ_in_what_it_shares():
         run_batch([a, scenario.from_sections(s, 'b')])
 
 
+
+
+@odroid
+def test_a_gain_studys_goals_are_checked_with_its_own_barrier_and_a_refused_one_is_counted():
+    """Issue (hostile input): ``--grid k_R=0.35,0.45 --grid alpha=6,10`` died midway: the goal
+    was checked against the testbed's alpha (8), not the gain set's, so the scenario then refused
+    a goal the check had let through. Every run of every gain set now builds, and the goals the
+    gain set's barrier cannot hold are flown with the check off and counted.
+    """
+    draw = manoeuvres.Manoeuvres(load_parameter_file(TESTBED))
+    refused = 0
+    for gains in ({'k_R': 0.35, 'alpha': 10.0}, {'k_R': 0.45, 'alpha': 10.0}):
+        for i in range(20):
+            s = draw.sections(7, i, gains)
+            scenario.from_sections(s, 'run')                      # no ConfigError
+            refused += draw.goal_refused(s)
+    assert refused == 5                                           # (4 and 1: gain_sets.csv)

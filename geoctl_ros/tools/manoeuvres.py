@@ -215,7 +215,9 @@ class Manoeuvres:
         if key not in self._probes:
             self._probes[key] = AttitudeController(controller_config(dict(
                 self.nominal_c, unmodelled_moment_max=self.unmodelled, **(gains or {}))))
-        values = dict(self.nominal_c, **{'cones.names': ['c%d' % i for i in range(len(cones))]})
+        # the gains too: the barrier's own parameters (alpha, the guard) shape the cones
+        values = dict(self.nominal_c, **(gains or {}))
+        values['cones.names'] = ['c%d' % i for i in range(len(cones))]
         for i, (axis, half_angle) in enumerate(cones):
             values['cones.c%d.axis' % i] = axis
             values['cones.c%d.half_angle_deg' % i] = half_angle
