@@ -18,6 +18,7 @@ do not hear each other. No rclpy here: this is read before anything creates a no
 """
 import os
 import random
+import sys
 
 from ament_index_python.packages import get_package_share_directory
 
@@ -25,13 +26,30 @@ PROFILE_VAR = 'FASTRTPS_DEFAULT_PROFILES_FILE'   # Fast DDS 2.x (ROS 2 Jazzy)
 RANGE_VAR = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
 
 
+class NoConfig(SystemExit):
+    """The shipped config folder is nowhere to be found: a script stops with the message's one
+    line (how to source the workspace), not a traceback.
+    """
+
+
 def config_dir():
-    """The shipped config folder: the source tree's, or the installed share directory's."""
+    """The shipped config folder: the source tree's, the sourced workspace's share directory
+    (the ament index), or the one ``pip install`` put under this Python's prefix. NoConfig, with
+    one line saying how to source the workspace, when none has it.
+    """
     top = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    here = os.path.join(top, 'config')
-    if not os.path.isdir(here):
-        here = os.path.join(get_package_share_directory('geoctl_ros'), 'config')
-    return here
+    candidates = [os.path.join(top, 'config')]
+    try:
+        candidates.append(os.path.join(get_package_share_directory('geoctl_ros'), 'config'))
+    except (LookupError, ValueError, KeyError, OSError):
+        pass            # no ament index (AMENT_PREFIX_PATH unset), or not in it
+    candidates.append(os.path.join(sys.prefix, 'share', 'geoctl_ros', 'config'))
+    for here in candidates:
+        if os.path.isdir(here):
+            return here
+    raise NoConfig('geoctl_ros: the config folder was not found (looked in %s): source the '
+                   'workspace first (source install/setup.bash) or run from the source tree'
+                   % ', '.join(candidates))
 
 
 def dds_profile():
