@@ -44,6 +44,20 @@ def encoder(system_id, component_id):
     return mav
 
 
+def parse_datagram(mav, data):
+    """(messages, whether something in it was not a whole packet) of one datagram, parsed by
+    the MAVLink object mav from a clean state. Garbage the parser raises on is bad data too: the
+    datagram's other packets are lost with it, never the link.
+    """
+    mav.buf, mav.buf_index, mav.have_prefix_error = bytearray(), 0, False   # clean
+    mav.expected_length = mavutil.mavlink.HEADER_LEN_V1 + 2
+    try:
+        got = mav.parse_buffer(data) or []
+    except Exception:          # pymavlink's MAVError and what its decoders raise on garbage
+        return [], True
+    return got, mav.buf_len() > 0        # a packet cut short, or a header and no packet
+
+
 class Link:
     """A MAVLink connection served by a thread; counters for the diagnostics."""
 
@@ -153,10 +167,8 @@ class Link:
             except (BlockingIOError, ConnectionRefusedError):
                 break
             self.counts['datagrams'] += 1
-            mav.buf, mav.buf_index, mav.have_prefix_error = bytearray(), 0, False   # clean
-            mav.expected_length = mavutil.mavlink.HEADER_LEN_V1 + 2
-            got = mav.parse_buffer(data) or []
-            if mav.buf_len() > 0:            # a packet cut short, or a header and no packet
+            got, bad = parse_datagram(mav, data)
+            if bad:
                 self.counts['bad data'] += 1
             taken = [m for m in got if self._signed_or_allowed(m)]
             for msg in taken:

@@ -124,15 +124,15 @@ def _p(name, type_, default, unit, doc, nodes, length=0, check=None, choices=(),
 SCHEMA = [
     # Controller gains and shape (paper notation).
     _p('k_R', 'double', 0.4, 'N m', 'attitude gain k_R', CONTROLLER, check=_positive,
-       lo=0.0, hi=10.0),
+       lo=0.001, hi=10.0),
     _p('k_Omega', 'double', 0.7, 'N m s', 'angular-velocity gain k_Omega', CONTROLLER,
-       check=_positive, lo=0.0, hi=10.0),
+       check=_positive, lo=0.001, hi=10.0),
     _p('k_Delta', 'double', 0.05, '-', 'adaptation gain k_Delta', CONTROLLER, check=_positive,
-       lo=0.0, hi=10.0),
+       lo=1e-06, hi=10.0),
     _p('c', 'double', 0.1, '1/s', 'weight of e_R in the adaptive law (Prop. 5)', CONTROLLER,
-       check=_positive, lo=0.0, hi=100.0),
+       check=_positive, lo=0.0001, hi=100.0),
     _p('alpha', 'double', 8.0, '-', 'barrier shape alpha (larger: barrier acts closer to a cone)',
-       CONTROLLER, check=_positive, lo=0.0, hi=1000.0),
+       CONTROLLER, check=_positive, lo=0.1, hi=1000.0),
     _p('G', 'double_array', [0.9, 1.1, 1.0], '-',
        'diagonal weights g1, g2, g3 of the attitude error A (distinct, positive)', CONTROLLER,
        length=3, check=_weights, lo=0.0, hi=10.0),
@@ -179,7 +179,7 @@ SCHEMA = [
        '(README, "Safety campaign"); 0 = no check', CONTROLLER, lo=0.0, hi=10.0),
     _p('barrier_floor_deg', 'double', 0.25, 'deg',
        'within this angle of a cone boundary the barrier is extended linearly (saturated)',
-       CONTROLLER, check=_positive, lo=0.0, hi=10.0),
+       CONTROLLER, check=_positive, lo=0.01, hi=10.0),
     _p('cones.names', 'string_array', [], '-',
        'names of the forbidden cones; each needs cones.<name>.axis and .half_angle_deg',
        CONTROLLER),
@@ -197,9 +197,9 @@ SCHEMA = [
        'came for 1.5 periods, so stale inputs still fail safe)', CONTROLLER,
        choices=('timer', 'imu', 'pose')),
     _p('pose_timeout', 'double', 0.1, 's', 'pose older than this (by receipt) is stale',
-       CONTROLLER, check=_positive, lo=0.0, hi=0.5),
+       CONTROLLER, check=_positive, lo=0.001, hi=0.5),
     _p('imu_timeout', 'double', 0.05, 's', 'angular velocity older than this is stale',
-       CONTROLLER, check=_positive, lo=0.0, hi=0.5),
+       CONTROLLER, check=_positive, lo=0.001, hi=0.5),
     _p('pose_ride_through', 'double', 0.5, 's',
        'a pose gap up to this long is flown through on the gyro-propagated attitude; longer: '
        'failsafe (0: failsafe at pose_timeout)', CONTROLLER, lo=0.0, hi=1.0),
@@ -208,10 +208,10 @@ SCHEMA = [
        'longer: failsafe (0: failsafe at imu_timeout)', CONTROLLER, lo=0.0, hi=1.0),
     _p('pose_rate_window', 'double', 0.05, 's',
        'time between the two poses that give the rate during an angular-velocity gap',
-       CONTROLLER, check=_positive, lo=0.0, hi=0.5),
+       CONTROLLER, check=_positive, lo=0.001, hi=0.5),
     _p('max_angular_velocity', 'double', 100.0, 'rad/s',
        'gyro readings faster than this are refused', CONTROLLER, check=_positive,
-       lo=0.0, hi=200.0),
+       lo=0.1, hi=200.0),
     _p('setpoint_schedule.times', 'double_array', [], 's',
        'optional: times after arming at which the scheduled set points take over', CONTROLLER,
        lo=0.0, hi=3600.0),
@@ -223,7 +223,7 @@ SCHEMA = [
     _p('inertia', 'double_array', LAB_INERTIA, 'kg m^2',
        'inertia about the centre of mass, 9 values row-major', BOTH, length=9, check=_inertia,
        lo=-10.0, hi=10.0),
-    _p('mass', 'double', 1.26, 'kg', 'mass', BOTH, check=_positive, lo=0.0, hi=100.0),
+    _p('mass', 'double', 1.26, 'kg', 'mass', BOTH, check=_positive, lo=0.01, hi=100.0),
     _p('cog_offset', 'double_array', [0.0, 0.0, 0.1], 'm',
        'pivot -> centre of mass, body frame (z up: above the pivot)', BOTH, length=3,
        lo=-1.0, hi=1.0),
@@ -236,7 +236,7 @@ SCHEMA = [
     _p('rotors.count', 'integer', 6, '-', 'tilted_ring: number of rotors, numbered clockwise '
        'from above', BOTH, lo=3, hi=12),
     _p('rotors.arm_length', 'double', 0.31, 'm', 'tilted_ring: centre of mass to rotor', BOTH,
-       check=_positive, lo=0.0, hi=2.0),
+       check=_positive, lo=0.01, hi=2.0),
     _p('rotors.tilt_deg', 'double', 15.0, 'deg', 'tilted_ring: tangential tilt of each thrust '
        'axis, alternating with the spin', BOTH, lo=0.0, hi=60.0),
     _p('rotors.first_azimuth_deg', 'double', 0.0, 'deg', 'tilted_ring: azimuth of rotor 1 from '
@@ -266,20 +266,20 @@ SCHEMA = [
        BOTH, lo=-10.0, hi=10.0),
     _p('motor.voltage_scale', 'double', 1.1261, '-',
        'battery-voltage scale of the command (12.5 V / 11.1 V)', BOTH, check=_positive,
-       lo=0.0, hi=10.0),
+       lo=0.01, hi=10.0),
     _p('motor.command_max', 'integer', 240, '-', 'largest ESC command (the set point of a '
        'normalised command of 1)', (CONTROLLER, SIM, ESC), lo=1, hi=65535),
     _p('thrust_min', 'double', 0.2, 'N', 'least thrust per rotor while armed', CONTROLLER,
        lo=0.0, hi=50.0),
     _p('thrust_max', 'double', 6.5, 'N', 'most thrust per rotor (<= the curve at command_max)',
-       CONTROLLER, check=_positive, lo=0.0, hi=50.0),
+       CONTROLLER, check=_positive, lo=0.01, hi=50.0),
     _p('collective_thrust', 'double', 0.0, 'N',
        'thrust along body z to hold while armed; 0 = m * |gravity|', CONTROLLER, lo=0.0, hi=500.0),
     # Simulator.
     _p('actuation', 'string', 'rotors', '-', 'rotors (commands through the motors) or torque '
        "(the controller's moment, ideal)", SIM, choices=('rotors', 'torque')),
     _p('motor_time_constant', 'double', 0.04, 's', "first-order lag of each rotor's thrust",
-       SIM, check=_positive, lo=0.0, hi=1.0),
+       SIM, check=_positive, lo=0.0001, hi=1.0),
     _p('noise.attitude_deg', 'double', 0.0, 'deg',
        'std dev of measured-attitude noise per axis (motion capture)', SIM, lo=0.0, hi=10.0),
     _p('noise.angular_velocity', 'double', 0.0, 'rad/s',
@@ -288,7 +288,7 @@ SCHEMA = [
        length=3, lo=-1.0, hi=1.0),
     _p('noise.seed', 'integer', 0, '-', 'random seed of the noise', SIM, lo=0, hi=2 ** 32 - 1),
     _p('integration_rate_hz', 'double', 1000.0, 'Hz', 'simulator integration rate (RKMK4)', SIM,
-       check=_positive, lo=0.0, hi=10000.0),
+       check=_positive, lo=1.0, hi=10000.0),
     _p('initial_attitude', 'double_array', [0.0, 0.0, 0.0, 1.0], '-',
        'initial attitude quaternion (x, y, z, w)', SIM, length=4, check=_unit_quaternion,
        lo=-1.0, hi=1.0),
@@ -302,15 +302,15 @@ SCHEMA = [
     _p('disturbance.frequency', 'double', 0.0, 'rad/s', 'w of the sinusoidal disturbance', SIM,
        lo=0.0, hi=1000.0),
     _p('pose_rate_hz', 'double', 200.0, 'Hz', 'sim node: rate of pose (motion capture)', SIM,
-       check=_positive, lo=0.0, hi=1000.0),
+       check=_positive, lo=1.0, hi=1000.0),
     _p('imu_rate_hz', 'double', 100.0, 'Hz', 'sim node: rate of imu', SIM, check=_positive,
-       lo=0.0, hi=1000.0),
+       lo=1.0, hi=1000.0),
     _p('publish_clock', 'bool', False, '-', 'sim node: publish /clock (for use_sim_time)', SIM),
     _p('real_time_factor', 'double', 1.0, '-', 'sim node: simulated seconds per wall second',
-       SIM, check=_positive, lo=0.0, hi=20.0),
+       SIM, check=_positive, lo=0.01, hi=20.0),
     _p('command_timeout', 'double', 0.1, 's',
        'sim node: motors stop when motor_commands are older than this', SIM, check=_positive,
-       lo=0.0, hi=1.0),
+       lo=0.001, hi=1.0),
     _p('world_frame_id', 'string', 'world', '-', 'world frame id (sim: of pose messages; '
        'controller: of active_setpoint; view: of its markers)', (CONTROLLER, SIM, VIEW)),
     # MAVLink bridge (geoctl_ros.nodes.mavlink_bridge).
@@ -335,22 +335,22 @@ SCHEMA = [
     _p('mavlink.esc', 'string', 'esc_i2c', '-', 'name of the ESC node that carries out '
        'MAV_CMD_DO_MOTOR_TEST', MAVLINK),
     _p('mavlink.heartbeat_rate_hz', 'double', 1.0, 'Hz', 'HEARTBEAT rate', MAVLINK,
-       check=_positive, lo=0.0, hi=100.0),
+       check=_positive, lo=0.01, hi=100.0),
     _p('mavlink.status_rate_hz', 'double', 1.0, 'Hz', 'SYS_STATUS rate', MAVLINK, check=_positive,
-       lo=0.0, hi=100.0),
+       lo=0.01, hi=100.0),
     _p('mavlink.attitude_rate_hz', 'double', 10.0, 'Hz', 'ATTITUDE_QUATERNION and ATTITUDE_TARGET '
-       'rate', MAVLINK, check=_positive, lo=0.0, hi=100.0),
+       'rate', MAVLINK, check=_positive, lo=0.01, hi=100.0),
     _p('mavlink.actuator_rate_hz', 'double', 5.0, 'Hz', 'ACTUATOR_OUTPUT_STATUS rate', MAVLINK,
-       check=_positive, lo=0.0, hi=100.0),
+       check=_positive, lo=0.01, hi=100.0),
     _p('mavlink.internals_rate_hz', 'double', 2.0, 'Hz', 'rate of Psi, cone margins and the '
        'estimate (NAMED_VALUE_FLOAT, DEBUG_FLOAT_ARRAY)', MAVLINK, check=_positive,
-       lo=0.0, hi=100.0),
+       lo=0.01, hi=100.0),
     _p('mavlink.statustext_rate_hz', 'double', 2.0, 'Hz', 'most STATUSTEXT messages per second '
-       '(controller warnings and errors)', MAVLINK, check=_positive, lo=0.0, hi=100.0),
+       '(controller warnings and errors)', MAVLINK, check=_positive, lo=0.01, hi=100.0),
     _p('mavlink.autopilot_url', 'string', '', '-', 'optional link to a PX4/ArduPilot board used '
        'as IMU (empty: none)', MAVLINK),
     _p('mavlink.autopilot_imu_rate_hz', 'double', 100.0, 'Hz', 'HIGHRES_IMU rate requested from '
-       'the autopilot', MAVLINK, check=_positive, lo=0.0, hi=1000.0),
+       'the autopilot', MAVLINK, check=_positive, lo=1.0, hi=1000.0),
     # Flight recorder (geoctl_ros.nodes.recorder).
     _p('record.path', 'string', '', '-', 'the bag folder to create (empty: '
        'records/flight_<UTC date and time> under the working directory)', RECORD),
@@ -365,7 +365,7 @@ SCHEMA = [
        '(cones, sensor axis) are stored in the bag for the report', RECORD),
     # Live 3D view (geoctl_ros.nodes.view).
     _p('view.rate_hz', 'double', 10.0, 'Hz', 'view/markers rate', VIEW,
-       check=_positive, lo=0.0, hi=50.0),
+       check=_positive, lo=0.1, hi=50.0),
     _p('view.trail_s', 'double', 3.0, 's', 'how long a trail of sensor directions is drawn',
        VIEW, lo=0.0, hi=60.0),
     _p('view.warning_deg', 'double', 5.0, 'deg', 'a cone turns red while the sensor is this close '
@@ -382,7 +382,7 @@ SCHEMA = [
        check=lambda v: None if v in (8, 11) else 'must be 8 or 11', lo=8, hi=11),
     _p('esc.timeout', 'double', 0.1, 's', 'motor_commands older than this (or malformed, or none '
        'yet) give zero on every ESC', ESC,
-       check=_positive, lo=0.0, hi=1.0),
+       check=_positive, lo=0.001, hi=1.0),
     _p('esc.rate_hz', 'double', 100.0, 'Hz', 'least write rate: each ESC gets its set point on '
        'every command and at least this often', ESC, lo=10.0, hi=1000.0),
     _p('esc.telemetry_rate_hz', 'double', 20.0, 'Hz', 'ESC reads per second (one ESC at a time, '
@@ -408,10 +408,10 @@ SCHEMA = [
     _p('motor_test.command', 'double', 0.1, '-', "the motor test's normalised command",
        ESC, lo=0.0, hi=MOTOR_TEST_COMMAND_MAX),
     _p('motor_test.duration', 'double', 2.0, 's', 'how long the motor test runs', ESC,
-       check=_positive, lo=0.0, hi=MOTOR_TEST_DURATION_MAX),
+       check=_positive, lo=0.01, hi=MOTOR_TEST_DURATION_MAX),
     # Headless runner.
     _p('duration', 'double', 20.0, 's', 'simulated time of a scenario run', SCENARIO,
-       check=_positive, lo=0.0, hi=3600.0),
+       check=_positive, lo=0.01, hi=3600.0),
     _p('title', 'string', '', '-', "title for a scenario run's plots and summary", SCENARIO),
     _p('latency', 'double', 0.0, 's', 'measurement latency of a scenario run: the controller sees '
        'the state this long ago (a whole number of integration steps)', SCENARIO,

@@ -1,0 +1,39 @@
+"""The fuzzer's short version (``./run fuzz`` runs 10,000 inputs per boundary): a few hundred
+hostile inputs at each boundary, each kept by every promise (``geoctl_ros.tools.fuzz``): nothing
+escapes, nothing non-finite comes out, no motor moves, the next valid input is answered, every
+refusal has a reason. Each boundary must both refuse and accept some of what it is given, so that
+a strategy that stopped reaching the code under test fails here.
+"""
+import pytest
+
+from geoctl_ros.tools import fuzz
+
+pytestmark = pytest.mark.odroid
+EXAMPLES = 200
+
+
+@pytest.fixture(scope='module', autouse=True)
+def nodes_closed_at_the_end():
+    yield
+    fuzz.close_nodes()
+
+
+@pytest.mark.parametrize('boundary', sorted(fuzz.BOUNDARIES))
+def test_hostile_input_at_each_boundary_is_refused_with_a_reason_and_nothing_breaks(boundary):
+    tally = fuzz.BOUNDARIES[boundary](EXAMPLES, 2)
+    assert tally.crash is None, tally.line()
+    assert tally.tried >= EXAMPLES
+    assert 0 < tally.refused < tally.tried, tally.line()
+
+
+def test_a_broken_promise_is_shrunk_to_the_smallest_input_that_breaks_it():
+    """The machinery itself: a property that breaks for any integer from 1000 on is reported with
+    exactly 1000, the smallest input that breaks it, and counted as a crash.
+    """
+    def check(n):
+        if n >= 1000:
+            raise ValueError('too big')
+        return 'refused' if n < 0 else None
+    tally = fuzz.run_property(fuzz.Tally('demo'), fuzz.st.integers(), check, 500, 1)
+    assert tally.crash is not None and 'too big' in tally.crash
+    assert 'n=1000,' in tally.crash.replace('x=', 'n='), tally.crash
