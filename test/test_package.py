@@ -109,7 +109,7 @@ ROSDEP_KEYS = {'numpy': 'python3-numpy', 'yaml': 'python3-yaml',
                'matplotlib': 'python3-matplotlib', 'pymavlink': 'python3-pymavlink-pip',
                'pytest': 'python3-pytest', 'rosbags': 'python3-rosbags-pip',
                'dask': 'python3-dask', 'distributed': 'python3-distributed',
-               'smbus2': 'python3-smbus2'}
+               'smbus2': 'python3-smbus2', 'hypothesis': 'python3-hypothesis'}
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python', 'std_msgs',
                 'geometry_msgs', 'sensor_msgs', 'std_srvs', 'diagnostic_msgs', 'rosgraph_msgs',
                 'launch_ros', 'visualization_msgs'}
