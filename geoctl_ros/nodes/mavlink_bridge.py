@@ -98,6 +98,7 @@ class MavlinkBridge(Node):
 
         view = self.vehicle.view
         self.refusals = RefusalLog(self.get_logger())
+        self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, qos.EVENT)
 
         def taking(topic, take):
             """A callback that hands a message's value to the view; a refusal is logged."""
