@@ -248,3 +248,41 @@ def test_the_linter_finds_what_the_rules_forbid():
     assert r.returncode == 1
     found = set(re.findall(r'\b([A-Z]+[0-9]+)\b', r.stdout))
     assert {'F401', 'PLC0415', 'Q000', 'E501'} <= found, r.stdout
+
+
+INSTALLED_CONFIG = """
+import sys
+from geoctl_ros.tools import rosenv
+print(rosenv.config_dir())
+"""
+
+
+def test_the_scripts_find_the_config_pip_installed_without_a_sourced_workspace(tmp_path):
+    """Issue (hostile input): after ``pip install`` outside a sourced workspace, ``campaign``
+    died with "Environment variable 'AMENT_PREFIX_PATH' is not set or empty". Here the package
+    is laid out as pip installs it (the code in site-packages, the config under the venv's
+    share/geoctl_ros) in a venv of its own, with no AMENT_PREFIX_PATH: the config is found; and
+    with no config anywhere the script stops with one line saying to source the workspace.
+    """
+    venv = tmp_path / 'venv'
+    subprocess.run([sys.executable, '-m', 'venv', '--without-pip', str(venv)], check=True)
+    site = tmp_path / 'site'
+    shutil.copytree(os.path.join(ROOT, 'geoctl_ros'), site / 'geoctl_ros',
+                    ignore=shutil.ignore_patterns('__pycache__'))
+    deps = [p for p in sys.path if p.endswith('site-packages')]
+    env = {k: v for k, v in os.environ.items() if k != 'AMENT_PREFIX_PATH'}
+    env['PYTHONPATH'] = os.pathsep.join([str(site)] + deps)
+    python = str(venv / 'bin' / 'python')
+    missing = subprocess.run([python, '-c', INSTALLED_CONFIG], env=env, capture_output=True,
+                             cwd=str(tmp_path),
+                             text=True, timeout=60)
+    assert missing.returncode != 0 and 'Traceback' not in missing.stderr, missing.stderr
+    assert len(missing.stderr.strip().splitlines()) == 1, missing.stderr
+    assert 'source the workspace' in missing.stderr
+    share = venv / 'share' / 'geoctl_ros' / 'config'
+    shutil.copytree(os.path.join(ROOT, 'config'), share)
+    found = subprocess.run([python, '-c', INSTALLED_CONFIG], env=env, capture_output=True,
+                           cwd=str(tmp_path),
+                           text=True, timeout=60)
+    assert found.returncode == 0, found.stderr
+    assert found.stdout.strip() == str(share)

@@ -7,6 +7,7 @@ import math
 import os
 import subprocess
 import sys
+import time
 from typing import NamedTuple
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -211,3 +212,29 @@ def test_a_full_disk_stops_the_bag_cleanly_and_what_was_written_reads_back(tmp_p
     assert int(r.stdout.split('dropped:')[1]) > 0
     got = bag.read_bag(str(path), ['/configuration_error'])
     assert len(got['/configuration_error']) > 0
+
+
+def test_each_checkpoint_puts_the_bag_on_the_disk_not_only_in_the_page_cache(tmp_path,
+                                                                             monkeypatch):
+    """Issue (hostile input): the 1 s checkpoint flushed the MCAP file but did not fsync it, so a
+    power cut could lose what the checkpoint promised. The disk is the hardware edge: os.fsync is
+    watched (and still called) while a bag records for a little over one checkpoint.
+    """
+    synced = []
+    real = os.fsync
+
+    def fsync(fd):
+        synced.append(os.fstat(fd).st_ino)
+        return real(fd)
+    monkeypatch.setattr(os, 'fsync', fsync)
+    path = tmp_path / 'synced'
+    topic = bag.BY_NAME['/configuration_error']
+    w = bag.BagWriter(str(path), [topic], 'mcap')
+    t_end = time.monotonic() + 1.5 * bag.CHECKPOINT_S
+    while time.monotonic() < t_end:
+        w.put(topic.name, time.time_ns(), serialize_message(Float64(data=0.5)))
+        time.sleep(0.01)
+    checkpointed = list(synced)          # before close() (which may sync again)
+    w.close()
+    (mcap,) = path.glob('*.mcap')
+    assert os.stat(mcap).st_ino in checkpointed
