@@ -12,7 +12,7 @@ from geoctl_ros.tools.batch import run_batch
 
 # on the vehicle's stack too, but for the campaign and the replay of a written run: they fly the
 # same batches as these, and a 50-run campaign's runs.csv was byte-identical on both stacks when
-# checked by hand (README "Two stacks")
+# checked by hand (docs/stacks.md, "Two stacks")
 odroid = pytest.mark.odroid
 pytestmark = pytest.mark.headless
 

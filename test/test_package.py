@@ -286,3 +286,31 @@ def test_the_scripts_find_the_config_pip_installed_without_a_sourced_workspace(t
                            text=True, timeout=60)
     assert found.returncode == 0, found.stderr
     assert found.stdout.strip() == str(share)
+
+
+def _anchor(heading):
+    return re.sub(r'[^\w\- ]', '', heading.strip().lower()).replace(' ', '-')
+
+
+def test_every_link_of_the_readme_and_the_manual_leads_somewhere():
+    """The README is a map and docs/ the manual: every relative link of theirs names a file that
+    exists and, with a #fragment, a heading of that file.
+    """
+    pages = [os.path.join(ROOT, 'README.md')] + sorted(
+        str(p) for p in pathlib.Path(ROOT, 'docs').glob('*.md'))
+    broken = []
+    for page in pages:
+        text = open(page).read()
+        for target in re.findall(r'\]\(([^)\s]+)\)', text):
+            if re.match(r'[a-z]+:', target):
+                continue                                    # https:, mailto:
+            path, _, fragment = target.partition('#')
+            full = os.path.normpath(os.path.join(os.path.dirname(page), path)) if path else page
+            if not os.path.exists(full):
+                broken.append('%s: %s' % (os.path.relpath(page, ROOT), target))
+            elif fragment and full.endswith('.md'):
+                headings = {_anchor(h) for h in re.findall(r'^#+ (.*)$', open(full).read(),
+                                                           re.M)}
+                if fragment not in headings:
+                    broken.append('%s: %s' % (os.path.relpath(page, ROOT), target))
+    assert not broken, broken

@@ -1,5 +1,5 @@
 """The parameter schema: defaults, ROS-strict types, one clear error per bad parameter, YAML files,
-and the README table generated from the schema.
+and the parameter table (docs/parameters.md) generated from the schema.
 """
 import os
 import re
@@ -141,14 +141,14 @@ def test_shipped_configs_are_valid():
 
 
 def test_readme_parameter_table_is_in_sync_with_the_schema():
-    """A documentation snapshot (it keeps the README true), not a correctness test."""
-    with open(os.path.join(ROOT, 'README.md')) as f:
+    """A documentation snapshot (it keeps docs/parameters.md true), not a correctness test."""
+    with open(os.path.join(ROOT, 'docs', 'parameters.md')) as f:
         readme = f.read()
     m = re.search(r'<!-- params:begin -->\n(.*?)\n<!-- params:end -->', readme, re.S)
-    assert m, 'README.md lacks the generated parameter table markers'
+    assert m, 'docs/parameters.md lacks the generated parameter table markers'
     assert m.group(1).strip() == readme_table.markdown_table().strip(), (
-        'README parameter table is stale: regenerate it with '
-        '`./run shell -m geoctl_ros.params.readme --write-readme README.md`')
+        'docs/parameters.md is stale: regenerate it with '
+        '`./run shell -m geoctl_ros.params.readme --write-readme docs/parameters.md`')
 
 
 def test_every_default_passes_its_own_type_and_check():

@@ -15,8 +15,8 @@ from geoctl_ros.tools import scenario
 from geoctl_ros.tools.demo import table_row
 
 # On the vehicle's stack the tests without the shipped scenarios' full runs: their summaries were
-# the same on both stacks when compared by hand (README "Two stacks"), and the full runs alone
-# would double that stack's share of ./run test.
+# the same on both stacks when compared by hand (docs/stacks.md, "Two stacks"), and the full
+# runs alone would double that stack's share of ./run test.
 odroid = pytest.mark.odroid
 pytestmark = pytest.mark.headless
 
@@ -152,13 +152,13 @@ def test_duration_option_and_errors(tmp_path, capsys):
 
 def test_readme_results_table_matches_the_runs(runs):
     """The README's table of what each scenario gives is what the runs give (wall time aside)."""
-    with open(os.path.join(ROOT, 'README.md')) as fh:
+    with open(os.path.join(ROOT, 'docs', 'scenarios.md')) as fh:
         readme = fh.read()
     number = re.compile(r'-?\d+(?:\.\d+)?(?:e[-+]?\d+)?')
     for name, (summary, _) in runs.items():
         expected = table_row(summary).rsplit('|', 2)[0]       # drop the wall-time column
         line = next((ln for ln in readme.splitlines() if ln.startswith('| `%s` |' % name)), None)
-        assert line is not None, 'README lacks the results row of %s' % name
+        assert line is not None, 'docs/scenarios.md lacks the results row of %s' % name
         shown = line.rsplit('|', 2)[0]
         assert re.sub(number, '#', shown) == re.sub(number, '#', expected), (shown, expected)
         got = [float(x) for x in number.findall(shown)]

@@ -107,7 +107,8 @@ def test_short_gaps_are_ridden_through_and_a_long_one_fails_safe(tmp_path):
     finally:
         s.close()
     # the sim's own pause: before the ESC watchdog judged command age by the link, the sim
-    # caught up with its motors stopped and once ended 5.9 deg inside (README, "Input gaps")
+    # caught up with its motors stopped and once ended 5.9 deg inside (docs/safety-behaviour.md,
+    # "Input gaps")
     assert pause_margin > 0.0, '150 ms sim pause: sensor %.1f deg inside the cone' % -pause_margin
 
 

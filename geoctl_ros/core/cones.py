@@ -28,9 +28,9 @@ is, and evaluations report which cones are violated (g_i <= 0) and which are in 
 A guard (``guard_rad``, the ``cone_guard_deg`` parameter) puts the barrier on cones wider than the
 real ones by that angle: a sampled controller with latency sees the sensor a control period or two
 late, and at the testbed's speeds (up to about 3 rad/s, 1.7 deg per 10 ms period) that is enough to
-cross the floor band unseen (README, "Safety campaign"). Margins and violations are always reported
-against the real half-angles theta_i; the barrier, its floor band and the inside field use
-theta_i + guard.
+cross the floor band unseen (docs/campaigns.md, "Safety campaign"). Margins and violations are
+always reported against the real half-angles theta_i; the barrier, its floor band and the inside
+field use theta_i + guard.
 
 A batch of cone sets (one per run of a campaign, each with the same number of cones) is one
 ConeSet with axes (batch, n, 3) and half-angles (batch, n); it evaluates a stack of attitudes

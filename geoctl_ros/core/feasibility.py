@@ -24,7 +24,7 @@ def holding_moment(config, cones, R_d):
     at least the set point's clearance c_i from that cone away from R_d, and A is then at least
     (1 - cos c_i) (g_a + g_b) / 2 (g_a, g_b the two smallest weights). An unlearnt moment larger
     than this (a disturbance, an error in the model of gravity, before the adaptive estimate has
-    caught up) holds the sensor in the cone: the campaign's creep class (README, "Safety
+    caught up) holds the sensor in the cone: the campaign's creep class (docs/campaigns.md, "Safety
     campaign").
     """
     if not len(cones):

@@ -15,8 +15,8 @@ mass above the pivot. So, while a stream is stale but not yet lost
   (by their stamps): Omega = log(R_old^T R_new) / (t_new - t_old), the mean body rate over the
   window (so it lags by about half the window). With 0.1 deg of motion-capture noise and a 50 ms
   window its noise alone is about sqrt(2) 0.1 deg / 50 ms = 0.05 rad/s; over the testbed's
-  manoeuvre, lag included, the error is 0.088 rad/s RMS, 0.17 p99, 0.33 max (README, "Input
-  gaps").
+  manoeuvre, lag included, the error is 0.088 rad/s RMS, 0.17 p99, 0.33 max
+  (docs/safety-behaviour.md, "Input gaps").
 - **both**: the last rate in use is held and the attitude propagated with it.
 
 When a stream is fresh its measurement is used as it is: nothing here changes normal flight.

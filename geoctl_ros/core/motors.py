@@ -84,7 +84,8 @@ class Mixer:
 
     Without it, the 40 ms lag of the lab's motors costs the attitude loop about 50 deg of phase
     at the barrier's stiffness near a cone; in the campaign that let a sensor starting in a
-    narrow corridor between two cones bounce between them into one (README, "Safety campaign").
+    narrow corridor between two cones bounce between them into one (docs/campaigns.md, "Safety
+    campaign").
     A batch of moments keeps one model per run. The model starts at the first armed step's own
     allocation (no kick at arming) and is dropped when disarmed.
     """

@@ -1,6 +1,6 @@
 """Input checks and the arming supervisor: the controller node's safety logic, ROS-free.
 
-Rules (the README's "Safety behaviour" section says the same to users):
+Rules (docs/safety-behaviour.md, "Safety behaviour" section says the same to users):
 
 - A measurement is refused, with its reason, if it is not finite, if its quaternion is not a unit
   quaternion (|q| off by more than 1e-3; within that it is normalised), if its angular velocity is

@@ -26,7 +26,7 @@ from geoctl_ros.mavlink import frames
 from geoctl_ros.mavlink.params import BY_ID, TABLE, to_mavlink
 from geoctl_ros.params.schema import MOTOR_TEST_DURATION_MAX
 
-# DEBUG_FLOAT_ARRAY / NAMED_VALUE_FLOAT names (at most 10 characters; README, "MAVLink").
+# DEBUG_FLOAT_ARRAY / NAMED_VALUE_FLOAT names (at most 10 characters; docs/mavlink.md, "MAVLink").
 NAME_PSI = 'GC_PSI'            # configuration error Psi
 NAME_MARGIN = 'GC_MARGIN'      # smallest cone margin, deg
 NAME_MARGINS = 'GC_MARGINS'    # DEBUG_FLOAT_ARRAY: every cone margin, deg, in cones.names order

@@ -3,7 +3,8 @@
 A thin shell over ``geoctl_ros.core.loop.ControlLoop``: subscriptions feed it checked measurements
 and set points, a timer at ``rate_hz`` runs one control step and publishes the results, services
 arm, disarm and reset the estimate, and parameter changes are validated by the shared schema before
-they touch the running controller. Topics, services and parameters: see the README.
+they touch the running controller. Topics, services and parameters: docs/interface.md and
+docs/parameters.md.
 """
 from dataclasses import replace
 import sys

@@ -1,5 +1,5 @@
 """The ESC node: ``ros2 run geoctl_ros esc_i2c`` writes ``motor_commands`` to the BL-Ctrl ESCs on
-I2C (``esc.*`` and ``motor_test.*`` in the README's table; README "ESCs on I2C").
+I2C (``esc.*`` and ``motor_test.*`` in docs/parameters.md; docs/esc.md, "ESCs on I2C").
 
 A thin shell over ``geoctl_ros.esc.driver.EscDriver``, which decides everything: zero at start,
 on shutdown and on SIGINT/SIGTERM; the watchdog (commands older than ``esc.timeout``, malformed,
@@ -52,7 +52,8 @@ class EscNode(Node):
                    else I2cBus(values['esc.bus']))
         except (OSError, ValueError) as e:
             raise ConfigError([('esc.virtual_bus' if path else 'esc.bus',
-                                'cannot open the bus: %s (README "ESCs on I2C")' % e)]) from None
+                                'cannot open the bus: %s (docs/esc.md, "ESCs on I2C")'
+                                % e)]) from None
         self.bus = bus
         self.driver = EscDriver(config, bus)
         try:

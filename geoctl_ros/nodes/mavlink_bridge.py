@@ -7,7 +7,7 @@ is carried out through the controller's own services: ``~/arm`` for MAV_CMD_COMP
 ``set_parameters`` for PARAM_SET (validated exactly as ``ros2 param set`` is); and the ESC node's
 ``~/motor_test`` for MAV_CMD_DO_MOTOR_TEST (refused while armed). Optionally a second
 link reads a PX4/ArduPilot board's HIGHRES_IMU and publishes it on ``imu`` (FLU). Its own health
-goes to /diagnostics. Parameters: ``mavlink.*`` in the README's table.
+goes to /diagnostics. Parameters: ``mavlink.*`` in docs/parameters.md.
 """
 import importlib.metadata
 import os

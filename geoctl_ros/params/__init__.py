@@ -7,7 +7,7 @@ Where each piece lives (the names below are this package's public API):
     files.py     ROS 2 parameter files: ``load_parameter_file``, ``node_overrides``
     build.py     objects from resolved values: ``controller_setup``, ``mixer``, ``airframe``,
                  ``testbed_sim``, ``cone_set``, ... with the checks that span parameters
-    readme.py    the README's parameter table (``python -m geoctl_ros.params.readme``)
+    readme.py    the parameter table (docs/parameters.md) (``python -m geoctl_ros.params.readme``)
 
 Nothing here imports rclpy: the nodes (``geoctl_ros.nodes.ros_params``) and the headless runner
 use the same code.

@@ -1,6 +1,6 @@
-"""The README's parameter table, generated from the schema.
+"""The parameter table, generated from the schema.
 
-./run shell -m geoctl_ros.params.readme --write-readme README.md
+./run shell -m geoctl_ros.params.readme --write-readme docs/parameters.md
 """
 import sys
 
@@ -14,7 +14,7 @@ from geoctl_ros.params.schema import (
 
 
 def markdown_table():
-    """The README's parameter table."""
+    """The parameter table."""
     rows = ['| parameter | node | type | default | range | unit | meaning |',
             '|---|---|---|---|---|---|---|']
     for p in SCHEMA + CONE_SCHEMA:

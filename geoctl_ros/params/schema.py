@@ -3,7 +3,7 @@
 Each ``Param`` has its ROS 2 type, default, unit, one-line doc, the nodes that read it and a check
 (a function returning a reason, or None). The nodes declare their parameters from it
 (``geoctl_ros.nodes.ros_params``), the headless runner reads files through it
-(``geoctl_ros.params.files``) and the README's table is generated from it
+(``geoctl_ros.params.files``) and the parameter table (docs/parameters.md) is generated from it
 (``geoctl_ros.params.readme``). Cones are parameters too: ``cones.names: [a, b]`` plus
 ``cones.<name>.axis`` and ``cones.<name>.half_angle_deg`` per name (``CONE_SCHEMA``).
 """
@@ -105,7 +105,7 @@ class Param:
 
     @property
     def range_text(self):
-        """The documented range, as the README's table shows it ('' for non-numbers)."""
+        """The documented range, as docs/parameters.md shows it ('' for non-numbers)."""
         if self.lo is None:
             return ''
         return '[%s, %s]' % (_number(self.lo), _number(self.hi))
@@ -171,12 +171,12 @@ SCHEMA = [
        'time (docs/safety.md, "Delay"); 0 = never', CONTROLLER, lo=0.0, hi=30.0),
     _p('motor_lag_compensation', 'double', 0.0, 's',
        "the motors' thrust time constant the mixer compensates (commands the thrust that brings "
-       'a model of the lagged rotors to the allocated thrust by the next step; README, "Safety '
-       'campaign"); 0 = none', CONTROLLER, lo=0.0, hi=0.5),
+       'a model of the lagged rotors to the allocated thrust by the next step; '
+       'docs/campaigns.md, "Safety campaign"); 0 = none', CONTROLLER, lo=0.0, hi=0.5),
     _p('unmodelled_moment_max', 'double', 0.0, 'N m',
        'the moment the controller may have to hold without having learnt it (disturbance plus '
        "model errors); set points whose cones' barriers cannot hold it near the goal are refused "
-       '(README, "Safety campaign"); 0 = no check', CONTROLLER, lo=0.0, hi=10.0),
+       '(docs/campaigns.md, "Safety campaign"); 0 = no check', CONTROLLER, lo=0.0, hi=10.0),
     _p('barrier_floor_deg', 'double', 0.25, 'deg',
        'within this angle of a cone boundary the barrier is extended linearly (saturated)',
        CONTROLLER, check=_positive, lo=0.01, hi=10.0),
@@ -358,7 +358,7 @@ SCHEMA = [
        'sqlite3', RECORD,
        check=lambda v: None if v in ('mcap', 'sqlite3') else 'must be mcap or sqlite3'),
     _p('record.topics', 'string_array', list(RECORD_TOPICS), '-', 'the topics to record, '
-       'of those the package publishes and reads (README "Flight records")', RECORD,
+       'of those the package publishes and reads (docs/records.md, "Flight records")', RECORD,
        check=lambda v: next(('unknown topic %r (one of %s)' % (t, ', '.join(RECORD_TOPICS))
                              for t in v if t not in RECORD_TOPICS), None)),
     _p('record.controller', 'string', 'controller', '-', 'the controller node whose parameters '
@@ -372,7 +372,7 @@ SCHEMA = [
        'to it (or inside)', VIEW, lo=0.0, hi=90.0),
     _p('view.controller', 'string', 'controller', '-', 'the controller node whose cones are '
        'drawn', VIEW),
-    # ESCs on I2C (geoctl_ros.nodes.esc_i2c; README "ESCs on I2C").
+    # ESCs on I2C (geoctl_ros.nodes.esc_i2c; docs/esc.md, "ESCs on I2C").
     _p('esc.bus', 'integer', 1, '-', 'the I2C bus: /dev/i2c-<bus>', ESC, lo=0, hi=255),
     _p('esc.addresses', 'integer_array', [0x29, 0x2A, 0x2B, 0x2C, 0x2D, 0x2E], '-',
        "7-bit I2C address of each rotor's ESC, in rotor order (the lab's 0x29-0x2E)", (ESC, SIM),

@@ -33,7 +33,7 @@ from geoctl_ros.tools.batch import run_batch
 from geoctl_ros.tools.rosenv import config_dir
 from geoctl_ros.tools.scenario import from_sections
 
-BATCH = 1024                       # runs flown together at most (README "Campaign speed")
+BATCH = 1024               # runs flown together at most (docs/campaigns.md, "Campaign speed")
 # runs.csv's columns, in order (gain_set only in a gain study)
 COLUMNS = ('gain_set', 'run', 'cones', 'closest_deg', 'violated', 'final_error_deg', 'converged',
            'settle_s', 'saturated_s', 'max_rate', 'latency_ms', 'disturbance_Nm', 'goal_refused')

@@ -3,8 +3,8 @@
 ``connect()`` opens a client: on a ``LocalCluster`` of this machine by default (one worker
 process per core, one thread each, scheduler and workers on 127.0.0.1 only, no dashboard unless
 asked), or on an existing scheduler (``tcp://HOST:PORT``: ``dask scheduler`` and ``dask worker``
-on the lab's machines, or dask-jobqueue on SLURM; README "Campaigns on a cluster"). The same code
-path serves both.
+on the lab's machines, or dask-jobqueue on SLURM; docs/campaigns.md, "Campaigns on a cluster").
+The same code path serves both.
 
 ``run_tasks()`` submits the tasks, hands each result over as it arrives (nothing is held but what
 the caller keeps), and reports progress from the workers' own events: a task calls
@@ -24,7 +24,7 @@ from distributed import Client, LocalCluster, as_completed, get_worker
 
 LOOPBACK = '127.0.0.1'
 # Dask's statistical profiler samples the task's stack every 10 ms from the worker's event loop:
-# it took 7 % of the batched loop's time (the README gives the same setting for `dask worker`)
+# it took 7 % of the batched loop's time (docs/campaigns.md gives the same for `dask worker`)
 WORKER_CONFIG = {'distributed.worker.profile.enabled': False}
 PROGRESS_TOPIC = 'geoctl-progress'
 

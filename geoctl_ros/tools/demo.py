@@ -9,7 +9,7 @@ diagnostics), and what a subscriber sees of the command stream. Writes OUT/sil_s
 OUT/sil.png and the two nodes' logs. Discovery stays on loopback in a DDS domain of its own.
 
 ``./run demo --headless`` instead runs every shipped scenario through the headless runner and
-prints the README's results table.
+prints the results table of docs/scenarios.md.
 """
 import argparse
 import glob
@@ -45,7 +45,7 @@ TABLE_HEAD = ('| scenario | min angle to each cone (half-angle), deg | final att
 
 
 def table_row(summary):
-    """One README table row of a run's summary."""
+    """One results-table row (docs/scenarios.md) of a run's summary."""
     cones = ', '.join('%s %.1f (%g)' % (n, a, summary['cone_half_angle_deg'][n])
                       for n, a in summary['min_cone_angle_deg'].items()) or '-'
     settle = '-' if summary['settle_time_s'] is None else '%.1f' % summary['settle_time_s']

@@ -1,7 +1,7 @@
 """The DDS environment of every ROS process this project starts: loopback only, a domain of its
 own.
 
-Two settings, both keeping traffic on 127.0.0.1 (README, "DDS transport"):
+Two settings, both keeping traffic on 127.0.0.1 (docs/interface.md, "DDS transport"):
 
 - ``node_env``: the nodes (and the tests' and tools' own rclpy nodes) use the shipped Fast DDS
   profile ``config/dds/fastdds_loopback.xml``: UDPv4 only, every locator and initial peer on

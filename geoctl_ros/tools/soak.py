@@ -26,7 +26,7 @@ missing for a while; and the sim process paused with SIGSTOP/SIGCONT (both input
 
 ``--transport profile`` (default) runs the nodes on the shipped loopback profile
 (``geoctl_ros.tools.rosenv``), ``rmw-default`` on the rmw's defaults (shared memory + UDP,
-LOCALHOST): the "before" of the README's table. Everything stays on 127.0.0.1.
+LOCALHOST): the "before" of docs/interface.md's table. Everything stays on 127.0.0.1.
 """
 import argparse
 import json
@@ -208,7 +208,8 @@ def start_loads(loads, env):
             if load == 'cli':
                 ros2 = ros2_command()
                 if ros2 is None:
-                    raise RuntimeError('the cli load needs the ros2 command (README, "Set-up")')
+                    raise RuntimeError('the cli load needs the ros2 command (README, '
+                                       '"Set-up: two commands")')
                 env_cli = dict(env, PATH=os.path.dirname(ros2) + os.pathsep + env.get('PATH', ''))
                 procs.append(subprocess.Popen(['bash', '-c', CLI_LOOP], env=env_cli,
                                               stdout=subprocess.DEVNULL,
@@ -356,7 +357,7 @@ def main(argv=None):
     parser.add_argument('--params-file', default=None, help='default: config/testbed.yaml')
     parser.add_argument('--prefix', default='',
                         help="run sim and controller under this command, as ros2 run --prefix "
-                             "(e.g. 'nice -n -10'; README, \"Scheduling\")")
+                             "(e.g. 'nice -n -10'; docs/interface.md, \"Scheduling\")")
     parser.add_argument('--out', default=None, help='folder for logs and soak.json')
     args = parser.parse_args(argv)
     params_file = args.params_file or os.path.join(config_dir(), 'testbed.yaml')
