@@ -15,7 +15,13 @@ from geoctl_ros.core.diagnostics import ERROR, OK, WARN, Figures, Status
 from geoctl_ros.mavlink import frames  # noqa: E402
 from geoctl_ros.mavlink.link import encoder  # noqa: E402
 from geoctl_ros.mavlink.params import BY_ID, TABLE, to_mavlink, to_ros  # noqa: E402
-from geoctl_ros.mavlink.vehicle import Vehicle  # noqa: E402
+from geoctl_ros.mavlink.vehicle import (  # noqa: E402
+    Arm,
+    Ignored,
+    MotorTest,
+    SetParameter,
+    Vehicle,
+)
 from geoctl_ros.params import BY_NAME  # noqa: E402
 
 pytestmark = pytest.mark.odroid
@@ -104,14 +110,14 @@ def test_the_motor_test_goes_to_the_esc_node_and_is_refused_while_armed():
         return v.handle(g.command_long_encode(7, 1, mav.MAV_CMD_DO_MOTOR_TEST, 0, 3,
                                               throttle_type, 12.0, 2.0, count, 0, 0))
     v.view.diagnostics = Status(OK, '', Figures(armed=False, state='disarmed'))
-    assert motor_test() == [('motor_test', 3, 0.12, 2.0, mav.MAV_CMD_DO_MOTOR_TEST)]
+    assert motor_test() == [MotorTest(3, 0.12, 2.0, mav.MAV_CMD_DO_MOTOR_TEST)]
     v.view.diagnostics = Status(OK, '', Figures(armed=True, state='armed'))
-    ack, text = (parse(a[1]) for a in motor_test())
+    ack, text = (parse(a.message) for a in motor_test())
     assert ack.result == mav.MAV_RESULT_TEMPORARILY_REJECTED
     assert text.text == 'motor test refused: the controller is armed'
     v.view.diagnostics = Status(OK, '', Figures(armed=False, state='disarmed'))
     for refused in (motor_test(throttle_type=mav.MOTOR_TEST_THROTTLE_PWM), motor_test(count=6)):
-        assert parse(refused[0][1]).result == mav.MAV_RESULT_UNSUPPORTED
+        assert parse(refused[0].message).result == mav.MAV_RESULT_UNSUPPORTED
 
 
 def test_attitude_and_target_go_out_in_ned_frd():
@@ -128,23 +134,23 @@ def test_connect_sequence_answers():
     g = encoder(255, 190)                                   # a ground station
     acts = v.handle(g.command_long_encode(7, 1, mav.MAV_CMD_REQUEST_MESSAGE, 0,
                                           mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0))
-    ack, ver = (parse(a[1]) for a in acts)
+    ack, ver = (parse(a.message) for a in acts)
     assert ack.result == mav.MAV_RESULT_ACCEPTED and ver.get_type() == 'AUTOPILOT_VERSION'
     assert ver.capabilities & mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
     assert ver.flight_sw_version >> 8 == (1 << 16) | (2 << 8) | 3
     assert bytes(ver.flight_custom_version) == bytes.fromhex('0123456789abcdef')
-    values = [parse(a[1]) for a in v.handle(g.param_request_list_encode(7, 1))]
+    values = [parse(a.message) for a in v.handle(g.param_request_list_encode(7, 1))]
     assert [p.param_id for p in values] == ['GC_K_R', 'GC_ADAPTIVE']   # those the controller gave
     assert values[0].param_count == len(TABLE) and values[1].param_value == 1.0
-    count = parse(v.handle(g.mission_request_list_encode(7, 1))[0][1])
+    count = parse(v.handle(g.mission_request_list_encode(7, 1))[0].message)
     assert count.get_type() == 'MISSION_COUNT' and count.count == 0
     arm = v.handle(g.command_long_encode(7, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0,
                                          0, 0, 0))
-    assert arm == [('arm', True, mav.MAV_CMD_COMPONENT_ARM_DISARM)]
+    assert arm == [Arm(True, mav.MAV_CMD_COMPONENT_ARM_DISARM)]
     other = parse(v.handle(g.command_long_encode(7, 1, mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0,
-                                                 0, 0, 0))[0][1])
+                                                 0, 0, 0))[0].message)
     assert other.result == mav.MAV_RESULT_UNSUPPORTED
     setp = v.handle(g.param_set_encode(7, 1, b'GC_K_R', 0.5, mav.MAV_PARAM_TYPE_REAL32))
-    assert setp == [('set', 'k_R', 0.5, 0)]
-    assert v.handle(g.param_set_encode(9, 1, b'GC_K_R', 0.5, mav.MAV_PARAM_TYPE_REAL32))[0][0] \
-        == 'ignored'                                         # another system's
+    assert setp == [SetParameter('k_R', 0.5, 0)]
+    other_system = v.handle(g.param_set_encode(9, 1, b'GC_K_R', 0.5, mav.MAV_PARAM_TYPE_REAL32))
+    assert other_system == [Ignored('for system 9')]

@@ -19,7 +19,7 @@ from pymavlink.dialects.v20 import common as mav  # noqa: E402
 
 from geoctl_ros.mavlink import signing  # noqa: E402
 from geoctl_ros.mavlink.link import Link, encoder  # noqa: E402
-from geoctl_ros.mavlink.vehicle import Vehicle  # noqa: E402
+from geoctl_ros.mavlink.vehicle import Send, Vehicle  # noqa: E402
 
 TRIES = 20
 ANSWER_WITHIN = 5.0            # s: no answer by then is a lost command, not a slow one
@@ -46,8 +46,8 @@ class Bridge:
         while not self._stop.is_set():
             for msg in self.link.receive():
                 for action in self.vehicle.handle(msg):
-                    if action[0] == 'send':
-                        self.link.send(action[1])
+                    if isinstance(action, Send):
+                        self.link.send(action.message)
             time.sleep(0.002)
 
     def close(self):

@@ -15,6 +15,7 @@ base_mode carries the armed flag; system_status is STANDBY (disarmed), ACTIVE (a
 """
 from dataclasses import dataclass, field
 import math
+from typing import NamedTuple
 
 import numpy as np
 from pymavlink.dialects.v20 import common
@@ -85,6 +86,43 @@ class ControllerView:
             return '%s not finite' % name
         setattr(self, name, list(data))
         return None
+
+
+# What an incoming message asks of the bridge (``Vehicle.handle``): typed, dispatched by type.
+class Send(NamedTuple):
+    """Send this message to the ground station."""
+
+    message: object
+
+
+class Arm(NamedTuple):
+    """Arm (on) or disarm the controller, then answer the COMMAND_LONG command."""
+
+    on: bool
+    command: int
+
+
+class SetParameter(NamedTuple):
+    """Set the controller's ROS parameter name to a PARAM_SET value (table index)."""
+
+    name: str
+    value: float
+    index: int
+
+
+class MotorTest(NamedTuple):
+    """Spin rotor (1-based) at a normalised command for seconds through the ESC node."""
+
+    rotor: int
+    command: float
+    seconds: float
+    mav_command: int
+
+
+class Ignored(NamedTuple):
+    """Nothing to do (the message is not for this system, or names nothing it has)."""
+
+    why: str
 
 
 class Vehicle:
@@ -238,38 +276,38 @@ class Vehicle:
         return target in (0, self.system_id)
 
     def handle(self, msg):
-        """What an incoming message asks: a list of ('send', message) and ('arm', bool, command)
-        / ('set', ros_name, mavlink value, index) actions. Anything not for us: ('ignored', why).
+        """What an incoming message asks: a list of actions (Send, Arm, SetParameter, MotorTest;
+        Ignored for anything not for us).
         """
         kind = msg.get_type()
         if not self.for_us(msg):
-            return [('ignored', 'for system %d' % msg.target_system)]
+            return [Ignored('for system %d' % msg.target_system)]
         if kind == 'COMMAND_LONG':
             return self._command(msg)
         if kind == 'PARAM_REQUEST_LIST':
-            return [('send', p) for p in (self.param_value(i) for i in range(len(TABLE))) if p]
+            return [Send(p) for p in (self.param_value(i) for i in range(len(TABLE))) if p]
         if kind == 'PARAM_REQUEST_READ':
             i = self.param_index(msg.param_id, msg.param_index)
             p = self.param_value(i) if i is not None else None
-            return [('send', p)] if p else [('ignored', 'unknown parameter %r' % msg.param_id)]
+            return [Send(p)] if p else [Ignored('unknown parameter %r' % msg.param_id)]
         if kind == 'PARAM_SET':
             i = self.param_index(msg.param_id, -1)
             if i is None:
-                return [('send', self.statustext('unknown parameter %s' % msg.param_id))]
-            return [('set', TABLE[i][0], float(msg.param_value), i)]
+                return [Send(self.statustext('unknown parameter %s' % msg.param_id))]
+            return [SetParameter(TABLE[i][0], float(msg.param_value), i)]
         if kind == 'SETUP_SIGNING':       # the key is the vehicle's file, never set over the link
-            return [('send', self.statustext('SETUP_SIGNING refused: the signing key comes from '
+            return [Send(self.statustext('SETUP_SIGNING refused: the signing key comes from '
                                              "the vehicle's key file only"))]
         if kind == 'MISSION_REQUEST_LIST':
-            return [('send', self.mav.mission_count_encode(msg.get_srcSystem(),
+            return [Send(self.mav.mission_count_encode(msg.get_srcSystem(),
                                                            msg.get_srcComponent(), 0,
                                                            getattr(msg, 'mission_type', 0)))]
         return []
 
     def denied(self, command, why):
         """COMMAND_ACK DENIED and a STATUSTEXT saying why: the answer to a malformed command."""
-        return [('send', self.command_ack(command, 'MAV_RESULT_DENIED')),
-                ('send', self.statustext(why, 'MAV_SEVERITY_WARNING'))]
+        return [Send(self.command_ack(command, 'MAV_RESULT_DENIED')),
+                Send(self.statustext(why, 'MAV_SEVERITY_WARNING'))]
 
     def _command(self, msg):
         cmd = msg.command
@@ -277,7 +315,7 @@ class Vehicle:
         if cmd == m_const('MAV_CMD_COMPONENT_ARM_DISARM'):
             if msg.param1 not in (0.0, 1.0):
                 return self.denied(cmd, 'arm refused: param1 %s is not 0 or 1' % _show(msg.param1))
-            return [('arm', msg.param1 == 1.0, cmd)]
+            return [Arm(msg.param1 == 1.0, cmd)]
         if cmd == m_const('MAV_CMD_DO_MOTOR_TEST'):
             return self._motor_test(msg)
         if cmd in (m_const('MAV_CMD_REQUEST_MESSAGE'),
@@ -289,15 +327,15 @@ class Vehicle:
                     return self.denied(cmd, 'REQUEST_MESSAGE refused: param1 %s is not a '
                                        'message id' % _show(msg.param1))
             if wanted == m_const('MAVLINK_MSG_ID_AUTOPILOT_VERSION'):
-                return [('send', ack(cmd, 'MAV_RESULT_ACCEPTED')),
-                        ('send', self.autopilot_version())]
+                return [Send(ack(cmd, 'MAV_RESULT_ACCEPTED')),
+                        Send(self.autopilot_version())]
             if wanted == m_const('MAVLINK_MSG_ID_HEARTBEAT'):
-                return [('send', ack(cmd, 'MAV_RESULT_ACCEPTED')), ('send', self.heartbeat())]
-        return [('send', ack(cmd, 'MAV_RESULT_UNSUPPORTED'))]
+                return [Send(ack(cmd, 'MAV_RESULT_ACCEPTED')), Send(self.heartbeat())]
+        return [Send(ack(cmd, 'MAV_RESULT_UNSUPPORTED'))]
 
     def _motor_test(self, msg):
         """MAV_CMD_DO_MOTOR_TEST (QGroundControl's motor test): one motor, throttle in percent,
-        for param4 seconds -> ('motor_test', rotor, normalised command, seconds, command), carried
+        for param4 seconds -> MotorTest(rotor, normalised command, seconds, command), carried
         out by the ESC node (which refuses it too while armed); refused here while armed.
         """
         cmd = msg.command
@@ -323,9 +361,9 @@ class Vehicle:
         if why:
             result = ('MAV_RESULT_TEMPORARILY_REJECTED' if self.armed
                       else 'MAV_RESULT_UNSUPPORTED')
-            return [('send', self.command_ack(cmd, result)),
-                    ('send', self.statustext('motor test ' + why, 'MAV_SEVERITY_WARNING'))]
-        return [('motor_test', rotor, float(msg.param3) / 100.0, float(msg.param4), cmd)]
+            return [Send(self.command_ack(cmd, result)),
+                    Send(self.statustext('motor test ' + why, 'MAV_SEVERITY_WARNING'))]
+        return [MotorTest(rotor, float(msg.param3) / 100.0, float(msg.param4), cmd)]
 
     def command_ack(self, command, result):
         return self.mav.command_ack_encode(command, m_const(result))

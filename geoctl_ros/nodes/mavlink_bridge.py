@@ -29,7 +29,15 @@ from geoctl_ros.core.diagnostics import ERROR, WARN
 from geoctl_ros.mavlink import health, signing
 from geoctl_ros.mavlink.link import Link, encoder
 from geoctl_ros.mavlink.params import BY_ROS, TABLE, to_ros
-from geoctl_ros.mavlink.vehicle import Vehicle, m_const
+from geoctl_ros.mavlink.vehicle import (
+    Arm,
+    Ignored,
+    MotorTest,
+    Send,
+    SetParameter,
+    Vehicle,
+    m_const,
+)
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.autopilot_imu import AutopilotImu
 from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
@@ -261,17 +269,18 @@ class MavlinkBridge(Node):
             self._act(action, msg)
 
     def _act(self, action, msg):
-        what = action[0]
-        if what == 'send':
-            self.link.send(action[1])
-        elif what == 'ignored':
+        if isinstance(action, Send):
+            self.link.send(action.message)
+        elif isinstance(action, Ignored):
             self.counts[health.IGNORED] += 1
-        elif what == 'arm':
-            self._arm(action[1], action[2])
-        elif what == 'set':
-            self._set_param(*action[1:])
-        elif what == 'motor_test':
-            self._motor_test(*action[1:])
+        elif isinstance(action, Arm):
+            self._arm(action.on, action.command)
+        elif isinstance(action, SetParameter):
+            self._set_param(action.name, action.value, action.index)
+        elif isinstance(action, MotorTest):
+            self._motor_test(action.rotor, action.command, action.seconds, action.mav_command)
+        else:
+            raise TypeError('not an action: %r' % (action,))
 
     def _arm(self, on, command):
         self.counts[health.ARM_REQUESTS] += 1

@@ -56,7 +56,7 @@ import yaml
 from geoctl_ros.mavlink.link import encoder, parse_datagram
 from geoctl_ros.mavlink.params import TABLE, to_ros
 from geoctl_ros.mavlink.signing import Verifier
-from geoctl_ros.mavlink.vehicle import Vehicle
+from geoctl_ros.mavlink.vehicle import Arm, Ignored, MotorTest, Send, SetParameter, Vehicle
 from geoctl_ros.nodes.controller import ControllerNode
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg
 from geoctl_ros.nodes.mavlink_bridge import MavlinkBridge
@@ -210,26 +210,26 @@ def fuzz_mavlink(examples, seed):
             if refusal is not None:
                 why = refusal
             for action in vehicle.handle(m):
-                what = action[0]
-                if what == 'send':
-                    finite_fields(action[1])
-                    action[1].pack(out_mav)
-                    if action[1].get_type() == 'COMMAND_ACK' and action[1].result in (
+                if isinstance(action, Send):
+                    out = action.message
+                    finite_fields(out)
+                    out.pack(out_mav)
+                    if out.get_type() == 'COMMAND_ACK' and out.result in (
                             mav.MAV_RESULT_DENIED, mav.MAV_RESULT_UNSUPPORTED,
                             mav.MAV_RESULT_TEMPORARILY_REJECTED):
                         why = why or 'command refused'
-                    if action[1].get_type() == 'STATUSTEXT':
-                        why = why or action[1].text
-                elif what == 'ignored':
-                    why = why or action[1]
-                elif what == 'motor_test':
-                    _, rotor, command, seconds, _ = action
-                    assert isinstance(rotor, int) and 1 <= rotor <= 32, action
-                    assert 0.0 <= command <= 1.0 and 0.0 < seconds <= 10.0, action
-                elif what == 'arm':
-                    assert isinstance(action[1], bool), action
-                elif what == 'set':
-                    assert isinstance(action[2], float), action
+                    if out.get_type() == 'STATUSTEXT':
+                        why = why or out.text
+                elif isinstance(action, Ignored):
+                    why = why or action.why
+                elif isinstance(action, MotorTest):
+                    assert isinstance(action.rotor, int) and 1 <= action.rotor <= 32, action
+                    assert 0.0 <= action.command <= 1.0, action
+                    assert 0.0 < action.seconds <= 10.0, action
+                elif isinstance(action, Arm):
+                    assert isinstance(action.on, bool), action
+                elif isinstance(action, SetParameter):
+                    assert isinstance(action.value, float), action
                 else:
                     raise AssertionError('unknown action %r' % (action,))
         return why
