@@ -8,7 +8,7 @@ import os
 import numpy as np
 import pytest
 
-from geoctl_ros.core import so3
+from geoctl_ros.core import gaps, so3
 from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.core.control import AttitudeController
 from geoctl_ros.core.diagnostics import ERROR, OK, WARN
@@ -234,7 +234,7 @@ def test_both_gaps_hold_the_rate_and_propagate_until_the_shorter_limit():
     loop = make_loop()
     tick = fly_spinning(loop, 0.34, pose_until=0.2, imu_until=0.2)   # both stop: 0.14 s gap
     assert tick.armed and tick.bridging
-    assert loop.bridge.rate_source == 'held'
+    assert loop.bridge.rate_source is gaps.HELD
     assert np.allclose(loop.bridge.R, spinning(0.34), atol=1e-12)    # held constant rate: exact
     assert not loop.tick(0.45, 0.01).armed                           # imu lost at 0.25 s
     # and the gyro reading it held was the last measurement

@@ -657,6 +657,16 @@ def test_a_control_step_that_raises_disarms_and_commands_zero_and_the_node_stays
         node.destroy_node()
 
 
+def _true_poses_on_disk(path):
+    """Whether the bag being written at path has true poses on disk (read as report reads a
+    bag cut short).
+    """
+    try:
+        return bool(bag.read_bag(str(path), ['/sim/true_pose']).get('/sim/true_pose'))
+    except ValueError:
+        return False
+
+
 def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_approach(ros,
                                                                                       tmp_path):
     """``record`` beside the sim and the controller, in both storages. The sim starts tilted
@@ -691,6 +701,10 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
     # until the sensor has fallen a degree into the cone (the controller's own margins)
     mon.wait_for(lambda: any(m[0] < -1.0 for m in mon.since('margins', t_mon)), 30.0,
                  'the sensor in the cone')
+    # (a checkpoint of the recorder about to be killed holds the true pose: at nice 19 beside
+    # the flights its writer can lag the fall, and a Prescott CI run killed it before one did)
+    mon.wait_for(lambda: _true_poses_on_disk(tmp_path / 'killed'), 30.0,
+                 'a checkpoint with the true pose')
     recorders.pop('killed').kill()                # mid-flight, as a crash or a full disk would
     mon.spin_for(0.5)
     for p in recorders.values():

@@ -21,15 +21,31 @@ mass above the pivot. So, while a stream is stale but not yet lost
 
 When a stream is fresh its measurement is used as it is: nothing here changes normal flight.
 """
+from enum import Enum
+
 import numpy as np
 
 from geoctl_ros.core import so3
 
 POSE_HISTORY = 64    # poses kept for the rate estimate (320 ms at 200 Hz)
 
-# Where the attitude and the rate in use come from.
-POSE, PROPAGATED = 'pose', 'propagated with the gyro'
-GYRO, FROM_POSES, HELD = 'gyro', 'from successive poses', 'held'
+class AttitudeSource(Enum):
+    """Where the attitude in use comes from (the value is how the diagnostics say it)."""
+
+    POSE = 'pose'
+    PROPAGATED = 'propagated with the gyro'
+
+
+class RateSource(Enum):
+    """Where the body rate in use comes from (the value is how the diagnostics say it)."""
+
+    GYRO = 'gyro'
+    FROM_POSES = 'from successive poses'
+    HELD = 'held'
+
+
+POSE, PROPAGATED = AttitudeSource.POSE, AttitudeSource.PROPAGATED
+GYRO, FROM_POSES, HELD = RateSource.GYRO, RateSource.FROM_POSES, RateSource.HELD
 
 
 class GapBridge:
@@ -100,4 +116,4 @@ class GapBridge:
     @property
     def bridging(self):
         """True while either the attitude or the rate is not the fresh measurement."""
-        return self.attitude_source != POSE or self.rate_source != GYRO
+        return self.attitude_source is not POSE or self.rate_source is not GYRO

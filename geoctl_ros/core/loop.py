@@ -364,12 +364,12 @@ class ControlLoop:
         """Sentences for the gaps being ridden through (empty in normal flight)."""
         notes = []
         b = self.bridge
-        if b.attitude_source != POSE:
+        if b.attitude_source is not POSE:
             notes.append('pose gap: attitude %s (pose %.3f s old, failsafe at %.3f s)'
-                         % (b.attitude_source, self.pose.age(now), self.pose.limit))
-        if b.rate_source != GYRO:
+                         % (b.attitude_source.value, self.pose.age(now), self.pose.limit))
+        if b.rate_source is not GYRO:
             notes.append('angular velocity gap: rate %s (imu %.3f s old, failsafe at %.3f s)'
-                         % (b.rate_source, self.rate.age(now), self.rate.limit))
+                         % (b.rate_source.value, self.rate.age(now), self.rate.limit))
         return notes
 
     def status(self, now, other_commanders=None):
