@@ -9,7 +9,7 @@ import pytest
 from geoctl_ros.tools import fuzz
 
 pytestmark = pytest.mark.odroid
-EXAMPLES = 200
+EXAMPLES = 100
 
 
 @pytest.fixture(scope='module', autouse=True)
