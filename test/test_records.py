@@ -180,12 +180,14 @@ def test_a_closed_bag_whose_file_was_cut_still_reports(tmp_path):
 
 FULL_DISK = """
 import resource, signal, sys, time
+from rclpy.serialization import serialize_message
+from std_msgs.msg import Float64
 from geoctl_ros.records import bag
 signal.signal(signal.SIGXFSZ, signal.SIG_IGN)   # a write past the limit fails, as on a full disk
 resource.setrlimit(resource.RLIMIT_FSIZE, (1_000_000, 1_000_000))
 w = bag.BagWriter(sys.argv[1], [bag.BY_NAME['/configuration_error']], 'mcap')
 t_end = time.monotonic() + 10.0
-psi = b'\\x00\\x01\\x00\\x00' + bytes(8)       # a std_msgs/Float64 of 0.0 in CDR
+psi = serialize_message(Float64(data=0.0))
 while w.error is None and time.monotonic() < t_end:     # some 400 kB a second
     for _ in range(100):
         w.put('/configuration_error', time.time_ns(), psi)

@@ -29,6 +29,7 @@ from geoctl_ros.core import so3
 
 POSE_HISTORY = 64    # poses kept for the rate estimate (320 ms at 200 Hz)
 
+
 class AttitudeSource(Enum):
     """Where the attitude in use comes from (the value is how the diagnostics say it)."""
 

@@ -1,6 +1,6 @@
 """Input checks and the arming supervisor: the controller node's safety logic, ROS-free.
 
-Rules (docs/safety-behaviour.md, "Safety behaviour" section says the same to users):
+Rules (docs/safety-behaviour.md says the same to users):
 
 - A measurement is refused, with its reason, if it is not finite, if its quaternion is not a unit
   quaternion (|q| off by more than 1e-3; within that it is normalised), if its angular velocity is
@@ -23,6 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from geoctl_ros.core import so3
 from geoctl_ros.core.diagnostics import failsafe
 
 QUATERNION_TOLERANCE = 1e-3
@@ -38,11 +39,19 @@ def quaternion_problem(q):
     return None
 
 
+def attitude_of(q):
+    """(R, None) for an acceptable attitude quaternion q (x, y, z, w), else (None, why): what
+    the bridge and the view take from a pose or a set point.
+    """
+    problem = quaternion_problem(q)
+    return (None, problem) if problem else (so3.quat_to_rot(q), None)
+
+
 def motor_commands_problem(data, n):
     """Why a motor_commands message cannot be actuated (a sentence), or None: it must hold n
     finite values in [0, 1] (the sim and the ESC node refuse it the same way).
     """
-    if len(data) != n or not all(math.isfinite(x) for x in data):
+    if not len(data) or len(data) != n or not all(math.isfinite(x) for x in data):
         return 'expected %d finite values, got %r' % (n, [round(x, 4) for x in list(data)[:8]])
     if min(data) < 0.0 or max(data) > 1.0:
         return 'values outside [0, 1]'

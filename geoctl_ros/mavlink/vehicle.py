@@ -20,9 +20,8 @@ from typing import NamedTuple
 import numpy as np
 from pymavlink.dialects.v20 import common
 
-from geoctl_ros.core import so3
 from geoctl_ros.core.diagnostics import ERROR, Status
-from geoctl_ros.core.safety import quaternion_problem
+from geoctl_ros.core.safety import angular_velocity_problem, attitude_of, motor_commands_problem
 from geoctl_ros.mavlink import frames
 from geoctl_ros.mavlink.params import BY_ID, TABLE, to_mavlink
 from geoctl_ros.params.schema import MOTOR_TEST_DURATION_MAX
@@ -53,9 +52,8 @@ class ControllerView:
     # a frame conversion or a ground station. Each returns why it refused the value, or None.
     def take_attitude(self, q, setpoint=False):
         """A pose's (or, setpoint, the active set point's) quaternion (x, y, z, w)."""
-        problem = quaternion_problem(q)
+        R, problem = attitude_of(q)
         if problem is None:
-            R = so3.quat_to_rot(np.asarray(q, dtype=float))
             if setpoint:
                 self.R_d = R
             else:
@@ -63,16 +61,16 @@ class ControllerView:
         return problem
 
     def take_rate(self, w):
-        if not all(math.isfinite(x) for x in w):
-            return 'angular velocity is not finite'
-        self.omega = np.asarray(w, dtype=float)
-        return None
+        problem = angular_velocity_problem(w, math.inf)
+        if problem is None:
+            self.omega = np.asarray(w, dtype=float)
+        return problem
 
     def take_commands(self, data):
-        if not all(math.isfinite(x) and 0.0 <= x <= 1.0 for x in data):
-            return 'motor commands not finite or outside [0, 1]'
-        self.commands = list(data)
-        return None
+        problem = motor_commands_problem(data, len(data))
+        if problem is None:
+            self.commands = list(data)
+        return problem
 
     def take_psi(self, x):
         if not math.isfinite(x):

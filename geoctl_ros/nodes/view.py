@@ -14,8 +14,7 @@ from rclpy.node import Node
 from std_msgs.msg import ColorRGBA, Float64MultiArray
 from visualization_msgs.msg import Marker, MarkerArray
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.safety import quaternion_problem
+from geoctl_ros.core.safety import attitude_of
 from geoctl_ros.core.view import Trail, cone_triangles, in_warning
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.controller_params import ControllerParameters
@@ -64,11 +63,11 @@ class View(Node):
         """A quaternion drawn as an attitude; a zero, non-unit or NaN one is refused and logged
         (a zero one ended the view).
         """
-        problem = quaternion_problem(q)
+        R, problem = attitude_of(q)
         if problem:
             self.refusals.warn('%s refused: ' % topic, problem)
             return
-        setattr(self, field, so3.quat_to_rot(np.asarray(q, dtype=float)))
+        setattr(self, field, R)
 
     def _on_margins(self, msg):
         margins = np.array(msg.data, dtype=float)

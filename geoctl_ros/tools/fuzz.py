@@ -36,7 +36,6 @@ import io
 import math
 import os
 import shutil
-import struct
 import sys
 import tempfile
 import time
@@ -50,7 +49,9 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mav  # (the v2 dialect itself: MAVLink 2)
 import rclpy
 from rclpy.parameter import Parameter
+from rclpy.serialization import serialize_message
 from sensor_msgs.msg import Imu
+from std_msgs.msg import Float64
 import yaml
 
 from geoctl_ros.mavlink.link import encoder, parse_datagram
@@ -401,7 +402,7 @@ def fuzz_messages(examples, seed):
     subs = {}
 
     def check(events):
-        refused = [ctl.loop.pose.refused + ctl.loop.rate.refused]
+        refused_before = ctl.loop.pose.refused + ctl.loop.rate.refused
         for topic, stamp, payload in events:
             if topic not in subs:
                 subs[topic] = n.callbacks(topic)
@@ -438,7 +439,7 @@ def fuzz_messages(examples, seed):
             ctl._on_imu(imu)
         if not (ctl.loop.pose.accepted > accepted[0] and ctl.loop.rate.accepted > accepted[1]):
             raise AssertionError('valid pose and imu refused after the hostile ones')
-        got = ctl.loop.pose.refused + ctl.loop.rate.refused - refused[0]
+        got = ctl.loop.pose.refused + ctl.loop.rate.refused - refused_before
         return 'refused %d' % got if got else None
     return run_property(Tally('messages'), EVENTS, check, examples, seed)
 
@@ -495,9 +496,10 @@ def fuzz_files(examples, seed):
 # --- bags --------------------------------------------------------------------------------------
 def _sample_bags(folder):
     """Two small bags of a flight's topics (MCAP and sqlite3)."""
-    pose = b'\x00\x01\x00\x00' + bytes(4) + bytes(4) + b'\x06\x00\x00\x00world\x00\x00\x00' \
-        + bytes(24) + struct.pack('<4d', 0.0, 0.0, 0.0, 1.0)
-    psi = b'\x00\x01\x00\x00' + bytes(8)
+    level = PoseStamped()
+    level.header.frame_id = 'world'
+    level.pose.orientation.w = 1.0
+    pose, psi = serialize_message(level), serialize_message(Float64(data=0.0))
     out = []
     for storage in ('mcap', 'sqlite3'):
         path = os.path.join(folder, storage)
