@@ -52,7 +52,7 @@ def test_the_prediction_over_the_commands_sent_matches_the_plant_integrated_fine
             plant.step(produced, h)
             produced = target + math.exp(-h / lag) * (produced - target)
     now = 0.06
-    R_pred, W_pred = DelayPredictor(c)(R_then, W_then, now, now, history, now, 0.0)
+    R_pred, W_pred = DelayPredictor(c)(R_then, W_then, now, now, history, now)
     err_R = math.degrees(so3.angle(plant.R.T @ R_pred))
     err_W = np.linalg.norm(plant.Omega - W_pred)
     assert err_R < 0.1 and err_W < 0.05, (err_R, err_W)

@@ -238,6 +238,7 @@ class ControlLoop:
             if not was_armed:
                 self.cone_entries, self.entry, self._inside = 0, None, False
                 self.step.history.clear()
+                self.step.predict.reset()
         return result
 
     def disarm(self, reason='disarm requested'):

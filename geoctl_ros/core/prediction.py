@@ -23,7 +23,8 @@ from geoctl_ros.core import so3
 from geoctl_ros.core.mechanics import gravity_moment
 from geoctl_ros.core.so3 import cross, matvec
 
-PREDICT_SLOW_S = 0.25     # s, what delay compensation counts as the model's slow error
+PREDICT_SLOW_S = 0.25    # s, the observer's low-pass of the model's error
+OBSERVE_GAP_MAX_S = 0.05  # s, the longest interval between rate samples the observer learns from
 SUBSTEP_MAX_S = 0.01      # s, the longest piece of the prediction's integration
 
 
@@ -95,14 +96,27 @@ class CommandHistory:
 
 
 class DelayPredictor:
-    """The prediction of one run or a batch, with its state: the slow part of the model's
-    acceleration, low-passed over the ticks.
+    """The prediction of one run or a batch, with its state: an observer of the model's error.
+
+    The model's acceleration is wrong by what it does not know (the moment not yet learnt, a
+    wrong mass or centre of mass). The observer measures that error where it can be measured: at
+    the rate samples themselves. Between two samples, the measured mean acceleration
+    (Omega_k - Omega_{k-1}) / (t_k - t_{k-1}) is compared with the model's at the interval's
+    middle, under the moment in force then; the difference, low-passed over ``PREDICT_SLOW_S``,
+    is taken off every piece of the prediction. At rest this is the whole model acceleration (the
+    true one is zero); while manoeuvring, only the model's error, so a vehicle that really
+    accelerates is predicted to.
     """
 
     def __init__(self, controller):
         """controller: the AttitudeController whose model (inertia, gravity, estimate) it uses."""
         self.controller = controller
-        self._acc_slow = 0.0
+        self.reset()
+
+    def reset(self):
+        """Forget the observer (at arming: what held the vehicle on its stops is not its error)."""
+        self.acc_error = 0.0          # rad/s^2: model minus measured acceleration, low-passed
+        self._last = None             # (capture time, Omega) of the last rate sample
 
     def acceleration(self, R, Omega, moment):
         """The model's angular acceleration at (R, Omega) under the rotors' moment."""
@@ -113,43 +127,67 @@ class DelayPredictor:
                       + (c.delta_bar if W is None else matvec(W, c.delta_bar))
                       - cross(Omega, matvec(cfg.J, Omega)))
 
-    def __call__(self, R, Omega, age_R, age_Omega, history, now, dt):
-        """The attitude and rate at ``now`` from measurements age_R and age_Omega seconds old
-        (scalars, or one per run of a batch), given the moments commanded before now (a
-        CommandHistory on the same clock as now). dt is the time since the last call (the low-pass
-        of the slow part). Ages of 0 return the measurements unchanged.
+    def observe(self, R, Omega, captured, history):
+        """Learn the model's error from a rate sample captured at ``captured`` (a time on the
+        history's clock; one per run of a batch). A sample no newer than the last (a stall
+        repeats it), one more than ``OBSERVE_GAP_MAX_S`` after it, or an interval that starts
+        before the first command held teaches nothing.
+        """
+        last, self._last = self._last, (captured, Omega)
+        if last is None:
+            return
+        interval = captured - last[0]
+        usable = (interval > 1e-6) & (interval <= OBSERVE_GAP_MAX_S) & (last[0] >= history.first)
+        if not np.any(usable):
+            return
+        span = np.where(usable, interval, 1.0)
+        mid_rate = 0.5 * (Omega + last[1])
+        modelled = self.acceleration(R, mid_rate, history.at(last[0] + 0.5 * span))
+        measured = ((Omega - last[1]).T / span).T
+        weight = np.where(usable, span / (PREDICT_SLOW_S + span), 0.0)
+        self.acc_error = self.acc_error + ((modelled - measured - self.acc_error).T * weight).T
+
+    def __call__(self, R, Omega, age_R, age_Omega, history, now, lead=0.0):
+        """The attitude and rate at ``now + lead`` from measurements age_R and age_Omega seconds
+        old at ``now`` (scalars, or one per run of a batch), given the moments commanded before
+        now (a CommandHistory on the same clock as now). Ages and lead of 0 return the
+        measurements unchanged.
 
         Only the part of the window since the first command held is predicted (none at the
-        first tick after arming). The window from the older measurement to now is integrated in
-        S equal pieces of at most SUBSTEP_MAX_S: in each, the moment in force at its midpoint;
-        the rate is advanced only in the part of the window after its own capture, the attitude
-        only after its own (the attitude with the mean of the rates at either end of the piece).
+        first tick after arming). The window from the older measurement to now + lead is
+        integrated in S equal pieces of at most SUBSTEP_MAX_S: in each, the moment in force at
+        its midpoint; the rate is advanced only in the part of the window after its own capture,
+        the attitude only after its own (the attitude with the mean of the rates at either end of
+        the piece).
         """
-        moment_now = history.at(now)
+        self.observe(R, Omega, now - age_Omega, history)
+        moment_now = history.at(now - age_Omega)
         acc0 = self.acceleration(R, Omega, moment_now)
-        self._acc_slow = self._acc_slow + (acc0 - self._acc_slow) * (dt / (PREDICT_SLOW_S + dt))
         # nothing is predicted from before the first command held: what moved the vehicle then
         # (its stops, a hand) is not in the model
         known = max(now - history.first, 0.0)
+        if known <= 0.0:
+            return R, Omega
         age_R, age_Omega = np.minimum(age_R, known), np.minimum(age_Omega, known)
         if np.ndim(age_R) == 0 and np.ndim(age_Omega) == 0:
             return self._scalar_ages(R, Omega, float(age_R), float(age_Omega), history, now,
-                                     acc0, moment_now)
+                                     lead, acc0, moment_now)
         age_R = np.asarray(age_R, dtype=float)
         age_Omega = np.asarray(age_Omega, dtype=float)
         horizon = np.maximum(age_R, age_Omega)
-        if float(np.max(horizon)) <= 0.0:
+        span = horizon + lead
+        if float(np.max(span)) <= 0.0:
             return R, Omega
         # each run in its own number of equal pieces (so a run's prediction does not depend on
         # the other runs of its batch); a run with fewer pieces than the most idles (h = 0)
-        pieces = np.maximum(np.ceil(horizon / SUBSTEP_MAX_S - 1e-9), 1.0)
-        h_run = horizon / pieces
+        pieces = np.maximum(np.ceil(span / SUBSTEP_MAX_S - 1e-9), 1.0)
+        h_run = span / pieces
         start = now - horizon
-        slow = self._acc_slow
+        error = self.acc_error
         for j in range(int(np.max(pieces))):
             h = np.where(j < pieces, h_run, 0.0)
             mid = start + (j + 0.5) * h_run
-            acc = self._piece_acceleration(j, R, Omega, history.at(mid), acc0, moment_now) - slow
+            acc = self._piece_acceleration(j, R, Omega, history.at(mid), acc0, moment_now) - error
             # each measurement moves only after its own capture time
             hw = np.where(mid > now - age_Omega, h, 0.0)
             hr = np.where(mid > now - age_R, h, 0.0)
@@ -167,21 +205,22 @@ class DelayPredictor:
             return acc0 + matvec(self.controller.J_inv, moment - moment_now)
         return self.acceleration(R, Omega, moment)
 
-    def _scalar_ages(self, R, Omega, age_R, age_Omega, history, now, acc0, moment_now):
+    def _scalar_ages(self, R, Omega, age_R, age_Omega, history, now, lead, acc0, moment_now):
         """``__call__`` for ages shared by every run (one run, or a batch on one clock): the
         same pieces, in plain floats (the node's tick; numpy on scalars costs more than the
         arithmetic).
         """
         horizon = max(age_R, age_Omega)
-        if horizon <= 0.0:
+        span = horizon + lead
+        if span <= 0.0:
             return R, Omega
-        pieces = max(math.ceil(horizon / SUBSTEP_MAX_S - 1e-9), 1)
-        h = horizon / pieces
+        pieces = max(math.ceil(span / SUBSTEP_MAX_S - 1e-9), 1)
+        h = span / pieces
         start = now - horizon
-        slow = self._acc_slow
+        error = self.acc_error
         for j in range(pieces):
             mid = start + (j + 0.5) * h
-            acc = self._piece_acceleration(j, R, Omega, history.at(mid), acc0, moment_now) - slow
+            acc = self._piece_acceleration(j, R, Omega, history.at(mid), acc0, moment_now) - error
             Omega_next = Omega + acc * h if mid > now - age_Omega else Omega
             if mid > now - age_R:
                 R = R @ so3.exp((0.5 * (Omega + Omega_next)) * h)

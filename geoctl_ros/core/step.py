@@ -99,9 +99,9 @@ class ControlTick:
         t = self._time(now, dt)
         if predict:
             # with a model of the motors' lag, aimed at the middle of the command's hold
-            d = self.measurement_delay + (0.5 * dt if self.mixer.lag > 0.0 else 0.0)
+            d = self.measurement_delay
             R, Omega = self.predict(R, Omega, d + ages[0], d + ages[1], self.history, t,
-                                    dt if held is None else held)
+                                    0.5 * dt if self.mixer.lag > 0.0 else 0.0)
         blind = self.blind = blind_time(self.measurement_delay, ages, dt, held)
         out = self.controller.step(R, Omega, dt, adapt=adapt, blind=blind)
         if not np.isfinite(out.u).all():           # a last line of defence: never command it
