@@ -108,16 +108,15 @@ class ControlTick:
             if np.ndim(out.u) > 1:
                 raise FloatingPointError('a run of the batch produced a non-finite moment')
             out, armed = None, False
-        spin_up = armed and self.mixer.modelled_thrusts is None     # the rotors were off
         motors = self.mixer.mix(np.zeros(3) if out is None else out.u, armed=armed, dt=dt,
                                 held=held)
-        self.history.push(t, *self._produced(motors, armed, spin_up))
+        self.history.push(t, *self._produced(motors, armed))
         return TickResult(out, motors)
 
-    def _produced(self, motors, armed, spin_up):
+    def _produced(self, motors, armed):
         """The moments the rotors make from this tick on: the one they settle to and the one they
         make now (by the mixer's lag model, if it keeps one: at arming, none, the rotors
-        spinning up from rest), about the pivot.
+        spooling up from rest), about the pivot.
         """
         mixer = self.mixer
         if not armed:
@@ -126,7 +125,7 @@ class ControlTick:
             return motors.allocation.moment, None
         B = mixer.allocator.B_full[3:]
         end = matvec(B, mixer.sent_thrusts)
-        return end, np.zeros_like(end) if spin_up else matvec(B, mixer.modelled_thrusts)
+        return end, matvec(B, mixer.modelled_thrusts)
 
     def idle(self, dt, now=None):
         """A tick without a state to control from (before the first pose and rate): zero
