@@ -21,9 +21,9 @@ cone count without drawing them, and its second everything else):
 - the testbed (``config/testbed.yaml``): its gains, rotors, thrust curve, 40 ms motor lag and
   saturation, motion-capture (0.1 deg) and gyro (0.005 rad/s) noise, 100 Hz control, 1 kHz
   integration, 20 s;
-- per run: measurement latency 0-80 ms (whole ms, uniform), and input stalls, 0.5 a second on
+- per run: measurement latency 0-60 ms (whole ms, uniform), and input stalls, 0.5 a second on
   average (Poisson), each 10-40 ms (whole ms, uniform), so the controller's inputs are up to
-  120 ms old, as the sim-in-the-loop measured them on a busy machine; a constant disturbance of
+  100 ms old, as the sim-in-the-loop measured them on a busy machine; a constant disturbance of
   uniform direction and magnitude up to 0.05 N m (``--disturbance-max``; with the gravity moment
   of the errors below the estimate sees at most 0.40 N m, within its bound delta_bar_max =
   1 N m); the
@@ -61,7 +61,7 @@ TWIST_DEG = 15.0                   # turn about the sensor axis from the most up
 CONE_ELEVATION_DEG = 20.0          # cone axes within this of the horizon
 DISTURBANCE_MAX = 0.05             # N m, largest constant disturbance (docs/campaigns.md)
 MODEL_ERROR = 0.2                  # true mass, inertia stretch and centre of mass within +-20 %
-LATENCY_MS_MAX = 80                # measurement latency 0..this (whole ms, uniform)
+LATENCY_MS_MAX = 60                # measurement latency 0..this (whole ms, uniform)
 STALL_RATE = 0.5                   # input stalls per second (Poisson)
 STALL_MS = (10, 40)                # each stall's length (whole ms, uniform)
 

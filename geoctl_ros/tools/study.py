@@ -34,8 +34,12 @@ from geoctl_ros.params import (
 )
 from geoctl_ros.tools import plots
 from geoctl_ros.tools.batch import SETTLED_DEG as CONVERGED_DEG
+from geoctl_ros.tools.manoeuvres import LATENCY_MS_MAX
 
 # what a gain set may not change: what each run draws for itself
+# the summary's bands of measurement latency (ms, inclusive): thirds of the campaign's draw
+_THIRD = (LATENCY_MS_MAX + 1) // 3
+LATENCY_BANDS_MS = ((0, _THIRD - 1), (_THIRD, 2 * _THIRD - 1), (2 * _THIRD, LATENCY_MS_MAX))
 PER_RUN = ('setpoint', 'setpoint_schedule.times', 'setpoint_schedule.quaternions', 'cones.names')
 
 
@@ -151,10 +155,11 @@ def summary_table(columns):
         'saturated time p99 / max [s]': '%.2f / %.2f' % (np.percentile(sat, 99), sat.max()),
     }
     bands = []
-    for band in (range(0, 30), range(30, 60), range(60, 81)):
-        picked = margins[np.isin(columns['latency_ms'], list(band))]
+    for band in LATENCY_BANDS_MS:
+        picked = margins[(columns['latency_ms'] >= band[0]) & (columns['latency_ms'] <= band[1])]
         bands.append('%.2f' % picked.min() if len(picked) else '-')
-    table['worst closest approach by latency 0-29 / 30-59 / 60-80 ms [deg]'] = ' / '.join(bands)
+    table['worst closest approach by latency %s ms [deg]' % ' / '.join(
+        '%d-%d' % band for band in LATENCY_BANDS_MS)] = ' / '.join(bands)
     return table
 
 
