@@ -13,7 +13,6 @@ from geoctl_ros.core import so3
 from geoctl_ros.core.control import AttitudeController, SetpointRejected
 from geoctl_ros.core.diagnostics import (
     ERROR,
-    FAILSAFE,
     OK,
     WARN,
     Counts,
@@ -21,7 +20,6 @@ from geoctl_ros.core.diagnostics import (
     Gaps,
     Status,
     failsafe,
-    state_kind,
 )
 from geoctl_ros.core.gaps import GYRO, POSE, GapBridge
 from geoctl_ros.core.safety import (
@@ -86,6 +84,7 @@ class Tick:
                              # (the node's header stamp, for exact-time matching; or None)
     pose_receipt: float      # when that pose was received, on the loop's clock (or None)
     state: str               # the supervisor's state: 'armed', or why not
+    failed: bool             # disarmed by a failsafe
     sources: tuple           # (attitude source, rate source): POSE/GYRO, or a gap's stand-ins
     setpoint: np.ndarray     # R_d being flown (the same object until a new one is adopted)
     bridging: bool = False   # a gap is being ridden through (see geoctl_ros.core.gaps)
@@ -245,8 +244,9 @@ class ControlLoop:
                 self.step.predict.reset()
         return result
 
-    def disarm(self, reason='disarm requested'):
-        return self.supervisor.disarm(reason)
+    def disarm(self, reason='disarm requested', failed=False):
+        """Disarm; failed: by a failsafe (reason from core.diagnostics.failsafe)."""
+        return self.supervisor.disarm(reason, failed)
 
     def reset_adaptation(self):
         self.controller.reset_adaptation()
@@ -286,7 +286,7 @@ class ControlLoop:
         if armed and self.esc is not None:          # the documented action: fail safe
             problem = self._esc_problem(now)
             if problem:
-                self.disarm(failsafe(problem))
+                self.disarm(failsafe(problem), failed=True)
                 armed = False
         schedule = self.setup.schedule
         if armed and len(schedule):
@@ -310,7 +310,7 @@ class ControlLoop:
             out, motors = self.step(R, Omega, dt, now, ages, armed=armed,
                                     adapt=armed and not bridging, predict=not bridging)
             if out is None:
-                self.disarm(NON_FINITE)
+                self.disarm(NON_FINITE, failed=True)
                 armed = False
             elif armed and out.violated:
                 self._note_entry(out)
@@ -350,7 +350,8 @@ class ControlLoop:
     def _result(self, out, motors, armed, bridging):
         b = self.bridge
         return Tick(out, motors, armed, self._pose_stamp, self.pose.last_receipt,
-                    self.supervisor.reason, (b.attitude_source, b.rate_source),
+                    self.supervisor.reason, self.supervisor.failed,
+                    (b.attitude_source, b.rate_source),
                     self.controller.R_d, bridging)
 
     @property
@@ -389,7 +390,7 @@ class ControlLoop:
         errors, warnings = [], []
         sup = self.supervisor
         if not sup.armed:
-            (errors if state_kind(sup.reason) == FAILSAFE else warnings).append(sup.reason)
+            (errors if sup.failed else warnings).append(sup.reason)
             if self.unconfigured:
                 warnings.append(self.unconfigured)
             stale = sup.input_problem(now)

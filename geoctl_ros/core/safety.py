@@ -245,6 +245,7 @@ class Supervisor:
         self.armed = False
         self.armed_since = None
         self.reason = 'disarmed at start-up'
+        self.failed = False          # disarmed by a failsafe (reason says why)
 
     def input_problem(self, now):
         """Why the inputs are not fresh enough to arm (the first stale stream), or None."""
@@ -261,12 +262,13 @@ class Supervisor:
             return ArmResult(False, 'arming refused: ' + problem)
         if not self.armed:
             self.armed, self.armed_since = True, now
-        self.reason = 'armed'
+        self.reason, self.failed = 'armed', False
         return ArmResult(True, 'armed')
 
-    def disarm(self, reason='disarm requested'):
+    def disarm(self, reason='disarm requested', failed=False):
+        """Disarm; failed: by a failsafe (reason then reads 'failsafe: why')."""
         self.armed, self.armed_since = False, None
-        self.reason = reason
+        self.reason, self.failed = reason, failed
         return ArmResult(True, 'disarmed')
 
     def check(self, now):
@@ -274,7 +276,7 @@ class Supervisor:
         if self.armed:
             problem = self.input_loss(now)
             if problem:
-                self.disarm(failsafe(problem))
+                self.disarm(failsafe(problem), failed=True)
         return self.armed
 
 

@@ -19,7 +19,7 @@ from std_msgs.msg import Float64, Float64MultiArray, UInt16MultiArray, UInt32Mul
 from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core import so3
-from geoctl_ros.core.diagnostics import FAILSAFE, failsafe, state_kind
+from geoctl_ros.core.diagnostics import failsafe
 from geoctl_ros.core.gains import gain_condition
 from geoctl_ros.core.loop import ControlLoop, step_period
 from geoctl_ros.core.safety import ArmedState, new_session
@@ -268,7 +268,7 @@ class ControllerNode(Node):
         up, so its topics, diagnostics and services still answer.
         """
         reason = failsafe('control step failed: %s: %s' % (type(error).__name__, error))
-        self.loop.disarm(reason)
+        self.loop.disarm(reason, failed=True)
         self.get_logger().error(reason, throttle_duration_sec=1.0)
         self._publish_zero()
 
@@ -329,8 +329,7 @@ class ControllerNode(Node):
             self.pub_setpoint.publish(sp)
         state = (tick.armed, tick.state, tick.sources)
         if state != self._last_state:
-            failed = not tick.armed and state_kind(tick.state) == FAILSAFE
-            if self._last_state is not None and failed:
+            if self._last_state is not None and tick.failed:
                 self.get_logger().error(tick.state)
             elif tick.bridging:
                 self.get_logger().warning('; '.join(self.loop.gap_notes(now)))
