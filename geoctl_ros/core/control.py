@@ -28,6 +28,7 @@ and model are shared by the batch. (``x.T`` on a stack of vectors puts the batch
 ``(x.T * a).T`` scales each run's vector by its own scalar and a single vector by a scalar.)
 """
 from dataclasses import dataclass, field
+import itertools
 from typing import NamedTuple
 
 import numpy as np
@@ -70,6 +71,8 @@ class ControllerConfig:
     cog_estimate_max: float = 0.0    # bound on |m rho estimate| (kg m); 0 = none
     unmodelled_moment_max: float = 0.0   # what a set point must be held against (N m); 0 = none
     blind_guard_max: float = 0.0     # rad, the most a blind loop widens a cone's barrier
+    law: str = 'paper'               # the control law, a key of LAWS
+    cbf_rate: float = 4.0            # 1/s, the cbf law's double pole
     J: np.ndarray = field(init=False, repr=False)        # inertia about the pivot
     m_rho: np.ndarray = field(init=False, repr=False)    # mass times pivot -> centre of mass
 
@@ -274,17 +277,24 @@ class AttitudeController:
         return np.concatenate((np.broadcast_to(np.eye(3), Y.shape), Y), axis=-1)
 
     def step(self, R, Omega, dt, adapt=True, blind=0.0):
-        """One control step at attitude R and body angular velocity Omega.
+        """One control step at attitude R and body angular velocity Omega, by the configured law
+        (``config.law``, one of ``LAWS``).
 
         dt is the time until the next step (the control period); adapt=False holds the estimate
         (e.g. while disarmed). blind: the time (s; one per run of a batch) over which the loop
-        cannot see or correct what the vehicle does beyond its nominal period: the barrier then
-        acts on each cone widened by how far the sensor travels towards it in that time
-        (``blind_widening``).
+        cannot see or correct what the vehicle does beyond its nominal period: a law with the
+        barrier then acts on each cone widened by how far the sensor travels towards it in that
+        time (``blind_widening``).
+        """
+        return self._law(self, R, Omega, dt, adapt, blind)
+
+    # --- the pieces every law is made of -------------------------------------------------------
+    def terms(self, R, Omega, blind=0.0):
+        """The step's terms at (R, Omega): ``StepTerms`` (the attractive error, the cones
+        evaluated, widened by the blind time when it is given, and the gravity moment).
         """
         cfg = self.config
         y = self._linear(R)                     # A, e_RA, the cones' terms, M_g (linear_terms)
-        A, e_RA = y[..., 0:1], y[..., 1:4]
         n = self._linear.n_cones
         sc = y[..., 4:4 + 4 * n].reshape(y.shape[:-1] + (n, 4))
         widened = None
@@ -293,7 +303,15 @@ class AttitudeController:
             if extra.max() > 0.0:                  # (else no cone is being approached)
                 widened = cfg.cones.widened(extra)
         ev = cfg.cones.evaluate_terms(sc, widened)
-        psi, e_R = with_cones(A, e_RA, ev)
+        return StepTerms(y[..., 0:1], y[..., 1:4], ev, y[..., -3:])
+
+    def moment(self, R, Omega, dt, adapt, terms, psi, e_R, barrier=True):
+        """The geometric law's moment for the configuration error (psi, e_R), with the adaptive
+        estimate advanced: ``ControlOutput``. barrier: the error carries the cones' barrier
+        (the estimate then freezes where a barrier saturates).
+        """
+        cfg = self.config
+        ev = terms.cones
         e_Omega = Omega
         tracking = self._tracking
         if tracking:
@@ -307,8 +325,8 @@ class AttitudeController:
         if tracking:
             u -= matvec(cfg.J, cross(Omega, Omega_d) - matvec(RtRd, self.dOmega_d))
         if cfg.gravity_compensation:
-            u -= y[..., -3:]
-        saturated = ev.any_saturated
+            u -= terms.M_g
+        saturated = ev.any_saturated if barrier else np.zeros_like(ev.any_saturated)
         adapting = adapt and cfg.adaptive and ~saturated      # a flag per run
         if adapting is not False and any_flag(adapting):
             v = e_Omega + cfg.c * e_R
@@ -318,7 +336,8 @@ class AttitudeController:
             self.delta_bar += rate
             self._project()
         # violated implies saturated (the floor band lies outside every cone)
-        violated = ev.violated.any(axis=-1) if any_flag(saturated) else saturated
+        violated = (ev.violated.any(axis=-1) if any_flag(ev.any_saturated)
+                    else ev.any_saturated)
         return ControlOutput(u, e_R, e_Omega, psi, delta_bar, violated, saturated,
                              adapting, ev, cfg.cones.theta_deg)
 
@@ -332,7 +351,137 @@ class AttitudeController:
 
     def _set_config(self, config):
         self.config = config
+        self._law = LAWS[config.law]
         self.J_inv = np.linalg.inv(config.J)     # the model's, for the prediction too
         self._balls = [(block, bound) for block, bound in ((slice(0, 3), config.delta_bar_max),
                                                            (slice(3, 6), config.cog_estimate_max))
                        if bound > 0.0 and block.start < config.n_params]
+
+
+class StepTerms(NamedTuple):
+    """What a step computes from the attitude before any law's choice (one per run of a batch)."""
+
+    A: np.ndarray        # attractive error A, with a trailing axis of 1
+    e_RA: np.ndarray     # its gradient
+    cones: object        # ConeEval: the cones at R (widened by the blind time, if any)
+    M_g: np.ndarray      # the model's gravity moment
+
+
+def paper_law(controller, R, Omega, dt, adapt, blind):
+    """The paper's law (Kulumani, Poole & Lee): the configuration error carries every cone's
+    log barrier, the cones widened by the blind time (docs/safety.md, "Delay").
+    """
+    terms = controller.terms(R, Omega, blind)
+    psi, e_R = with_cones(terms.A, terms.e_RA, terms.cones)
+    return controller.moment(R, Omega, dt, adapt, terms, psi, e_R)
+
+
+def geometric_law(controller, R, Omega, dt, adapt, blind):
+    """Lee's geometric controller on SO(3) with the same gains and no barrier: the attractive
+    error alone (the baseline that shows what the barrier buys). The cones are still evaluated,
+    so margins and violations are reported.
+    """
+    terms = controller.terms(R, Omega)
+    return controller.moment(R, Omega, dt, adapt, terms, terms.A[..., 0], terms.e_RA,
+                             barrier=False)
+
+
+def pointing_cbf(controller, R, Omega, terms, delta_bar):
+    """Each cone as a pointing constraint of relative degree 2, as the rows of A u >= beta.
+
+    h_i = cos(theta_i + guard) - (R^T v_i) . r >= 0 (the sensor outside the guarded cone). With
+    b_i = R^T v_i and c_i = b_i x r: b_i' = b_i x Omega, so h_i' = c_i . Omega and
+    h_i'' = ((b_i x Omega) x r) . Omega + c_i . Omega', Omega' = J^-1 (u + f) with f = M_g +
+    W Delta_bar - Omega x J Omega the model's moment besides u. The exponential CBF condition
+    h'' + 2 lambda h' + lambda^2 h >= 0 (a double pole at -lambda, ``cbf_rate``) is then linear in
+    u: a_i . u >= beta_i with a_i = J^-1 c_i. Returns (A (..., n, 3), beta (..., n), h, h').
+    """
+    cfg = controller.config
+    cones = cfg.cones
+    ev = terms.cones
+    b = cones.V @ R                                     # rows R^T v_i
+    c = ev.cross
+    h = cones.cos_theta - ev.s
+    h_dot = so3.dot(c, Omega[..., None, :])
+    c_dot = cross(cross(b, Omega[..., None, :]), np.broadcast_to(cones.r, b.shape))
+    W = controller.regressor(R)
+    f = (terms.M_g + (delta_bar if W is None else matvec(W, delta_bar))
+         - cross(Omega, matvec(cfg.J, Omega)))
+    A = c @ controller.J_inv                            # J symmetric: rows (J^-1 c_i)^T
+    lam = cfg.cbf_rate
+    beta = -(so3.dot(c_dot, Omega[..., None, :]) + so3.dot(A, f[..., None, :])
+             + 2.0 * lam * h_dot + lam * lam * h)
+    return A, beta, h, h_dot
+
+
+_SUBSETS = {}
+
+
+def _active_sets(n):
+    """The nonempty sets of at most 3 of n constraints (a moment has 3 components), as index
+    tuples, smallest first.
+    """
+    if n not in _SUBSETS:
+        _SUBSETS[n] = [S for k in (1, 2, 3) for S in itertools.combinations(range(n), k)]
+    return _SUBSETS[n]
+
+
+def closest_admissible(u0, A, beta):
+    """The moment closest to u0 with A u >= beta (the QP min |u - u0|^2), exactly, by its active
+    set: with none active u0 if it is admissible; else of the sets of at most 3 constraints held
+    with equality, u = u0 + A_S^T lambda, (A_S A_S^T) lambda = beta_S - A_S u0, the admissible
+    one with lambda >= 0 closest to u0 (one cone: the closed form u0 + max(0, beta - a.u0) a /
+    |a|^2). Where no set is admissible (constraints that contradict each other), the most
+    violated constraint alone. A batch solves each run on its own.
+    """
+    tol = 1e-9
+    slack = matvec(A, u0) - beta if A.ndim == 2 else np.einsum('...ij,...j->...i', A, u0) - beta
+    ok = np.all(slack >= -tol, axis=-1)
+    if np.all(ok):
+        return u0
+    n = A.shape[-2]
+    best, best_cost = np.array(u0, dtype=float, copy=True), np.where(ok, 0.0, np.inf)
+    for S in _active_sets(n):
+        A_S = A[..., S, :]
+        G = A_S @ np.swapaxes(A_S, -1, -2)
+        rhs = -slack[..., S]
+        det = np.linalg.det(G)
+        usable = np.abs(det) > 1e-12
+        G = np.where(usable[..., None, None], G, np.eye(len(S)))
+        lam = np.linalg.solve(G, rhs[..., None])[..., 0]
+        u = u0 + np.einsum('...ki,...k->...i', A_S, lam)
+        s_all = np.einsum('...ij,...j->...i', A, u) - beta
+        good = usable & np.all(lam >= -tol, axis=-1) & np.all(s_all >= -1e-7, axis=-1)
+        cost = np.where(good, so3.dot(u - u0, u - u0), np.inf)
+        better = cost < best_cost
+        best = np.where(better[..., None], u, best)
+        best_cost = np.where(better, cost, best_cost)
+    stuck = ~np.isfinite(best_cost)
+    if np.any(stuck):                     # the most violated constraint alone
+        i = np.argmin(slack, axis=-1)
+        a = np.take_along_axis(A, i[..., None, None], axis=-2)[..., 0, :]
+        gap = -np.take_along_axis(slack, i[..., None], axis=-1)[..., 0]
+        u = u0 + (a.T * (np.maximum(gap, 0.0) / np.maximum(so3.dot(a, a), 1e-12))).T
+        best = np.where(stuck[..., None], u, best)
+    return best
+
+
+def cbf_law(controller, R, Omega, dt, adapt, blind):
+    """The geometric baseline filtered by a control-barrier-function QP on SO(3): the moment
+    closest to Lee's geometric controller's that keeps every cone's pointing constraint
+    (``pointing_cbf``) with a double pole at -``cbf_rate``. The estimate adapts as the
+    baseline's.
+    """
+    terms = controller.terms(R, Omega)
+    out = controller.moment(R, Omega, dt, adapt, terms, terms.A[..., 0], terms.e_RA,
+                            barrier=False)
+    if not len(controller.config.cones):
+        return out
+    # (with the estimate the moment used, before it advanced)
+    A, beta, _, _ = pointing_cbf(controller, R, Omega, terms, out.delta_bar)
+    return out._replace(u=closest_admissible(out.u, A, beta))
+
+
+# The control laws, one signature: law(controller, R, Omega, dt, adapt, blind) -> ControlOutput.
+# The ``law`` parameter names one; a new law is a function and a row here, not a new loop.
+LAWS = {'paper': paper_law, 'geometric': geometric_law, 'cbf': cbf_law}

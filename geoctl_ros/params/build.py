@@ -41,7 +41,8 @@ def controller_config(values):
         disturbance_model=values['disturbance_model'], delta_bar_max=values['delta_bar_max'],
         cog_estimate_max=values['cog_estimate_max'],
         unmodelled_moment_max=values['unmodelled_moment_max'],
-        blind_guard_max=math.radians(values['blind_guard_max_deg']))
+        blind_guard_max=math.radians(values['blind_guard_max_deg']), law=values['law'],
+        cbf_rate=values['cbf_rate'])
 
 
 _RECORDS = {}

@@ -12,7 +12,7 @@ import re
 
 import numpy as np
 
-from geoctl_ros.core.control import DISTURBANCE_MODELS
+from geoctl_ros.core.control import DISTURBANCE_MODELS, LAWS
 from geoctl_ros.core.safety import quaternion_problem
 from geoctl_ros.records.bag import TOPICS as _RECORDED
 
@@ -136,6 +136,13 @@ SCHEMA = [
     _p('G', 'double_array', [0.9, 1.1, 1.0], '-',
        'diagonal weights g1, g2, g3 of the attitude error A (distinct, positive)', CONTROLLER,
        length=3, check=_weights, lo=0.0, hi=10.0),
+    _p('law', 'string', 'paper', '-',
+       'the control law: paper (the barrier of Kulumani, Poole & Lee), geometric (the same '
+       'gains, no barrier: a baseline that does not keep the cones) or cbf (geometric, filtered '
+       'by a control-barrier-function QP per cone)', CONTROLLER, choices=tuple(LAWS)),
+    _p('cbf_rate', 'double', 4.0, '1/s',
+       "the cbf law: double pole lambda of h'' + 2 lambda h' + lambda^2 h >= 0 for each cone",
+       CONTROLLER, check=_positive, lo=0.1, hi=100.0),
     _p('adaptive', 'bool', True, '-', 'run the adaptive law (else Delta_bar stays 0)', CONTROLLER),
     _p('disturbance_model', 'string', 'constant', '-',
        'regressor W: constant (W = I) or constant+cog (also estimates the error in m*rho)',
