@@ -208,8 +208,10 @@ def test_an_input_is_as_old_as_its_capture_stamp_says_unless_the_stamp_is_not_be
 @odroid
 def test_a_loop_blind_past_its_bound_says_so_sustained_or_at_a_stall():
     """Armed at rest, inputs stamped 70 ms old at every tick: WARN naming the sustained blindness
-    against its 60 ms bound. Then 20 ms old with one 150 ms stall of both inputs: WARN with the
-    blind time up to the stall's, against 100 ms. Then 20 ms old throughout: no blind warning.
+    against its 60 ms bound, and the degraded mode's gains (60/70: 86 % of the bandwidth). Then
+    20 ms old with one 150 ms stall of both inputs: WARN with the blind time up to the stall's,
+    against 100 ms, and degraded. Then 20 ms old throughout: after the stall's peak is released,
+    no blind or degraded warning.
     """
     values = resolve(CONTROLLER, {'allow_default_configuration': True})
     loop = ControlLoop(controller_setup(values))
@@ -229,11 +231,16 @@ def test_a_loop_blind_past_its_bound_says_so_sustained_or_at_a_stall():
         return message
     fly(1, 0.07)
     assert loop.arm(t[0]).ok
-    fly(10, 0.07)
+    fly(150, 0.07)                  # the low-pass (0.25 s) settled
     sustained = fly(50, 0.07)
     assert 'loop blind at least 7' in sustained and 'beyond the 60 ms' in sustained, sustained
+    # the degraded mode: the bandwidth scaled by 60 ms over the low-passed blind time
+    pct = int(sustained.split('feedback gains down to ')[1].split(' %')[0])
+    assert 80 <= pct <= 90, sustained
     stalled = fly(50, 0.02, stall=range(20, 35))
     assert 'loop blind up to 1' in stalled and 'beyond the 100 ms' in stalled, stalled
+    assert 'degraded' in stalled
+    fly(300, 0.02)                  # the stall's peak released (1 s)
     clear = fly(50, 0.02)
     assert 'blind' not in clear, clear
 

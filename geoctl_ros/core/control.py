@@ -213,6 +213,8 @@ class AttitudeController:
         self.Omega_d = np.zeros(3)
         self.dOmega_d = np.zeros(3)
         self._tracking = False      # Omega_d or its derivative nonzero
+        self.gain_scale = 1.0       # of the bandwidth (k_R by its square, k_Omega by it), set by
+                                    # the tick past the delay bound (core.step.DegradedMode)
 
     @property
     def R_d(self):
@@ -320,7 +322,12 @@ class AttitudeController:
             e_Omega = Omega - Omega_d
         W = self.regressor(R)
         delta_bar = self.delta_bar.copy()
-        u = cross(Omega, matvec(cfg.J, Omega)) - cfg.k_R * e_R - cfg.k_Omega * e_Omega
+        g = self.gain_scale                     # past the delay bound, below 1 (DegradedMode)
+        if np.ndim(g):                          # one per run of a batch
+            k_R, k_Omega = (cfg.k_R * g * g)[..., None], (cfg.k_Omega * g)[..., None]
+        else:
+            k_R, k_Omega = cfg.k_R * g * g, cfg.k_Omega * g
+        u = cross(Omega, matvec(cfg.J, Omega)) - k_R * e_R - k_Omega * e_Omega
         u -= delta_bar if W is None else matvec(W, delta_bar)
         if tracking:
             u -= matvec(cfg.J, cross(Omega, Omega_d) - matvec(RtRd, self.dOmega_d))

@@ -32,14 +32,10 @@ from geoctl_ros.core.safety import (
     quaternion_problem,
 )
 from geoctl_ros.core.stats import WindowStats
-from geoctl_ros.core.step import ControlTick
+from geoctl_ros.core.step import BLIND_BOUND_S, SUSTAINED_BLIND_BOUND_S, ControlTick
 
 NEAR_CONE_DEG = 2.0           # a cone margin below this is reported (WARN)
 ARM_RATE_DISAGREE = 0.3      # rad/s (+ half the poses' rate): gyro against poses, at arming
-# the delay the cone is kept for (docs/safety.md, "The bound"): blind time at any tick, and the
-# blind time the loop is never below through a diagnostics window (a sustained latency)
-BLIND_BOUND_S = 0.10
-SUSTAINED_BLIND_BOUND_S = 0.06
 NON_FINITE = failsafe('non-finite control output')
 
 
@@ -119,7 +115,7 @@ class ControlLoop:
         self.pose_age = WindowStats()
         self.rate_age = WindowStats()
         self._window = {'ticks': 0, 'saturated': 0, 'bridging': 0, 'blind_ms': 0,
-                        'armed_ticks': 0, 'steady_blind_ms': 0}
+                        'armed_ticks': 0, 'steady_blind_ms': 0, 'gain_pct': 100}
         # the sensor inside a cone while armed, latched until the next arming: entries counted,
         # the deepest (cone name, depth deg)
         self.cone_entries = 0
@@ -330,6 +326,8 @@ class ControlLoop:
             w['blind_ms'] = max(w['blind_ms'], blind_ms)
             w['steady_blind_ms'] = (min(w['steady_blind_ms'], blind_ms) if w['armed_ticks']
                                     else blind_ms)
+            gain_pct = int(round(100.0 * float(self.step.degraded.scale_now)))
+            w['gain_pct'] = min(w['gain_pct'], gain_pct) if w['armed_ticks'] else gain_pct
             w['armed_ticks'] += 1
         self.last_tick = tick
         return tick
@@ -437,6 +435,9 @@ class ControlLoop:
                                 np.max(self.pose_age.samples(), initial=0.0),
                                 np.max(self.rate_age.samples(), initial=0.0)),
                                 1e3 * BLIND_BOUND_S))
+        if sup.armed and w['armed_ticks'] and w['gain_pct'] < 100:
+            warnings.append('degraded: feedback gains down to %d %% of their bandwidth while '
+                            'blind past the bound' % w['gain_pct'])
         if w['saturated']:
             warnings.append('allocation saturated in %d of %d ticks'
                             % (w['saturated'], w['ticks']))

@@ -29,6 +29,41 @@ def blind_time(delay, ages, dt, held):
     return age + (held - dt)
 
 
+# The delay bound (docs/safety.md, "The bound"): the blind time the cone is kept for at any tick,
+# and sustained
+BLIND_BOUND_S = 0.10
+SUSTAINED_BLIND_BOUND_S = 0.06
+SUSTAINED_TAU_S = 0.25      # s, the low-pass that tells a sustained blindness from a stall
+PEAK_RELEASE_S = 1.0        # s, how long a blind peak past the bound keeps the gains down
+
+
+class DegradedMode:
+    """Past the delay bound, the feedback gains come down with the blindness (docs/safety.md,
+    "Past the bound"): the loop's bandwidth scales by s = min(1, SUSTAINED_BLIND_BOUND_S /
+    (blind time low-passed over SUSTAINED_TAU_S), BLIND_BOUND_S / (blind time peak-held over
+    PEAK_RELEASE_S)), k_R by s^2 and k_Omega by s, so the loop's phase lag at its crossover
+    stays what it was at the bound. Within the bound s = 1 and nothing changes. One scale per run
+    of a batch.
+    """
+
+    def __init__(self):
+        self.sustained = 0.0        # s, the low-passed blind time
+        self.peak = 0.0             # s, the blind time held from its last peak
+        self.scale_now = 1.0
+
+    def scale(self, blind, held):
+        """The gain scale s after a tick of blind time ``blind`` that came ``held`` s after the
+        last.
+        """
+        self.sustained = self.sustained + (blind - self.sustained) * (
+            held / (SUSTAINED_TAU_S + held))
+        self.peak = np.maximum(blind, self.peak * np.exp(-held / PEAK_RELEASE_S))
+        self.scale_now = np.minimum(1.0, np.minimum(
+            SUSTAINED_BLIND_BOUND_S / np.maximum(self.sustained, 1e-9),
+            BLIND_BOUND_S / np.maximum(self.peak, 1e-9)))
+        return self.scale_now
+
+
 class TickResult(NamedTuple):
     """What one control tick commands."""
 
@@ -54,6 +89,7 @@ class ControlTick:
         self.history = CommandHistory(HISTORY_TICKS, mixer.lag)
         self._last_now = None
         self.blind = 0.0                # the last tick's blind time (blind_time)
+        self.degraded = DegradedMode()
         self._clock = 0.0               # the tick's time: now, or (untimed) periods counted
         self._ticked = False
 
@@ -103,6 +139,7 @@ class ControlTick:
             R, Omega = self.predict(R, Omega, d + ages[0], d + ages[1], self.history, t,
                                     0.5 * dt if self.mixer.lag > 0.0 else 0.0)
         blind = self.blind = blind_time(self.measurement_delay, ages, dt, held)
+        self.controller.gain_scale = self.degraded.scale(blind, dt if held is None else held)
         out = self.controller.step(R, Omega, dt, adapt=adapt, blind=blind)
         if not np.isfinite(out.u).all():           # a last line of defence: never command it
             if np.ndim(out.u) > 1:
