@@ -555,8 +555,18 @@ def test_hostile_frames_and_messages_are_refused_and_never_end_the_bridge(tmp_pa
                                        mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0)
         gcs.wait(lambda m: m.get_type() == 'AUTOPILOT_VERSION', 10.0, 'the next valid command',
                  since=t0)
-        gcs.wait(lambda m: m.get_type() == 'ATTITUDE_QUATERNION', 10.0, 'the valid attitude',
-                 mon, since=t0)
+        # (the pose topic is best effort, as a motion-capture driver's: a pose may be lost on a
+        # busy machine, so the valid one is sent again until the bridge shows it)
+        deadline = time.monotonic() + 10.0
+        while True:
+            try:
+                gcs.wait(lambda m: m.get_type() == 'ATTITUDE_QUATERNION', 0.2,
+                         'the valid attitude', mon, since=t0)
+                break
+            except TimeoutError:
+                if time.monotonic() > deadline:
+                    raise
+                mon.publish_pose(level)
         attitudes = [m for _, m in gcs.got if m.get_type() == 'ATTITUDE_QUATERNION']
         assert all(math.isfinite(v) for m in attitudes for v in (m.q1, m.q2, m.q3, m.q4))
         assert bridge.proc.poll() is None, bridge.output()
