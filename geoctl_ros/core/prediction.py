@@ -136,6 +136,16 @@ class DelayPredictor:
         last, self._last = self._last, (captured, Omega)
         if last is None:
             return
+        if np.ndim(captured) == 0:              # one run (the node's tick): plain floats
+            interval = float(captured) - float(last[0])
+            if not (1e-6 < interval <= OBSERVE_GAP_MAX_S and last[0] >= history.first):
+                return
+            modelled = self.acceleration(R, 0.5 * (Omega + last[1]),
+                                         history.at(last[0] + 0.5 * interval))
+            self.acc_error = self.acc_error + (
+                modelled - (Omega - last[1]) / interval - self.acc_error) * (
+                interval / (PREDICT_SLOW_S + interval))
+            return
         interval = captured - last[0]
         usable = (interval > 1e-6) & (interval <= OBSERVE_GAP_MAX_S) & (last[0] >= history.first)
         if not np.any(usable):

@@ -6,6 +6,7 @@ and ``geoctl_ros.tools.batch.run_batch`` (a campaign's batches) both call :class
 Like the core's formulas it takes one run (R (3, 3), Omega (3,)) or a batch of N ((N, 3, 3),
 (N, 3)); the single run is the batch of one, to rounding.
 """
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -57,6 +58,11 @@ class DegradedMode:
         """
         self.sustained = self.sustained + (blind - self.sustained) * (
             held / (SUSTAINED_TAU_S + held))
+        if np.ndim(blind) == 0 and np.ndim(self.peak) == 0:     # one run: plain floats
+            self.peak = max(float(blind), self.peak * math.exp(-held / PEAK_RELEASE_S))
+            self.scale_now = min(1.0, SUSTAINED_BLIND_BOUND_S / max(self.sustained, 1e-9),
+                                 BLIND_BOUND_S / max(self.peak, 1e-9))
+            return self.scale_now
         self.peak = np.maximum(blind, self.peak * np.exp(-held / PEAK_RELEASE_S))
         self.scale_now = np.minimum(1.0, np.minimum(
             SUSTAINED_BLIND_BOUND_S / np.maximum(self.sustained, 1e-9),
