@@ -329,7 +329,8 @@ class ControllerNode(Node):
             self.pub_setpoint.publish(sp)
         state = (tick.armed, tick.state, tick.sources)
         if state != self._last_state:
-            if self._last_state is not None and tick.failed:
+            if (self._last_state is not None and tick.failed
+                    and self._last_state[:2] != state[:2]):   # (once: not at each gap change)
                 self.get_logger().error(tick.state)
             elif tick.bridging:
                 self.get_logger().warning('; '.join(self.loop.gap_notes(now)))
