@@ -305,7 +305,7 @@ class AttitudeController:
             if extra.max() > 0.0:                  # (else no cone is being approached)
                 widened = cfg.cones.widened(extra)
         ev = cfg.cones.evaluate_terms(sc, widened)
-        return StepTerms(y[..., 0:1], y[..., 1:4], ev, y[..., -3:])
+        return StepTerms(y[..., 0:1], y[..., 1:4], ev, y[..., -3:], self.regressor(R))
 
     def moment(self, R, Omega, dt, adapt, terms, psi, e_R, barrier=True):
         """The geometric law's moment for the configuration error (psi, e_R), with the adaptive
@@ -320,7 +320,7 @@ class AttitudeController:
             RtRd = transpose(R) @ self.R_d
             Omega_d = matvec(RtRd, self.Omega_d)
             e_Omega = Omega - Omega_d
-        W = self.regressor(R)
+        W = terms.W
         delta_bar = self.delta_bar.copy()
         g = self.gain_scale                     # past the delay bound, below 1 (DegradedMode)
         if np.ndim(g):                          # one per run of a batch
@@ -372,6 +372,7 @@ class StepTerms(NamedTuple):
     e_RA: np.ndarray     # its gradient
     cones: object        # ConeEval: the cones at R (widened by the blind time, if any)
     M_g: np.ndarray      # the model's gravity moment
+    W: object            # the regressor W(R) (None for the constant model, W = I)
 
 
 def paper_law(controller, R, Omega, dt, adapt, blind):
@@ -411,7 +412,7 @@ def pointing_cbf(controller, R, Omega, terms, delta_bar):
     h = cones.cos_theta - ev.s
     h_dot = so3.dot(c, Omega[..., None, :])
     c_dot = cross(cross(b, Omega[..., None, :]), np.broadcast_to(cones.r, b.shape))
-    W = controller.regressor(R)
+    W = terms.W
     f = (terms.M_g + (delta_bar if W is None else matvec(W, delta_bar))
          - cross(Omega, matvec(cfg.J, Omega)))
     A = c @ controller.J_inv                            # J symmetric: rows (J^-1 c_i)^T
@@ -442,7 +443,7 @@ def closest_admissible(u0, A, beta):
     violated constraint alone. A batch solves each run on its own.
     """
     tol = 1e-9
-    slack = matvec(A, u0) - beta if A.ndim == 2 else np.einsum('...ij,...j->...i', A, u0) - beta
+    slack = np.einsum('...ij,...j->...i', A, u0) - beta
     ok = np.all(slack >= -tol, axis=-1)
     if np.all(ok):
         return u0

@@ -150,7 +150,8 @@ class Mixer:
                 if self.design_hold > hold:       # a late step not long ago: back to dt slowly
                     hold = max(hold, dt + (self.design_hold - dt) * math.exp(
                         -held / self.HOLD_MEMORY))
-                self.spool_left -= held
+                if self.spool_left > 0.0:
+                    self.spool_left -= held
             if self.spool_left <= 0.0:
                 a = math.exp(-hold / self.lag)
                 thrusts = np.minimum(np.maximum((thrusts - a * model) / (1.0 - a),
