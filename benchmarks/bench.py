@@ -14,7 +14,7 @@ against ``paper_law.py``, a plain numpy transcription of the paper's law with a 
 at 1, 4, 16 and 64 cones (after checking that both give the same moment); the controller node's
 tick in-process (imu callback to motor command published, and the whole callback with the
 monitoring topics after it; p50, p99, max); the campaign's batched closed loop
-(``geoctl_ros.tools.batch``): its real-time factor per core for batches of 1 to 256 runs; and
+(``geoctl_ros.sim.closed_loop``): its real-time factor per core for batches of 1 to 256 runs; and
 input-to-command latency over DDS against a bare relay node (``latency.py``; ``--no-latency``
 skips it).
 """
@@ -49,7 +49,7 @@ from geoctl_ros.params import (
     testbed_sim,
 )
 from geoctl_ros.tools import manoeuvres, scenario
-from geoctl_ros.tools.batch import run_batch
+from geoctl_ros.sim.closed_loop import fly
 from geoctl_ros.tools.rosenv import use_node_env
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -190,7 +190,7 @@ def batched():
         i += 1
     rows = []
     for n in (1, 16, 64, 256):
-        wall = min(run_batch(pool[:n]).wall_s for _ in range(2))
+        wall = min(fly(pool[:n]).wall_s for _ in range(2))
         rows.append((n, wall, n * 1.0 / wall))
     return rows
 

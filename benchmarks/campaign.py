@@ -5,7 +5,7 @@ after, the fixed cost of a campaign, and a 10,000-run campaign of 20 s runs.
     ./run shell benchmarks/campaign.py --runs 2000      # a shorter campaign
     ./run shell benchmarks/campaign.py --against REV    # "before" is REV's tree (default below)
 
-1. Per core: the batched closed loop (``geoctl_ros.tools.batch.run_batch``: testbed, rotors, 1 kHz
+1. Per core: the batched closed loop (``geoctl_ros.sim.closed_loop.fly``: testbed, rotors, 1 kHz
    integration, 100 Hz control) in one process, on runs of 2 s with two cones, in the batch size
    each tree's campaign uses. "Before" is the tree of BEFORE (the campaign on the standard
    library's process pool, 300 runs a batch), "after" this tree. Each is measured by this file's
@@ -30,7 +30,7 @@ import numpy
 
 from geoctl_ros.params import load_parameter_file  # (the tree first on PYTHONPATH)
 from geoctl_ros.tools import campaign, manoeuvres, scenario
-from geoctl_ros.tools.batch import run_batch
+from geoctl_ros.sim.closed_loop import fly
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -47,7 +47,7 @@ def per_core(duration=2.0, cones=2):
         if len(sections['controller']['cones.names']) == cones:
             runs.append(scenario.from_sections(sections, 'run_%d' % i))
         i += 1
-    wall = run_batch(runs).wall_s
+    wall = fly(runs).wall_s
     return n, wall, n * duration / wall
 
 

@@ -1,5 +1,5 @@
-"""The safety campaign: batched runs equal single runs, the worst runs replay exactly, and a
-50-manoeuvre campaign of the testbed keeps every cone.
+"""The safety campaign: the worst runs replay exactly, and a 50-manoeuvre campaign of the
+testbed keeps every cone (a batch against its runs alone: test_closed_loop.py).
 """
 import os
 
@@ -8,7 +8,7 @@ import pytest
 
 from geoctl_ros.params import load_parameter_file
 from geoctl_ros.tools import campaign, manoeuvres, scenario
-from geoctl_ros.tools.batch import run_batch
+from geoctl_ros.sim.closed_loop import fly
 
 # on the vehicle's stack too, but for the campaign and the replay of a written run: they fly the
 # same batches as these, and a 50-run campaign's runs.csv was byte-identical on both stacks when
@@ -53,27 +53,6 @@ def test_the_distribution_is_what_the_readme_says():
                           manoeuvres.draw_manoeuvre(7, 3, r)['R_d'])
 
 
-@odroid
-def test_a_batch_flies_each_run_as_the_scenario_runner_does():
-    # runs 0..5 of seed 1 with one cone: latency, errors, disturbance and noise all differ
-    picked = [i for i in range(40) if len(sections(i)['controller']['cones.names']) == 1][:3]
-    runs = [scenario.from_sections(sections(i, duration=4.0), 'run_%d' % i) for i in picked]
-    assert len({s.options['latency'] for s in runs}) > 1
-    batch = run_batch(runs)
-    for p, s in enumerate(runs):
-        single = scenario.run(s).summary
-        closest = min(single['min_cone_angle_deg'][n] - single['cone_half_angle_deg'][n]
-                      for n in single['min_cone_angle_deg'])
-        # the same formulas; only rounding differs (the node's quaternion round trip, math.sin
-        # against np.sin, and the BLAS kernel of the CPU: OpenBLAS's Prescott one gave 3e-6 deg
-        # where others give 1e-7): agreement to 1e-4 deg after 4 s of closed loop, a thousandth
-        # of the motion capture's own noise (0.1 deg), which no difference of behaviour fits in
-        assert abs(batch.min_margin_deg[p].min() - closest) < 1e-4, (
-            closest, batch.min_margin_deg[p])
-        assert abs(batch.final_error_deg[p] - single['final_attitude_error_deg']) < 1e-4
-        assert batch.saturated_s[p] == pytest.approx(single['saturated_fraction'] * 4.0)
-
-
 def test_a_run_written_out_replays_to_the_same_figures(tmp_path):
     """A campaign's batch (flown as a worker flies it) and one of its runs alone from its file."""
     base = load_parameter_file(TESTBED)
@@ -83,7 +62,7 @@ def test_a_run_written_out_replays_to_the_same_figures(tmp_path):
     i = indices[4]
     path = tmp_path / 'run.yaml'
     manoeuvres.write_scenario_file(sections(i, duration=3.0), str(path))
-    again = run_batch([scenario.load(str(path))])                      # alone, from the file
+    again = fly([scenario.load(str(path))])                      # alone, from the file
     assert again.min_margin_deg[0].min() == figures['closest_deg'][4]
     assert again.final_error_deg[0] == figures['final_error_deg'][4]
     assert again.settle_s[0] == figures['settle_s'][4] or np.isnan(figures['settle_s'][4])
@@ -91,7 +70,7 @@ def test_a_run_written_out_replays_to_the_same_figures(tmp_path):
     assert len(figures['worst']) == 2
     closest, _, worst, margins, sensor, _ = figures['worst'][0]
     assert closest == figures['closest_deg'].min()
-    alone = run_batch([scenario.from_sections(sections(worst, duration=3.0), 'w')])
+    alone = fly([scenario.from_sections(sections(worst, duration=3.0), 'w')], series=True)
     assert np.array_equal(alone.margin_series[:, 0], margins)
     assert np.array_equal(alone.sensor_series[:, 0], sensor)
 
@@ -102,7 +81,7 @@ def test_a_batch_refuses_runs_that_differ_in_what_it_shares():
     s = sections(0, duration=1.0)
     s['controller']['k_R'] = 0.5
     with pytest.raises(ValueError, match='k_R'):
-        run_batch([a, scenario.from_sections(s, 'b')])
+        fly([a, scenario.from_sections(s, 'b')])
 
 
 

@@ -39,7 +39,7 @@ ConeSet with axes (batch, n, 3) and half-angles (batch, n); it evaluates a stack
 import numpy as np
 
 from geoctl_ros.core.flags import any_flag
-from geoctl_ros.core.so3 import hat, vecmat
+from geoctl_ros.core.so3 import hat, matmul, vecmat
 
 
 def angle_deg(s):
@@ -134,7 +134,7 @@ class ConeSet:
         """(n, 4) per cone: s_i = r^T R^T v_i, then (R^T v_i) x r; both linear in R (the control
         step evaluates them as part of one precomputed linear map, see ``core.control``).
         """
-        return self.V @ (R @ self._r_cols)
+        return matmul(self.V, matmul(R, self._r_cols))
 
     def evaluate(self, R):
         """Barrier values, gradients and flags at attitude R."""

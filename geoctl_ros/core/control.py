@@ -111,8 +111,8 @@ class ControlOutput(NamedTuple):
 
 def attractive_error(R, R_d, G):
     """A (eq. 13) and e_RA (eq. 15) for the diagonal weights G (3,)."""
-    RdtR = transpose(R_d) @ R
-    A = 0.5 * ((1.0 - np.diagonal(RdtR, 0, -2, -1)) @ G)
+    RdtR = so3.matmul(transpose(R_d), R)
+    A = 0.5 * so3.dot(1.0 - np.diagonal(RdtR, 0, -2, -1), G)
     M = G[:, None] * RdtR            # G R_d^T R; its transpose is R^T R_d G
     return A, 0.5 * vee(M - transpose(M))
 
@@ -160,8 +160,8 @@ def approach_rates(sc, Omega):
     d/dt s_i = -Omega . ((R^T v_i) x r) and sin(phi_i) = |(R^T v_i) x r|.
     """
     cross = sc[..., 1:]
-    sin_phi = np.sqrt(np.einsum('...ij,...ij->...i', cross, cross))
-    return -np.einsum('...ij,...j->...i', cross, Omega) / np.maximum(sin_phi, 1e-9)
+    sin_phi = np.sqrt(so3.dot(cross, cross))
+    return -so3.dot(cross, Omega[..., None, :]) / np.maximum(sin_phi, 1e-9)
 
 
 WIDEN_GAP_SHARE = 0.5     # the widening takes at most this share of the gap to a cone's barrier
@@ -317,7 +317,7 @@ class AttitudeController:
         e_Omega = Omega
         tracking = self._tracking
         if tracking:
-            RtRd = transpose(R) @ self.R_d
+            RtRd = so3.matmul(transpose(R), self.R_d)
             Omega_d = matvec(RtRd, self.Omega_d)
             e_Omega = Omega - Omega_d
         W = terms.W
@@ -407,7 +407,7 @@ def pointing_cbf(controller, R, Omega, terms, delta_bar):
     cfg = controller.config
     cones = cfg.cones
     ev = terms.cones
-    b = cones.V @ R                                     # rows R^T v_i
+    b = so3.matmul(cones.V, R)                                     # rows R^T v_i
     c = ev.cross
     h = cones.cos_theta - ev.s
     h_dot = so3.dot(c, Omega[..., None, :])
@@ -415,7 +415,7 @@ def pointing_cbf(controller, R, Omega, terms, delta_bar):
     W = terms.W
     f = (terms.M_g + (delta_bar if W is None else matvec(W, delta_bar))
          - cross(Omega, matvec(cfg.J, Omega)))
-    A = c @ controller.J_inv                            # J symmetric: rows (J^-1 c_i)^T
+    A = so3.matmul(c, controller.J_inv)                            # J symmetric: rows (J^-1 c_i)^T
     lam = cfg.cbf_rate
     beta = -(so3.dot(c_dot, Omega[..., None, :]) + so3.dot(A, f[..., None, :])
              + 2.0 * lam * h_dot + lam * lam * h)
@@ -443,7 +443,7 @@ def closest_admissible(u0, A, beta):
     violated constraint alone. A batch solves each run on its own.
     """
     tol = 1e-9
-    slack = np.einsum('...ij,...j->...i', A, u0) - beta
+    slack = so3.matvec(A, u0) - beta
     ok = np.all(slack >= -tol, axis=-1)
     if np.all(ok):
         return u0
@@ -458,7 +458,7 @@ def closest_admissible(u0, A, beta):
         G = np.where(usable[..., None, None], G, np.eye(len(S)))
         lam = np.linalg.solve(G, rhs[..., None])[..., 0]
         u = u0 + np.einsum('...ki,...k->...i', A_S, lam)
-        s_all = np.einsum('...ij,...j->...i', A, u) - beta
+        s_all = so3.matvec(A, u) - beta
         good = usable & np.all(lam >= -tol, axis=-1) & np.all(s_all >= -1e-7, axis=-1)
         cost = np.where(good, so3.dot(u - u0, u - u0), np.inf)
         better = cost < best_cost

@@ -202,7 +202,7 @@ class DelayPredictor:
             hw = np.where(mid > now - age_Omega, h, 0.0)
             hr = np.where(mid > now - age_R, h, 0.0)
             Omega_next = Omega + (acc.T * hw).T
-            R = R @ so3.exp(((0.5 * (Omega + Omega_next)).T * hr).T)
+            R = so3.matmul(R, so3.exp(((0.5 * (Omega + Omega_next)).T * hr).T))
             Omega = Omega_next
         return R, Omega
 

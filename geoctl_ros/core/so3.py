@@ -6,9 +6,9 @@ takes and returns plain numpy arrays; none of them validates its input (that bel
 boundary, see ``geoctl_ros.params`` and the nodes), but all stay accurate for rotation angles near
 0 and near pi.
 
-Batches: ``hat``, ``cross``, ``vee``, ``exp``, ``matvec``, ``vecmat``, ``dot`` and ``transpose``
-also take a stack of vectors (..., 3) or matrices (..., 3, 3) and work on each, so the campaign's
-batched simulation (many runs at once) uses the same formulas as a single run. (The trick:
+Batches: ``hat``, ``cross``, ``vee``, ``exp``, ``matmul``, ``matvec``, ``vecmat``, ``dot`` and
+``transpose`` also take a stack of vectors (..., 3) or matrices (..., 3, 3) and work on each, so
+the campaign's batched simulation (many runs at once) uses the same formulas as a single run. (The trick:
 ``x.T[i]`` is component i of a single vector and the column of components i of a stack alike.)
 
 numpy 1.26 and 2.x alike: Ubuntu 24.04 (the vehicle's stack) ships numpy 1.26, which has neither
@@ -53,31 +53,49 @@ def vee(M):
     return np.array([M[1, 2], M[2, 0], M[0, 1]]).T
 
 
-def matvec(M, v):
-    """M v for a matrix and a vector, or for each of a stack of them (broadcasting).
+# Stacks are multiplied out entry by entry (each entry a sum of products taken in index order),
+# not through matmul: matmul hands each pair of a stack to BLAS, and OpenBLAS's kernels round a
+# product by where its matrices fall in memory (0.3.23's Prescott kernel, numpy 1.26's: every
+# other 3x3 matrix of a stack, by its 16-byte alignment). A run of a batch then stays bit for bit
+# on the same run flown alone, on any CPU. One pair still goes through ``@``.
 
-    A stack goes through matmul with an explicit axis, which rounds each product exactly as
-    ``M @ v`` does for a single pair: a batched run then stays bit for bit on its single run
-    (einsum sums in another order, and a chaotic stretch of flight turns that into 1e-3 deg in
-    4 s).
-    """
-    if v.ndim == 1:                      # one vector: M @ v, for one M or each of a stack
+def _summed(terms):
+    """The sum of the products of an iterable, in its order."""
+    it = iter(terms)
+    out = next(it)
+    for term in it:
+        out = out + term
+    return out
+
+
+def matmul(A, B):
+    """A B for two matrices, or for each pair of stacks of them (broadcasting)."""
+    if A.ndim <= 2 and B.ndim <= 2:
+        return A @ B
+    return _summed(A[..., :, k, None] * B[..., None, k, :] for k in range(A.shape[-1]))
+
+
+def matvec(M, v):
+    """M v for a matrix and a vector, or for each of a stack of them (broadcasting)."""
+    if M.ndim <= 2 and v.ndim == 1:
         return M @ v
-    return (M @ v[..., None])[..., 0]
+    v = v[..., None, :]
+    return _summed(M[..., :, k] * v[..., k] for k in range(M.shape[-1]))
 
 
 def vecmat(v, M):
     """v^T M (= M^T v) for a vector and a matrix, or for each of a stack of them."""
-    if v.ndim == 1:
+    if v.ndim == 1 and M.ndim <= 2:
         return v @ M
-    return (v[..., None, :] @ M)[..., 0, :]
+    v = v[..., None]
+    return _summed(v[..., k, :] * M[..., k, :] for k in range(M.shape[-2]))
 
 
 def dot(a, b):
     """a . b for two vectors, or for each pair of two stacks of them."""
-    if a.ndim == 1:
+    if a.ndim == 1 and b.ndim == 1:
         return a @ b
-    return (a[..., None, :] @ b[..., :, None])[..., 0, 0]
+    return _summed(a[..., k] * b[..., k] for k in range(a.shape[-1]))
 
 
 def transpose(M):
@@ -174,10 +192,16 @@ def log(R):
 
 
 def angle(R):
-    """Geodesic rotation angle of R in [0, pi] (radians)."""
-    skew_norm = 0.5 * math.sqrt((R[2, 1] - R[1, 2]) ** 2 + (R[0, 2] - R[2, 0]) ** 2
-                                + (R[1, 0] - R[0, 1]) ** 2)
-    return math.atan2(skew_norm, 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0))
+    """Geodesic rotation angle of R in [0, pi] (radians); of each rotation of a stack (..., 3, 3)
+    as an array.
+    """
+    if np.ndim(R) == 2:
+        skew_norm = 0.5 * math.sqrt((R[2, 1] - R[1, 2]) ** 2 + (R[0, 2] - R[2, 0]) ** 2
+                                    + (R[1, 0] - R[0, 1]) ** 2)
+        return math.atan2(skew_norm, 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0))
+    skew_norm = 0.5 * np.sqrt((R[..., 2, 1] - R[..., 1, 2]) ** 2 + (R[..., 0, 2] - R[..., 2, 0]) ** 2
+                              + (R[..., 1, 0] - R[..., 0, 1]) ** 2)
+    return np.arctan2(skew_norm, 0.5 * (R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2] - 1.0))
 
 
 def project(M):

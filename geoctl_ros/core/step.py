@@ -1,10 +1,9 @@
 """The control tick of the closed loop, written once: prediction, control step, mixing, and the
 bookkeeping of how long each command was held.
 
-``ControlLoop.tick`` (the controller node and the scenario runner, which flies the node's logic)
-and ``geoctl_ros.tools.batch.run_batch`` (a campaign's batches) both call :class:`ControlTick`.
-Like the core's formulas it takes one run (R (3, 3), Omega (3,)) or a batch of N ((N, 3, 3),
-(N, 3)); the single run is the batch of one, to rounding.
+``ControlLoop.tick`` (the controller node) and ``geoctl_ros.sim.closed_loop`` (the simulated
+closed loop of the scenario runner and the campaigns) both call :class:`ControlTick`. Like the
+core's formulas it takes one run (R (3, 3), Omega (3,)) or a batch of N ((N, 3, 3), (N, 3)).
 """
 import math
 from typing import NamedTuple

@@ -118,7 +118,7 @@ class Plant:
         xi = h * k3x
         W = W0 + h * k3w
         k4x, k4w = _dexpinv(xi, W), acc(t + h, so3.exp_apply(-xi, g0), W, tau)
-        self.R = R0 @ so3.exp((h / 6.0) * (k1x + 2.0 * k2x + 2.0 * k3x + k4x))
+        self.R = so3.matmul(R0, so3.exp((h / 6.0) * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)))
         self.Omega = W0 + (h / 6.0) * (k1w + 2.0 * k2w + 2.0 * k3w + k4w)
         self.t = t + h
 

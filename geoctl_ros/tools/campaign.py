@@ -4,7 +4,7 @@
 
 Flies many random manoeuvres of the testbed headless and reports how often the sensor kept out of
 the cones. Each run is an ordinary scenario (``config/testbed.yaml`` with its own cones, set point,
-errors and seed), flown by ``geoctl_ros.tools.batch`` many at a time on a Dask cluster
+errors and seed), flown by ``geoctl_ros.sim.closed_loop`` many at a time on a Dask cluster
 (``geoctl_ros.tools.cluster``: a local one by default). The distribution of the manoeuvres is
 ``geoctl_ros.tools.manoeuvres``'s: run i of a seed draws from its own seed, so ``runs.csv`` is the
 same, bit for bit, on one worker or many, in any batch size, here or on a cluster.
@@ -29,9 +29,9 @@ import numpy as np
 
 from geoctl_ros.params import ConfigError, load_parameter_file
 from geoctl_ros.tools import cluster, manoeuvres, plots, study
-from geoctl_ros.tools.batch import run_batch
+from geoctl_ros.sim import closed_loop
 from geoctl_ros.tools.rosenv import config_dir
-from geoctl_ros.tools.scenario import from_sections
+from geoctl_ros.sim.scenario import from_sections
 
 BATCH = 1024               # runs flown together at most (docs/campaigns.md, "Campaign speed")
 # runs.csv's columns, in order (gain_set only in a gain study)
@@ -83,7 +83,7 @@ def fly_batch(job):
     sections = [draw.sections(seed, i, gains) for i in indices]
     scenarios = [_scenario(s, 'run_%d' % i) for i, s in zip(indices, sections)]
     drawn = time.perf_counter() - t0
-    res = run_batch(scenarios, cluster.report_progress, series=worst > 0)
+    res = closed_loop.fly(scenarios, cluster.report_progress, series=worst > 0)
     n = len(indices)
     closest = res.min_margin_deg.min(axis=1)
     kept = [(float(closest[p]), gain_set, indices[p], res.margin_series[:, p].copy(),
@@ -155,7 +155,7 @@ def replay(paths):
     """Fly scenario files written by a campaign, each alone; exit code 1 if any entered a cone."""
     violated = False
     for path in paths:
-        res = run_batch([from_sections(load_parameter_file(path), os.path.basename(path))])
+        res = closed_loop.fly([from_sections(load_parameter_file(path), os.path.basename(path))])
         violated |= bool(res.violated[0])
         print('%s: closest approach %r deg, %s, final error %.3f deg, saturated %.2f s'
               % (path, float(res.min_margin_deg[0].min()),

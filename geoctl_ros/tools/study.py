@@ -33,7 +33,7 @@ from geoctl_ros.params import (
     write_parameter_file,
 )
 from geoctl_ros.tools import plots
-from geoctl_ros.tools.batch import SETTLED_DEG as CONVERGED_DEG
+from geoctl_ros.sim.closed_loop import SETTLED_DEG as CONVERGED_DEG
 from geoctl_ros.tools.manoeuvres import LATENCY_MS_MAX
 
 # what a gain set may not change: what each run draws for itself

@@ -1,0 +1,315 @@
+"""The closed loop, written once: N >= 1 runs of the simulated testbed under the controller's tick.
+
+``fly(scenarios)`` flies the scenarios together, as arrays with a leading run axis, through the
+classes the node uses: ``ControlTick`` (the node's ``ControlLoop`` calls the same tick),
+``AttitudeController``, ``Mixer``, and the testbed's ``Plant`` and ``RotorActuator``. The scenario
+runner flies a batch of one; a campaign flies batches of many. A run in a batch gives the same
+bits as the same run flown alone (test_closed_loop.py).
+
+Each control step the controller sees the state ``latency`` before (a ring of past states, one
+per integration step), with the motion-capture and gyro noise of the run's own seed; at a stalled
+step (``stalls``) no sample arrives and the run flies on its last one, older by the wait. The tick
+brings the samples forward by their age, the mixer turns the moment into integer commands (or,
+with ``actuation: torque``, the moment acts itself) and the command is held while the plant
+integrates: a control period, or longer with ``tick_jitter``. Set-point schedules switch at their
+times after the start (the runs are armed at t = 0).
+
+Per run may differ what a campaign varies (``PER_RUN``); everything else (gains, airframe, rates,
+noise levels, duration, schedule, the disturbance's varying part) must be the same, and ``fly``
+says which parameter differs otherwise. The node's input supervision (refusals, gap bridging,
+failsafes) is the node's: a scenario's stalls are shorter than the inputs' timeouts.
+"""
+from dataclasses import dataclass, replace
+import math
+import time
+
+import numpy as np
+
+from geoctl_ros.core import so3
+from geoctl_ros.core.cones import ConeSet
+from geoctl_ros.core.control import AttitudeController
+from geoctl_ros.core.stats import SETTLE_PSI
+from geoctl_ros.core.step import ControlTick
+from geoctl_ros.params import CONTROLLER, SIM, airframe, cone_set, controller_setup
+from geoctl_ros.sim.history import History
+from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
+from geoctl_ros.sim.testbed import RotorActuator
+
+SETTLED_DEG = 5.0       # attitude error below which a run has converged (at the end) or settled
+
+# What may differ between the runs of a batch (everything else must be equal).
+PER_RUN = {
+    CONTROLLER: ('setpoint', 'unmodelled_moment_max'),     # (a set-point check, not in flight)
+    SIM: ('initial_attitude', 'initial_angular_velocity', 'mass', 'inertia', 'cog_offset',
+          'disturbance.constant', 'noise.seed', 'noise.gyro_bias'),
+}
+
+
+@dataclass
+class Flight:
+    """Per-run figures of a flight (arrays with one entry per run, in the scenarios' order)."""
+
+    names: list
+    min_angle_deg: np.ndarray      # (runs, cones): smallest angle between the sensor and each
+                                   # cone's axis, after every integration step
+    half_angle_deg: np.ndarray     # (runs, cones)
+    final_error_deg: np.ndarray    # (runs,): attitude error at the end (true attitude)
+    final: object                  # ControlOutput of the true final state (no adaptation)
+    final_angular_velocity: np.ndarray   # (runs, 3)
+    saturated_steps: np.ndarray    # (runs,): control steps with the allocation saturated
+    max_rate: np.ndarray           # (runs,): largest measured |Omega| (rad/s)
+    settle_s: np.ndarray           # (runs,): the time from which the attitude error stays below
+                                   # SETTLED_DEG (NaN: not below at the end)
+    psi_settle_s: np.ndarray       # (runs,): the time from which Psi stays below SETTLE_PSI
+                                   # (the paper's; NaN: not below at the end)
+    margin_series: np.ndarray      # (steps, runs): min cone margin at each control step (None
+                                   # unless asked for: series=True)
+    sensor_series: np.ndarray      # (steps, runs, 3): sensor direction R r, world frame (float32;
+                                   # None unless asked for)
+    history: object                # History: every step's state and output (history=True)
+    times: np.ndarray              # (steps,): the control steps' times
+    dt: float
+    wall_s: float = 0.0
+
+    @property
+    def min_margin_deg(self):
+        """(runs, cones): the closest approach to each cone (angle minus half-angle, deg)."""
+        return self.min_angle_deg - self.half_angle_deg
+
+    @property
+    def saturated_s(self):
+        """(runs,): time with the allocation saturated (s)."""
+        return self.saturated_steps * self.dt
+
+    @property
+    def violated(self):
+        """(runs,): the sensor reached or entered a cone."""
+        return np.any(self.min_margin_deg <= 0.0, axis=-1)
+
+
+def _differing(scenarios):
+    """The first shared parameter that differs between the scenarios, or None."""
+    first = scenarios[0]
+    for attr, node in (('controller', CONTROLLER), ('sim', SIM)):
+        ref = getattr(first, attr)
+        for s in scenarios[1:]:
+            values = getattr(s, attr)
+            for key, v in ref.items():
+                if key in PER_RUN[node] or key.startswith('cones.'):
+                    continue
+                if not np.array_equal(np.asarray(v), np.asarray(values[key])):
+                    return '%s: %s (%s and %s)' % (node, key, first.name, s.name)
+    for s in scenarios[1:]:
+        for key in ('duration', 'tick_jitter'):
+            if s.options[key] != first.options[key]:
+                return 'scenario: %s (%s and %s)' % (key, first.name, s.name)
+        if len(s.controller['cones.names']) != len(first.controller['cones.names']):
+            return 'the number of cones (%s and %s)' % (first.name, s.name)
+    return None
+
+
+def hold_steps(steps, n_sub, jitter, seed):
+    """How many integration steps each control step's command is held, for a run of ``steps``
+    periods of n_sub integration steps: n_sub each, or with jitter (in integration steps, > 0)
+    n_sub plus a uniform random whole number in 0..jitter, as on a machine too busy to run the
+    loop on time: the steps come late, one after the other, and fewer fit in the run. From a
+    stream of its own of ``seed``, so the noise is the same with and without it.
+    """
+    if jitter <= 0.0:
+        return np.full(steps, n_sub)
+    holds = n_sub + np.random.default_rng([seed, 1]).integers(0, int(round(jitter)) + 1, steps)
+    starts = np.cumsum(holds) - holds
+    return holds[starts < steps * n_sub]
+
+
+def stalled_steps(options, times):
+    """Per control step (at times), whether the inputs stall there (scenario stalls.start and
+    .duration): no new sample reaches the controller at a step within [start, start + duration).
+    """
+    out = np.zeros(len(times), dtype=bool)
+    for start, length in zip(options['stalls.start'], options['stalls.duration']):
+        out |= (times >= start) & (times < start + length)
+    return out
+
+
+def _holds(scenarios, rate, n_sub, duration):
+    """The batch's hold sequence (integration steps per control step): the runs must share it."""
+    h = 1.0 / (rate * n_sub)
+    steps = int(round(duration * rate))
+    holds = [hold_steps(steps, n_sub, s.options['tick_jitter'] / h, s.sim['noise.seed'])
+             for s in scenarios]
+    if any(not np.array_equal(holds[0], x) for x in holds[1:]):
+        raise ValueError('the runs of a batch share their late steps: with scenario.tick_jitter '
+                         'they fly together only with the same noise.seed')
+    return holds[0]
+
+
+def _noise(scenarios, sv, steps):
+    """Per run, the motion-capture and gyro noise of every step, (2, steps, runs, 3), drawn from
+    the run's seed in TestbedSim's order: per step the attitude's 3, then the gyro's 3.
+    """
+    sigmas = [math.radians(sv['noise.attitude_deg']), sv['noise.angular_velocity']]
+    drawn = [i for i, sigma in enumerate(sigmas) if sigma > 0.0]
+    noise = np.zeros((2, steps, len(scenarios), 3))
+    for j, s in enumerate(scenarios):
+        z = np.random.default_rng(s.sim['noise.seed']).standard_normal((steps, len(drawn), 3))
+        for slot, i in enumerate(drawn):
+            noise[i, :, j] = sigmas[i] * z[:, slot]
+    return noise
+
+
+class _Testbeds:
+    """The controller and the simulated testbeds of a batch, built from its scenarios."""
+
+    def __init__(self, scenarios):
+        first = scenarios[0]
+        cv, sv = first.controller, first.sim
+        n = len(scenarios)
+        self.setup = setup = controller_setup(cv)                     # gains, model, mixer
+
+        def stack(key):
+            return np.array([s.sim[key] for s in scenarios], dtype=float)
+
+        shared = setup.config.cones
+        per_run = [cone_set(s.controller) for s in scenarios]
+        names = cv['cones.names']
+        self.cones = ConeSet(shared.r, np.array([c.V for c in per_run]).reshape(n, len(names), 3),
+                             np.array([c.theta for c in per_run]).reshape(n, len(names)),
+                             shared.alpha, shared.floor, names, shared.guard)
+        self.controller = AttitudeController(replace(setup.config, cones=self.cones))
+        self.controller.R_d = np.array([so3.quat_to_rot(s.controller['setpoint'])
+                                        for s in scenarios])
+        self.controller.delta_bar = np.zeros((n, setup.config.n_params))
+        self.plant = Plant(
+            PlantConfig(inertia=stack('inertia').reshape(n, 3, 3), mass=stack('mass'),
+                        cog_offset=stack('cog_offset'), gravity=sv['gravity'],
+                        disturbance=Disturbance(stack('disturbance.constant'),
+                                                sv['disturbance.amplitude'],
+                                                sv['disturbance.frequency'])),
+            np.array([so3.quat_to_rot(s.sim['initial_attitude']) for s in scenarios]),
+            stack('initial_angular_velocity'))
+        self.actuator = None                                         # torque: the moment acts
+        if sv['actuation'] == 'rotors':
+            geometry, curve, failed = airframe(sv)
+            self.actuator = RotorActuator(geometry, stack('cog_offset'), curve,
+                                          sv['motor_time_constant'], failed)
+        self.gyro_bias = stack('noise.gyro_bias')
+
+
+def fly(scenarios, progress=None, series=False, history=False, duration=None):
+    """Fly the scenarios together; a Flight. progress(fraction) is called now and then.
+    series: keep the margin and sensor direction at every control step (the figures of a few
+    runs; a campaign's batches leave them out and fly its worst runs again for them); history:
+    keep every step's state and output (the scenario runner's history.csv); duration: simulated
+    seconds (default: the scenarios').
+    """
+    problem = _differing(scenarios)
+    if problem:
+        raise ValueError('a batch shares everything but %s; differs: %s'
+                         % (', '.join(PER_RUN[CONTROLLER] + PER_RUN[SIM]), problem))
+    first = scenarios[0]
+    cv, sv = first.controller, first.sim
+    bed = _Testbeds(scenarios)
+    setup, controller, plant, cones, actuator = (bed.setup, bed.controller, bed.plant, bed.cones,
+                                                 bed.actuator)
+    n = len(scenarios)
+    rate, rate_sub = cv['rate_hz'], sv['integration_rate_hz']
+    n_sub = int(round(rate_sub / rate))
+    dt, h = 1.0 / rate, 1.0 / (rate * n_sub)
+    holds = _holds(scenarios, rate, n_sub, first.options['duration'] if duration is None
+                   else duration)
+    steps = len(holds)
+    j_at = np.cumsum(holds) - holds                   # integration steps before each step
+    times = j_at / rate_sub
+    noise = _noise(scenarios, sv, steps)
+    schedule = setup.schedule
+    # latency: a ring of the last states, one per integration step
+    delay = np.array([int(round(s.options['latency'] * rate_sub)) for s in scenarios])
+    ring = int(delay.max()) + 1
+    R_past = np.repeat(plant.R[None], ring, axis=0)
+    W_past = np.repeat(plant.Omega[None], ring, axis=0)
+    runs = np.arange(n)
+
+    # each sample received at its step: its age the latency from its stamp (age_from_stamps),
+    # else the measurement_delay the controller assumes; stalled, older by the wait since
+    stamped = setup.loop.age_from_stamps
+    tick = ControlTick(controller, setup.mixer, 0.0 if stamped else setup.loop.measurement_delay)
+    stalled = np.stack([stalled_steps(s.options, times) for s in scenarios], axis=1)
+    any_stall = bool(stalled.any())
+    receipt = np.zeros(n)
+    ages = (delay * h,) * 2 if stamped else (0.0, 0.0)
+    R_seen, W_seen = plant.R, plant.Omega
+    min_angle = cones.angles_deg(plant.R)
+    margin_series = np.empty((steps, n)) if series else None
+    sensor_series = np.empty((steps, n, 3), dtype=np.float32) if series else None
+    record = History(steps, n, controller, plant, actuator) if history else None
+    last_unsettled = np.full(n, -1)        # the last step with the error >= SETTLED_DEG
+    last_psi_above = np.full(n, -1)        # the last step with Psi >= SETTLE_PSI
+    cos_settled = math.cos(math.radians(SETTLED_DEG))
+    saturated = np.zeros(n)
+    max_rate = np.zeros(n)
+    scheduled = -1
+    j = 0                                                     # integration steps so far
+    t0 = time.perf_counter()
+    for k in range(steps):
+        t = times[k]
+        i = schedule.index_at(t) if len(schedule) else -1
+        if i != scheduled and i >= 0:                  # (checked at configuration)
+            controller.R_d = np.repeat(schedule.rotations[i][None], n, axis=0)
+            scheduled = i
+        seen = np.maximum(j - delay, 0) % ring
+        R_new = so3.matmul(R_past[seen, runs], so3.exp(noise[0, k]))
+        W_new = W_past[seen, runs] + bed.gyro_bias + noise[1, k]
+        if any_stall:
+            fresh = ~stalled[k]
+            R_seen = np.where(fresh[:, None, None], R_new, R_seen)
+            W_seen = np.where(fresh[:, None], W_new, W_seen)
+            receipt = np.where(fresh, t, receipt)
+            waited = np.maximum(t - receipt, 0.0)
+            age = delay * h + waited if stamped else waited
+            ages = (age, age)
+        else:
+            R_seen, W_seen = R_new, W_new
+        max_rate = np.maximum(max_rate, np.linalg.norm(W_seen, axis=-1))
+        out, motors = tick(R_seen, W_seen, dt, t, ages)
+        saturated += motors.allocation.saturated
+        last_unsettled[_cos_error(controller.R_d, plant.R) <= cos_settled] = k
+        last_psi_above[out.psi >= SETTLE_PSI] = k
+        if series:
+            margin_series[k] = cones.margins_deg(plant.R).min(axis=-1)
+            sensor_series[k] = so3.matvec(plant.R, cones.r)
+        if record is not None:
+            record.add(k, t, out, motors)
+        command = out.u if actuator is None else motors.commands
+        for _ in range(holds[k]):
+            plant.step(command if actuator is None else actuator.moment(command, h), h)
+            j += 1
+            R_past[j % ring], W_past[j % ring] = plant.R, plant.Omega
+            min_angle = np.minimum(min_angle, cones.angles_deg(plant.R))
+        if progress is not None and (k + 1) % 100 == 0:
+            progress((k + 1) / steps)
+    wall = time.perf_counter() - t0
+    final = controller.step(plant.R, plant.Omega, dt, adapt=False)
+    return Flight(
+        names=[s.name for s in scenarios], min_angle_deg=min_angle,
+        half_angle_deg=cones.theta_deg * np.ones((n, 1)),
+        final_error_deg=np.degrees(so3.angle(so3.matmul(so3.transpose(controller.R_d), plant.R))),
+        final=final, final_angular_velocity=plant.Omega, saturated_steps=saturated,
+        max_rate=max_rate, settle_s=_settled(last_unsettled, times),
+        psi_settle_s=_settled(last_psi_above, times),
+        margin_series=margin_series, sensor_series=sensor_series, history=record, times=times,
+        dt=dt, wall_s=wall)
+
+
+def _cos_error(R_d, R):
+    """The cosine of the attitude error angle between R_d and R, per run."""
+    return 0.5 * (np.trace(so3.matmul(so3.transpose(R_d), R), axis1=-2, axis2=-1) - 1.0)
+
+
+def _settled(last_above, times):
+    """The time from which a quantity stays below its threshold, per run, from the last step it
+    was above it: the next step's time (times[0] if never above; NaN if above at the end).
+    """
+    steps = len(times)
+    after = np.minimum(last_above + 1, max(steps - 1, 0))
+    return np.where(last_above == steps - 1, np.nan, times[after] if steps else 0.0)

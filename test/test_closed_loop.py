@@ -1,0 +1,96 @@
+"""The closed loop exists once (geoctl_ros.sim.closed_loop): a run flown in a batch gives the same
+bits as the same run flown alone, whatever the loop models (rotors or torque, latency, stalls, late
+steps, a time-varying disturbance, a set-point schedule); and a scenario file gives the same
+figures through the scenario runner and through a campaign's replay.
+"""
+import os
+
+import numpy as np
+import pytest
+
+from geoctl_ros.params import load_parameter_file
+from geoctl_ros.sim.closed_loop import fly
+from geoctl_ros.tools import campaign, manoeuvres, scenario
+
+pytestmark = [pytest.mark.headless, pytest.mark.odroid]
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+TESTBED = os.path.join(ROOT, 'config', 'testbed.yaml')
+SCENARIOS = os.path.join(ROOT, 'config', 'scenarios')
+
+FIGURES = ('min_angle_deg', 'final_error_deg', 'final_angular_velocity', 'saturated_steps',
+           'max_rate', 'settle_s', 'psi_settle_s', 'margin_series', 'sensor_series')
+
+
+def assert_same_bits(batch, alone, p):
+    """Run p of the batch against the Flight of that run alone: every figure, bit for bit."""
+    for name in FIGURES:
+        a, b = getattr(batch, name), getattr(alone, name)
+        a = a[:, p] if name.endswith('_series') else a[p]
+        assert np.array_equal(a, b[:, 0] if name.endswith('_series') else b[0],
+                              equal_nan=True), name
+    assert np.array_equal(batch.final.psi[p], alone.final.psi[0])
+    assert np.array_equal(batch.final.delta_bar[p], alone.final.delta_bar[0])
+    history = batch.history.table(p)
+    assert np.array_equal(history, alone.history.table(0))
+
+
+def test_a_run_in_a_batch_flies_as_it_does_alone_with_rotors_latency_and_stalls():
+    # runs of the campaign with one cone: latency, stalls, model errors, disturbance, noise differ
+    base = load_parameter_file(TESTBED)
+    picked = [i for i in range(40) if manoeuvres.cone_count(1, i) == 1][:3]
+    runs = [scenario.from_sections(manoeuvres.run_sections(base, 1, i, 2.0), 'run_%d' % i)
+            for i in picked]
+    assert len({s.options['latency'] for s in runs}) > 1
+    assert any(s.options['stalls.start'].size for s in runs)
+    batch = fly(runs, series=True, history=True)
+    for p, s in enumerate(runs):
+        assert_same_bits(batch, fly([s], series=True, history=True), p)
+
+
+def test_a_run_in_a_batch_flies_as_it_does_alone_with_torque_late_steps_and_a_schedule():
+    """The dissertation's time-varying disturbance with ideal torque, varied per run in what a
+    batch may vary, with late steps (shared by the runs: one noise seed) and a schedule.
+    """
+    path = os.path.join(SCENARIOS, 'dissertation_time_varying.yaml')
+    runs = []
+    for p, w0 in enumerate(([0.0, 0.0, 0.0], [0.2, -0.1, 0.0], [0.0, 0.3, 0.1])):
+        sections = load_parameter_file(path)
+        sections.setdefault('sim', {}).update(initial_angular_velocity=w0, mass=1.0 + 0.1 * p)
+        sections.setdefault('scenario', {}).update(duration=2.0, tick_jitter=0.004,
+                                                   latency=0.002 * p)
+        sections.setdefault('controller', {}).update({
+            'setpoint_schedule.times': [1.0],
+            'setpoint_schedule.quaternions': [0.0, 0.0, 0.0872, 0.9962]})   # 10 deg yaw
+        runs.append(scenario.from_sections(sections, 'run_%d' % p))
+    batch = fly(runs, series=True, history=True)
+    assert len(batch.times) < round(2.0 / batch.dt)      # late steps: fewer than 2 s of periods
+    assert not np.allclose(np.diff(batch.times), batch.dt)
+    for p, s in enumerate(runs):
+        assert_same_bits(batch, fly([s], series=True, history=True), p)
+    # the schedule took over at the first step from 1 s: e_R jumps there
+    e_R = batch.history.arrays['eR']
+    k = int(np.searchsorted(batch.times, 1.0))
+    jump = np.linalg.norm(e_R[k] - e_R[k - 1], axis=-1)
+    assert np.all(jump > 10.0 * np.linalg.norm(e_R[k - 1] - e_R[k - 2], axis=-1))
+    other = scenario.from_sections(load_parameter_file(path), 'other')
+    other.controller.update({k: runs[0].controller[k] for k in other.controller})
+    other.options.update(runs[0].options)
+    other.sim['noise.seed'] = 99
+    with pytest.raises(ValueError, match='same noise.seed'):
+        fly([runs[0], other])
+
+
+def test_a_scenario_file_gives_the_same_figures_through_the_runner_and_a_campaign_replay(
+        tmp_path, capsys):
+    path = tmp_path / 'run.yaml'
+    i = [i for i in range(20) if manoeuvres.cone_count(1, i) == 2][0]
+    manoeuvres.write_scenario_file(
+        manoeuvres.run_sections(load_parameter_file(TESTBED), 1, i, 3.0), str(path))
+    summary = scenario.run(scenario.load(str(path))).summary
+    closest = min(summary['min_cone_angle_deg'][n] - summary['cone_half_angle_deg'][n]
+                  for n in summary['min_cone_angle_deg'])
+    campaign.replay([str(path)])
+    printed = capsys.readouterr().out
+    assert 'closest approach %r deg' % closest in printed
+    assert 'final error %.3f deg' % summary['final_attitude_error_deg'] in printed
