@@ -48,8 +48,8 @@ from geoctl_ros.params import (
     resolve,
     testbed_sim,
 )
-from geoctl_ros.tools import manoeuvres, scenario
 from geoctl_ros.sim.closed_loop import fly
+from geoctl_ros.tools import manoeuvres, scenario
 from geoctl_ros.tools.rosenv import use_node_env
 
 HERE = os.path.dirname(os.path.abspath(__file__))

@@ -29,8 +29,8 @@ import time
 import numpy
 
 from geoctl_ros.params import load_parameter_file  # (the tree first on PYTHONPATH)
-from geoctl_ros.tools import campaign, manoeuvres, scenario
 from geoctl_ros.sim.closed_loop import fly
+from geoctl_ros.tools import campaign, manoeuvres, scenario
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)

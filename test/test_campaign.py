@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from geoctl_ros.params import load_parameter_file
-from geoctl_ros.tools import campaign, manoeuvres, scenario
 from geoctl_ros.sim.closed_loop import fly
+from geoctl_ros.tools import campaign, manoeuvres, scenario
 
 # on the vehicle's stack too, but for the campaign and the replay of a written run: they fly the
 # same batches as these, and a 50-run campaign's runs.csv was byte-identical on both stacks when

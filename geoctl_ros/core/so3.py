@@ -8,7 +8,7 @@ boundary, see ``geoctl_ros.params`` and the nodes), but all stay accurate for ro
 
 Batches: ``hat``, ``cross``, ``vee``, ``exp``, ``matmul``, ``matvec``, ``vecmat``, ``dot`` and
 ``transpose`` also take a stack of vectors (..., 3) or matrices (..., 3, 3) and work on each, so
-the campaign's batched simulation (many runs at once) uses the same formulas as a single run. (The trick:
+the batched simulation (many runs at once) uses the same formulas as a single run. (The trick:
 ``x.T[i]`` is component i of a single vector and the column of components i of a stack alike.)
 
 numpy 1.26 and 2.x alike: Ubuntu 24.04 (the vehicle's stack) ships numpy 1.26, which has neither
@@ -199,7 +199,8 @@ def angle(R):
         skew_norm = 0.5 * math.sqrt((R[2, 1] - R[1, 2]) ** 2 + (R[0, 2] - R[2, 0]) ** 2
                                     + (R[1, 0] - R[0, 1]) ** 2)
         return math.atan2(skew_norm, 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0))
-    skew_norm = 0.5 * np.sqrt((R[..., 2, 1] - R[..., 1, 2]) ** 2 + (R[..., 0, 2] - R[..., 2, 0]) ** 2
+    skew_norm = 0.5 * np.sqrt((R[..., 2, 1] - R[..., 1, 2]) ** 2
+                              + (R[..., 0, 2] - R[..., 2, 0]) ** 2
                               + (R[..., 1, 0] - R[..., 0, 1]) ** 2)
     return np.arctan2(skew_norm, 0.5 * (R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2] - 1.0))
 

@@ -24,6 +24,7 @@ from geoctl_ros.params import (
 )
 from geoctl_ros.sim.closed_loop import fly
 
+
 @dataclass
 class Scenario:
     """A loaded, validated scenario."""

@@ -28,10 +28,10 @@ import time
 import numpy as np
 
 from geoctl_ros.params import ConfigError, load_parameter_file
-from geoctl_ros.tools import cluster, manoeuvres, plots, study
 from geoctl_ros.sim import closed_loop
-from geoctl_ros.tools.rosenv import config_dir
 from geoctl_ros.sim.scenario import from_sections
+from geoctl_ros.tools import cluster, manoeuvres, plots, study
+from geoctl_ros.tools.rosenv import config_dir
 
 BATCH = 1024               # runs flown together at most (docs/campaigns.md, "Campaign speed")
 # runs.csv's columns, in order (gain_set only in a gain study)

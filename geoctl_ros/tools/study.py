@@ -32,8 +32,8 @@ from geoctl_ros.params import (
     resolve,
     write_parameter_file,
 )
-from geoctl_ros.tools import plots
 from geoctl_ros.sim.closed_loop import SETTLED_DEG as CONVERGED_DEG
+from geoctl_ros.tools import plots
 from geoctl_ros.tools.manoeuvres import LATENCY_MS_MAX
 
 # what a gain set may not change: what each run draws for itself
