@@ -59,20 +59,17 @@ def vee(M):
 # other 3x3 matrix of a stack, by its 16-byte alignment). A run of a batch then stays bit for bit
 # on the same run flown alone, on any CPU. One pair still goes through ``@``.
 
-def _summed(terms):
-    """The sum of the products of an iterable, in its order."""
-    it = iter(terms)
-    out = next(it)
-    for term in it:
-        out = out + term
-    return out
-
-
 def matmul(A, B):
     """A B for two matrices, or for each pair of stacks of them (broadcasting)."""
     if A.ndim <= 2 and B.ndim <= 2:
         return A @ B
-    return _summed(A[..., :, k, None] * B[..., None, k, :] for k in range(A.shape[-1]))
+    if A.shape[-1] == 3:
+        return (A[..., :, 0, None] * B[..., None, 0, :] + A[..., :, 1, None] * B[..., None, 1, :]
+                + A[..., :, 2, None] * B[..., None, 2, :])
+    out = A[..., :, 0, None] * B[..., None, 0, :]
+    for k in range(1, A.shape[-1]):
+        out = out + A[..., :, k, None] * B[..., None, k, :]
+    return out
 
 
 def matvec(M, v):
@@ -80,7 +77,12 @@ def matvec(M, v):
     if M.ndim <= 2 and v.ndim == 1:
         return M @ v
     v = v[..., None, :]
-    return _summed(M[..., :, k] * v[..., k] for k in range(M.shape[-1]))
+    if M.shape[-1] == 3:
+        return M[..., :, 0] * v[..., 0] + M[..., :, 1] * v[..., 1] + M[..., :, 2] * v[..., 2]
+    out = M[..., :, 0] * v[..., 0]
+    for k in range(1, M.shape[-1]):
+        out = out + M[..., :, k] * v[..., k]
+    return out
 
 
 def vecmat(v, M):
@@ -88,14 +90,25 @@ def vecmat(v, M):
     if v.ndim == 1 and M.ndim <= 2:
         return v @ M
     v = v[..., None]
-    return _summed(v[..., k, :] * M[..., k, :] for k in range(M.shape[-2]))
+    if M.shape[-2] == 3:
+        return (v[..., 0, :] * M[..., 0, :] + v[..., 1, :] * M[..., 1, :]
+                + v[..., 2, :] * M[..., 2, :])
+    out = v[..., 0, :] * M[..., 0, :]
+    for k in range(1, M.shape[-2]):
+        out = out + v[..., k, :] * M[..., k, :]
+    return out
 
 
 def dot(a, b):
     """a . b for two vectors, or for each pair of two stacks of them."""
     if a.ndim == 1 and b.ndim == 1:
         return a @ b
-    return _summed(a[..., k] * b[..., k] for k in range(a.shape[-1]))
+    if a.shape[-1] == 3:
+        return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+    out = a[..., 0] * b[..., 0]
+    for k in range(1, a.shape[-1]):
+        out = out + a[..., k] * b[..., k]
+    return out
 
 
 def transpose(M):
