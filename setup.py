@@ -27,14 +27,14 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
-            'scenario = geoctl_ros.tools.scenario:main',
+            'scenario = geoctl_ros.cli.scenario:main',
             'controller = geoctl_ros.nodes.controller:main',
             'sim = geoctl_ros.nodes.sim:main',
-            'soak = geoctl_ros.tools.soak:main',
+            'soak = geoctl_ros.cli.soak:main',
             'mavlink_bridge = geoctl_ros.nodes.mavlink_bridge:main',
-            'campaign = geoctl_ros.tools.campaign:main',
+            'campaign = geoctl_ros.cli.campaign:main',
             'record = geoctl_ros.nodes.recorder:main',
-            'report = geoctl_ros.tools.report:main',
+            'report = geoctl_ros.cli.report:main',
             'view = geoctl_ros.nodes.view:main',
             'esc_i2c = geoctl_ros.nodes.esc_i2c:main',
         ],

@@ -36,6 +36,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import Imu
 
 import geoctl_ros
+from geoctl_ros.campaign import manoeuvres
 from geoctl_ros.core import so3
 from geoctl_ros.core.loop import ControlLoop
 from geoctl_ros.nodes.controller import ControllerNode
@@ -48,9 +49,9 @@ from geoctl_ros.params import (
     resolve,
     testbed_sim,
 )
+from geoctl_ros.sil.rosenv import use_node_env
+from geoctl_ros.sim import scenario
 from geoctl_ros.sim.closed_loop import fly
-from geoctl_ros.tools import manoeuvres, scenario
-from geoctl_ros.tools.rosenv import use_node_env
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 BASELINE = os.path.join(HERE, 'baseline.json')

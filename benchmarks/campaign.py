@@ -29,8 +29,16 @@ import time
 import numpy
 
 from geoctl_ros.params import load_parameter_file  # (the tree first on PYTHONPATH)
-from geoctl_ros.sim.closed_loop import fly
-from geoctl_ros.tools import campaign, manoeuvres, scenario
+
+try:                                    # this layout (issue 29) ...
+    from geoctl_ros.campaign import manoeuvres
+    from geoctl_ros.campaign.runner import BATCH
+    from geoctl_ros.sim import scenario
+    from geoctl_ros.sim.closed_loop import fly
+except ImportError:                     # ... or a "before" tree's
+    from geoctl_ros.tools import manoeuvres, scenario
+    from geoctl_ros.tools.batch import run_batch as fly
+    from geoctl_ros.tools.campaign import BATCH
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -39,7 +47,7 @@ BEFORE = '05267a5'        # the last tree before the campaign went to Dask (issu
 
 def per_core(duration=2.0, cones=2):
     """In this process: (batch size, wall s, real-time factor per core) of the tree on the path."""
-    n = campaign.BATCH
+    n = BATCH
     base = load_parameter_file(os.path.join(ROOT, 'config', 'testbed.yaml'))
     runs, i = [], 0
     while len(runs) < n:
@@ -69,7 +77,7 @@ def measure_tree(tree):
 
 def timed_campaign(args, out):
     t0 = time.monotonic()
-    r = subprocess.run([sys.executable, '-m', 'geoctl_ros.tools.campaign', '--out', out] + args,
+    r = subprocess.run([sys.executable, '-m', 'geoctl_ros.cli.campaign', '--out', out] + args,
                        capture_output=True, text=True)
     wall = time.monotonic() - t0
     if r.returncode not in (0, 1):

@@ -28,8 +28,8 @@ from std_srvs.srv import SetBool
 
 from geoctl_ros.nodes import qos
 from geoctl_ros.nodes.conversions import set_quaternion, time_msg
-from geoctl_ros.tools.processes import NodeProcess
-from geoctl_ros.tools.rosenv import node_env, use_node_env
+from geoctl_ros.sil.processes import NodeProcess
+from geoctl_ros.sil.rosenv import node_env, use_node_env
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 

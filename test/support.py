@@ -15,7 +15,7 @@ from geoctl_ros.nodes.conversions import (
     set_quaternion,
     set_vector,
 )
-from geoctl_ros.tools.processes import Monitor
+from geoctl_ros.sil.processes import Monitor
 
 
 class FakeInputs(Monitor):

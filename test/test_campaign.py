@@ -6,9 +6,10 @@ import os
 import numpy as np
 import pytest
 
+from geoctl_ros.campaign import manoeuvres, runner
 from geoctl_ros.params import load_parameter_file
+from geoctl_ros.sim import scenario
 from geoctl_ros.sim.closed_loop import fly
-from geoctl_ros.tools import campaign, manoeuvres, scenario
 
 # on the vehicle's stack too, but for the campaign and the replay of a written run: they fly the
 # same batches as these, and a 50-run campaign's runs.csv was byte-identical on both stacks when
@@ -57,7 +58,7 @@ def test_a_run_written_out_replays_to_the_same_figures(tmp_path):
     """A campaign's batch (flown as a worker flies it) and one of its runs alone from its file."""
     base = load_parameter_file(TESTBED)
     indices = [i for i in range(30) if manoeuvres.cone_count(1, i) == 2][:6]
-    figures = campaign.fly_batch((base, 1, 3.0, manoeuvres.DISTURBANCE_MAX, 1, {}, indices, 2))
+    figures = runner.fly_batch((base, 1, 3.0, manoeuvres.DISTURBANCE_MAX, 1, {}, indices, 2))
     assert list(figures['run']) == indices and set(figures['cones']) == {2}
     i = indices[4]
     path = tmp_path / 'run.yaml'

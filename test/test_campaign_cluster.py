@@ -16,6 +16,7 @@ from distributed import Client, LocalCluster
 import numpy as np
 import pytest
 
+from geoctl_ros.cli import campaign
 from geoctl_ros.params import (
     CONTROLLER,
     controller_setup,
@@ -23,7 +24,6 @@ from geoctl_ros.params import (
     node_overrides,
     resolve,
 )
-from geoctl_ros.tools import campaign
 
 # (not marked `headless`: in ./run test these run in the foreground stream, which is the shorter
 # of the two; the headless stream was the first phase's longest)
@@ -102,7 +102,7 @@ def test_a_worker_killed_mid_campaign_loses_no_run_and_doubles_none(reference, t
 
 def test_ctrl_c_writes_the_runs_flown_so_far(tmp_path):
     out = tmp_path / 'interrupted'
-    proc = subprocess.Popen([sys.executable, '-m', 'geoctl_ros.tools.campaign', '--runs', '60',
+    proc = subprocess.Popen([sys.executable, '-m', 'geoctl_ros.cli.campaign', '--runs', '60',
                              '--duration', '2', '--batch', '2', '--worst', '1',
                              '--out', str(out)], stderr=subprocess.PIPE, text=True)
     seen = []

@@ -8,9 +8,10 @@ import os
 import numpy as np
 import pytest
 
+from geoctl_ros.campaign import manoeuvres, runner
 from geoctl_ros.params import load_parameter_file
+from geoctl_ros.sim import scenario
 from geoctl_ros.sim.closed_loop import fly
-from geoctl_ros.tools import campaign, manoeuvres, scenario
 
 pytestmark = [pytest.mark.headless, pytest.mark.odroid]
 
@@ -90,7 +91,7 @@ def test_a_scenario_file_gives_the_same_figures_through_the_runner_and_a_campaig
     summary = scenario.run(scenario.load(str(path))).summary
     closest = min(summary['min_cone_angle_deg'][n] - summary['cone_half_angle_deg'][n]
                   for n in summary['min_cone_angle_deg'])
-    campaign.replay([str(path)])
+    runner.replay([str(path)])
     printed = capsys.readouterr().out
     assert 'closest approach %r deg' % closest in printed
     assert 'final error %.3f deg' % summary['final_attitude_error_deg'] in printed

@@ -25,8 +25,8 @@ from geoctl_ros.core.feasibility import holding_clearance_deg, holding_moment
 from geoctl_ros.core.gains import gain_condition
 from geoctl_ros.core.mechanics import gravity_moment
 from geoctl_ros.params import CONTROLLER, controller_config, resolve
+from geoctl_ros.sim import scenario
 from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
-from geoctl_ros.tools import scenario
 
 # on the vehicle's stack too, but for the four long closed-loop flights: the scenario and campaign
 # tests and the sim-in-the-loop flight fly the same loop there

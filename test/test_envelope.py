@@ -23,8 +23,8 @@ from geoctl_ros.params import (
     resolve,
 )
 from geoctl_ros.params import testbed_sim as simulated_testbed
+from geoctl_ros.sim import scenario
 from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
-from geoctl_ros.tools import scenario
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 odroid = pytest.mark.odroid

@@ -1,12 +1,14 @@
 """The fuzzer's short version (``./run fuzz`` runs 10,000 inputs per boundary): a few hundred
-hostile inputs at each boundary, each kept by every promise (``geoctl_ros.tools.fuzz``): nothing
+hostile inputs at each boundary, each kept by every promise (``geoctl_ros.fuzz``): nothing
 escapes, nothing non-finite comes out, no motor moves, the next valid input is answered, every
 refusal has a reason. Each boundary must both refuse and accept some of what it is given, so that
 a strategy that stopped reaching the code under test fails here.
 """
+from hypothesis import strategies as st
 import pytest
 
-from geoctl_ros.tools import fuzz
+from geoctl_ros.fuzz.boundaries import BOUNDARIES, close_nodes
+from geoctl_ros.fuzz.hostile import Tally, run_property
 
 pytestmark = pytest.mark.odroid
 EXAMPLES = 100
@@ -15,12 +17,12 @@ EXAMPLES = 100
 @pytest.fixture(scope='module', autouse=True)
 def nodes_closed_at_the_end():
     yield
-    fuzz.close_nodes()
+    close_nodes()
 
 
-@pytest.mark.parametrize('boundary', sorted(fuzz.BOUNDARIES))
+@pytest.mark.parametrize('boundary', sorted(BOUNDARIES))
 def test_hostile_input_at_each_boundary_is_refused_with_a_reason_and_nothing_breaks(boundary):
-    tally = fuzz.BOUNDARIES[boundary](EXAMPLES, 2)
+    tally = BOUNDARIES[boundary](EXAMPLES, 2)
     assert tally.crash is None, tally.line()
     assert tally.tried >= EXAMPLES
     assert 0 < tally.refused < tally.tried, tally.line()
@@ -34,6 +36,6 @@ def test_a_broken_promise_is_shrunk_to_the_smallest_input_that_breaks_it():
         if n >= 1000:
             raise ValueError('too big')
         return 'refused' if n < 0 else None
-    tally = fuzz.run_property(fuzz.Tally('demo'), fuzz.st.integers(), check, 500, 1)
+    tally = run_property(Tally('demo'), st.integers(), check, 500, 1)
     assert tally.crash is not None and 'too big' in tally.crash
     assert 'n=1000,' in tally.crash.replace('x=', 'n='), tally.crash

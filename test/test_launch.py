@@ -24,8 +24,8 @@ from geoctl_ros.core import so3
 from geoctl_ros.nodes import qos
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector
 from geoctl_ros.params import cone_set, load_parameter_file, node_overrides, resolve
-from geoctl_ros.tools import scenario
-from geoctl_ros.tools.processes import process_sockets
+from geoctl_ros.sil.processes import process_sockets
+from geoctl_ros.sim import scenario
 
 pytestmark = pytest.mark.dds
 

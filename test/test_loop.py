@@ -15,7 +15,7 @@ from geoctl_ros.core.diagnostics import ERROR, OK, WARN
 from geoctl_ros.core.loop import NON_FINITE, ControlLoop, step_period
 from geoctl_ros.core.step import ControlTick
 from geoctl_ros.params import CONTROLLER, ConfigError, controller_setup, resolve
-from geoctl_ros.tools import scenario
+from geoctl_ros.sim import scenario
 
 pytestmark = pytest.mark.odroid
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -26,8 +26,8 @@ from geoctl_ros.mavlink import frames, health
 from geoctl_ros.mavlink.params import TABLE
 from geoctl_ros.nodes import qos
 from geoctl_ros.params import BY_NAME, CONTROLLER, cone_param, schema_for
-from geoctl_ros.tools.processes import NodeProcess
-from geoctl_ros.tools.rosenv import config_dir
+from geoctl_ros.sil.processes import NodeProcess
+from geoctl_ros.sil.rosenv import config_dir
 
 pytestmark = pytest.mark.dds
 

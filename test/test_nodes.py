@@ -17,6 +17,7 @@ from rosgraph_msgs.msg import Clock
 from std_srvs.srv import SetBool, Trigger
 from support import FakeInputs
 
+from geoctl_ros.cli import report as report_cli
 from geoctl_ros.core import so3
 from geoctl_ros.core.diagnostics import ERROR, OK, WARN, aggregate_ms
 from geoctl_ros.esc.virtual import VirtualEscBus
@@ -30,10 +31,10 @@ from geoctl_ros.params import (
     node_overrides,
     resolve,
 )
-from geoctl_ros.records import bag
-from geoctl_ros.tools import report, scenario
-from geoctl_ros.tools.processes import NodeProcess
-from geoctl_ros.tools.soak import ros2_command, start_loads, stop_loads
+from geoctl_ros.records import bag, report
+from geoctl_ros.sil.loads import ros2_command, start_loads, stop_loads
+from geoctl_ros.sil.processes import NodeProcess
+from geoctl_ros.sim import scenario
 
 pytestmark = pytest.mark.dds
 
@@ -746,7 +747,7 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
         assert silent == ['/attitude_setpoint'], counts         # nobody sends a set point here
         assert len(angles) == counts['/sim/true_pose']
         out = tmp_path / ('report_' + storage)
-        assert report.main([str(path), '--out', str(out)]) == 0
+        assert report_cli.main([str(path), '--out', str(out)]) == 0
         reports[storage] = json.loads((out / 'summary.json').read_text())
         closest = reports[storage]['closest_approach_deg']['obstacle']
         assert closest['angle'] == pytest.approx(min(angles), abs=0.01)
@@ -767,7 +768,7 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
     # the flight up to its last second, its cones from the bag itself
     assert not (tmp_path / 'killed' / 'metadata.yaml').exists()
     out = tmp_path / 'report_killed'
-    assert report.main([str(tmp_path / 'killed'), '--out', str(out), '--no-plots']) == 0
+    assert report_cli.main([str(tmp_path / 'killed'), '--out', str(out), '--no-plots']) == 0
     cut = json.loads((out / 'summary.json').read_text())
     assert cut['duration_s'] > 1.0 and cut['attitude_source'] == '/sim/true_pose'
     assert cut['closest_approach_deg']['obstacle']['angle'] >= reports['mcap'][

@@ -39,7 +39,7 @@ def test_core_sim_params_and_mavlink_import_without_rclpy():
             '    pkg = importlib.import_module("geoctl_ros." + sub)\n'
             '    for m in pkgutil.iter_modules(pkg.__path__):\n'
             '        importlib.import_module("geoctl_ros.%s.%s" % (sub, m.name))\n'
-            'import geoctl_ros.tools.rosenv\n'
+            'import geoctl_ros.sil.rosenv\n'
             'print("ok")\n')
     r = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 0 and r.stdout.strip() == 'ok', r.stderr
@@ -252,7 +252,7 @@ def test_the_linter_finds_what_the_rules_forbid():
 
 INSTALLED_CONFIG = """
 import sys
-from geoctl_ros.tools import rosenv
+from geoctl_ros.sil import rosenv
 print(rosenv.config_dir())
 """
 

@@ -11,7 +11,7 @@ from support import past_bounds
 from geoctl_ros import params
 from geoctl_ros.params import CONTROLLER, SIM, ConfigError, resolve
 from geoctl_ros.params import readme as readme_table
-from geoctl_ros.tools import scenario
+from geoctl_ros.sim import scenario
 
 pytestmark = pytest.mark.odroid
 

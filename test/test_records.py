@@ -18,13 +18,13 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64
 import yaml
 
+from geoctl_ros.cli.report import main as report_main
 from geoctl_ros.core.diagnostics import Figures, Status
 from geoctl_ros.core.view import Trail, cone_triangles, in_warning
 from geoctl_ros.nodes.conversions import set_quaternion, status_msg
 from geoctl_ros.records import bag
 from geoctl_ros.records.bag import BY_NAME, Topic
-from geoctl_ros.tools import scenario
-from geoctl_ros.tools.report import main as report_main
+from geoctl_ros.sim import scenario
 
 pytestmark = pytest.mark.odroid
 TESTBED = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config',

@@ -11,8 +11,9 @@ import sys
 import matplotlib.image
 import pytest
 
-from geoctl_ros.tools import scenario
-from geoctl_ros.tools.demo import table_row
+from geoctl_ros.cli import scenario as scenario_cli
+from geoctl_ros.cli.demo import table_row
+from geoctl_ros.sim import scenario
 
 # On the vehicle's stack the tests without the shipped scenarios' full runs: their summaries were
 # the same on both stacks when compared by hand (docs/stacks.md, "Two stacks"), and the full
@@ -32,7 +33,7 @@ SUMMARY_KEYS = {'min_cone_angle_deg', 'cone_half_angle_deg', 'constraint_violate
 
 
 def _run(args):
-    return scenario.main(args)
+    return scenario_cli.main(args)
 
 
 @pytest.fixture(scope='module')
@@ -124,12 +125,12 @@ def test_hexrotor_experiment_goes_round_the_cone(runs):
 @odroid
 def test_duration_option_and_errors(tmp_path, capsys):
     f = os.path.join(SCENARIOS, 'hexrotor_experiment_yaw90.yaml')
-    assert scenario.main([f, '--out', str(tmp_path), '--duration', '0.5', '--no-plots']) == 0
+    assert scenario_cli.main([f, '--out', str(tmp_path), '--duration', '0.5', '--no-plots']) == 0
     with open(tmp_path / 'summary.json') as fh:
         assert json.load(fh)['control_steps'] == 50
     bad = tmp_path / 'bad.yaml'
     bad.write_text('controller:\n  ros__parameters:\n    k_R: -1.0\n    alpha: 1\n')
-    assert scenario.main([str(bad), '--out', str(tmp_path / 'x')]) == 2
+    assert scenario_cli.main([str(bad), '--out', str(tmp_path / 'x')]) == 2
     err = capsys.readouterr().err
     assert 'controller: k_R: must be > 0' in err and 'controller: alpha: expected a double' in err
     inside = tmp_path / 'inside.yaml'
@@ -140,12 +141,12 @@ def test_duration_option_and_errors(tmp_path, capsys):
       names: [obstacle]
       obstacle: {axis: [1.0, 1.0, 0.0], half_angle_deg: 12.0}
 """)
-    assert scenario.main([str(inside), '--out', str(tmp_path / 'y')]) == 2
+    assert scenario_cli.main([str(inside), '--out', str(tmp_path / 'y')]) == 2
     assert "inside cone 'obstacle'" in capsys.readouterr().err
     assert not os.path.exists(tmp_path / 'y')
     rates = tmp_path / 'rates.yaml'
     rates.write_text('sim:\n  ros__parameters:\n    integration_rate_hz: 250.0\n')
-    assert scenario.main([str(rates), '--out', str(tmp_path / 'z')]) == 2
+    assert scenario_cli.main([str(rates), '--out', str(tmp_path / 'z')]) == 2
     assert 'integer multiple' in capsys.readouterr().err
     assert not os.path.exists(tmp_path / 'z')          # nothing written for a refused file
 
@@ -230,7 +231,7 @@ def test_a_late_loop_keeps_the_lag_compensated_testbed_steady():
 
 def _scenario_cli(*args):
     """The scenario command as a user runs it, in a process of its own."""
-    return subprocess.run([sys.executable, '-m', 'geoctl_ros.tools.scenario', *map(str, args)],
+    return subprocess.run([sys.executable, '-m', 'geoctl_ros.cli.scenario', *map(str, args)],
                           capture_output=True, text=True)
 
 

@@ -15,9 +15,10 @@ import rclpy
 import yaml
 
 from geoctl_ros.core import so3
-from geoctl_ros.tools.processes import NodeProcess, process_sockets
-from geoctl_ros.tools.rosenv import cli_env, config_dir
-from geoctl_ros.tools.soak import Session, ros2_command
+from geoctl_ros.sil.loads import ros2_command
+from geoctl_ros.sil.processes import NodeProcess, process_sockets
+from geoctl_ros.sil.rosenv import cli_env, config_dir
+from geoctl_ros.sil.soak import Session
 
 pytestmark = pytest.mark.dds
 

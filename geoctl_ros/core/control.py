@@ -23,7 +23,7 @@ paper's assumptions do not hold) and optionally projected onto a ball so that it
 
 Batches: with a batched ConeSet (one cone set per run) and stacks of set points, attitudes and
 rates (a leading batch axis), ``step`` advances every run at once with the same formulas; this is
-how the campaign (``geoctl_ros.tools.campaign``) flies a thousand manoeuvres. The gains, weights
+how the campaign (``geoctl_ros.campaign.runner``) flies a thousand manoeuvres. The gains, weights
 and model are shared by the batch. (``x.T`` on a stack of vectors puts the batch axis last, so
 ``(x.T * a).T`` scales each run's vector by its own scalar and a single vector by a scalar.)
 """

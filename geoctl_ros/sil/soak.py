@@ -25,39 +25,29 @@ inputs delayed by 0-10 ms, duplicated, reordered, held back and released in burs
 missing for a while; and the sim process paused with SIGSTOP/SIGCONT (both inputs missing).
 
 ``--transport profile`` (default) runs the nodes on the shipped loopback profile
-(``geoctl_ros.tools.rosenv``), ``rmw-default`` on the rmw's defaults (shared memory + UDP,
+(``geoctl_ros.sil.rosenv``), ``rmw-default`` on the rmw's defaults (shared memory + UDP,
 LOCALHOST): the "before" of docs/interface.md's table. Everything stays on 127.0.0.1.
 """
-import argparse
 import json
 import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 
 import numpy as np
 import rclpy
 from std_msgs.msg import String
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.diagnostics import WARN, aggregate_ms, to_values
+from geoctl_ros.core.diagnostics import to_values
 from geoctl_ros.nodes.qos import EVENT
-from geoctl_ros.params import (
-    CONTROLLER,
-    cone_set,
-    load_parameter_file,
-    node_overrides,
-    resolve,
-)
-from geoctl_ros.tools.processes import Monitor, NodeProcess, executable
-from geoctl_ros.tools.rosenv import PROFILE_VAR, cli_env, config_dir, node_env
-from geoctl_ros.tools.soak_agents import CHURN_LOOP, CLI_LOOP, PARAMS_LOOP
+from geoctl_ros.sil import measures
+from geoctl_ros.sil.loads import start_loads, stop_loads
+from geoctl_ros.sil.processes import Monitor, NodeProcess
+from geoctl_ros.sil.rosenv import PROFILE_VAR, cli_env, node_env
 
-AGENTS = 'geoctl_ros.tools.soak_agents'
+AGENTS = 'geoctl_ros.sil.loads'
 
 # name: (loads, fault, what). A fault is (kind, argument, period s) or None.
 CASES = {
@@ -92,7 +82,7 @@ class Session:
         if PROFILE_VAR not in env:
             os.environ.pop(PROFILE_VAR, None)
         self.env, self.out = env, out
-        self.cones = _cones(params_file)
+        self.cones = measures.cones_of(params_file)
         os.makedirs(out, exist_ok=True)
         sim_args = ('-r', 'pose:=raw/pose', '-r', 'imu:=raw/imu') if relay else ()
         self.procs = []
@@ -169,7 +159,7 @@ class Session:
                 if t0 <= t <= self.t_end:
                     f.write(json.dumps(dict(to_values(d.figures), level=d.level,
                                             message=d.message, t=round(t - t0, 3))) + '\n')
-        return figures(mon, t0, self.t_end, self.cones)
+        return measures.figures(mon, t0, self.t_end, self.cones)
 
     def command_times(self):
         """Receipt times of motor_commands at the listener (stops it)."""
@@ -191,139 +181,6 @@ class Session:
         return [p.stop() for p in self.procs]
 
 
-def ros2_command():
-    """The `ros2` command beside this interpreter (the venv's) or on PATH, or None."""
-    return (shutil.which('ros2', path=os.path.dirname(sys.executable))
-            or shutil.which('ros2'))
-
-
-def start_loads(loads, env):
-    """Start the named loads (CASES) as other people's processes in a plain LOCALHOST shell
-    beside nodes started with env; the processes, for stop_loads.
-    """
-    env = cli_env(env)
-    procs = []
-    try:
-        for load in loads:
-            if load == 'cli':
-                ros2 = ros2_command()
-                if ros2 is None:
-                    raise RuntimeError('the cli load needs the ros2 command (README, '
-                                       '"Set-up: two commands")')
-                env_cli = dict(env, PATH=os.path.dirname(ros2) + os.pathsep + env.get('PATH', ''))
-                procs.append(subprocess.Popen(['bash', '-c', CLI_LOOP], env=env_cli,
-                                              stdout=subprocess.DEVNULL,
-                                              stderr=subprocess.DEVNULL, start_new_session=True))
-            elif load in ('churn', 'params'):
-                code = CHURN_LOOP if load == 'churn' else PARAMS_LOOP
-                procs.append(subprocess.Popen([sys.executable, '-c', code], env=env,
-                                              stdout=subprocess.DEVNULL,
-                                              stderr=subprocess.DEVNULL, start_new_session=True))
-            elif load == 'record':          # a lab's recorder and 3D view, ros2 run as they are
-                bag = os.path.join(tempfile.mkdtemp(prefix='soak-record-'), 'flight')
-                for name, args in (('record', ['-p', 'record.path:=' + bag]), ('view', [])):
-                    procs.append(subprocess.Popen(
-                        [executable(name) or name, '--ros-args', *args], env=node_env(),
-                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                        start_new_session=True))
-                    procs[-1].node = True
-            elif load == 'cpu':
-                for _ in range(os.cpu_count() or 1):
-                    procs.append(subprocess.Popen([sys.executable, '-c', 'while True: pass'],
-                                                  start_new_session=True))
-            else:
-                raise ValueError('unknown load %r' % load)
-    except BaseException:
-        stop_loads(procs, env)
-        raise
-    return procs
-
-
-def stop_loads(procs, env):
-    """Stop what start_loads started (each with its process group) and the `ros2` daemon that
-    the cli load spawns.
-    """
-    for p in procs:       # SIGKILL, but Ctrl-C first for a node (a recorder closes its bag)
-        try:
-            if getattr(p, 'node', False):
-                os.killpg(p.pid, signal.SIGINT)
-                p.wait(5.0)
-        except ProcessLookupError:
-            pass
-        except subprocess.TimeoutExpired:
-            pass
-        try:
-            os.killpg(p.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        p.wait()
-    ros2 = ros2_command()
-    if ros2 is not None:
-        subprocess.run([ros2, 'daemon', 'stop'], env=cli_env(env), stdout=subprocess.DEVNULL,
-                       stderr=subprocess.DEVNULL, timeout=30)
-
-
-def _windows(diags, name):
-    """(p99 over the windows' p99, max) of a windowed figure of the controller's diagnostics
-    (a Figures field), ms.
-    """
-    w = aggregate_ms(diags, name)
-    return (float('nan'), float('nan')) if w is None else (w.p99, w.max)
-
-
-def _cones(params_file):
-    return cone_set(resolve(CONTROLLER, node_overrides(load_parameter_file(params_file),
-                                                       CONTROLLER)))
-
-
-def command_gaps(times, t0, t1):
-    """(p99, max) of the gaps between command receipts within [t0, t1], ms."""
-    t = times[(times >= t0) & (times <= t1)]
-    if len(t) < 2:
-        return float('nan'), float('nan')
-    gaps = np.diff(t) * 1e3
-    return float(np.percentile(gaps, 99)), float(gaps.max())
-
-
-def figures(mon, t0, t1, cones):
-    """The figures of the flight between t0 and t1 (monotonic, as the monitor's log)."""
-    diags = [d for t, d in mon.log['diagnostics'] if t0 <= t <= t1]
-    failed = [d.figures.failsafe for d in diags]
-    failsafes = sum(1 for a, b in zip([False] + failed, failed) if b and not a)
-    margins = [float(np.min(cones.margins_deg(so3.quat_to_rot(q))))
-               for t, (_, q) in mon.log['true_pose'] if t0 <= t <= t1] if len(cones) else [np.nan]
-    last = diags[-1].figures if diags else None
-    out = {
-        'seconds': t1 - t0,
-        'failsafes': failsafes,
-        'warn windows': sum(1 for d in diags if d.level == WARN),
-        'pose age p99/max [ms]': _windows(diags, 'pose_age_at_tick'),
-        'imu age p99/max [ms]': _windows(diags, 'imu_age_at_tick'),
-        'loop period p99/max [ms]': _windows(diags, 'loop_period'),
-        'pose to command p99/max [ms]': _windows(diags, 'pose_to_command_latency'),
-        'closest approach [deg]': min(margins) if margins else float('nan'),
-        'gaps ridden (pose, imu)': (('-', '-') if last is None else
-                                    (last.pose_gaps.count, last.imu_gaps.count)),
-    }
-    return out
-
-
-TABLE_HEAD = ('| case | s | failsafes | pose age p99 / max, ms | imu age p99 / max, ms | '
-              'command gap p99 / max, ms | loop period p99 / max, ms | '
-              'pose to command p99 / max, ms | min cone margin, deg |\n'
-              '|---|---|---|---|---|---|---|---|---|')
-
-
-def table_row(name, f):
-    def pair(p):
-        return '%.1f / %.1f' % p
-    return '| %s | %.0f | %d | %s | %s | %s | %s | %s | %.1f |' % (
-        name, f['seconds'], f['failsafes'], pair(f['pose age p99/max [ms]']),
-        pair(f['imu age p99/max [ms]']), pair(f['command gap p99/max [ms]']),
-        pair(f['loop period p99/max [ms]']), pair(f['pose to command p99/max [ms]']),
-        f['closest approach [deg]'])
-
-
 def run_cases(names, duration, params_file, out, transport='profile', prefix=(),
               progress=print):
     """Run the named cases, each on a fresh session (relay when a fault needs one); returns
@@ -339,43 +196,9 @@ def run_cases(names, duration, params_file, out, transport='profile', prefix=(),
                     relay, prefix)
         try:
             f = results[label] = s.phase(duration, loads, fault)
-            f['command gap p99/max [ms]'] = command_gaps(s.command_times(),
+            f['command gap p99/max [ms]'] = measures.command_gaps(s.command_times(),
                                                          s.t_end - f['seconds'], s.t_end)
         finally:
             s.close()
-        progress('  ' + table_row(label, f))
+        progress('  ' + measures.table_row(label, f))
     return results
-
-
-def main(argv=None):
-    parser = argparse.ArgumentParser(prog='soak', description=__doc__.split('\n\n')[0])
-    parser.add_argument('--case', action='append', choices=sorted(CASES),
-                        help='a case to run (repeatable; default: all)')
-    parser.add_argument('--duration', type=float, default=60.0, help='seconds per case (60)')
-    parser.add_argument('--transport', choices=('profile', 'rmw-default'), default='profile',
-                        help='the nodes on the loopback profile (default) or the rmw defaults')
-    parser.add_argument('--params-file', default=None, help='default: config/testbed.yaml')
-    parser.add_argument('--prefix', default='',
-                        help="run sim and controller under this command, as ros2 run --prefix "
-                             "(e.g. 'nice -n -10'; docs/interface.md, \"Scheduling\")")
-    parser.add_argument('--out', default=None, help='folder for logs and soak.json')
-    args = parser.parse_args(argv)
-    params_file = args.params_file or os.path.join(config_dir(), 'testbed.yaml')
-    out = args.out or tempfile.mkdtemp(prefix='soak-')
-    names = args.case or list(CASES)
-    results = run_cases(names, args.duration, params_file, out, args.transport,
-                        args.prefix.split(),
-                        progress=lambda m: print(m, file=sys.stderr, flush=True))
-    with open(os.path.join(out, 'soak.json'), 'w') as f:
-        json.dump({'transport': args.transport, 'results': results}, f, indent=2)
-    print('transport: %s, %s%s' % (args.transport, os.path.basename(params_file),
-                                    ', nodes under ' + args.prefix if args.prefix else ''))
-    print(TABLE_HEAD)
-    for label, f in results.items():
-        print(table_row(label, f))
-    print('logs and soak.json in %s' % out)
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

@@ -3,7 +3,7 @@ nodes as processes (as ``ros2 run`` would), and a monitor node that records thei
 their services and parameters.
 
 Every process started here runs with the loopback DDS profile and the caller's ``ROS_DOMAIN_ID``
-(``geoctl_ros.tools.rosenv.node_env``), so DDS traffic stays on 127.0.0.1.
+(``geoctl_ros.sil.rosenv.node_env``), so DDS traffic stays on 127.0.0.1.
 """
 import ipaddress
 import os
@@ -33,7 +33,7 @@ from geoctl_ros.nodes.conversions import (
     stamp_seconds,
     status_of,
 )
-from geoctl_ros.tools.rosenv import node_env
+from geoctl_ros.sil.rosenv import node_env
 
 
 def executable(name):
@@ -54,7 +54,7 @@ class NodeProcess:
     """One node as a child process, its output in a log file."""
 
     def __init__(self, name, params_file=None, ros_args=(), log_dir='.', env=None, prefix=()):
-        """env: the process's environment (default: geoctl_ros.tools.rosenv.node_env()); prefix: a
+        """env: the process's environment (default: geoctl_ros.sil.rosenv.node_env()); prefix: a
         command to run it under (as ``ros2 run --prefix``), e.g. ('nice', '-n', '-10').
         """
         exe = executable(name)

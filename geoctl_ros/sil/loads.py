@@ -1,15 +1,19 @@
-"""The processes a soak run starts beside the flight (``geoctl_ros.tools.soak``).
+"""The processes a soak run starts beside the flight (``geoctl_ros.sil.soak``).
 
-    python -m geoctl_ros.tools.soak_agents relay        # faults between sim and controller
-    python -m geoctl_ros.tools.soak_agents listen FILE  # motor_commands receipt times -> FILE.npy
+    python -m geoctl_ros.sil.loads relay        # faults between sim and controller
+    python -m geoctl_ros.sil.loads listen FILE  # motor_commands receipt times -> FILE.npy
 
 and the load scripts (``CLI_LOOP`` for bash, ``CHURN_LOOP`` and ``PARAMS_LOOP`` for Python) that
 stand for other people's processes in a plain LOCALHOST shell.
 """
 import heapq
+import os
 import random
+import shutil
 import signal
+import subprocess
 import sys
+import tempfile
 import time
 
 from geometry_msgs.msg import PoseStamped
@@ -20,6 +24,8 @@ from std_msgs.msg import Float64MultiArray, String
 
 from geoctl_ros.nodes.qos import COMMAND, EVENT, SENSOR
 from geoctl_ros.nodes.runtime import make_executor
+from geoctl_ros.sil.processes import executable
+from geoctl_ros.sil.rosenv import cli_env, node_env
 
 CLI_LOOP = r"""
 while true; do
@@ -172,9 +178,82 @@ def listen_main(path):
     return 0
 
 
+
+def ros2_command():
+    """The `ros2` command beside this interpreter (the venv's) or on PATH, or None."""
+    return (shutil.which('ros2', path=os.path.dirname(sys.executable))
+            or shutil.which('ros2'))
+
+
+def start_loads(loads, env):
+    """Start the named loads (CASES) as other people's processes in a plain LOCALHOST shell
+    beside nodes started with env; the processes, for stop_loads.
+    """
+    env = cli_env(env)
+    procs = []
+    try:
+        for load in loads:
+            if load == 'cli':
+                ros2 = ros2_command()
+                if ros2 is None:
+                    raise RuntimeError('the cli load needs the ros2 command (README, '
+                                       '"Set-up: two commands")')
+                env_cli = dict(env, PATH=os.path.dirname(ros2) + os.pathsep + env.get('PATH', ''))
+                procs.append(subprocess.Popen(['bash', '-c', CLI_LOOP], env=env_cli,
+                                              stdout=subprocess.DEVNULL,
+                                              stderr=subprocess.DEVNULL, start_new_session=True))
+            elif load in ('churn', 'params'):
+                code = CHURN_LOOP if load == 'churn' else PARAMS_LOOP
+                procs.append(subprocess.Popen([sys.executable, '-c', code], env=env,
+                                              stdout=subprocess.DEVNULL,
+                                              stderr=subprocess.DEVNULL, start_new_session=True))
+            elif load == 'record':          # a lab's recorder and 3D view, ros2 run as they are
+                bag = os.path.join(tempfile.mkdtemp(prefix='soak-record-'), 'flight')
+                for name, args in (('record', ['-p', 'record.path:=' + bag]), ('view', [])):
+                    procs.append(subprocess.Popen(
+                        [executable(name) or name, '--ros-args', *args], env=node_env(),
+                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                        start_new_session=True))
+                    procs[-1].node = True
+            elif load == 'cpu':
+                for _ in range(os.cpu_count() or 1):
+                    procs.append(subprocess.Popen([sys.executable, '-c', 'while True: pass'],
+                                                  start_new_session=True))
+            else:
+                raise ValueError('unknown load %r' % load)
+    except BaseException:
+        stop_loads(procs, env)
+        raise
+    return procs
+
+
+def stop_loads(procs, env):
+    """Stop what start_loads started (each with its process group) and the `ros2` daemon that
+    the cli load spawns.
+    """
+    for p in procs:       # SIGKILL, but Ctrl-C first for a node (a recorder closes its bag)
+        try:
+            if getattr(p, 'node', False):
+                os.killpg(p.pid, signal.SIGINT)
+                p.wait(5.0)
+        except ProcessLookupError:
+            pass
+        except subprocess.TimeoutExpired:
+            pass
+        try:
+            os.killpg(p.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        p.wait()
+    ros2 = ros2_command()
+    if ros2 is not None:
+        subprocess.run([ros2, 'daemon', 'stop'], env=cli_env(env), stdout=subprocess.DEVNULL,
+                       stderr=subprocess.DEVNULL, timeout=30)
+
+
 if __name__ == '__main__':
     if sys.argv[1:2] == ['relay']:
         sys.exit(relay_main())
     if sys.argv[1:2] == ['listen'] and len(sys.argv) == 3:
         sys.exit(listen_main(sys.argv[2]))
-    sys.exit('usage: python -m geoctl_ros.tools.soak_agents relay | listen FILE')
+    sys.exit('usage: python -m geoctl_ros.sil.loads relay | listen FILE')

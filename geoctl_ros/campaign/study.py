@@ -23,6 +23,7 @@ import os
 import numpy as np
 import yaml
 
+from geoctl_ros.campaign.manoeuvres import LATENCY_MS_MAX
 from geoctl_ros.params import (
     BY_NAME,
     CONTROLLER,
@@ -32,9 +33,8 @@ from geoctl_ros.params import (
     resolve,
     write_parameter_file,
 )
+from geoctl_ros.plots import campaign as campaign_plots
 from geoctl_ros.sim.closed_loop import SETTLED_DEG as CONVERGED_DEG
-from geoctl_ros.tools import plots
-from geoctl_ros.tools.manoeuvres import LATENCY_MS_MAX
 
 # what a gain set may not change: what each run draws for itself
 # the summary's bands of measurement latency (ms, inclusive): thirds of the campaign's draw
@@ -179,7 +179,7 @@ def write_study(columns, base, gain_sets, out_dir, best):
         for k, (gains, fig) in enumerate(zip(gain_sets, figures), 1):
             f.write(','.join([str(k)] + [repr(gains.get(n)) for n in names]
                              + [repr(fig[c]) for c in keys] + [str(k - 1 in front)]) + '\n')
-    plots.gain_study_figure(figures, [label(g) for g in gain_sets], front,
+    campaign_plots.gain_study_figure(figures, [label(g) for g in gain_sets], front,
                             os.path.join(out_dir, 'gain_study.png'))
     os.makedirs(os.path.join(out_dir, 'best'), exist_ok=True)
     chosen = sorted(front, key=lambda k: -figures[k]['closest_p1_deg'])[:best]

@@ -1,5 +1,5 @@
 """The campaign's random manoeuvres, and each as an ordinary scenario (``run_sections``) or a
-scenario file (``write_scenario_file``); flown by ``geoctl_ros.tools.campaign``.
+scenario file (``write_scenario_file``); flown by ``geoctl_ros.campaign.runner``.
 
 The distribution (run i of seed S draws from its own seed, ``SeedSequence(S).spawn(N)[i]``, for
 any N > i: a run does not depend on how many others there are, nor on where or with which it is

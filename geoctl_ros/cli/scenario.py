@@ -14,29 +14,14 @@ the control steps late, as a busy machine's timer does: each command is held unt
 comes.
 """
 import argparse
-import json
 import math
 import os
 import sys
 
-import numpy as np
-
 from geoctl_ros.core.gains import gain_condition
 from geoctl_ros.params import ConfigError, controller_config
-from geoctl_ros.sim.scenario import Result, Scenario, from_sections, load, run  # noqa: F401
-from geoctl_ros.tools import plots as plotting
-
-
-def write(result, out_dir, plots=True):
-    """Write summary.json, history.csv and (if plots) the PNG figures into out_dir."""
-    os.makedirs(out_dir, exist_ok=True)
-    with open(os.path.join(out_dir, 'summary.json'), 'w') as f:
-        json.dump(result.summary, f, indent=2)
-        f.write('\n')
-    np.savetxt(os.path.join(out_dir, 'history.csv'), result.history, delimiter=',',
-               header=','.join(result.columns), comments='', fmt='%.9g')
-    if plots:
-        plotting.scenario_figures(result, out_dir)
+from geoctl_ros.records import scenario as scenario_files
+from geoctl_ros.sim.scenario import load, run
 
 
 def _output_problem(out_dir):
@@ -76,7 +61,7 @@ def main(argv=None):
         print('warning: ' + check.message(), file=sys.stderr)
     result = run(scenario, args.duration)
     try:
-        write(result, args.out, plots=not args.no_plots)
+        scenario_files.write(result, args.out, plots=not args.no_plots)
     except OSError as e:
         print('scenario: --out %s: %s' % (args.out, e.strerror or e), file=sys.stderr)
         return 2

@@ -1,25 +1,20 @@
-"""Safety campaigns and gain studies:
-``campaign --runs 1000 --seed 1 --out DIR [--workers N | --scheduler tcp://HOST:PORT]
-[--grid NAME=V1,V2,...]... [--replay FILE...]``.
+"""Safety campaigns and gain studies, flown (the ``campaign`` command: geoctl_ros.cli.campaign).
 
-Flies many random manoeuvres of the testbed headless and reports how often the sensor kept out of
-the cones. Each run is an ordinary scenario (``config/testbed.yaml`` with its own cones, set point,
-errors and seed), flown by ``geoctl_ros.sim.closed_loop`` many at a time on a Dask cluster
-(``geoctl_ros.tools.cluster``: a local one by default). The distribution of the manoeuvres is
-``geoctl_ros.tools.manoeuvres``'s: run i of a seed draws from its own seed, so ``runs.csv`` is the
-same, bit for bit, on one worker or many, in any batch size, here or on a cluster.
+Each run is an ordinary scenario (``config/testbed.yaml`` with its own cones, set point, errors
+and seed), flown by ``geoctl_ros.sim.closed_loop`` many at a time on a Dask cluster
+(``geoctl_ros.campaign.cluster``: a local one by default). The distribution of the manoeuvres is
+``geoctl_ros.campaign.manoeuvres``'s: run i of a seed draws from its own seed, so ``runs.csv`` is
+the same, bit for bit, on one worker or many, in any batch size, here or on a cluster.
 
 Per run: the closest approach to each cone (after every 1 ms integration step), whether the sensor
 touched a cone (a violation), convergence (attitude error below 5 deg at the end), the settle time
 (the error below 5 deg from then on), and the time the allocation was saturated. Writes
 DIR/runs.csv (every figure exact: Python's shortest repr of each float), DIR/summary.md (the
-table), DIR/closest_approach.png, DIR/worst_runs.png and DIR/worst/*.yaml; the worst runs are flown
-again for their figure, and the files fly them again (``campaign --replay``, ``scenario``).
-
-With ``--grid`` (``geoctl_ros.tools.study``) every gain set flies the same runs; the campaign then
-also writes DIR/gain_sets.csv, DIR/gain_study.png and DIR/best/gain_set_K.yaml.
+table), DIR/closest_approach.png, DIR/worst_runs.png and DIR/worst/*.yaml; the worst runs are
+flown again for their figure, and the files fly them again (``campaign --replay``, ``scenario``).
+With a gain study (``geoctl_ros.campaign.study``) every gain set flies the same runs, and the
+campaign also writes DIR/gain_sets.csv, DIR/gain_study.png and DIR/best/gain_set_K.yaml.
 """
-import argparse
 import math
 import os
 import sys
@@ -27,11 +22,11 @@ import time
 
 import numpy as np
 
+from geoctl_ros.campaign import cluster, manoeuvres, study
 from geoctl_ros.params import ConfigError, load_parameter_file
+from geoctl_ros.plots import campaign as campaign_plots
 from geoctl_ros.sim import closed_loop
 from geoctl_ros.sim.scenario import from_sections
-from geoctl_ros.tools import cluster, manoeuvres, plots, study
-from geoctl_ros.tools.rosenv import config_dir
 
 BATCH = 1024               # runs flown together at most (docs/campaigns.md, "Campaign speed")
 # runs.csv's columns, in order (gain_set only in a gain study)
@@ -176,91 +171,21 @@ def worst_runs(worst, base, args, gain_sets, out_dir):
         flown.append((name.replace('_', ' '), margins, sensor, dt, sections['controller']))
         labels.append('%s (%.2f deg)' % (name.replace('_', ' '), closest))
     if flown:
-        plots.worst_runs_figure(flown, os.path.join(out_dir, 'worst_runs.png'))
+        campaign_plots.worst_runs_figure(flown, os.path.join(out_dir, 'worst_runs.png'))
     return labels
 
 
-def progress_printer(total):
-    tty = sys.stderr.isatty()
-    shown = [-1]
-
-    def report(done, seconds):
-        percent = 100.0 * done / total
-        line = 'campaign: %5.1f %% of %d runs flown, %.0f s' % (percent, total, seconds)
-        if tty:
-            print('\r' + line, end='', file=sys.stderr, flush=True)
-        elif int(percent // 10) > shown[0]:          # a log file: a line every 10 %
-            shown[0] = int(percent // 10)
-            print(line, file=sys.stderr, flush=True)
-    return report
-
-
-def main(argv=None):
-    parser = argparse.ArgumentParser(prog='campaign', description=__doc__.split('\n\n')[0])
-    parser.add_argument('--runs', type=int, default=1000, help='number of manoeuvres (1000)')
-    parser.add_argument('--seed', type=int, default=1, help='campaign seed (1)')
-    parser.add_argument('--out', required=True, help='output directory')
-    parser.add_argument('--workers', '--jobs', type=int, default=os.cpu_count() or 1,
-                        dest='workers', help='local cluster: worker processes (one per core)')
-    parser.add_argument('--scheduler', metavar='tcp://HOST:PORT', default=None,
-                        help='fly on this Dask scheduler instead of a local cluster')
-    parser.add_argument('--dashboard', action='store_true',
-                        help='local cluster: serve the Dask dashboard on 127.0.0.1:8787')
-    parser.add_argument('--batch', type=int, default=BATCH,
-                        help='runs flown together at most (%d)' % BATCH)
-    parser.add_argument('--grid', action='append', default=[], metavar='NAME=V1,V2,...',
-                        help='a gain study: fly every run with each combination of these '
-                             'controller parameters')
-    parser.add_argument('--duration', type=float, default=20.0, help='seconds per run (20)')
-    parser.add_argument('--worst', type=int, default=5, help='worst runs written out (5)')
-    parser.add_argument('--best', type=int, default=3,
-                        help='gain study: non-dominated gain sets written out, at most (3)')
-    parser.add_argument('--disturbance-max', type=float, default=manoeuvres.DISTURBANCE_MAX,
-                        help='largest constant disturbance, N m (%g)' % manoeuvres.DISTURBANCE_MAX)
-    parser.add_argument('--params-file', default=None,
-                        help='the testbed (default: config/testbed.yaml)')
-    parser.add_argument('--replay', nargs='+', metavar='FILE',
-                        help='fly these scenario files (written by a campaign) instead')
-    args = parser.parse_args(argv)
-    if args.runs < 1 or args.workers < 1 or args.batch < 1 or not args.duration > 0:
-        parser.error('--runs, --workers, --batch and --duration must be positive')
-    try:
-        if args.replay:
-            return replay(args.replay)
-        os.makedirs(args.out, exist_ok=True)
-        base = load_parameter_file(args.params_file or os.path.join(config_dir(), 'testbed.yaml'))
-        gain_sets = study.parse_grid(args.grid) if args.grid else [{}]
-        study.check_gain_sets(base, gain_sets)
-    except ConfigError as e:
-        print('campaign: %s' % e, file=sys.stderr)
-        return 2
-    except OSError as e:
-        print('campaign: %s: %s' % (e.filename or args.out, e.strerror or e), file=sys.stderr)
-        return 2
-    total = args.runs * len(gain_sets)
-    t0 = time.monotonic()
-    with cluster.connect(args.scheduler, args.workers, args.dashboard) as (client, where):
-        started = time.monotonic() - t0
-        print('campaign: %d runs on %s (started in %.1f s)' % (total, where, started),
-              file=sys.stderr, flush=True)
-        t1 = time.monotonic()
-        try:
-            columns, worst, interrupted, (draw_s, fly_s) = fly(client, base, args, gain_sets,
-                                               progress_printer(total))
-        except (ConfigError, ValueError) as e:          # a run the batch cannot fly
-            print('\ncampaign: %s' % e, file=sys.stderr)
-            return 2
-        workers = cluster.worker_count(client)
-    wall = time.monotonic() - t1
-    print('', file=sys.stderr)
+def write_results(columns, worst, interrupted, timing, base, args, gain_sets):
+    """Write runs.csv, summary.md, the worst runs and the figures into args.out; the summary's
+    lines and its violation count. timing: wall s, workers, cluster start s, drawing s, flying s.
+    """
+    wall, workers, started, draw_s, fly_s = timing
     n = len(columns['run'])
-    if not n:
-        print('campaign: interrupted before any run was flown; nothing written', file=sys.stderr)
-        return 130
     write_runs(os.path.join(args.out, 'runs.csv'), columns, len(gain_sets) > 1)
     if interrupted:
         print('campaign: interrupted: %d of %d runs flown, written to %s'
-              % (n, total, os.path.join(args.out, 'runs.csv')), file=sys.stderr)
+              % (n, args.runs * len(gain_sets), os.path.join(args.out, 'runs.csv')),
+              file=sys.stderr)
     summary = study.summary_table(columns)
     summary['wall time [s]'] = '%.1f on %d workers (cluster start %.1f s before it)' % (
         wall, workers, started)
@@ -276,14 +201,6 @@ def main(argv=None):
         lines += [''] + study.write_study(columns, base, gain_sets, args.out, args.best)
     with open(os.path.join(args.out, 'summary.md'), 'w') as f:
         f.write('\n'.join(lines) + '\n')
-    plots.closest_approach_figure(columns['closest_deg'],
+    campaign_plots.closest_approach_figure(columns['closest_deg'],
                                   os.path.join(args.out, 'closest_approach.png'))
-    print('\n'.join(lines))
-    print('wrote %s' % args.out)
-    if interrupted:
-        return 130
-    return 1 if summary['violations'] else 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())
+    return lines, summary['violations']
