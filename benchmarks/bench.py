@@ -47,10 +47,10 @@ from geoctl_ros.params import (
     controller_setup,
     load_parameter_file,
     resolve,
-    testbed_sim,
 )
 from geoctl_ros.sil.rosenv import use_node_env
 from geoctl_ros.sim import scenario
+from geoctl_ros.sim.build import testbed_sim
 from geoctl_ros.sim.closed_loop import fly
 
 HERE = os.path.dirname(os.path.abspath(__file__))

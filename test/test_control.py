@@ -10,19 +10,11 @@ import pytest
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.cones import ConeSet
-from geoctl_ros.core.control import (
-    AttitudeController,
-    ControllerConfig,
-    E_matrix,
-    SetpointRejected,
-    attractive_error,
-    closest_admissible,
-    configuration_error,
-    linear_terms,
-    pointing_cbf,
-)
+from geoctl_ros.core.control import AttitudeController, ControllerConfig, SetpointRejected
+from geoctl_ros.core.errors import E_matrix, attractive_error, configuration_error, linear_terms
 from geoctl_ros.core.feasibility import holding_clearance_deg, holding_moment
 from geoctl_ros.core.gains import gain_condition
+from geoctl_ros.core.laws import closest_admissible, pointing_cbf
 from geoctl_ros.core.mechanics import gravity_moment
 from geoctl_ros.params import CONTROLLER, controller_config, resolve
 from geoctl_ros.sim import scenario

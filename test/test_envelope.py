@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from geoctl_ros.core import so3
-from geoctl_ros.core.control import AttitudeController, approach_rates, blind_widening
+from geoctl_ros.core.control import AttitudeController
 from geoctl_ros.core.diagnostics import ERROR
+from geoctl_ros.core.errors import approach_rates, blind_widening
 from geoctl_ros.core.loop import ControlLoop
 from geoctl_ros.core.mechanics import gravity_moment
 from geoctl_ros.core.prediction import CommandHistory, DelayPredictor
@@ -22,8 +23,8 @@ from geoctl_ros.params import (
     controller_setup,
     resolve,
 )
-from geoctl_ros.params import testbed_sim as simulated_testbed
 from geoctl_ros.sim import scenario
+from geoctl_ros.sim.build import testbed_sim as simulated_testbed
 from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

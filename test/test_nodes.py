@@ -31,6 +31,7 @@ from geoctl_ros.params import (
     node_overrides,
     resolve,
 )
+from geoctl_ros.params.topics import TOPICS
 from geoctl_ros.records import bag, report
 from geoctl_ros.sil.loads import ros2_command, start_loads, stop_loads
 from geoctl_ros.sil.processes import NodeProcess
@@ -743,7 +744,7 @@ def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_appro
         assert first < t_start and t_start < last < t_end
         # every stream is in it (this test runs beside the flights at nice 19, so the rates are
         # not this test's to judge: the recorded flight of the sim-in-the-loop test judges them)
-        silent = [t.name for t in bag.TOPICS if counts.get(t.name, 0) == 0]
+        silent = [t.name for t in TOPICS if counts.get(t.name, 0) == 0]
         assert silent == ['/attitude_setpoint'], counts         # nobody sends a set point here
         assert len(angles) == counts['/sim/true_pose']
         out = tmp_path / ('report_' + storage)

@@ -22,7 +22,8 @@ pytestmark = pytest.mark.odroid
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PKG = os.path.join(ROOT, 'geoctl_ros')
-LAYERS = ['core', 'sim', 'records', 'params', 'esc', 'mavlink', 'nodes', 'tools']  # lowest first
+LAYERS = ['core', 'params', 'sim', 'plots', 'records', 'esc', 'mavlink', 'campaign', 'nodes',
+          'sil', 'fuzz', 'cli']    # lowest first
 
 
 def test_core_sim_params_and_mavlink_import_without_rclpy():
@@ -35,7 +36,7 @@ def test_core_sim_params_and_mavlink_import_without_rclpy():
             '            raise ImportError("blocked: " + name)\n'
             'sys.meta_path.insert(0, Block())\n'
             'import pkgutil, importlib, geoctl_ros\n'
-            'for sub in ("core", "sim", "params", "mavlink", "records", "esc"):\n'
+            'for sub in ("core", "sim", "params", "mavlink", "records", "esc", "plots"):\n'
             '    pkg = importlib.import_module("geoctl_ros." + sub)\n'
             '    for m in pkgutil.iter_modules(pkg.__path__):\n'
             '        importlib.import_module("geoctl_ros.%s.%s" % (sub, m.name))\n'

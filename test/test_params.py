@@ -12,6 +12,7 @@ from geoctl_ros import params
 from geoctl_ros.params import CONTROLLER, SIM, ConfigError, resolve
 from geoctl_ros.params import readme as readme_table
 from geoctl_ros.sim import scenario
+from geoctl_ros.sim.build import plant_config
 
 pytestmark = pytest.mark.odroid
 
@@ -32,7 +33,7 @@ def test_defaults_build_a_controller_and_a_plant():
     cfg = params.controller_config(c)
     assert cfg.k_R == 0.4 and len(cfg.cones) == 0
     assert np.allclose(cfg.J[0, 0], 5.5710e-3 + 1.26 * 0.1 ** 2)   # pivot inertia
-    plant = params.plant_config(resolve(SIM, {}))
+    plant = plant_config(resolve(SIM, {}))
     assert plant.mass == 1.26
 
 

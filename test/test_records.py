@@ -22,8 +22,8 @@ from geoctl_ros.cli.report import main as report_main
 from geoctl_ros.core.diagnostics import Figures, Status
 from geoctl_ros.core.view import Trail, cone_triangles, in_warning
 from geoctl_ros.nodes.conversions import set_quaternion, status_msg
+from geoctl_ros.params.topics import BY_NAME, Topic
 from geoctl_ros.records import bag
-from geoctl_ros.records.bag import BY_NAME, Topic
 from geoctl_ros.sim import scenario
 
 pytestmark = pytest.mark.odroid
@@ -80,7 +80,7 @@ def test_a_bag_with_some_topics_reports_what_it_can_and_names_the_rest(tmp_path,
                                                                       report):
     path = tmp_path / 'psi_only'
     psi = [0.5, 0.2, 0.05, 0.0009, 0.0004]
-    write(path, bag.BY_NAME['/configuration_error'], psi, storage)
+    write(path, BY_NAME['/configuration_error'], psi, storage)
     out = tmp_path / 'out'
     r = report(path, '--out', out)
     assert r.returncode == 0, r.stderr
@@ -167,7 +167,7 @@ def test_a_closed_bag_whose_file_was_cut_still_reports(tmp_path):
     """
     path = tmp_path / 'cut'
     psi = [0.5 - 0.001 * i for i in range(200)]
-    write(path, bag.BY_NAME['/configuration_error'], psi)
+    write(path, BY_NAME['/configuration_error'], psi)
     (mcap,) = path.glob('*.mcap')
     data = mcap.read_bytes()
     mcap.write_bytes(data[:len(data) - 40])                    # into its summary and footer
@@ -183,9 +183,10 @@ import resource, signal, sys, time
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64
 from geoctl_ros.records import bag
+from geoctl_ros.params.topics import BY_NAME
 signal.signal(signal.SIGXFSZ, signal.SIG_IGN)   # a write past the limit fails, as on a full disk
 resource.setrlimit(resource.RLIMIT_FSIZE, (1_000_000, 1_000_000))
-w = bag.BagWriter(sys.argv[1], [bag.BY_NAME['/configuration_error']], 'mcap')
+w = bag.BagWriter(sys.argv[1], [BY_NAME['/configuration_error']], 'mcap')
 t_end = time.monotonic() + 10.0
 psi = serialize_message(Float64(data=0.0))
 while w.error is None and time.monotonic() < t_end:     # some 400 kB a second
@@ -230,7 +231,7 @@ def test_each_checkpoint_puts_the_bag_on_the_disk_not_only_in_the_page_cache(tmp
         return real(fd)
     monkeypatch.setattr(os, 'fsync', fsync)
     path = tmp_path / 'synced'
-    topic = bag.BY_NAME['/configuration_error']
+    topic = BY_NAME['/configuration_error']
     w = bag.BagWriter(str(path), [topic], 'mcap')
     t_end = time.monotonic() + 1.5 * bag.CHECKPOINT_S
     while time.monotonic() < t_end:

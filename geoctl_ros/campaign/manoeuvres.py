@@ -52,7 +52,6 @@ from geoctl_ros.params import (
 CLEAR_DEG = 5.0                    # start and goal at least this far outside every cone
 GAP_DEG = 10.0                     # edge-to-edge distance between two cones, at least
 UP = np.array([0.0, 0.0, 1.0])
-_I3 = np.eye(3)
 _ARC = np.linspace(0.0, 1.0, 41)      # points on the straight way from start to goal
 _TWISTS = np.radians(np.arange(-180.0, 180.0, 2.0))     # turns about the sensor axis tried
 PLACEMENTS = 64                    # candidate placements of the cones drawn at once
@@ -64,18 +63,6 @@ MODEL_ERROR = 0.2                  # true mass, inertia stretch and centre of ma
 LATENCY_MS_MAX = 60                # measurement latency 0..this (whole ms, uniform)
 STALL_RATE = 0.5                   # input stalls per second (Poisson)
 STALL_MS = (10, 40)                # each stall's length (whole ms, uniform)
-
-
-def unit(v):
-    return v / math.sqrt(float(v @ v))
-
-
-def direction(axis, angle, azimuth):
-    """The unit vector at angle from axis, at azimuth round it."""
-    e1 = unit(so3.cross(axis, _I3[int(np.argmin(np.abs(axis)))]))
-    e2 = so3.cross(axis, e1)
-    return (math.cos(angle) * axis
-            + math.sin(angle) * (math.cos(azimuth) * e1 + math.sin(azimuth) * e2))
 
 
 def _aligning(r, d):
@@ -139,13 +126,13 @@ def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None, duration=20.0):
     """
     n = cone_count(seed, index)
     rng = np.random.default_rng(run_seeds(seed, index)[1])
-    r = unit(np.asarray(sensor_axis, dtype=float))
+    r = so3.unit(np.asarray(sensor_axis, dtype=float))
     while True:
         theta, axes = _place_cones(rng, n)
         v0, th0 = axes[0], math.radians(theta[0])
         azimuth = rng.uniform(0.0, 2.0 * math.pi)
-        d0 = direction(v0, th0 + math.radians(rng.uniform(5.0, 30.0)), azimuth)
-        d1 = direction(v0, th0 + math.radians(rng.uniform(5.0, 30.0)),
+        d0 = so3.direction(v0, th0 + math.radians(rng.uniform(5.0, 30.0)), azimuth)
+        d1 = so3.direction(v0, th0 + math.radians(rng.uniform(5.0, 30.0)),
                         azimuth + math.pi + math.radians(rng.uniform(-30.0, 30.0)))
         if any(_angle_deg(d, v) < t + CLEAR_DEG for d in (d0, d1) for v, t in zip(axes, theta)):
             continue
@@ -157,7 +144,7 @@ def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None, duration=20.0):
         if R0 is not None and R_d is not None and (
                 goal_ok is None or goal_ok(list(zip(axes, theta)), R_d)):
             break
-    push = unit(rng.normal(size=3))
+    push = so3.unit(rng.normal(size=3))
     return {
         'cones': [(list(map(float, v)), float(t)) for v, t in zip(axes, theta)],
         'R0': R0, 'R_d': R_d,

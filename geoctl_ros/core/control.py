@@ -28,17 +28,21 @@ and model are shared by the batch. (``x.T`` on a stack of vectors puts the batch
 ``(x.T * a).T`` scales each run's vector by its own scalar and a single vector by a scalar.)
 """
 from dataclasses import dataclass, field
-import itertools
 from typing import NamedTuple
 
 import numpy as np
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.cones import ConeSet
+from geoctl_ros.core.errors import (
+    LinearMap,
+    blind_widening,
+)
 from geoctl_ros.core.feasibility import setpoint_problem
 from geoctl_ros.core.flags import any_flag
-from geoctl_ros.core.mechanics import cog_regressor, first_moment, gravity_moment, pivot_inertia
-from geoctl_ros.core.so3 import cross, matvec, transpose, vee
+from geoctl_ros.core.laws import LAWS
+from geoctl_ros.core.mechanics import cog_regressor, first_moment, pivot_inertia
+from geoctl_ros.core.so3 import cross, matvec, transpose
 
 # Disturbance models: name -> number of estimated parameters (the columns of W).
 #   constant:      W = I,                     Delta = a constant moment (the paper's case)
@@ -107,100 +111,6 @@ class ControlOutput(NamedTuple):
         (computed when asked: the node publishes the motor commands first).
         """
         return self.cones.margins_deg(self.half_angles_deg)
-
-
-def attractive_error(R, R_d, G):
-    """A (eq. 13) and e_RA (eq. 15) for the diagonal weights G (3,)."""
-    RdtR = so3.matmul(transpose(R_d), R)
-    A = 0.5 * so3.dot(1.0 - np.diagonal(RdtR, 0, -2, -1), G)
-    M = G[:, None] * RdtR            # G R_d^T R; its transpose is R^T R_d G
-    return A, 0.5 * vee(M - transpose(M))
-
-
-def E_matrix(R, R_d, G):
-    """E(R, R_d) of eq. (27): d/dt e_RA = E e_Omega."""
-    M = (R.T @ R_d) * G[None, :]     # R^T R_d G
-    return 0.5 * (np.trace(M) * np.eye(3) - M)
-
-
-def configuration_error(R, R_d, G, cones):
-    """Psi, e_R, A, e_RA and the cone evaluation at R (Prop. 1 generalised to several cones)."""
-    A, e_RA = attractive_error(R, R_d, G)
-    ev = cones.evaluate(R)
-    psi, e_R = with_cones(A[..., None], e_RA, ev)
-    return psi, e_R, A, e_RA, ev
-
-
-def with_cones(A, e_RA, ev):
-    """Psi = A (1 + sum_i (B_i - 1)) and e_R = e_RA (1 + sum_i (B_i - 1)) + A sum_i e_RB,i from
-    A (with a trailing axis of 1), e_RA and the cones' evaluation.
-    """
-    scale = (1.0 - ev.B.shape[-1]) + ev.B.sum(axis=-1, keepdims=True)
-    return (A * scale)[..., 0], e_RA * scale + A * ev.e_RB_sum
-
-
-_BASIS = np.eye(9).reshape(9, 3, 3)       # the unit matrices E_jk
-
-
-def linear_terms(R, R_d, config):
-    """The parts of the law that are affine in R, side by side (..., 5 + 4 n): A, e_RA (3), for
-    each cone s_i and (R^T v_i) x r (``ConeSet.terms``), and the gravity moment M_g (3).
-    """
-    A, e_RA = attractive_error(R, R_d, config.G)
-    sc = config.cones.terms(R)
-    M_g = gravity_moment(R, config.m_rho, config.gravity)
-    parts = [A[..., None], e_RA, sc.reshape(sc.shape[:-2] + (-1,)), M_g]
-    batch = np.broadcast_shapes(*(p.shape[:-1] for p in parts))
-    return np.concatenate([np.broadcast_to(p, batch + p.shape[-1:]) for p in parts], axis=-1)
-
-
-def approach_rates(sc, Omega):
-    """Per cone, how fast the sensor's angle to the cone's axis is closing (rad/s; negative when
-    it opens), from ``ConeSet.terms`` (s_i, (R^T v_i) x r) and Omega: with s_i = cos(phi_i),
-    d/dt s_i = -Omega . ((R^T v_i) x r) and sin(phi_i) = |(R^T v_i) x r|.
-    """
-    cross = sc[..., 1:]
-    sin_phi = np.sqrt(so3.dot(cross, cross))
-    return -so3.dot(cross, Omega[..., None, :]) / np.maximum(sin_phi, 1e-9)
-
-
-WIDEN_GAP_SHARE = 0.5     # the widening takes at most this share of the gap to a cone's barrier
-
-
-def blind_widening(sc, Omega, blind, widening_max, theta_b=None):
-    """How much wider (rad) the barrier's cones are for a loop blind for ``blind`` seconds (one
-    per run of a batch): what the sensor travels towards each cone in that time at its present
-    approach rate, at most widening_max and, given the barrier's half-angles theta_b, at most
-    WIDEN_GAP_SHARE of the sensor's gap to each: the barrier is evaluated where the sensor is
-    heading, but never at or past its edge, where a widened cone suddenly round the sensor would
-    kick it with the barrier's strongest field (a 19 N m yaw command in a campaign run).
-    """
-    travel = approach_rates(sc, Omega) * np.asarray(blind)[..., None]
-    if theta_b is not None:
-        gap = np.arccos(np.clip(sc[..., 0], -1.0, 1.0)) - theta_b
-        travel = np.minimum(travel, WIDEN_GAP_SHARE * gap)
-    return np.clip(travel, 0.0, widening_max)
-
-
-class LinearMap:
-    """``linear_terms`` as one matrix product, ``L vec(R) + y0``: exact, since the terms are affine
-    in R, and built at configuration time (a new set point or configuration) by evaluating
-    ``linear_terms`` itself on the basis E_jk, so each formula still lives in one place. The hot
-    path then gets A, e_RA, every cone's terms and M_g from one small matrix-vector product
-    instead of a dozen numpy calls (docs/benchmarks.md, "Benchmarks").
-    """
-
-    def __init__(self, R_d, config):
-        lead = np.broadcast_shapes(R_d.shape[:-2], config.cones.V.shape[:-2])     # the batch
-        self.y0 = linear_terms(np.zeros((3, 3)), R_d, config)
-        basis = _BASIS.reshape((9,) + (1,) * len(lead) + (3, 3))
-        terms = linear_terms(basis, R_d, config) - self.y0
-        self.L = np.ascontiguousarray(np.moveaxis(terms, 0, -1))
-        self.n_cones = len(config.cones)
-
-    def __call__(self, R):
-        """The terms y = linear_terms(R, R_d, config), to rounding."""
-        return matvec(self.L, R.reshape(R.shape[:-2] + (9,))) + self.y0
 
 
 class AttitudeController:
@@ -373,123 +283,3 @@ class StepTerms(NamedTuple):
     cones: object        # ConeEval: the cones at R (widened by the blind time, if any)
     M_g: np.ndarray      # the model's gravity moment
     W: object            # the regressor W(R) (None for the constant model, W = I)
-
-
-def paper_law(controller, R, Omega, dt, adapt, blind):
-    """The paper's law (Kulumani, Poole & Lee): the configuration error carries every cone's
-    log barrier, the cones widened by the blind time (docs/safety.md, "Delay").
-    """
-    terms = controller.terms(R, Omega, blind)
-    psi, e_R = with_cones(terms.A, terms.e_RA, terms.cones)
-    return controller.moment(R, Omega, dt, adapt, terms, psi, e_R)
-
-
-def geometric_law(controller, R, Omega, dt, adapt, blind):
-    """Lee's geometric controller on SO(3) with the same gains and no barrier: the attractive
-    error alone (the baseline that shows what the barrier buys). The cones are still evaluated,
-    so margins and violations are reported.
-    """
-    terms = controller.terms(R, Omega)
-    return controller.moment(R, Omega, dt, adapt, terms, terms.A[..., 0], terms.e_RA,
-                             barrier=False)
-
-
-def pointing_cbf(controller, R, Omega, terms, delta_bar):
-    """Each cone as a pointing constraint of relative degree 2, as the rows of A u >= beta.
-
-    h_i = cos(theta_i + guard) - (R^T v_i) . r >= 0 (the sensor outside the guarded cone). With
-    b_i = R^T v_i and c_i = b_i x r: b_i' = b_i x Omega, so h_i' = c_i . Omega and
-    h_i'' = ((b_i x Omega) x r) . Omega + c_i . Omega', Omega' = J^-1 (u + f) with f = M_g +
-    W Delta_bar - Omega x J Omega the model's moment besides u. The exponential CBF condition
-    h'' + 2 lambda h' + lambda^2 h >= 0 (a double pole at -lambda, ``cbf_rate``) is then linear in
-    u: a_i . u >= beta_i with a_i = J^-1 c_i. Returns (A (..., n, 3), beta (..., n), h, h').
-    """
-    cfg = controller.config
-    cones = cfg.cones
-    ev = terms.cones
-    b = so3.matmul(cones.V, R)                                     # rows R^T v_i
-    c = ev.cross
-    h = cones.cos_theta - ev.s
-    h_dot = so3.dot(c, Omega[..., None, :])
-    c_dot = cross(cross(b, Omega[..., None, :]), np.broadcast_to(cones.r, b.shape))
-    W = terms.W
-    f = (terms.M_g + (delta_bar if W is None else matvec(W, delta_bar))
-         - cross(Omega, matvec(cfg.J, Omega)))
-    A = so3.matmul(c, controller.J_inv)                            # J symmetric: rows (J^-1 c_i)^T
-    lam = cfg.cbf_rate
-    beta = -(so3.dot(c_dot, Omega[..., None, :]) + so3.dot(A, f[..., None, :])
-             + 2.0 * lam * h_dot + lam * lam * h)
-    return A, beta, h, h_dot
-
-
-_SUBSETS = {}
-
-
-def _active_sets(n):
-    """The nonempty sets of at most 3 of n constraints (a moment has 3 components), as index
-    tuples, smallest first.
-    """
-    if n not in _SUBSETS:
-        _SUBSETS[n] = [S for k in (1, 2, 3) for S in itertools.combinations(range(n), k)]
-    return _SUBSETS[n]
-
-
-def closest_admissible(u0, A, beta):
-    """The moment closest to u0 with A u >= beta (the QP min |u - u0|^2), exactly, by its active
-    set: with none active u0 if it is admissible; else of the sets of at most 3 constraints held
-    with equality, u = u0 + A_S^T lambda, (A_S A_S^T) lambda = beta_S - A_S u0, the admissible
-    one with lambda >= 0 closest to u0 (one cone: the closed form u0 + max(0, beta - a.u0) a /
-    |a|^2). Where no set is admissible (constraints that contradict each other), the most
-    violated constraint alone. A batch solves each run on its own.
-    """
-    tol = 1e-9
-    slack = so3.matvec(A, u0) - beta
-    ok = np.all(slack >= -tol, axis=-1)
-    if np.all(ok):
-        return u0
-    n = A.shape[-2]
-    best, best_cost = np.array(u0, dtype=float, copy=True), np.where(ok, 0.0, np.inf)
-    for S in _active_sets(n):
-        A_S = A[..., S, :]
-        G = A_S @ np.swapaxes(A_S, -1, -2)
-        rhs = -slack[..., S]
-        det = np.linalg.det(G)
-        usable = np.abs(det) > 1e-12
-        G = np.where(usable[..., None, None], G, np.eye(len(S)))
-        lam = np.linalg.solve(G, rhs[..., None])[..., 0]
-        u = u0 + np.einsum('...ki,...k->...i', A_S, lam)
-        s_all = so3.matvec(A, u) - beta
-        good = usable & np.all(lam >= -tol, axis=-1) & np.all(s_all >= -1e-7, axis=-1)
-        cost = np.where(good, so3.dot(u - u0, u - u0), np.inf)
-        better = cost < best_cost
-        best = np.where(better[..., None], u, best)
-        best_cost = np.where(better, cost, best_cost)
-    stuck = ~np.isfinite(best_cost)
-    if np.any(stuck):                     # the most violated constraint alone
-        i = np.argmin(slack, axis=-1)
-        a = np.take_along_axis(A, i[..., None, None], axis=-2)[..., 0, :]
-        gap = -np.take_along_axis(slack, i[..., None], axis=-1)[..., 0]
-        u = u0 + (a.T * (np.maximum(gap, 0.0) / np.maximum(so3.dot(a, a), 1e-12))).T
-        best = np.where(stuck[..., None], u, best)
-    return best
-
-
-def cbf_law(controller, R, Omega, dt, adapt, blind):
-    """The geometric baseline filtered by a control-barrier-function QP on SO(3): the moment
-    closest to Lee's geometric controller's that keeps every cone's pointing constraint
-    (``pointing_cbf``) with a double pole at -``cbf_rate``. The estimate adapts as the
-    baseline's.
-    """
-    terms = controller.terms(R, Omega)
-    out = controller.moment(R, Omega, dt, adapt, terms, terms.A[..., 0], terms.e_RA,
-                            barrier=False)
-    if not len(controller.config.cones):
-        return out
-    # (with the estimate the moment used, before it advanced)
-    A, beta, _, _ = pointing_cbf(controller, R, Omega, terms, out.delta_bar)
-    return out._replace(u=closest_admissible(out.u, A, beta))
-
-
-# The control laws, one signature: law(controller, R, Omega, dt, adapt, blind) -> ControlOutput.
-# The ``law`` parameter names one; a new law is a function and a row here, not a new loop.
-LAWS = {'paper': paper_law, 'geometric': geometric_law, 'cbf': cbf_law}

@@ -15,6 +15,7 @@ from typing import NamedTuple, Optional
 
 import numpy as np
 
+NAME = 'geoctl_ros: controller'     # the controller's DiagnosticStatus name
 # Diagnostics levels (the values of diagnostic_msgs/DiagnosticStatus).
 OK, WARN, ERROR = 0, 1, 2
 FAILSAFE = 'failsafe'          # how the state of a vehicle that failed safe begins

@@ -111,6 +111,19 @@ def dot(a, b):
     return out
 
 
+def unit(v):
+    """v scaled to unit length (v not zero)."""
+    return v / math.sqrt(float(v @ v))
+
+
+def direction(axis, angle, azimuth):
+    """The unit vector at angle from the unit vector axis, at azimuth round it."""
+    e1 = unit(cross(axis, _I3[int(np.argmin(np.abs(axis)))]))
+    e2 = cross(axis, e1)
+    return (math.cos(angle) * axis
+            + math.sin(angle) * (math.cos(azimuth) * e1 + math.sin(azimuth) * e2))
+
+
 def transpose(M):
     """M^T for a matrix, or for each of a stack of them (a view)."""
     return M.swapaxes(-1, -2)

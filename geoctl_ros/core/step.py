@@ -21,7 +21,7 @@ def blind_time(delay, ages, dt, held):
     """How long the loop is blind beyond its nominal period (s; one per run of a batch): the age
     of its older input (measurement_delay plus the ages from capture) plus how much later than
     the period this step comes. The barrier widens each cone by the sensor's travel towards it
-    over this time (``core.control.blind_widening``); it is 0 for fresh inputs on time.
+    over this time (``core.errors.blind_widening``); it is 0 for fresh inputs on time.
     """
     age = delay + np.maximum(ages[0], ages[1])
     if held is None or held - dt < ON_TIME_S:

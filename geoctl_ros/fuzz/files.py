@@ -19,6 +19,7 @@ from geoctl_ros.fuzz.hostile import (
     run_property,
 )
 from geoctl_ros.params import ConfigError, load_parameter_file
+from geoctl_ros.params.topics import BY_NAME
 from geoctl_ros.records import bag
 from geoctl_ros.sil.rosenv import config_dir
 from geoctl_ros.sim import scenario
@@ -86,8 +87,8 @@ def _sample_bags(folder):
     out = []
     for storage in ('mcap', 'sqlite3'):
         path = os.path.join(folder, storage)
-        w = bag.BagWriter(path, [bag.BY_NAME['/sim/true_pose'],
-                                 bag.BY_NAME['/configuration_error']], storage)
+        w = bag.BagWriter(path, [BY_NAME['/sim/true_pose'],
+                                 BY_NAME['/configuration_error']], storage)
         for i in range(200):
             w.put('/sim/true_pose', 10 ** 18 + i * 10 ** 7, pose)
             w.put('/configuration_error', 10 ** 18 + i * 10 ** 7, psi)

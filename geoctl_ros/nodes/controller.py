@@ -19,6 +19,7 @@ from std_msgs.msg import Float64, Float64MultiArray, UInt16MultiArray, UInt32Mul
 from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core import so3
+from geoctl_ros.core.diagnostics import NAME as DIAGNOSTICS_NAME
 from geoctl_ros.core.diagnostics import failsafe
 from geoctl_ros.core.gains import gain_condition
 from geoctl_ros.core.loop import ControlLoop, step_period
@@ -48,7 +49,7 @@ from geoctl_ros.params import (
 )
 
 DIAGNOSTICS_PERIOD = 0.5      # s: the fixed statistics window
-STATUS_NAME = 'geoctl_ros: controller'
+STATUS_NAME = DIAGNOSTICS_NAME
 
 
 def build(values):

@@ -73,18 +73,8 @@ def time_msg(seconds):
     return Time(sec=sec, nanosec=min(int(round((seconds - sec) * 1e9)), 999999999))
 
 
-def quaternion(msg):
-    """geometry_msgs/Quaternion -> (x, y, z, w)."""
-    return (msg.x, msg.y, msg.z, msg.w)
-
-
 def set_quaternion(msg, q):
     msg.x, msg.y, msg.z, msg.w = (float(v) for v in q)
-
-
-def vector(msg):
-    """geometry_msgs/Vector3 -> (x, y, z)."""
-    return (msg.x, msg.y, msg.z)
 
 
 def set_vector(msg, v):

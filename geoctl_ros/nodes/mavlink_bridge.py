@@ -26,6 +26,7 @@ from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core.diagnostics import ERROR, WARN
+from geoctl_ros.core.diagnostics import NAME as CONTROLLER_STATUS
 from geoctl_ros.mavlink import health, signing
 from geoctl_ros.mavlink.link import Link, encoder
 from geoctl_ros.mavlink.params import BY_ROS, TABLE, to_ros
@@ -40,10 +41,10 @@ from geoctl_ros.mavlink.vehicle import (
 )
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.autopilot_imu import AutopilotImu
-from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
-from geoctl_ros.nodes.conversions import python_value, quaternion, status_of, vector
+from geoctl_ros.nodes.conversions import python_value, status_of
 from geoctl_ros.nodes.runtime import Periodic, RefusalLog, spin
 from geoctl_ros.params import MAVLINK, ConfigError, settings
+from geoctl_ros.records.bag import quaternion, vector
 
 GCS_TIMEOUT = 3.0          # s without a ground-station heartbeat: "no ground station"
 TIMESTAMP_LEAD = 10 * 100_000   # signing units saved ahead of the last sent (10 s of clock):

@@ -23,6 +23,7 @@ from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.controller_params import ControllerParameters
 from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.params import RECORD, ConfigError, settings
+from geoctl_ros.params.topics import BY_NAME, CONTROLLER_PARAMETERS
 from geoctl_ros.records import bag
 
 STATUS_NAME = 'geoctl_ros: record'
@@ -50,7 +51,7 @@ class Recorder(Node):
         super().__init__('record', **kwargs)
         cfg = settings(ros_params.load(self, RECORD), 'record.')
         self.path = cfg.path or default_path()
-        topics = [bag.BY_NAME[name] for name in cfg.topics]
+        topics = [BY_NAME[name] for name in cfg.topics]
         parent = os.path.dirname(os.path.abspath(self.path))
         os.makedirs(parent, exist_ok=True)
         try:
@@ -80,7 +81,7 @@ class Recorder(Node):
         return getattr(importlib.import_module(package + '.msg'), name)
 
     def _store_controller_parameters(self, values):
-        self.writer.put(bag.CONTROLLER_PARAMETERS.name, self.get_clock().now().nanoseconds,
+        self.writer.put(CONTROLLER_PARAMETERS.name, self.get_clock().now().nanoseconds,
                         serialize_message(String(data=yaml.safe_dump(values))))
         self.get_logger().info("stored the controller's %d cone and sensor parameters"
                                % len(values))

@@ -32,9 +32,11 @@ from geoctl_ros.core.safety import motor_commands_problem
 from geoctl_ros.esc.protocol import current_raw, decode
 from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.nodes import qos, ros_params
-from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg, vector
+from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg
 from geoctl_ros.nodes.runtime import RefusalLog, spin
-from geoctl_ros.params import SIM, ConfigError, settings, testbed_sim
+from geoctl_ros.params import SIM, ConfigError, settings
+from geoctl_ros.records.bag import vector
+from geoctl_ros.sim.build import testbed_sim
 from geoctl_ros.sim.testbed import EscWatchdog
 
 LATE = 0.05     # s behind real time before the sim warns

@@ -6,7 +6,7 @@ Where each piece lives (the names below are this package's public API):
     validate.py  ``check_value`` (ROS-strict types and checks) and ``resolve`` (a node's values)
     files.py     ROS 2 parameter files: ``load_parameter_file``, ``node_overrides``
     build.py     objects from resolved values: ``controller_setup``, ``mixer``, ``airframe``,
-                 ``testbed_sim``, ``cone_set``, ... with the checks that span parameters
+                 ``cone_set``, ... with the checks that span parameters
     readme.py    the parameter table (docs/parameters.md) (``python -m geoctl_ros.params.readme``)
 
 Nothing here imports rclpy: the nodes (``geoctl_ros.nodes.ros_params``) and the headless runner
@@ -19,10 +19,8 @@ from geoctl_ros.params.build import (
                                      controller_config,
                                      controller_setup,
                                      mixer,
-                                     plant_config,
                                      setpoint_rotation,
                                      settings,
-                                     testbed_sim,
 )
 from geoctl_ros.params.files import (
     flatten,
@@ -64,5 +62,5 @@ __all__ = ['BOTH', 'BY_NAME', 'CHANGE_WHILE_ARMED', 'CONE_KEY', 'CONE_SCHEMA', '
            'airframe', 'change_problem', 'check_value', 'cone_param',
            'configuration_given', 'cone_set',
            'controller_config', 'controller_setup', 'flatten', 'load_parameter_file', 'mixer',
-           'node_overrides', 'plant_config', 'resolve', 'write_parameter_file',
-           'schema_for', 'setpoint_rotation', 'settings', 'testbed_sim']
+           'node_overrides', 'resolve', 'write_parameter_file',
+           'schema_for', 'setpoint_rotation', 'settings']

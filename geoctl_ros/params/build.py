@@ -17,8 +17,6 @@ from geoctl_ros.core.loop import LoopSettings
 from geoctl_ros.core.motors import Mixer, ThrustCurve
 from geoctl_ros.core.safety import SetpointSchedule, quaternion_problem
 from geoctl_ros.params.schema import ConfigError
-from geoctl_ros.sim.plant import Disturbance, PlantConfig
-from geoctl_ros.sim.testbed import RotorActuator, TestbedSim
 
 
 def cone_set(values):
@@ -189,29 +187,3 @@ def mixer(values):
     collective = values['collective_thrust'] or values['mass'] * float(
         np.linalg.norm(values['gravity']))
     return Mixer(allocator, curve, collective, values['motor_lag_compensation'])
-
-
-def testbed_sim(values):
-    """The TestbedSim of resolved sim parameters, at its initial state."""
-    actuator = None
-    if values['actuation'] == 'rotors':
-        geometry, curve, failed = airframe(values)
-        actuator = RotorActuator(geometry, values['cog_offset'], curve,
-                                 values['motor_time_constant'], failed)
-    return TestbedSim(plant_config(values), so3.quat_to_rot(values['initial_attitude']),
-                      values['initial_angular_velocity'], actuator,
-                      math.radians(values['noise.attitude_deg']),
-                      values['noise.angular_velocity'], values['noise.gyro_bias'],
-                      values['noise.seed'])
-
-
-def plant_config(values):
-    """PlantConfig from resolved sim parameters."""
-    return PlantConfig(
-        inertia=values['inertia'].reshape(3, 3), mass=values['mass'],
-        cog_offset=values['cog_offset'], gravity=values['gravity'],
-        disturbance=Disturbance(constant=values['disturbance.constant'],
-                                amplitude=values['disturbance.amplitude'],
-                                frequency=values['disturbance.frequency']))
-
-

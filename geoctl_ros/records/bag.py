@@ -25,42 +25,11 @@ from rosbags.interfaces import (
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from geoctl_ros.params.topics import CONTROLLER_PARAMETERS
+
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 STORAGES = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
 CHECKPOINT_S = 1.0           # what is written is on disk (a chunk closed, a commit) this often
-
-
-class Topic(NamedTuple):
-    """A recorded topic: its name (absolute), type and the QoS its publisher offers."""
-
-    name: str
-    type: str
-    reliable: bool
-    transient_local: bool = False
-    depth: int = 1
-
-
-# The package's topics, as the nodes publish them at the root namespace (qos.py's profiles).
-TOPICS = (
-    Topic('/pose', 'geometry_msgs/msg/PoseStamped', False, depth=5),
-    Topic('/imu', 'sensor_msgs/msg/Imu', False, depth=5),
-    Topic('/motor_commands', 'std_msgs/msg/Float64MultiArray', True),
-    Topic('/control_wrench', 'geometry_msgs/msg/WrenchStamped', True),
-    Topic('/attitude_error', 'geometry_msgs/msg/Vector3Stamped', False),
-    Topic('/angular_velocity_error', 'geometry_msgs/msg/Vector3Stamped', False),
-    Topic('/configuration_error', 'std_msgs/msg/Float64', False),
-    Topic('/disturbance_estimate', 'std_msgs/msg/Float64MultiArray', False),
-    Topic('/cone_margins', 'std_msgs/msg/Float64MultiArray', False),
-    Topic('/active_setpoint', 'geometry_msgs/msg/QuaternionStamped', True, True),
-    Topic('/attitude_setpoint', 'geometry_msgs/msg/QuaternionStamped', True, depth=10),
-    Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', True, depth=10),
-    Topic('/sim/true_pose', 'geometry_msgs/msg/PoseStamped', False),
-    Topic('/view/markers', 'visualization_msgs/msg/MarkerArray', False),
-)
-BY_NAME = {t.name: t for t in TOPICS}
-# Written by the recorder itself, not heard on DDS: the controller's cone and sensor parameters
-# (a YAML mapping), so that a bag cut short still knows its cones.
-CONTROLLER_PARAMETERS = Topic('/record/controller_parameters', 'std_msgs/msg/String', True, True)
 
 
 def _qos(topic):
@@ -258,3 +227,14 @@ def _mend_mcap(src, dst):
         f.write(bytes([0x0F]) + (4).to_bytes(8, 'little') + bytes(4))           # data end
         f.write(bytes([0x02]) + (20).to_bytes(8, 'little') + bytes(20))         # footer
         f.write(_MCAP_MAGIC)
+
+
+# Field readers of a message, recorded (rosbags' classes) or live (rclpy's): the same fields
+def quaternion(msg):
+    """geometry_msgs/Quaternion -> (x, y, z, w)."""
+    return (msg.x, msg.y, msg.z, msg.w)
+
+
+def vector(msg):
+    """geometry_msgs/Vector3 -> (x, y, z)."""
+    return (msg.x, msg.y, msg.z)

@@ -19,10 +19,9 @@ import numpy as np
 import yaml
 
 from geoctl_ros.core import so3
+from geoctl_ros.core.diagnostics import NAME as CONTROLLER_STATUS
 from geoctl_ros.core.diagnostics import from_values, state_kind
 from geoctl_ros.core.stats import settle_time
-from geoctl_ros.nodes.controller import STATUS_NAME as CONTROLLER_STATUS
-from geoctl_ros.nodes.conversions import quaternion, vector
 from geoctl_ros.params import (
     CONTROLLER,
     SCENARIO,
@@ -32,7 +31,9 @@ from geoctl_ros.params import (
     node_overrides,
     resolve,
 )
+from geoctl_ros.params.topics import BY_NAME, CONTROLLER_PARAMETERS, TOPICS
 from geoctl_ros.records import bag
+from geoctl_ros.records.bag import quaternion, vector
 from geoctl_ros.sim import scenario
 
 
@@ -82,12 +83,12 @@ def load_flight(path, params_file=None):
     """The Flight recorded in the bag at path; raises ValueError (not a bag) or ConfigError."""
     topics = bag.read_bag(path)
     present = {k for k, v in topics.items() if v}
-    if not present & set(bag.BY_NAME):
+    if not present & set(BY_NAME):
         raise ValueError('%s has none of the topics geoctl_ros publishes (it has %s)' % (
             path, ', '.join(sorted(present)) or 'no messages'))
     first = [v[0].t for v in topics.values() if v]
     t0 = min(first) if first else 0.0
-    cones = _cones_of(topics.get(bag.CONTROLLER_PARAMETERS.name), params_file)
+    cones = _cones_of(topics.get(CONTROLLER_PARAMETERS.name), params_file)
     source = next((s for s in ('/sim/true_pose', '/pose') if s in present), '')
     att = topics.get(source, [])
     att_t = np.array([m.t - t0 for m in att])
@@ -127,7 +128,7 @@ def load_flight(path, params_file=None):
         failsafe_t=failsafe_t,
         states=[(t, f.state) for t, *_, f in figures],
         last_figures=figures[-1][3] if figures else None,
-        missing=[t.name for t in bag.TOPICS if t.name not in present],
+        missing=[t.name for t in TOPICS if t.name not in present],
         setpoints=[(m.t - t0, quaternion(m.msg.quaternion))
                    for m in topics.get('/active_setpoint', [])])
 

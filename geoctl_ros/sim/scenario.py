@@ -20,8 +20,8 @@ from geoctl_ros.params import (
     load_parameter_file,
     node_overrides,
     resolve,
-    testbed_sim,
 )
+from geoctl_ros.sim.build import testbed_sim
 from geoctl_ros.sim.closed_loop import fly
 
 

@@ -1,0 +1,136 @@
+"""The control laws, one signature: ``law(controller, R, Omega, dt, adapt, blind) ->
+ControlOutput`` (``geoctl_ros.core.control``); the ``law`` parameter names a row of ``LAWS``.
+
+- ``paper``: the paper's law, the cones' log barrier in the configuration error;
+- ``geometric``: Lee's geometric controller with the same gains and no barrier (the baseline);
+- ``cbf``: the geometric baseline filtered by a control-barrier-function QP, each cone a pointing
+  constraint of relative degree 2, solved exactly by its active set every step.
+"""
+import itertools
+
+import numpy as np
+
+from geoctl_ros.core import so3
+from geoctl_ros.core.errors import with_cones
+from geoctl_ros.core.so3 import cross, matvec
+
+
+def paper_law(controller, R, Omega, dt, adapt, blind):
+    """The paper's law (Kulumani, Poole & Lee): the configuration error carries every cone's
+    log barrier, the cones widened by the blind time (docs/safety.md, "Delay").
+    """
+    terms = controller.terms(R, Omega, blind)
+    psi, e_R = with_cones(terms.A, terms.e_RA, terms.cones)
+    return controller.moment(R, Omega, dt, adapt, terms, psi, e_R)
+
+
+def geometric_law(controller, R, Omega, dt, adapt, blind):
+    """Lee's geometric controller on SO(3) with the same gains and no barrier: the attractive
+    error alone (the baseline that shows what the barrier buys). The cones are still evaluated,
+    so margins and violations are reported.
+    """
+    terms = controller.terms(R, Omega)
+    return controller.moment(R, Omega, dt, adapt, terms, terms.A[..., 0], terms.e_RA,
+                             barrier=False)
+
+
+def pointing_cbf(controller, R, Omega, terms, delta_bar):
+    """Each cone as a pointing constraint of relative degree 2, as the rows of A u >= beta.
+
+    h_i = cos(theta_i + guard) - (R^T v_i) . r >= 0 (the sensor outside the guarded cone). With
+    b_i = R^T v_i and c_i = b_i x r: b_i' = b_i x Omega, so h_i' = c_i . Omega and
+    h_i'' = ((b_i x Omega) x r) . Omega + c_i . Omega', Omega' = J^-1 (u + f) with f = M_g +
+    W Delta_bar - Omega x J Omega the model's moment besides u. The exponential CBF condition
+    h'' + 2 lambda h' + lambda^2 h >= 0 (a double pole at -lambda, ``cbf_rate``) is then linear in
+    u: a_i . u >= beta_i with a_i = J^-1 c_i. Returns (A (..., n, 3), beta (..., n), h, h').
+    """
+    cfg = controller.config
+    cones = cfg.cones
+    ev = terms.cones
+    b = so3.matmul(cones.V, R)                                     # rows R^T v_i
+    c = ev.cross
+    h = cones.cos_theta - ev.s
+    h_dot = so3.dot(c, Omega[..., None, :])
+    c_dot = cross(cross(b, Omega[..., None, :]), np.broadcast_to(cones.r, b.shape))
+    W = terms.W
+    f = (terms.M_g + (delta_bar if W is None else matvec(W, delta_bar))
+         - cross(Omega, matvec(cfg.J, Omega)))
+    A = so3.matmul(c, controller.J_inv)                            # J symmetric: rows (J^-1 c_i)^T
+    lam = cfg.cbf_rate
+    beta = -(so3.dot(c_dot, Omega[..., None, :]) + so3.dot(A, f[..., None, :])
+             + 2.0 * lam * h_dot + lam * lam * h)
+    return A, beta, h, h_dot
+
+
+_SUBSETS = {}
+
+
+def _active_sets(n):
+    """The nonempty sets of at most 3 of n constraints (a moment has 3 components), as index
+    tuples, smallest first.
+    """
+    if n not in _SUBSETS:
+        _SUBSETS[n] = [S for k in (1, 2, 3) for S in itertools.combinations(range(n), k)]
+    return _SUBSETS[n]
+
+
+def closest_admissible(u0, A, beta):
+    """The moment closest to u0 with A u >= beta (the QP min |u - u0|^2), exactly, by its active
+    set: with none active u0 if it is admissible; else of the sets of at most 3 constraints held
+    with equality, u = u0 + A_S^T lambda, (A_S A_S^T) lambda = beta_S - A_S u0, the admissible
+    one with lambda >= 0 closest to u0 (one cone: the closed form u0 + max(0, beta - a.u0) a /
+    |a|^2). Where no set is admissible (constraints that contradict each other), the most
+    violated constraint alone. A batch solves each run on its own.
+    """
+    tol = 1e-9
+    slack = so3.matvec(A, u0) - beta
+    ok = np.all(slack >= -tol, axis=-1)
+    if np.all(ok):
+        return u0
+    n = A.shape[-2]
+    best, best_cost = np.array(u0, dtype=float, copy=True), np.where(ok, 0.0, np.inf)
+    for S in _active_sets(n):
+        A_S = A[..., S, :]
+        G = A_S @ np.swapaxes(A_S, -1, -2)
+        rhs = -slack[..., S]
+        det = np.linalg.det(G)
+        usable = np.abs(det) > 1e-12
+        G = np.where(usable[..., None, None], G, np.eye(len(S)))
+        lam = np.linalg.solve(G, rhs[..., None])[..., 0]
+        u = u0 + np.einsum('...ki,...k->...i', A_S, lam)
+        s_all = so3.matvec(A, u) - beta
+        good = usable & np.all(lam >= -tol, axis=-1) & np.all(s_all >= -1e-7, axis=-1)
+        cost = np.where(good, so3.dot(u - u0, u - u0), np.inf)
+        better = cost < best_cost
+        best = np.where(better[..., None], u, best)
+        best_cost = np.where(better, cost, best_cost)
+    stuck = ~np.isfinite(best_cost)
+    if np.any(stuck):                     # the most violated constraint alone
+        i = np.argmin(slack, axis=-1)
+        a = np.take_along_axis(A, i[..., None, None], axis=-2)[..., 0, :]
+        gap = -np.take_along_axis(slack, i[..., None], axis=-1)[..., 0]
+        u = u0 + (a.T * (np.maximum(gap, 0.0) / np.maximum(so3.dot(a, a), 1e-12))).T
+        best = np.where(stuck[..., None], u, best)
+    return best
+
+
+def cbf_law(controller, R, Omega, dt, adapt, blind):
+    """The geometric baseline filtered by a control-barrier-function QP on SO(3): the moment
+    closest to Lee's geometric controller's that keeps every cone's pointing constraint
+    (``pointing_cbf``) with a double pole at -``cbf_rate``. The estimate adapts as the
+    baseline's.
+    """
+    terms = controller.terms(R, Omega)
+    out = controller.moment(R, Omega, dt, adapt, terms, terms.A[..., 0], terms.e_RA,
+                            barrier=False)
+    if not len(controller.config.cones):
+        return out
+    # (with the estimate the moment used, before it advanced)
+    A, beta, _, _ = pointing_cbf(controller, R, Omega, terms, out.delta_bar)
+    return out._replace(u=closest_admissible(out.u, A, beta))
+
+
+# The control laws, one signature: law(controller, R, Omega, dt, adapt, blind) -> ControlOutput.
+# The ``law`` parameter names one; a new law is a function and a row here, not a new loop.
+LAWS = {'paper': paper_law, 'geometric': geometric_law, 'cbf': cbf_law}
+

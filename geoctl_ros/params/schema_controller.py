@@ -1,0 +1,120 @@
+"""The controller's own parameters: gains, law, model, envelope, set points, loop timing."""
+
+from geoctl_ros.core.control import DISTURBANCE_MODELS
+from geoctl_ros.core.laws import LAWS
+from geoctl_ros.params.param import (
+    BOTH,
+    CONTROLLER,
+    diagonal_weights,
+    nonzero_vector,
+    positive,
+    unit_quaternion,
+)
+from geoctl_ros.params.param import declare as _p
+
+PARAMS = [
+    # Controller gains and shape (paper notation).
+    _p('k_R', 'double', 0.4, 'N m', 'attitude gain k_R', CONTROLLER, check=positive,
+       lo=0.001, hi=10.0),
+    _p('k_Omega', 'double', 0.7, 'N m s', 'angular-velocity gain k_Omega', CONTROLLER,
+       check=positive, lo=0.001, hi=10.0),
+    _p('k_Delta', 'double', 0.05, '-', 'adaptation gain k_Delta', CONTROLLER, check=positive,
+       lo=1e-06, hi=10.0),
+    _p('c', 'double', 0.1, '1/s', 'weight of e_R in the adaptive law (Prop. 5)', CONTROLLER,
+       check=positive, lo=0.0001, hi=100.0),
+    _p('alpha', 'double', 8.0, '-', 'barrier shape alpha (larger: barrier acts closer to a cone)',
+       CONTROLLER, check=positive, lo=0.1, hi=1000.0),
+    _p('G', 'double_array', [0.9, 1.1, 1.0], '-',
+       'diagonal weights g1, g2, g3 of the attitude error A (distinct, positive)', CONTROLLER,
+       length=3, check=diagonal_weights, lo=0.0, hi=10.0),
+    _p('law', 'string', 'paper', '-',
+       'the control law: paper (the barrier of Kulumani, Poole & Lee), geometric (the same '
+       'gains, no barrier: a baseline that does not keep the cones) or cbf (geometric, filtered '
+       'by a control-barrier-function QP per cone)', CONTROLLER, choices=tuple(LAWS)),
+    _p('cbf_rate', 'double', 4.0, '1/s',
+       "the cbf law: double pole lambda of h'' + 2 lambda h' + lambda^2 h >= 0 for each cone",
+       CONTROLLER, check=positive, lo=0.1, hi=100.0),
+    _p('adaptive', 'bool', True, '-', 'run the adaptive law (else Delta_bar stays 0)', CONTROLLER),
+    _p('disturbance_model', 'string', 'constant', '-',
+       'regressor W: constant (W = I) or constant+cog (also estimates the error in m*rho)',
+       CONTROLLER, choices=tuple(DISTURBANCE_MODELS)),
+    _p('delta_bar_max', 'double', 1.0, 'N m',
+       'bound on |constant disturbance estimate| (projection); 0 = unbounded', CONTROLLER,
+       lo=0.0, hi=10.0),
+    _p('cog_estimate_max', 'double', 0.1, 'kg m',
+       'bound on |m*rho estimate| of the constant+cog model; 0 = unbounded', CONTROLLER,
+       lo=0.0, hi=1.0),
+    _p('gravity_compensation', 'bool', True, '-',
+       'subtract the modelled gravity moment of the centre-of-mass offset', CONTROLLER),
+    _p('sensor_axis', 'double_array', [1.0, 0.0, 0.0], '-',
+       'body-fixed sensor axis r (normalised)', CONTROLLER, length=3, check=nonzero_vector,
+       lo=-1000.0, hi=1000.0),
+    _p('measurement_delay', 'double', 0.0, 's',
+       'latency of the pose and imu chain from capture to receipt, where the stamps do not give '
+       'it (age_from_stamps); each tick predicts the measurements forward by their age with the '
+       'model and the moments commanded since (docs/safety.md, "Delay")', CONTROLLER,
+       lo=0.0, hi=0.05),
+    _p('age_from_stamps', 'bool', True, '-',
+       "each input's age from its header stamp against this computer's clock (the motion-capture "
+       'host and the IMU driver must stamp capture time on a clock synchronised with this one, '
+       'e.g. by chrony or PTP, to a few ms); a stamp ahead of this clock by more than 10 ms or '
+       'older than 0.5 s at receipt counts as measurement_delay old instead (docs/safety.md, '
+       '"Delay"); false: always measurement_delay', CONTROLLER),
+    _p('cone_guard_deg', 'double', 0.0, 'deg',
+       'the barrier acts on every cone widened by this (margins and violations are still those of '
+       'the real cones; set points must clear the widened cone)', CONTROLLER, lo=0.0, hi=10.0),
+    _p('blind_guard_max_deg', 'double', 10.0, 'deg',
+       'the most the barrier widens a cone for a blind loop (inputs old, or steps later than the '
+       'control period): each cone is widened by what the sensor travels towards it in that '
+       'time (docs/safety.md, "Delay"); 0 = never', CONTROLLER, lo=0.0, hi=30.0),
+    _p('motor_lag_compensation', 'double', 0.0, 's',
+       "the motors' thrust time constant the mixer compensates (commands the thrust that brings "
+       'a model of the lagged rotors to the allocated thrust by the next step; '
+       'docs/campaigns.md, "Safety campaign"); 0 = none', CONTROLLER, lo=0.0, hi=0.5),
+    _p('unmodelled_moment_max', 'double', 0.0, 'N m',
+       'the moment the controller may have to hold without having learnt it (disturbance plus '
+       "model errors); set points whose cones' barriers cannot hold it near the goal are refused "
+       '(docs/campaigns.md, "Safety campaign"); 0 = no check', CONTROLLER, lo=0.0, hi=10.0),
+    _p('barrier_floor_deg', 'double', 0.25, 'deg',
+       'within this angle of a cone boundary the barrier is extended linearly (saturated)',
+       CONTROLLER, check=positive, lo=0.01, hi=10.0),
+    _p('cones.names', 'string_array', [], '-',
+       'names of the forbidden cones; each needs cones.<name>.axis and .half_angle_deg',
+       CONTROLLER),
+    _p('setpoint', 'double_array', [0.0, 0.0, 0.0, 1.0], '-',
+       'desired attitude R_d as a quaternion (x, y, z, w), world frame', CONTROLLER, length=4,
+       check=unit_quaternion, lo=-1.0, hi=1.0),
+    _p('rate_hz', 'double', 100.0, 'Hz', 'control rate', CONTROLLER, lo=1.0, hi=1000.0),
+    _p('allow_default_configuration', 'bool', False, '-',
+       'arm even when started with no parameter file and no override, on these built-in '
+       'defaults (no cones): for deliberate bench use only; otherwise every arm request is '
+       'refused', CONTROLLER),
+    _p('step_on', 'string', 'timer', '-',
+       'what starts a control step: the rate_hz timer, or each accepted imu or pose sample (the '
+       'least latency; set rate_hz to that sample rate: the timer then steps only when no sample '
+       'came for 1.5 periods, so stale inputs still fail safe)', CONTROLLER,
+       choices=('timer', 'imu', 'pose')),
+    _p('pose_timeout', 'double', 0.1, 's', 'pose older than this (by receipt) is stale',
+       CONTROLLER, check=positive, lo=0.001, hi=0.5),
+    _p('imu_timeout', 'double', 0.05, 's', 'angular velocity older than this is stale',
+       CONTROLLER, check=positive, lo=0.001, hi=0.5),
+    _p('pose_ride_through', 'double', 0.5, 's',
+       'a pose gap up to this long is flown through on the gyro-propagated attitude; longer: '
+       'failsafe (0: failsafe at pose_timeout)', CONTROLLER, lo=0.0, hi=1.0),
+    _p('imu_ride_through', 'double', 0.25, 's',
+       'an angular-velocity gap up to this long is flown through on rates from successive poses; '
+       'longer: failsafe (0: failsafe at imu_timeout)', CONTROLLER, lo=0.0, hi=1.0),
+    _p('pose_rate_window', 'double', 0.05, 's',
+       'time between the two poses that give the rate during an angular-velocity gap',
+       CONTROLLER, check=positive, lo=0.001, hi=0.5),
+    _p('max_angular_velocity', 'double', 100.0, 'rad/s',
+       'gyro readings faster than this are refused', CONTROLLER, check=positive,
+       lo=0.1, hi=200.0),
+    _p('setpoint_schedule.times', 'double_array', [], 's',
+       'optional: times after arming at which the scheduled set points take over', CONTROLLER,
+       lo=0.0, hi=3600.0),
+    _p('setpoint_schedule.quaternions', 'double_array', [], '-',
+       'optional: the scheduled set points, 4 values (x, y, z, w) per time', CONTROLLER,
+       lo=-1.0, hi=1.0),
+    _p('frame_id', 'string', 'base_link', '-', 'body frame id on stamped outputs', BOTH),
+]
