@@ -30,12 +30,10 @@ from geoctl_ros.nodes.conversions import (
     armed_state_msg,
     esc_health_of,
     motor_commands_msg,
-    quaternion,
     set_quaternion,
     set_vector,
     stamp_seconds,
     status_msg,
-    vector,
 )
 from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.params import (
@@ -47,6 +45,7 @@ from geoctl_ros.params import (
     controller_setup,
     resolve,
 )
+from geoctl_ros.records.fields import quaternion, vector
 
 DIAGNOSTICS_PERIOD = 0.5      # s: the fixed statistics window
 STATUS_NAME = DIAGNOSTICS_NAME

@@ -44,7 +44,7 @@ from geoctl_ros.nodes.autopilot_imu import AutopilotImu
 from geoctl_ros.nodes.conversions import python_value, status_of
 from geoctl_ros.nodes.runtime import Periodic, RefusalLog, spin
 from geoctl_ros.params import MAVLINK, ConfigError, settings
-from geoctl_ros.records.bag import quaternion, vector
+from geoctl_ros.records.fields import quaternion, vector
 
 GCS_TIMEOUT = 3.0          # s without a ground-station heartbeat: "no ground station"
 TIMESTAMP_LEAD = 10 * 100_000   # signing units saved ahead of the last sent (10 s of clock):

@@ -35,7 +35,7 @@ from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg
 from geoctl_ros.nodes.runtime import RefusalLog, spin
 from geoctl_ros.params import SIM, ConfigError, settings
-from geoctl_ros.records.bag import vector
+from geoctl_ros.records.fields import vector
 from geoctl_ros.sim.build import testbed_sim
 from geoctl_ros.sim.testbed import EscWatchdog
 

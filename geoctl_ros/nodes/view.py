@@ -20,7 +20,7 @@ from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.controller_params import ControllerParameters
 from geoctl_ros.nodes.runtime import RefusalLog, spin
 from geoctl_ros.params import CONTROLLER, VIEW, cone_set, resolve, settings
-from geoctl_ros.records.bag import quaternion
+from geoctl_ros.records.fields import quaternion
 
 CONE_COLOUR = ColorRGBA(r=1.0, g=0.6, b=0.0, a=0.35)
 WARNING_COLOUR = ColorRGBA(r=1.0, g=0.0, b=0.0, a=0.7)

@@ -227,14 +227,3 @@ def _mend_mcap(src, dst):
         f.write(bytes([0x0F]) + (4).to_bytes(8, 'little') + bytes(4))           # data end
         f.write(bytes([0x02]) + (20).to_bytes(8, 'little') + bytes(20))         # footer
         f.write(_MCAP_MAGIC)
-
-
-# Field readers of a message, recorded (rosbags' classes) or live (rclpy's): the same fields
-def quaternion(msg):
-    """geometry_msgs/Quaternion -> (x, y, z, w)."""
-    return (msg.x, msg.y, msg.z, msg.w)
-
-
-def vector(msg):
-    """geometry_msgs/Vector3 -> (x, y, z)."""
-    return (msg.x, msg.y, msg.z)

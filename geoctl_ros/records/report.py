@@ -33,7 +33,7 @@ from geoctl_ros.params import (
 )
 from geoctl_ros.params.topics import BY_NAME, CONTROLLER_PARAMETERS, TOPICS
 from geoctl_ros.records import bag
-from geoctl_ros.records.bag import quaternion, vector
+from geoctl_ros.records.fields import quaternion, vector
 from geoctl_ros.sim import scenario
 
 

@@ -29,10 +29,10 @@ from geoctl_ros.nodes import qos
 from geoctl_ros.nodes.conversions import (
     bridge_report,
     key_values,
-    quaternion,
     stamp_seconds,
     status_of,
 )
+from geoctl_ros.records.fields import quaternion
 from geoctl_ros.sil.rosenv import node_env
 
 
