@@ -12,7 +12,8 @@ from geoctl_ros.core import gaps, so3
 from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.core.control import AttitudeController
 from geoctl_ros.core.diagnostics import ERROR, OK, WARN
-from geoctl_ros.core.loop import NON_FINITE, ControlLoop, step_period
+from geoctl_ros.core.loop import NON_FINITE, ControlLoop
+from geoctl_ros.core.loop_types import step_period
 from geoctl_ros.core.step import ControlTick
 from geoctl_ros.params import CONTROLLER, ConfigError, controller_setup, resolve
 from geoctl_ros.sim import scenario

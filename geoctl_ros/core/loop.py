@@ -4,24 +4,16 @@ The node turns messages into calls of this class and its results into messages; 
 (refuse a sample, refuse to arm, ride through a gap, fail safe, adopt a set point, freeze
 adaptation, the diagnostics level and its reasons) is made here, so it is tested without rclpy.
 """
-from dataclasses import dataclass
-import math
 
 import numpy as np
 
-from geoctl_ros.core import so3
+from geoctl_ros.core import loop_status, preflight, so3
 from geoctl_ros.core.control import AttitudeController, SetpointRejected
 from geoctl_ros.core.diagnostics import (
-    ERROR,
-    OK,
-    WARN,
-    Counts,
-    Figures,
-    Gaps,
-    Status,
     failsafe,
 )
-from geoctl_ros.core.gaps import GYRO, POSE, GapBridge
+from geoctl_ros.core.gaps import GapBridge
+from geoctl_ros.core.loop_types import LoopTick
 from geoctl_ros.core.safety import (
     EscHealth,
     EscStatus,
@@ -32,58 +24,9 @@ from geoctl_ros.core.safety import (
     quaternion_problem,
 )
 from geoctl_ros.core.stats import WindowStats
-from geoctl_ros.core.step import BLIND_BOUND_S, SUSTAINED_BLIND_BOUND_S, ControlTick
+from geoctl_ros.core.step import ControlTick
 
-NEAR_CONE_DEG = 2.0           # a cone margin below this is reported (WARN)
-ARM_RATE_DISAGREE = 0.3      # rad/s (+ half the poses' rate): gyro against poses, at arming
 NON_FINITE = failsafe('non-finite control output')
-
-
-def step_period(since, period):
-    """The dt of a step started by a sample (``step_on``): the time since the last step, within
-    half to twice the control period. A burst of samples must not make a step of almost no time:
-    the mixer's lag compensation would then command the extreme thrust, and the motors would hold
-    it for the whole wait until the next sample.
-    """
-    return min(max(since, 0.5 * period), 2.0 * period)
-
-
-@dataclass(frozen=True)
-class LoopSettings:
-    """The loop's and the node's settings, typed, built once from the parameters at configuration
-    (``geoctl_ros.params.controller_setup``); nothing on the hot path reads the parameter dict.
-    """
-
-    rate_hz: float                 # the control timer
-    step_on: str                   # 'timer', 'pose' or 'imu': what starts a control step
-    pose_timeout: float            # s: a pose older than this is stale
-    pose_ride_through: float       # s: how long a stale pose is ridden through (0: not at all)
-    imu_timeout: float
-    imu_ride_through: float
-    pose_rate_window: float        # s: the poses a rate is differenced from during an imu gap
-    max_angular_velocity: float    # rad/s: an imu sample faster than this is refused
-    measurement_delay: float       # s: the inputs' latency when their stamps do not give it
-    age_from_stamps: bool          # the inputs' ages from their capture stamps (synced clocks)
-    allow_default_configuration: bool   # may arm without a parameter file (the opt-in)
-    frame_id: str                  # the body frame of the published vectors
-    world_frame_id: str
-
-
-@dataclass
-class Tick:
-    """One control tick's results: everything the node publishes and logs."""
-
-    control: object          # ControlOutput, or None before the first pose and rate
-    motors: object           # MotorOutput (zero commands unless armed)
-    armed: bool
-    stamp: object            # stamp of the pose the step used, as offer_pose was given it
-                             # (the node's header stamp, for exact-time matching; or None)
-    pose_receipt: float      # when that pose was received, on the loop's clock (or None)
-    state: str               # the supervisor's state: 'armed', or why not
-    failed: bool             # disarmed by a failsafe
-    sources: tuple           # (attitude source, rate source): POSE/GYRO, or a gap's stand-ins
-    setpoint: np.ndarray     # R_d being flown (the same object until a new one is adopted)
-    bridging: bool = False   # a gap is being ridden through (see geoctl_ros.core.gaps)
 
 
 class ControlLoop:
@@ -114,8 +57,7 @@ class ControlLoop:
         # per diagnostics window: input ages at the ticks, armed ticks saturated / bridging
         self.pose_age = WindowStats()
         self.rate_age = WindowStats()
-        self._window = {'ticks': 0, 'saturated': 0, 'bridging': 0, 'blind_ms': 0,
-                        'armed_ticks': 0, 'steady_blind_ms': 0, 'gain_pct': 100}
+        self.window = loop_status.Window()
         # the sensor inside a cone while armed, latched until the next arming: entries counted,
         # the deepest (cone name, depth deg)
         self.cone_entries = 0
@@ -166,7 +108,8 @@ class ControlLoop:
         self.esc = EscStatus(int(command_max), tuple(EscHealth(e) for e in escs), receipt)
         return None
 
-    def _esc_problem(self, now):
+    def esc_report_problem(self, now):
+        """Why the ESC node's report forbids flight now, or None (no ESC node: None)."""
         return esc_problem(self.esc, now, self.setup.mixer.curve.command_max)
 
     def _delay(self, delay):
@@ -195,37 +138,8 @@ class ControlLoop:
 
     # --- commands ----------------------------------------------------------------------------
     def arm_problems(self, now, extra_problem=None):
-        """Every reason not to arm now (sentences; empty: it may), as a preflight check names
-        them: no configuration given, extra_problem (the caller's, e.g. another publisher of the
-        motor commands), each stale input, and the measured sensor inside a cone or within its
-        guard (the barrier's widening cone_guard_deg plus its floor band barrier_floor_deg).
-        """
-        problems = [p for p in (self.unconfigured, extra_problem, self._esc_problem(now)) if p]
-        problems += [p for p in (s.staleness(now) for s in self.supervisor.streams) if p]
-        if self.Omega is not None:
-            w_poses = self.bridge.pose_rate()
-            # (judged only where the poses resolve the rate: at most 1 rad turned per window)
-            if w_poses is not None and self.bridge.rate_window * max(
-                    np.linalg.norm(self.Omega), np.linalg.norm(w_poses)) < 1.0:
-                gap = float(np.linalg.norm(self.Omega - w_poses))
-                # (the poses' rate is a mean over the window: it lags a turning vehicle)
-                if gap > ARM_RATE_DISAGREE + 0.5 * float(np.linalg.norm(w_poses)):
-                    problems.append('the gyro and the poses disagree by %.2f rad/s (the imu '
-                                    'frame or axes wrong?)' % gap)
-        setpoint = self.controller.setpoint_problem(self.controller.R_d)
-        if setpoint:
-            problems.append('set point: ' + setpoint)
-        cones = self.setup.config.cones
-        if self.R is not None and len(cones):
-            guard = math.degrees(cones.guard + cones.floor)
-            margins = cones.margins_deg(self.R)
-            for name, margin in zip(cones.names, margins):
-                if margin <= 0.0:
-                    problems.append('sensor inside cone %r (%.2f deg in)' % (name, -margin))
-                elif margin < guard:
-                    problems.append('sensor within the guard of cone %r (margin %.2f deg, '
-                                    'guard %.2f deg)' % (name, margin, guard))
-        return problems
+        """Every reason not to arm now (``core.preflight.arm_problems``; empty: it may)."""
+        return preflight.arm_problems(self, now, extra_problem)
 
     def arm(self, now, extra_problem=None):
         """Arm unless arm_problems names a reason; the refusal names every one."""
@@ -280,7 +194,7 @@ class ControlLoop:
         """
         armed = self.supervisor.check(now)
         if armed and self.esc is not None:          # the documented action: fail safe
-            problem = self._esc_problem(now)
+            problem = self.esc_report_problem(now)
             if problem:
                 self.disarm(failsafe(problem), failed=True)
                 armed = False
@@ -317,18 +231,8 @@ class ControlLoop:
             self.pose_age.add(self.pose.age(now))
         if self.rate.last_receipt is not None:
             self.rate_age.add(self.rate.age(now))
-        w = self._window
-        w['ticks'] += 1
-        w['saturated'] += bool(armed and tick.motors.allocation.saturated)
-        w['bridging'] += bool(armed and tick.bridging)
-        if armed:
-            blind_ms = int(1e3 * self.step.blind)
-            w['blind_ms'] = max(w['blind_ms'], blind_ms)
-            w['steady_blind_ms'] = (min(w['steady_blind_ms'], blind_ms) if w['armed_ticks']
-                                    else blind_ms)
-            gain_pct = int(round(100.0 * float(self.step.degraded.scale_now)))
-            w['gain_pct'] = min(w['gain_pct'], gain_pct) if w['armed_ticks'] else gain_pct
-            w['armed_ticks'] += 1
+        self.window.note(armed, tick.motors.allocation.saturated, tick.bridging, self.step.blind,
+                         self.step.degraded.scale_now)
         self.last_tick = tick
         return tick
 
@@ -347,7 +251,7 @@ class ControlLoop:
 
     def _result(self, out, motors, armed, bridging):
         b = self.bridge
-        return Tick(out, motors, armed, self._pose_stamp, self.pose.last_receipt,
+        return LoopTick(out, motors, armed, self._pose_stamp, self.pose.last_receipt,
                     self.supervisor.reason, self.supervisor.failed,
                     (b.attitude_source, b.rate_source),
                     self.controller.R_d, bridging)
@@ -369,101 +273,19 @@ class ControlLoop:
         return None if problem is None else 'the current ' + problem
 
     # --- what the diagnostics say ------------------------------------------------------------
-    def gap_notes(self, now):
-        """Sentences for the gaps being ridden through (empty in normal flight)."""
-        notes = []
-        b = self.bridge
-        if b.attitude_source is not POSE:
-            notes.append('pose gap: attitude %s (pose %.3f s old, failsafe at %.3f s)'
-                         % (b.attitude_source.value, self.pose.age(now), self.pose.limit))
-        if b.rate_source is not GYRO:
-            notes.append('angular velocity gap: rate %s (imu %.3f s old, failsafe at %.3f s)'
-                         % (b.rate_source.value, self.rate.age(now), self.rate.limit))
-        return notes
-
     def status(self, now, other_commanders=None):
-        """The diagnostics: level, message and figures. other_commanders is the node's sentence
-        when another node publishes the motor commands (an error while armed).
+        """The diagnostics: level, message and figures (``core.loop_status.status``).
+        other_commanders is the node's sentence when another node publishes the motor commands
+        (an error while armed).
         """
-        errors, warnings = [], []
-        sup = self.supervisor
-        if not sup.armed:
-            (errors if sup.failed else warnings).append(sup.reason)
-            if self.unconfigured:
-                warnings.append(self.unconfigured)
-            stale = sup.input_problem(now)
-            if stale:
-                warnings.append(stale)
-            escs = self._esc_problem(now)
-            if escs:
-                warnings.append(escs)
-        else:
-            lost = sup.input_loss(now)
-            if lost:
-                errors.append(lost)
-            warnings += self.gap_notes(now)
-        for s in (self.pose, self.rate):
-            reasons = s.take_refusals()
-            if reasons:
-                warnings.append('%s refused: %s (%d so far)' % (s.name, ' | '.join(reasons),
-                                                                 s.refused))
-        tick = self.last_tick
-        out = tick.control if tick else None
-        if sup.armed and self.entry is not None:
-            errors.append('sensor entered cone %r, %.2f deg deep (%d entr%s since arming)'
-                          % (self.entry[0], self.entry[1], self.cone_entries,
-                             'y' if self.cone_entries == 1 else 'ies'))
-        if out is not None and len(out.margins_deg):
-            i = int(np.argmin(out.margins_deg))
-            name = self.setup.config.cones.names[i]
-            cones = self.setup.config.cones
-            near = max(NEAR_CONE_DEG, math.degrees(cones.guard + cones.floor))
-            if out.violated:
-                errors.append('sensor inside cone %r (margin %.2f deg)'
-                              % (name, out.margins_deg[i]))
-            elif out.margins_deg[i] < near:
-                warnings.append('near cone %r (margin %.2f deg)' % (name, out.margins_deg[i]))
-        w = self._window
-        if sup.armed and w['steady_blind_ms'] > 1e3 * SUSTAINED_BLIND_BOUND_S:
-            warnings.append('loop blind at least %d ms at every tick of the window (a sustained '
-                            'latency): beyond the %.0f ms the cone is kept for'
-                            % (w['steady_blind_ms'], 1e3 * SUSTAINED_BLIND_BOUND_S))
-        elif sup.armed and w['blind_ms'] > 1e3 * BLIND_BOUND_S:
-            warnings.append('loop blind up to %d ms (inputs up to %.0f ms old by receipt, plus '
-                            'their delay to receipt and late steps): beyond the %.0f ms the cone '
-                            'is kept for' % (w['blind_ms'], 1e3 * max(
-                                np.max(self.pose_age.samples(), initial=0.0),
-                                np.max(self.rate_age.samples(), initial=0.0)),
-                                1e3 * BLIND_BOUND_S))
-        if sup.armed and w['armed_ticks'] and w['gain_pct'] < 100:
-            warnings.append('degraded: feedback gains down to %d %% of their bandwidth while '
-                            'blind past the bound' % w['gain_pct'])
-        if w['saturated']:
-            warnings.append('allocation saturated in %d of %d ticks'
-                            % (w['saturated'], w['ticks']))
-        if self.setpoint_note:
-            warnings.append(self.setpoint_note)
-        if other_commanders:
-            (errors if sup.armed else warnings).append(other_commanders)
-        level = ERROR if errors else WARN if warnings else OK
-        margin = None
-        if out is not None and len(out.margins_deg):
-            margin = float(np.min(out.margins_deg))
-        figures = Figures(
-            armed=sup.armed, state=sup.reason,
-            pose_age=self.pose.age(now), imu_age=self.rate.age(now),
-            pose_counts=Counts(self.pose.accepted, self.pose.refused),
-            imu_counts=Counts(self.rate.accepted, self.rate.refused),
-            pose_age_at_tick=self.pose_age.window(), imu_age_at_tick=self.rate_age.window(),
-            pose_gaps=Gaps(*self.gaps['pose']), imu_gaps=Gaps(*self.gaps['angular velocity']),
-            ticks_bridging=w['bridging'], ticks=w['ticks'], cone_entries=self.cone_entries,
-            psi=None if out is None else float(out.psi), min_cone_margin_deg=margin,
-            motor_commands=None if out is None else tuple(int(c) for c in tick.motors.commands))
-        message = '; '.join(errors + warnings) or 'armed, all inputs fresh'
-        return Status(level, message, figures)
+        return loop_status.status(self, now, other_commanders)
+
+    def gap_notes(self, now):
+        """Sentences for the gaps being ridden through (``core.loop_status.gap_notes``)."""
+        return loop_status.gap_notes(self, now)
 
     def end_window(self):
         """Start a new diagnostics window (the node calls this on its fixed period)."""
         self.pose_age.reset()
         self.rate_age.reset()
-        self._window = dict.fromkeys(self._window, 0)
+        self.window = loop_status.Window()

@@ -69,7 +69,7 @@ class DegradedMode:
         return self.scale_now
 
 
-class TickResult(NamedTuple):
+class Command(NamedTuple):
     """What one control tick commands."""
 
     control: object     # ControlOutput of the step, or None when its moment was not finite
@@ -153,7 +153,7 @@ class ControlTick:
         motors = self.mixer.mix(np.zeros(3) if out is None else out.u, armed=armed, dt=dt,
                                 held=held)
         self.history.push(t, *self._produced(motors, armed))
-        return TickResult(out, motors)
+        return Command(out, motors)
 
     def _produced(self, motors, armed):
         """The moments the rotors make from this tick on: the one they settle to and the one they
@@ -175,4 +175,4 @@ class ControlTick:
         """
         self._held(now)
         self.history.push(self._time(now, dt), np.zeros(3))
-        return TickResult(None, self.mixer.mix(np.zeros(3), armed=False, dt=dt))
+        return Command(None, self.mixer.mix(np.zeros(3), armed=False, dt=dt))

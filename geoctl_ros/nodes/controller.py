@@ -22,7 +22,8 @@ from geoctl_ros.core import so3
 from geoctl_ros.core.diagnostics import NAME as DIAGNOSTICS_NAME
 from geoctl_ros.core.diagnostics import failsafe
 from geoctl_ros.core.gains import gain_condition
-from geoctl_ros.core.loop import ControlLoop, step_period
+from geoctl_ros.core.loop import ControlLoop
+from geoctl_ros.core.loop_types import step_period
 from geoctl_ros.core.safety import ArmedState, new_session
 from geoctl_ros.core.stats import WindowStats
 from geoctl_ros.nodes import qos, ros_params

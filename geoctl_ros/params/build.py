@@ -13,7 +13,7 @@ from geoctl_ros.core.airframe import AirframeError, RotorGeometry, effectiveness
 from geoctl_ros.core.allocation import Allocator
 from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.core.control import AttitudeController, ControllerConfig
-from geoctl_ros.core.loop import LoopSettings
+from geoctl_ros.core.loop_types import LoopSettings
 from geoctl_ros.core.motors import Mixer, ThrustCurve
 from geoctl_ros.core.safety import SetpointSchedule, quaternion_problem
 from geoctl_ros.params.schema import ConfigError
