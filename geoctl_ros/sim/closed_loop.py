@@ -19,30 +19,27 @@ noise levels, duration, schedule, the disturbance's varying part) must be the sa
 says which parameter differs otherwise. The node's input supervision (refusals, gap bridging,
 failsafes) is the node's: a scenario's stalls are shorter than the inputs' timeouts.
 """
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 import math
 import time
 
 import numpy as np
 
 from geoctl_ros.core import so3
-from geoctl_ros.core.cones import ConeSet
-from geoctl_ros.core.control import AttitudeController
 from geoctl_ros.core.stats import SETTLE_PSI
 from geoctl_ros.core.step import ControlTick
-from geoctl_ros.params import CONTROLLER, SIM, airframe, cone_set, controller_setup
+from geoctl_ros.params import CONTROLLER, SIM
 from geoctl_ros.sim.history import History
-from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
-from geoctl_ros.sim.testbed import RotorActuator
+from geoctl_ros.sim.runs import (
+    PER_RUN,
+    Testbeds,
+    differing,
+    drawn_noise,
+    shared_holds,
+    stalled_steps,
+)
 
 SETTLED_DEG = 5.0       # attitude error below which a run has converged (at the end) or settled
-
-# What may differ between the runs of a batch (everything else must be equal).
-PER_RUN = {
-    CONTROLLER: ('setpoint', 'unmodelled_moment_max'),     # (a set-point check, not in flight)
-    SIM: ('initial_attitude', 'initial_angular_velocity', 'mass', 'inertia', 'cog_offset',
-          'disturbance.constant', 'noise.seed', 'noise.gyro_bias'),
-}
 
 
 @dataclass
@@ -87,115 +84,6 @@ class Flight:
         return np.any(self.min_margin_deg <= 0.0, axis=-1)
 
 
-def _differing(scenarios):
-    """The first shared parameter that differs between the scenarios, or None."""
-    first = scenarios[0]
-    for attr, node in (('controller', CONTROLLER), ('sim', SIM)):
-        ref = getattr(first, attr)
-        for s in scenarios[1:]:
-            values = getattr(s, attr)
-            for key, v in ref.items():
-                if key in PER_RUN[node] or key.startswith('cones.'):
-                    continue
-                if not np.array_equal(np.asarray(v), np.asarray(values[key])):
-                    return '%s: %s (%s and %s)' % (node, key, first.name, s.name)
-    for s in scenarios[1:]:
-        for key in ('duration', 'tick_jitter'):
-            if s.options[key] != first.options[key]:
-                return 'scenario: %s (%s and %s)' % (key, first.name, s.name)
-        if len(s.controller['cones.names']) != len(first.controller['cones.names']):
-            return 'the number of cones (%s and %s)' % (first.name, s.name)
-    return None
-
-
-def hold_steps(steps, n_sub, jitter, seed):
-    """How many integration steps each control step's command is held, for a run of ``steps``
-    periods of n_sub integration steps: n_sub each, or with jitter (in integration steps, > 0)
-    n_sub plus a uniform random whole number in 0..jitter, as on a machine too busy to run the
-    loop on time: the steps come late, one after the other, and fewer fit in the run. From a
-    stream of its own of ``seed``, so the noise is the same with and without it.
-    """
-    if jitter <= 0.0:
-        return np.full(steps, n_sub)
-    holds = n_sub + np.random.default_rng([seed, 1]).integers(0, int(round(jitter)) + 1, steps)
-    starts = np.cumsum(holds) - holds
-    return holds[starts < steps * n_sub]
-
-
-def stalled_steps(options, times):
-    """Per control step (at times), whether the inputs stall there (scenario stalls.start and
-    .duration): no new sample reaches the controller at a step within [start, start + duration).
-    """
-    out = np.zeros(len(times), dtype=bool)
-    for start, length in zip(options['stalls.start'], options['stalls.duration']):
-        out |= (times >= start) & (times < start + length)
-    return out
-
-
-def _holds(scenarios, rate, n_sub, duration):
-    """The batch's hold sequence (integration steps per control step): the runs must share it."""
-    h = 1.0 / (rate * n_sub)
-    steps = int(round(duration * rate))
-    holds = [hold_steps(steps, n_sub, s.options['tick_jitter'] / h, s.sim['noise.seed'])
-             for s in scenarios]
-    if any(not np.array_equal(holds[0], x) for x in holds[1:]):
-        raise ValueError('the runs of a batch share their late steps: with scenario.tick_jitter '
-                         'they fly together only with the same noise.seed')
-    return holds[0]
-
-
-def _noise(scenarios, sv, steps):
-    """Per run, the motion-capture and gyro noise of every step, (2, steps, runs, 3), drawn from
-    the run's seed in TestbedSim's order: per step the attitude's 3, then the gyro's 3.
-    """
-    sigmas = [math.radians(sv['noise.attitude_deg']), sv['noise.angular_velocity']]
-    drawn = [i for i, sigma in enumerate(sigmas) if sigma > 0.0]
-    noise = np.zeros((2, steps, len(scenarios), 3))
-    for j, s in enumerate(scenarios):
-        z = np.random.default_rng(s.sim['noise.seed']).standard_normal((steps, len(drawn), 3))
-        for slot, i in enumerate(drawn):
-            noise[i, :, j] = sigmas[i] * z[:, slot]
-    return noise
-
-
-class _Testbeds:
-    """The controller and the simulated testbeds of a batch, built from its scenarios."""
-
-    def __init__(self, scenarios):
-        first = scenarios[0]
-        cv, sv = first.controller, first.sim
-        n = len(scenarios)
-        self.setup = setup = controller_setup(cv)                     # gains, model, mixer
-
-        def stack(key):
-            return np.array([s.sim[key] for s in scenarios], dtype=float)
-
-        shared = setup.config.cones
-        per_run = [cone_set(s.controller) for s in scenarios]
-        names = cv['cones.names']
-        self.cones = ConeSet(shared.r, np.array([c.V for c in per_run]).reshape(n, len(names), 3),
-                             np.array([c.theta for c in per_run]).reshape(n, len(names)),
-                             shared.alpha, shared.floor, names, shared.guard)
-        self.controller = AttitudeController(replace(setup.config, cones=self.cones))
-        self.controller.R_d = np.array([so3.quat_to_rot(s.controller['setpoint'])
-                                        for s in scenarios])
-        self.controller.delta_bar = np.zeros((n, setup.config.n_params))
-        self.plant = Plant(
-            PlantConfig(inertia=stack('inertia').reshape(n, 3, 3), mass=stack('mass'),
-                        cog_offset=stack('cog_offset'), gravity=sv['gravity'],
-                        disturbance=Disturbance(stack('disturbance.constant'),
-                                                sv['disturbance.amplitude'],
-                                                sv['disturbance.frequency'])),
-            np.array([so3.quat_to_rot(s.sim['initial_attitude']) for s in scenarios]),
-            stack('initial_angular_velocity'))
-        self.actuator = None                                         # torque: the moment acts
-        if sv['actuation'] == 'rotors':
-            geometry, curve, failed = airframe(sv)
-            self.actuator = RotorActuator(geometry, stack('cog_offset'), curve,
-                                          sv['motor_time_constant'], failed)
-        self.gyro_bias = stack('noise.gyro_bias')
-
-
 def fly(scenarios, progress=None, series=False, history=False, duration=None):
     """Fly the scenarios together; a Flight. progress(fraction) is called now and then.
     series: keep the margin and sensor direction at every control step (the figures of a few
@@ -203,25 +91,25 @@ def fly(scenarios, progress=None, series=False, history=False, duration=None):
     keep every step's state and output (the scenario runner's history.csv); duration: simulated
     seconds (default: the scenarios').
     """
-    problem = _differing(scenarios)
+    problem = differing(scenarios)
     if problem:
         raise ValueError('a batch shares everything but %s; differs: %s'
                          % (', '.join(PER_RUN[CONTROLLER] + PER_RUN[SIM]), problem))
     first = scenarios[0]
     cv, sv = first.controller, first.sim
-    bed = _Testbeds(scenarios)
+    bed = Testbeds(scenarios)
     setup, controller, plant, cones, actuator = (bed.setup, bed.controller, bed.plant, bed.cones,
                                                  bed.actuator)
     n = len(scenarios)
     rate, rate_sub = cv['rate_hz'], sv['integration_rate_hz']
     n_sub = int(round(rate_sub / rate))
     dt, h = 1.0 / rate, 1.0 / (rate * n_sub)
-    holds = _holds(scenarios, rate, n_sub, first.options['duration'] if duration is None
+    holds = shared_holds(scenarios, rate, n_sub, first.options['duration'] if duration is None
                    else duration)
     steps = len(holds)
     j_at = np.cumsum(holds) - holds                   # integration steps before each step
     times = j_at / rate_sub
-    noise = _noise(scenarios, sv, steps)
+    noise = drawn_noise(scenarios, sv, steps)
     schedule = setup.schedule
     # latency: a ring of the last states, one per integration step
     delay = np.array([int(round(s.options['latency'] * rate_sub)) for s in scenarios])
