@@ -13,15 +13,10 @@ from pymavlink.dialects.v20 import common as mav  # noqa: E402
 from geoctl_ros.core import so3  # noqa: E402
 from geoctl_ros.core.diagnostics import ERROR, OK, WARN, Figures, Status
 from geoctl_ros.mavlink import frames  # noqa: E402
+from geoctl_ros.mavlink.actions import Arm, Ignored, MotorTest, SetParameter  # noqa: E402
 from geoctl_ros.mavlink.link import encoder  # noqa: E402
 from geoctl_ros.mavlink.params import BY_ID, TABLE, to_mavlink, to_ros  # noqa: E402
-from geoctl_ros.mavlink.vehicle import (  # noqa: E402
-    Arm,
-    Ignored,
-    MotorTest,
-    SetParameter,
-    Vehicle,
-)
+from geoctl_ros.mavlink.vehicle import Vehicle  # noqa: E402
 from geoctl_ros.params import BY_NAME  # noqa: E402
 
 pytestmark = pytest.mark.odroid

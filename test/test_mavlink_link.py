@@ -18,8 +18,9 @@ from pymavlink.dialects.v10 import common as mav1  # noqa: E402
 from pymavlink.dialects.v20 import common as mav  # noqa: E402
 
 from geoctl_ros.mavlink import signing  # noqa: E402
+from geoctl_ros.mavlink.actions import Send  # noqa: E402
 from geoctl_ros.mavlink.link import Link, encoder  # noqa: E402
-from geoctl_ros.mavlink.vehicle import Send, Vehicle  # noqa: E402
+from geoctl_ros.mavlink.vehicle import Vehicle  # noqa: E402
 
 TRIES = 10                     # (the parser itself gets 10,000 inputs from ./run fuzz)
 ANSWER_WITHIN = 5.0            # s: no answer by then is a lost command, not a slow one

@@ -12,9 +12,10 @@ from geoctl_ros.fuzz.hostile import (
     hostile_float32,
     run_property,
 )
+from geoctl_ros.mavlink.actions import Arm, Ignored, MotorTest, Send, SetParameter
 from geoctl_ros.mavlink.link import encoder, parse_datagram
 from geoctl_ros.mavlink.signing import Verifier
-from geoctl_ros.mavlink.vehicle import Arm, Ignored, MotorTest, Send, SetParameter, Vehicle
+from geoctl_ros.mavlink.vehicle import Vehicle
 
 # --- MAVLink -----------------------------------------------------------------------------------
 KEY = bytes(range(32))

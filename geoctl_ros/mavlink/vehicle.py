@@ -13,114 +13,35 @@ Identity: MAV_TYPE_HEXAROTOR, MAV_AUTOPILOT_GENERIC (it is neither PX4 nor ArduP
 base_mode carries the armed flag; system_status is STANDBY (disarmed), ACTIVE (armed) or CRITICAL
 (disarmed by a failsafe, until armed again).
 """
-from dataclasses import dataclass, field
 import math
-from typing import NamedTuple
 
 import numpy as np
-from pymavlink.dialects.v20 import common
 
-from geoctl_ros.core.diagnostics import ERROR, Status
-from geoctl_ros.core.safety import angular_velocity_problem, attitude_of, motor_commands_problem
+from geoctl_ros.core.diagnostics import ERROR
 from geoctl_ros.mavlink import frames
+from geoctl_ros.mavlink.actions import (
+    MESSAGE_ID_MAX,
+    MOTORS_MAX,
+    Arm,
+    Ignored,
+    MotorTest,
+    Send,
+    SetParameter,
+    m_const,
+    shown,
+    whole,
+)
+from geoctl_ros.mavlink.controller_view import (
+    NAME_DBAR,
+    NAME_MARGIN,
+    NAME_MARGINS,
+    NAME_PSI,
+    ControllerView,
+)
 from geoctl_ros.mavlink.params import BY_ID, TABLE, to_mavlink
 from geoctl_ros.params.schema import MOTOR_TEST_DURATION_MAX
 
-# DEBUG_FLOAT_ARRAY / NAMED_VALUE_FLOAT names (at most 10 characters; docs/mavlink.md, "MAVLink").
-NAME_PSI = 'GC_PSI'            # configuration error Psi
-NAME_MARGIN = 'GC_MARGIN'      # smallest cone margin, deg
-NAME_MARGINS = 'GC_MARGINS'    # DEBUG_FLOAT_ARRAY: every cone margin, deg, in cones.names order
-NAME_DBAR = 'GC_DBAR'          # DEBUG_FLOAT_ARRAY: the disturbance estimate Delta_bar
 ARRAY_MARGINS, ARRAY_DBAR = 1, 2
-
-
-@dataclass
-class ControllerView:
-    """What the bridge knows of the controller (ROS frames), updated as messages arrive."""
-
-    R: np.ndarray = None                 # attitude ENU <- FLU (from pose)
-    omega: np.ndarray = None             # body rate FLU (from imu)
-    R_d: np.ndarray = None               # set point
-    commands: list = field(default_factory=list)   # normalised motor commands
-    psi: float = math.nan
-    margins: list = field(default_factory=list)
-    dbar: list = field(default_factory=list)
-    diagnostics: Status = None           # the controller's last diagnostics (typed figures)
-    params: dict = field(default_factory=dict)     # ROS name -> value
-
-    # What arrives is checked here: a zero or NaN quaternion, a non-finite vector, never reaches
-    # a frame conversion or a ground station. Each returns why it refused the value, or None.
-    def take_attitude(self, q, setpoint=False):
-        """A pose's (or, setpoint, the active set point's) quaternion (x, y, z, w)."""
-        R, problem = attitude_of(q)
-        if problem is None:
-            if setpoint:
-                self.R_d = R
-            else:
-                self.R = R
-        return problem
-
-    def take_rate(self, w):
-        problem = angular_velocity_problem(w, math.inf)
-        if problem is None:
-            self.omega = np.asarray(w, dtype=float)
-        return problem
-
-    def take_commands(self, data):
-        problem = motor_commands_problem(data, len(data))
-        if problem is None:
-            self.commands = list(data)
-        return problem
-
-    def take_psi(self, x):
-        if not math.isfinite(x):
-            return 'configuration error is not finite'
-        self.psi = float(x)
-        return None
-
-    def take_array(self, name, data):
-        """'margins' or 'dbar'."""
-        if not all(math.isfinite(x) for x in data):
-            return '%s not finite' % name
-        setattr(self, name, list(data))
-        return None
-
-
-# What an incoming message asks of the bridge (``Vehicle.handle``): typed, dispatched by type.
-class Send(NamedTuple):
-    """Send this message to the ground station."""
-
-    message: object
-
-
-class Arm(NamedTuple):
-    """Arm (on) or disarm the controller, then answer the COMMAND_LONG command."""
-
-    on: bool
-    command: int
-
-
-class SetParameter(NamedTuple):
-    """Set the controller's ROS parameter name to a PARAM_SET value (table index)."""
-
-    name: str
-    value: float
-    index: int
-
-
-class MotorTest(NamedTuple):
-    """Spin rotor (1-based) at a normalised command for seconds through the ESC node."""
-
-    rotor: int
-    command: float
-    seconds: float
-    mav_command: int
-
-
-class Ignored(NamedTuple):
-    """Nothing to do (the message is not for this system, or names nothing it has)."""
-
-    why: str
 
 
 class Vehicle:
@@ -312,7 +233,7 @@ class Vehicle:
         ack = self.command_ack
         if cmd == m_const('MAV_CMD_COMPONENT_ARM_DISARM'):
             if msg.param1 not in (0.0, 1.0):
-                return self.denied(cmd, 'arm refused: param1 %s is not 0 or 1' % _show(msg.param1))
+                return self.denied(cmd, 'arm refused: param1 %s is not 0 or 1' % shown(msg.param1))
             return [Arm(msg.param1 == 1.0, cmd)]
         if cmd == m_const('MAV_CMD_DO_MOTOR_TEST'):
             return self._motor_test(msg)
@@ -323,7 +244,7 @@ class Vehicle:
                 wanted = whole(msg.param1, 0, MESSAGE_ID_MAX)
                 if wanted is None:
                     return self.denied(cmd, 'REQUEST_MESSAGE refused: param1 %s is not a '
-                                       'message id' % _show(msg.param1))
+                                       'message id' % shown(msg.param1))
             if wanted == m_const('MAVLINK_MSG_ID_AUTOPILOT_VERSION'):
                 return [Send(ack(cmd, 'MAV_RESULT_ACCEPTED')),
                         Send(self.autopilot_version())]
@@ -340,12 +261,12 @@ class Vehicle:
         rotor = whole(msg.param1, 1, MOTORS_MAX)
         kind, count = whole(msg.param2, 0, 255), whole(msg.param5, 0, MOTORS_MAX)
         malformed = [why for bad, why in (
-            (rotor is None, 'motor %s is not 1 to %d' % (_show(msg.param1), MOTORS_MAX)),
-            (kind is None, 'throttle type %s is not a whole number' % _show(msg.param2)),
-            (not 0.0 <= msg.param3 <= 100.0, 'throttle %s is not 0 to 100 %%' % _show(msg.param3)),
+            (rotor is None, 'motor %s is not 1 to %d' % (shown(msg.param1), MOTORS_MAX)),
+            (kind is None, 'throttle type %s is not a whole number' % shown(msg.param2)),
+            (not 0.0 <= msg.param3 <= 100.0, 'throttle %s is not 0 to 100 %%' % shown(msg.param3)),
             (not 0.0 < msg.param4 <= MOTOR_TEST_DURATION_MAX,
-             'duration %s is not in (0, %g] s' % (_show(msg.param4), MOTOR_TEST_DURATION_MAX)),
-            (count is None, 'motor count %s is not a whole number' % _show(msg.param5))) if bad]
+             'duration %s is not in (0, %g] s' % (shown(msg.param4), MOTOR_TEST_DURATION_MAX)),
+            (count is None, 'motor count %s is not a whole number' % shown(msg.param5))) if bad]
         if malformed:
             return self.denied(cmd, 'motor test refused: ' + '; '.join(malformed))
         why = None
@@ -365,25 +286,3 @@ class Vehicle:
 
     def command_ack(self, command, result):
         return self.mav.command_ack_encode(command, m_const(result))
-
-
-MESSAGE_ID_MAX = (1 << 24) - 1      # MAVLink 2 message ids are 24 bits
-MOTORS_MAX = 32                     # a motor test's instance number (ACTUATOR_OUTPUT_STATUS: 32)
-
-
-def whole(x, lo, hi):
-    """x (a command's float parameter) as a whole number in [lo, hi], or None: NaN, inf and
-    fractions are not (int() of NaN or inf raises, which ended the bridge).
-    """
-    if not (math.isfinite(x) and lo <= x <= hi and x == math.floor(x)):
-        return None
-    return int(x)
-
-
-def _show(x):
-    return '%g' % x
-
-
-def m_const(name):
-    """A constant of the common dialect by name (MAV_TYPE_HEXAROTOR, ...)."""
-    return getattr(common, name)

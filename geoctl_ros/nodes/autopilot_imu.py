@@ -7,9 +7,9 @@ import time
 from sensor_msgs.msg import Imu
 
 from geoctl_ros.mavlink import frames
+from geoctl_ros.mavlink.actions import m_const
 from geoctl_ros.mavlink.health import NO_AUTOPILOT_HEARTBEAT
 from geoctl_ros.mavlink.link import Link
-from geoctl_ros.mavlink.vehicle import m_const
 from geoctl_ros.nodes import qos
 from geoctl_ros.nodes.conversions import set_vector
 

@@ -28,17 +28,10 @@ from std_srvs.srv import SetBool, Trigger
 from geoctl_ros.core.diagnostics import ERROR, WARN
 from geoctl_ros.core.diagnostics import NAME as CONTROLLER_STATUS
 from geoctl_ros.mavlink import health, signing
+from geoctl_ros.mavlink.actions import Arm, Ignored, MotorTest, Send, SetParameter, m_const
 from geoctl_ros.mavlink.link import Link, encoder
 from geoctl_ros.mavlink.params import BY_ROS, TABLE, to_ros
-from geoctl_ros.mavlink.vehicle import (
-    Arm,
-    Ignored,
-    MotorTest,
-    Send,
-    SetParameter,
-    Vehicle,
-    m_const,
-)
+from geoctl_ros.mavlink.vehicle import Vehicle
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.autopilot_imu import AutopilotImu
 from geoctl_ros.nodes.conversions import python_value, status_of
