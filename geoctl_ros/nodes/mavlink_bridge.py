@@ -9,13 +9,10 @@ is carried out through the controller's own services: ``~/arm`` for MAV_CMD_COMP
 link reads a PX4/ArduPilot board's HIGHRES_IMU and publishes it on ``imu`` (FLU). Its own health
 goes to /diagnostics. Parameters: ``mavlink.*`` in docs/parameters.md.
 """
-import importlib.metadata
-import os
-import subprocess
 import sys
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, QuaternionStamped
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
@@ -27,52 +24,38 @@ from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core.diagnostics import ERROR, WARN
 from geoctl_ros.core.diagnostics import NAME as CONTROLLER_STATUS
-from geoctl_ros.mavlink import health, signing
+from geoctl_ros.mavlink import health, identity, signing
 from geoctl_ros.mavlink.actions import Arm, Ignored, MotorTest, Send, SetParameter, m_const
 from geoctl_ros.mavlink.link import Link, encoder
-from geoctl_ros.mavlink.params import BY_ROS, TABLE, to_ros
+from geoctl_ros.mavlink.params import TABLE
 from geoctl_ros.mavlink.vehicle import Vehicle
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.autopilot_imu import AutopilotImu
 from geoctl_ros.nodes.conversions import python_value, status_of
+from geoctl_ros.nodes.mavlink_calls import (
+    UNSIGNED_WARNING,
+    ControllerCalls,
+    GroundStationReports,
+)
 from geoctl_ros.nodes.runtime import Periodic, RefusalLog, spin
 from geoctl_ros.params import MAVLINK, ConfigError, settings
 from geoctl_ros.records.fields import quaternion, vector
 
-GCS_TIMEOUT = 3.0          # s without a ground-station heartbeat: "no ground station"
 TIMESTAMP_LEAD = 10 * 100_000   # signing units saved ahead of the last sent (10 s of clock):
                                 # a crash between two saves cannot make a restart reuse one
-UNSIGNED_WARNING = 'MAVLink unsigned: anyone on the link can arm the vehicle'
 PARAM_REFRESH = 5.0        # s between reads of the controller's parameters
-STATUSTEXT_LEN = 50
 TICK = 0.01                # s: the bridge's one timer (the rates are at most 100 Hz)
 
 
-def _version():
-    try:
-        v = importlib.metadata.version('geoctl_ros')
-    except Exception:
-        v = '0.0.0'
-    parts = (v.split('.') + ['0', '0', '0'])[:3]
-    return tuple(int(p) if p.isdigit() else 0 for p in parts)
+class MavlinkBridge(ControllerCalls, GroundStationReports, Node):
+    """The MAVLink bridge: the testbed as a MAVLink vehicle to a ground station."""
 
-
-def _git_hash():
-    try:
-        here = os.path.dirname(os.path.abspath(__file__))
-        return subprocess.run(['git', 'rev-parse', 'HEAD'], cwd=here, capture_output=True,
-                              text=True, timeout=5).stdout.strip()
-    except Exception:
-        return ''
-
-
-class MavlinkBridge(Node):
     def __init__(self, **kwargs):
         super().__init__('mavlink_bridge', **kwargs)
         cfg = settings(ros_params.load(self, MAVLINK), 'mavlink.')
         self.sysid = cfg.system_id
         self.vehicle = Vehicle(encoder(self.sysid, m_const('MAV_COMP_ID_AUTOPILOT1')), self.sysid,
-                               _version(), _git_hash())
+                               identity.version(), identity.git_hash())
         # the key before the link: a key file that cannot be used stops the node first
         self.timestamps, self.streams, key = self._signing_key(cfg)
         self.link_id = cfg.signing_link_id
@@ -275,131 +258,6 @@ class MavlinkBridge(Node):
             self._motor_test(action.rotor, action.command, action.seconds, action.mav_command)
         else:
             raise TypeError('not an action: %r' % (action,))
-
-    def _arm(self, on, command):
-        self.counts[health.ARM_REQUESTS] += 1
-        if not self.arm_client.service_is_ready():
-            self.link.send(self.vehicle.command_ack(command, 'MAV_RESULT_TEMPORARILY_REJECTED'))
-            self._text('arm: the controller is not reachable', 'MAV_SEVERITY_ERROR')
-            return
-        self.link.send(self.vehicle.command_ack(command, 'MAV_RESULT_IN_PROGRESS'))
-        future = self.arm_client.call_async(SetBool.Request(data=on))
-
-        def done(f):
-            r = f.result()
-            ok = r is not None and r.success
-            self.link.send(self.vehicle.command_ack(
-                command, 'MAV_RESULT_ACCEPTED' if ok else 'MAV_RESULT_DENIED'))
-            if not ok:
-                self._text(r.message if r is not None else 'arm: no answer', 'MAV_SEVERITY_ERROR')
-        future.add_done_callback(done)
-
-    def _motor_test(self, rotor, command, duration, mav_command):
-        """MAV_CMD_DO_MOTOR_TEST through the ESC node: its motor_test.* parameters, then its
-        ~/motor_test service (which refuses while armed, or with a value out of its range).
-        """
-        ack = self.vehicle.command_ack
-        if not (self.esc_set.service_is_ready() and self.esc_test.service_is_ready()):
-            self.link.send(ack(mav_command, 'MAV_RESULT_TEMPORARILY_REJECTED'))
-            self._text('motor test: the ESC node is not reachable', 'MAV_SEVERITY_ERROR')
-            return
-        self.link.send(ack(mav_command, 'MAV_RESULT_IN_PROGRESS'))
-        params = [Parameter('motor_test.rotor', value=rotor).to_parameter_msg(),
-                  Parameter('motor_test.command', value=command).to_parameter_msg(),
-                  Parameter('motor_test.duration', value=duration).to_parameter_msg()]
-
-        def answer(ok, why):
-            self.link.send(ack(mav_command, 'MAV_RESULT_ACCEPTED' if ok else 'MAV_RESULT_DENIED'))
-            self._text('motor test: ' + why, 'MAV_SEVERITY_INFO' if ok
-                       else 'MAV_SEVERITY_WARNING')
-
-        def tested(f):
-            r = f.result()
-            answer(r is not None and r.success, r.message if r is not None else 'no answer')
-
-        def set_done(f):
-            r = f.result()
-            if r is None or not r.result.successful:
-                answer(False, ' '.join((r.result.reason if r is not None else 'no answer')
-                                       .split()))
-                return
-            self.esc_test.call_async(Trigger.Request()).add_done_callback(tested)
-        self.esc_set.call_async(SetParametersAtomically.Request(
-            parameters=params)).add_done_callback(set_done)
-
-    def _set_param(self, name, value, index):
-        self.counts[health.PARAM_SETS] += 1
-
-        def answer(ok, reason=''):
-            if ok:
-                self.vehicle.view.params[name] = to_ros(name, value)
-            elif reason:
-                self._text('%s refused: %s' % (BY_ROS[name][0], reason), 'MAV_SEVERITY_ERROR')
-            p = self.vehicle.param_value(index)
-            if p is not None:
-                self.link.send(p)
-        if not self.set_client.service_is_ready():
-            answer(False, 'the controller is not reachable')
-            return
-        try:
-            param = Parameter(name, value=to_ros(name, value)).to_parameter_msg()
-        except Exception as e:
-            answer(False, str(e))
-            return
-        future = self.set_client.call_async(SetParameters.Request(parameters=[param]))
-
-        def done(f):
-            r = f.result()
-            res = r.results[0] if r is not None and r.results else None
-            answer(bool(res and res.successful),
-                   ' '.join((res.reason if res else 'no answer').split()))
-        future.add_done_callback(done)
-
-    def _text(self, text, severity, limited=False):
-        """STATUSTEXT, in 50-character chunks (MAVLink 2 id/chunk_seq) when longer."""
-        now = time.monotonic()
-        if limited and now - self._last_text < self._text_period:
-            return
-        self._last_text = now
-        self.counts[health.STATUSTEXT] += 1
-        chunks = [text[i:i + STATUSTEXT_LEN] for i in range(0, len(text), STATUSTEXT_LEN)] or ['']
-        tid = (self.counts[health.STATUSTEXT] % 65535) + 1 if len(chunks) > 1 else 0
-        for k, chunk in enumerate(chunks):
-            msg = self.vehicle.statustext(chunk, severity)
-            msg.id, msg.chunk_seq = tid, k
-            self.link.send(msg)
-
-    # --- own health --------------------------------------------------------------------------
-    def _publish_diagnostics(self):
-        now = time.monotonic()
-        gcs_age = None if self.gcs_heartbeat is None else now - self.gcs_heartbeat
-        warnings = []
-        if self.link.verifier is None:
-            warnings.append(UNSIGNED_WARNING)
-        if gcs_age is None or gcs_age > GCS_TIMEOUT:
-            warnings.append(health.NO_GCS_HEARTBEAT)
-        ap_age = ap_messages = None
-        if self.autopilot is not None:
-            ap_age, ap_messages, ap_warning = self.autopilot.health(now)
-            if ap_warning:
-                warnings.append(ap_warning)
-        verifier = self.link.verifier
-        last = self.link.refusals[-1] if verifier is not None and self.link.refusals else None
-        figures = health.BridgeStatus(
-            url=self.link.url, gcs_age=gcs_age, link_counts=dict(self.link.counts),
-            counts=dict(self.counts), signing_link_id=None if verifier is None else self.link_id,
-            refused={} if verifier is None else dict(verifier.refused),
-            last_refused='' if last is None else '%s %s from %s' % tuple(last),
-            last_error=self.link.last_error if self.link.counts['bad data'] else '',
-            autopilot_age=ap_age, autopilot_messages=ap_messages)
-        status = DiagnosticStatus(level=bytes([1 if warnings else 0]), name=health.NAME,
-                                  hardware_id='mavlink',
-                                  message='; '.join(warnings) or 'ground station connected',
-                                  values=[KeyValue(key=k, value=v)
-                                          for k, v in health.to_values(figures).items()])
-        msg = DiagnosticArray(status=[status])
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self.pub_diag.publish(msg)
 
     def on_shutdown(self):
         self.link.close()
