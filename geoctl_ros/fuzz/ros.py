@@ -209,10 +209,10 @@ def fuzz_messages(examples, seed):
             for msg_type, callback in subs[topic]:
                 callback(_message(msg_type, topic, stamp, payload))
         ctl._tick(ctl._now())
-        motors = ctl._msgs['motors'].data
+        motors = ctl.motors_msg.data
         if not all(x == 0.0 for x in motors):
             raise AssertionError('disarmed, yet motor commands %r' % (list(motors),))
-        torque = ctl._msgs['wrench'].wrench.torque
+        torque = ctl.telemetry.wrench.wrench.torque
         if not all(math.isfinite(v) for v in (torque.x, torque.y, torque.z)):
             raise AssertionError('a non-finite control moment')
         now = time.monotonic()

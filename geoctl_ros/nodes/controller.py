@@ -11,14 +11,13 @@ import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped, QuaternionStamped, Vector3Stamped, WrenchStamped
+from geometry_msgs.msg import PoseStamped, QuaternionStamped
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import Imu
-from std_msgs.msg import Float64, Float64MultiArray, UInt16MultiArray, UInt32MultiArray
+from std_msgs.msg import Float64MultiArray, UInt16MultiArray, UInt32MultiArray
 from std_srvs.srv import SetBool, Trigger
 
-from geoctl_ros.core import so3
 from geoctl_ros.core.diagnostics import NAME as DIAGNOSTICS_NAME
 from geoctl_ros.core.diagnostics import failsafe
 from geoctl_ros.core.gains import gain_condition
@@ -27,24 +26,19 @@ from geoctl_ros.core.loop_types import step_period
 from geoctl_ros.core.safety import ArmedState, new_session
 from geoctl_ros.core.stats import WindowStats
 from geoctl_ros.nodes import qos, ros_params
+from geoctl_ros.nodes.controller_config import ControllerConfiguration, build
+from geoctl_ros.nodes.controller_topics import Telemetry
 from geoctl_ros.nodes.conversions import (
     armed_state_msg,
     esc_health_of,
     motor_commands_msg,
-    set_quaternion,
-    set_vector,
     stamp_seconds,
     status_msg,
 )
 from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.params import (
-    CHANGE_WHILE_ARMED,
     CONTROLLER,
     ConfigError,
-    change_problem,
-    configuration_given,
-    controller_setup,
-    resolve,
 )
 from geoctl_ros.records.fields import quaternion, vector
 
@@ -52,27 +46,8 @@ DIAGNOSTICS_PERIOD = 0.5      # s: the fixed statistics window
 STATUS_NAME = DIAGNOSTICS_NAME
 
 
-def build(values):
-    """The controller setup of a node's parameters: cones defined but not yet in cones.names are
-    allowed (they are being added, one parameter at a time, or came from a dump).
-    """
-    return controller_setup(resolve(CONTROLLER, values, staged_cones=True))
-
-
-class ControllerNode(Node):
-    def _unconfigured(self, setup):
-        """Why this node flies nothing it was given, or None: no parameter of its own reached it
-        (no file, a launch file's missing params_file, which only warns and passes none, or a
-        file whose sections name another node or namespace: its ``/**`` values alone do not
-        configure a controller).
-        """
-        if (configuration_given(CONTROLLER, ros_params.file_overrides(self))
-                or setup.loop.allow_default_configuration):
-            return None
-        return ('no configuration given for %s: no parameter file (or none addressed to this '
-                'name and namespace), so every arm request is refused (give --params-file FILE '
-                'with a section for it, or -p allow_default_configuration:=true to fly the '
-                'built-in defaults deliberately)' % self.get_fully_qualified_name())
+class ControllerNode(ControllerConfiguration, Node):
+    """The controller node (module docstring)."""
 
     def __init__(self, **kwargs):
         super().__init__('controller', allow_undeclared_parameters=True, **kwargs)
@@ -107,30 +82,16 @@ class ControllerNode(Node):
         self.create_subscription(UInt16MultiArray, 'esc_health', self._on_esc_health,
                                  qos.COMMAND)
         self.pub_motors = self.create_publisher(Float64MultiArray, 'motor_commands', qos.COMMAND)
-        self.pub_wrench = self.create_publisher(WrenchStamped, 'control_wrench', qos.COMMAND)
-        self.pub_eR = self.create_publisher(Vector3Stamped, 'attitude_error', qos.TELEMETRY)
-        self.pub_eW = self.create_publisher(Vector3Stamped, 'angular_velocity_error',
-                                            qos.TELEMETRY)
-        self.pub_psi = self.create_publisher(Float64, 'configuration_error', qos.TELEMETRY)
-        self.pub_dbar = self.create_publisher(Float64MultiArray, 'disturbance_estimate',
-                                              qos.TELEMETRY)
-        self.pub_margins = self.create_publisher(Float64MultiArray, 'cone_margins', qos.TELEMETRY)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
         # the armed state and session the ESC node follows (core.safety.ArmedState)
         self.session = new_session()
         self.pub_armed = self.create_publisher(UInt32MultiArray, '~/armed', qos.LATCHED)
         self._armed_sent = None
-        self.pub_setpoint = self.create_publisher(QuaternionStamped, 'active_setpoint',
-                                                  qos.LATCHED)
-        self._published_R_d = None
         self.create_service(SetBool, '~/arm', self._on_arm)
         self.create_service(Trigger, '~/reset_adaptation', self._on_reset)
 
-        self._msgs = {'motors': motor_commands_msg(self.session), 'wrench': WrenchStamped(),
-                      'eR': Vector3Stamped(), 'eW': Vector3Stamped(), 'psi': Float64(),
-                      'dbar': Float64MultiArray(), 'margins': Float64MultiArray()}
-        for key in ('wrench', 'eR', 'eW'):
-            self._msgs[key].header.frame_id = self.frame_id
+        self.motors_msg = motor_commands_msg(self.session)
+        self.telemetry = Telemetry(self, self.frame_id, self.world_frame_id)
         self._last_tick = None
         self._period_stats = WindowStats()
         self._compute_stats = WindowStats()
@@ -230,30 +191,6 @@ class ControllerNode(Node):
         response.success, response.message = True, 'disturbance estimate reset to zero'
         return response
 
-    def _validate(self, values, changed):
-        """A run-time change: only gains and goals while armed (``CHANGE_WHILE_ARMED``), the
-        whole configuration, and the set point now being flown (which may have come in on the
-        topic) against the new cones.
-        """
-        if self.loop.supervisor.armed:
-            problem = change_problem(changed, CHANGE_WHILE_ARMED, 'while disarmed')
-            if problem:
-                raise ConfigError([('armed', problem)])
-        setup = build(values)
-        problem = self.loop.reconfiguration_problem(setup)
-        if problem:
-            raise ConfigError([('cones', problem)])
-        return setup
-
-    def _apply(self, setup, changed):
-        problem = self.loop.reconfigure(
-            setup, setpoint_changed='setpoint' in changed,
-            schedule_changed=any(n.startswith('setpoint_schedule.') for n in changed))
-        if problem:       # validated before; only a set point that arrived since can do this
-            self.get_logger().error('parameters not applied: ' + problem)
-        else:
-            self.get_logger().info('parameters applied: %s' % ', '.join(sorted(changed)))
-
     # --- the control tick --------------------------------------------------------------------
     def _on_timer(self):
         """The rate_hz timer: a step, unless samples start the steps (step_on) and one did within
@@ -290,44 +227,17 @@ class ControllerNode(Node):
         except Exception as e:      # a defect must not end the node with the motors running on
             self._failed_step(e)
             return
-        out = tick.control
-        m = self._msgs
-        m['motors'].data = tick.motors.normalised.tolist()
+        msg = self.motors_msg
+        msg.data = tick.motors.normalised.tolist()
         if tick.armed and self._armed_sent is not True:
             self._publish_armed(True)            # the ESC node's gate opens before the command
-        self.pub_motors.publish(m['motors'])
+        self.pub_motors.publish(msg)
         if not tick.armed and self._armed_sent is not False:
             self._publish_armed(False)
         self._compute_stats.add(time.perf_counter() - t0)
         if tick.armed and tick.pose_receipt is not None:
             self._latency_stats.add(self._now() - tick.pose_receipt)
-        if out is not None:
-            stamp = tick.stamp
-            w = m['wrench']
-            w.header.stamp = stamp
-            set_vector(w.wrench.torque, out.u)
-            set_vector(w.wrench.force, (0.0, 0.0, tick.motors.allocation.collective))
-            self.pub_wrench.publish(w)
-            m['eR'].header.stamp = stamp
-            set_vector(m['eR'].vector, out.e_R)
-            self.pub_eR.publish(m['eR'])
-            m['eW'].header.stamp = stamp
-            set_vector(m['eW'].vector, out.e_Omega)
-            self.pub_eW.publish(m['eW'])
-            m['psi'].data = float(out.psi)
-            self.pub_psi.publish(m['psi'])
-            m['dbar'].data = out.delta_bar.tolist()
-            self.pub_dbar.publish(m['dbar'])
-            m['margins'].data = out.margins_deg.tolist()
-            self.pub_margins.publish(m['margins'])
-        R_d = tick.setpoint
-        if R_d is not self._published_R_d:      # a new set point (set_setpoint copies)
-            self._published_R_d = R_d
-            sp = QuaternionStamped()
-            sp.header.stamp = self.get_clock().now().to_msg()
-            sp.header.frame_id = self.world_frame_id
-            set_quaternion(sp.quaternion, so3.rot_to_quat(R_d))
-            self.pub_setpoint.publish(sp)
+        self.telemetry.publish(tick)
         state = (tick.armed, tick.state, tick.sources)
         if state != self._last_state:
             if (self._last_state is not None and tick.failed
