@@ -10,8 +10,7 @@ the motors.
   too), and when the commands stop. It needs nothing from the controller: a controller that dies
   or hangs stops its commands, and the ESCs get zero one timeout later.
 - Every write cycle writes every ESC; a failed transfer is retried up to ``retries`` times in the
-  cycle and counted (by ESC and kind); the next cycle writes again.
-- At stop: zero to every ESC, each retried.
+  cycle and counted (by ESC and kind); the next cycle writes again. At stop: zero to every ESC.
 - The motor test: one rotor at a given command for a given time, refused while the controller is
   armed, while it sends non-zero commands (armed, though its armed state may not have arrived
   yet), while another test runs, or beyond ``test_command_max``. An arming or a non-zero command
