@@ -21,12 +21,12 @@ OK, WARN, ERROR = 0, 1, 2
 FAILSAFE = 'failsafe'          # how the state of a vehicle that failed safe begins
 
 
-def state_kind(state):
-    """The kind of a supervisor state as the codec spells it: 'failsafe' for any failsafe, else
-    the state up to its first colon ('armed', 'disarmed at start-up', ...). The one place a state
-    is read back (the report's time in each state, Figures.failsafe).
+def state_kind(figures):
+    """The kind of the state a report's figures show, for a table of time in each state:
+    'failsafe' for any failsafe (the typed flag), else the state's words up to their first colon
+    ('armed', 'disarmed at start-up', ...).
     """
-    return FAILSAFE if state.startswith(FAILSAFE) else state.split(':')[0]
+    return FAILSAFE if figures.failsafe else figures.state.split(':')[0]
 
 
 def failsafe(why):
@@ -98,7 +98,8 @@ class Figures:
     """
 
     armed: bool = False
-    state: str = ''
+    failsafe: bool = False         # disarmed by a failsafe (until someone arms it again)
+    state: str = ''                # the supervisor's state, in words
     pose_age: float = math.inf
     imu_age: float = math.inf
     pose_counts: Counts = Counts(0, 0)
@@ -117,11 +118,6 @@ class Figures:
     loop_period: Optional[Window] = None
     tick_to_command: Optional[Window] = None
     pose_to_command_latency: Optional[Window] = None
-
-    @property
-    def failsafe(self):
-        """The vehicle failed safe (and is disarmed until someone arms it again)."""
-        return state_kind(self.state) == FAILSAFE
 
     def with_timing(self, loop_period, tick_to_command, pose_to_command_latency):
         return replace(self, loop_period=loop_period, tick_to_command=tick_to_command,
@@ -175,6 +171,7 @@ def _margin_value(text):
 # out of a report when they are None (psi and the commands before the first control step).
 KEYS = {
     'armed': ('armed', str, lambda t: t == 'True'),
+    'failsafe': ('failsafe', str, lambda t: t == 'True'),
     'state': ('state', str, str),
     'pose_age': ('pose age [s]', '%.4f'.__mod__, float),
     'imu_age': ('imu age [s]', '%.4f'.__mod__, float),
@@ -231,4 +228,6 @@ def from_values(pairs):
             found[name] = parse(text)
         except (ValueError, AttributeError):
             pass
+    if 'failsafe' not in found:     # a record from before the key: its state's words say it
+        found['failsafe'] = str(found.get('state', '')).startswith(FAILSAFE)
     return Figures(**found)

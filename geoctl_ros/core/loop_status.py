@@ -124,7 +124,7 @@ def status(loop, now, other_commanders=None):
     if out is not None and len(out.margins_deg):
         margin = float(np.min(out.margins_deg))
     figures = Figures(
-        armed=sup.armed, state=sup.reason,
+        armed=sup.armed, failsafe=sup.failed and not sup.armed, state=sup.reason,
         pose_age=loop.pose.age(now), imu_age=loop.rate.age(now),
         pose_counts=Counts(loop.pose.accepted, loop.pose.refused),
         imu_counts=Counts(loop.rate.accepted, loop.rate.refused),

@@ -56,7 +56,7 @@ class Flight(NamedTuple):
     pose_age_ms: np.ndarray
     imu_age_ms: np.ndarray
     failsafe_t: list
-    states: list                   # (t, state) of the controller's diagnostics
+    states: list                   # (t, state kind) of the controller's diagnostics
     last_figures: object           # the last diagnostics' Figures, or None
     missing: list                  # the package's topics the bag lacks
     setpoints: list                # (t, quaternion) of active_setpoint, as the controller flew
@@ -126,7 +126,7 @@ def load_flight(path, params_file=None):
         imu_age_ms=np.array([1e3 * f.imu_age if math.isfinite(f.imu_age) else np.nan
                              for *_, f in figures]),
         failsafe_t=failsafe_t,
-        states=[(t, f.state) for t, *_, f in figures],
+        states=[(t, state_kind(f)) for t, *_, f in figures],
         last_figures=figures[-1][3] if figures else None,
         missing=[t.name for t in TOPICS if t.name not in present],
         setpoints=[(m.t - t0, quaternion(m.msg.quaternion))
@@ -172,8 +172,7 @@ def summary(f):
     e_R = e_R[(t_eR >= t_from) & (t_eR <= t_to)]
     out['final_eR_norm'] = float(np.linalg.norm(e_R[-1])) if len(e_R) else None
     durations = {}
-    for (t, state), (t_next, _) in zip(f.states, f.states[1:]):
-        kind = state_kind(state)
+    for (t, kind), (t_next, _) in zip(f.states, f.states[1:]):
         durations[kind] = durations.get(kind, 0.0) + (t_next - t)
     out['time_in_state_s'] = {k: round(v, 3) for k, v in durations.items()}
     out['failsafes'] = len(f.failsafe_t)
