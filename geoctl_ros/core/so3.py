@@ -53,15 +53,34 @@ def vee(M):
     return np.array([M[1, 2], M[2, 0], M[0, 1]]).T
 
 
-# Stacks are multiplied out entry by entry (each entry a sum of products taken in index order),
-# not through matmul: matmul hands each pair of a stack to BLAS, and OpenBLAS's kernels round a
-# product by where its matrices fall in memory (0.3.23's Prescott kernel, numpy 1.26's: every
-# other 3x3 matrix of a stack, by its 16-byte alignment). A run of a batch then stays bit for bit
-# on the same run flown alone, on any CPU. One pair still goes through ``@``.
+# The products of a stack are multiplied out entry by entry (each entry a sum of products taken
+# in index order), not through matmul: matmul hands each pair of a stack to BLAS, and OpenBLAS's
+# kernels round a product by where its matrices fall in memory (0.3.23's Prescott kernel, numpy
+# 1.26's: every other 3x3 matrix of a stack, by its 16-byte alignment). One pair of at most
+# SMALL entries is multiplied out in floats, in the same order: a run flown alone (the
+# simulated testbed of a batch of one) then gives the same bits as in a stack of any size. A
+# larger single pair (the control step's linear map) goes through ``@``.
+SMALL = 18
+
+
+def _float_matvec(M, v):
+    rows, x = M.tolist(), v.tolist()
+    out = []
+    for r in rows:
+        acc = r[0] * x[0]
+        for k in range(1, len(x)):
+            acc = acc + r[k] * x[k]
+        out.append(acc)
+    return np.array(out)
+
 
 def matmul(A, B):
     """A B for two matrices, or for each pair of stacks of them (broadcasting)."""
-    if A.ndim <= 2 and B.ndim <= 2:
+    if A.ndim == 2 and B.ndim == 2:
+        if A.shape == (3, 3) and B.shape == (3, 3):
+            a, b = A.tolist(), B.tolist()
+            return np.array([[r[0] * b[0][j] + r[1] * b[1][j] + r[2] * b[2][j] for j in range(3)]
+                             for r in a])
         return A @ B
     if A.shape[-1] == 3:
         return (A[..., :, 0, None] * B[..., None, 0, :] + A[..., :, 1, None] * B[..., None, 1, :]
@@ -75,7 +94,7 @@ def matmul(A, B):
 def matvec(M, v):
     """M v for a matrix and a vector, or for each of a stack of them (broadcasting)."""
     if M.ndim <= 2 and v.ndim == 1:
-        return M @ v
+        return _float_matvec(M, v) if M.size <= SMALL else M @ v
     v = v[..., None, :]
     if M.shape[-1] == 3:
         return M[..., :, 0] * v[..., 0] + M[..., :, 1] * v[..., 1] + M[..., :, 2] * v[..., 2]
@@ -88,7 +107,7 @@ def matvec(M, v):
 def vecmat(v, M):
     """v^T M (= M^T v) for a vector and a matrix, or for each of a stack of them."""
     if v.ndim == 1 and M.ndim <= 2:
-        return v @ M
+        return _float_matvec(M.T, v) if M.size <= SMALL else v @ M
     v = v[..., None]
     if M.shape[-2] == 3:
         return (v[..., 0, :] * M[..., 0, :] + v[..., 1, :] * M[..., 1, :]
@@ -102,7 +121,11 @@ def vecmat(v, M):
 def dot(a, b):
     """a . b for two vectors, or for each pair of two stacks of them."""
     if a.ndim == 1 and b.ndim == 1:
-        return a @ b
+        x, y = a.tolist(), b.tolist()
+        acc = x[0] * y[0]
+        for k in range(1, len(x)):
+            acc = acc + x[k] * y[k]
+        return np.float64(acc)
     if a.shape[-1] == 3:
         return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
     out = a[..., 0] * b[..., 0]
@@ -142,7 +165,7 @@ def exp(w):
         x, y, z = w.tolist()
         theta2 = x * x + y * y + z * z
         theta = math.sqrt(theta2)
-        a, b = _rodrigues(theta2 < 1e-8, theta2, theta, math.sin(theta), math.cos(theta))
+        a, b = _rodrigues(theta2 < 1e-8, theta2, theta, *_sin_cos(theta))
         bxy, bxz, byz, ax, ay, az = b * x * y, b * x * z, b * y * z, a * x, a * y, a * z
         return np.array([[1.0 - b * (y * y + z * z), bxy - az, bxz + ay],
                          [bxy + az, 1.0 - b * (x * x + z * z), byz - ax],
@@ -169,7 +192,7 @@ def exp_apply(w, v):
         x, y, z = w.tolist()
         theta2 = x * x + y * y + z * z
         theta = math.sqrt(theta2)
-        a, b = _rodrigues(theta2 < 1e-8, theta2, theta, math.sin(theta), math.cos(theta))
+        a, b = _rodrigues(theta2 < 1e-8, theta2, theta, *_sin_cos(theta))
     else:
         x, y, z = w[..., 0], w[..., 1], w[..., 2]
         theta2 = x * x + y * y + z * z
@@ -180,6 +203,13 @@ def exp_apply(w, v):
     return v + a * wv + b * cross(w, wv)
 
 
+def _sin_cos(theta):
+    """sin and cos of one angle, by numpy's functions: a stack's entries get numpy's, which need
+    not round as the math module's do.
+    """
+    return float(np.sin(theta)), float(np.cos(theta))
+
+
 def _rodrigues(small, theta2, theta, sin, cos):
     """sin(t)/t and (1 - cos t)/t^2, by their Taylor series to O(t^4) where t^2 < 1e-8 (error below
     1e-20); scalars, or arrays entry by entry.
@@ -188,9 +218,8 @@ def _rodrigues(small, theta2, theta, sin, cos):
               0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0)
     if isinstance(small, (bool, np.bool_)):
         return taylor if small else (sin / theta, (1.0 - cos) / theta2)
-    safe = np.where(small, 1.0, theta)
-    return (np.where(small, taylor[0], sin / safe),
-            np.where(small, taylor[1], (1.0 - cos) / (safe * safe)))
+    return (np.where(small, taylor[0], sin / np.where(small, 1.0, theta)),
+            np.where(small, taylor[1], (1.0 - cos) / np.where(small, 1.0, theta2)))
 
 
 def log(R):

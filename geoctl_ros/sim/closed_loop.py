@@ -114,8 +114,9 @@ def fly(scenarios, progress=None, series=False, history=False, duration=None):
     # latency: a ring of the last states, one per integration step
     delay = np.array([int(round(s.options['latency'] * rate_sub)) for s in scenarios])
     ring = int(delay.max()) + 1
-    R_past = np.repeat(plant.R[None], ring, axis=0)
-    W_past = np.repeat(plant.Omega[None], ring, axis=0)
+    R_now, W_now = bed.state()
+    R_past = np.repeat(R_now[None], ring, axis=0)
+    W_past = np.repeat(W_now[None], ring, axis=0)
     runs = np.arange(n)
 
     # each sample received at its step: its age the latency from its stamp (age_from_stamps),
@@ -126,11 +127,11 @@ def fly(scenarios, progress=None, series=False, history=False, duration=None):
     any_stall = bool(stalled.any())
     receipt = np.zeros(n)
     ages = (delay * h,) * 2 if stamped else (0.0, 0.0)
-    R_seen, W_seen = plant.R, plant.Omega
-    min_angle = cones.angles_deg(plant.R)
+    R_seen, W_seen = R_now, W_now
+    min_angle = cones.angles_deg(R_now)
     margin_series = np.empty((steps, n)) if series else None
     sensor_series = np.empty((steps, n, 3), dtype=np.float32) if series else None
-    record = History(steps, n, controller, plant, actuator) if history else None
+    record = History(steps, bed) if history else None
     last_unsettled = np.full(n, -1)        # the last step with the error >= SETTLED_DEG
     last_psi_above = np.full(n, -1)        # the last step with Psi >= SETTLE_PSI
     cos_settled = math.cos(math.radians(SETTLED_DEG))
@@ -161,28 +162,29 @@ def fly(scenarios, progress=None, series=False, history=False, duration=None):
         max_rate = np.maximum(max_rate, np.linalg.norm(W_seen, axis=-1))
         out, motors = tick(R_seen, W_seen, dt, t, ages)
         saturated += motors.allocation.saturated
-        last_unsettled[_cos_error(controller.R_d, plant.R) <= cos_settled] = k
+        last_unsettled[_cos_error(controller.R_d, R_now) <= cos_settled] = k
         last_psi_above[out.psi >= SETTLE_PSI] = k
         if series:
-            margin_series[k] = cones.margins_deg(plant.R).min(axis=-1)
-            sensor_series[k] = so3.matvec(plant.R, cones.r)
+            margin_series[k] = cones.margins_deg(R_now).min(axis=-1)
+            sensor_series[k] = so3.matvec(R_now, cones.r)
         if record is not None:
             record.add(k, t, out, motors)
         command = out.u if actuator is None else motors.commands
         for _ in range(holds[k]):
-            plant.step(command if actuator is None else actuator.moment(command, h), h)
+            plant.step(bed.moment(command, h), h)
             j += 1
-            R_past[j % ring], W_past[j % ring] = plant.R, plant.Omega
-            min_angle = np.minimum(min_angle, cones.angles_deg(plant.R))
+            R_now, W_now = bed.state()
+            R_past[j % ring], W_past[j % ring] = R_now, W_now
+            min_angle = np.minimum(min_angle, cones.angles_deg(R_now))
         if progress is not None and (k + 1) % 100 == 0:
             progress((k + 1) / steps)
     wall = time.perf_counter() - t0
-    final = controller.step(plant.R, plant.Omega, dt, adapt=False)
+    final = controller.step(R_now, W_now, dt, adapt=False)
     return Flight(
         names=[s.name for s in scenarios], min_angle_deg=min_angle,
         half_angle_deg=cones.theta_deg * np.ones((n, 1)),
-        final_error_deg=np.degrees(so3.angle(so3.matmul(so3.transpose(controller.R_d), plant.R))),
-        final=final, final_angular_velocity=plant.Omega, saturated_steps=saturated,
+        final_error_deg=np.degrees(so3.angle(so3.matmul(so3.transpose(controller.R_d), R_now))),
+        final=final, final_angular_velocity=W_now, saturated_steps=saturated,
         max_rate=max_rate, settle_s=_settled(last_unsettled, times),
         psi_settle_s=_settled(last_psi_above, times),
         margin_series=margin_series, sensor_series=sensor_series, history=record, times=times,

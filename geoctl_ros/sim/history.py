@@ -11,14 +11,18 @@ from geoctl_ros.core.mechanics import gravity_moment
 class History:
     """Per-step arrays with a leading step axis and a run axis: (steps, runs, ...)."""
 
-    def __init__(self, steps, runs, controller, plant, actuator):
+    def __init__(self, steps, bed):
+        """bed: the batch's controller and testbeds (``geoctl_ros.sim.runs.Testbeds``)."""
+        self._bed = bed
+        controller, plant, actuator = bed.controller, bed.plant, bed.actuator
+        runs = len(bed.cones.V)
         self._controller, self._plant, self._actuator = controller, plant, actuator
         cfg = controller.config
         self.cone_names = list(cfg.cones.names)
         n_params = cfg.n_params
         rotors = 0 if actuator is None else actuator.thrusts.shape[-1]
         m_rho_model = cfg.m_rho if cfg.gravity_compensation else np.zeros(3)
-        self._m_rho_error = plant.config.m_rho - m_rho_model     # (runs, 3)
+        self._m_rho_error = np.broadcast_to(plant.config.m_rho - m_rho_model, (runs, 3))
         self.arrays = {
             't': np.empty(steps),
             'q': np.empty((steps, runs, 4)),
@@ -37,10 +41,10 @@ class History:
     def add(self, k, t, out, motors):
         """Step k at time t: the plant's state now, the step's ControlOutput and MotorOutput."""
         a, plant = self.arrays, self._plant
-        R = plant.R
+        R, Omega = self._bed.state()
         a['t'][k] = t
         a['q'][k] = [so3.rot_to_quat(Ri) for Ri in R]
-        a['w'][k] = plant.Omega
+        a['w'][k] = Omega
         a['eR'][k], a['psi'][k], a['u'][k], a['dbar'][k] = out.e_R, out.psi, out.u, out.delta_bar
         # what the controller does not model: the disturbance plus the uncompensated gravity
         # moment, or (with the constant + centre-of-mass model) the two separately
