@@ -90,7 +90,8 @@ def test_heartbeat_identity_and_state():
     hb = parse(v.heartbeat())
     assert hb.system_status == mav.MAV_STATE_ACTIVE
     assert hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED
-    v.view.diagnostics = Status(ERROR, '', Figures(armed=False, failsafe=True, state='failsafe: pose lost'))
+    v.view.diagnostics = Status(ERROR, '', Figures(armed=False, failsafe=True,
+                                                   state='failsafe: pose lost'))
     hb = parse(v.heartbeat())
     assert hb.system_status == mav.MAV_STATE_CRITICAL
     assert not hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED

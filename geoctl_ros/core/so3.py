@@ -64,6 +64,8 @@ SMALL = 18
 
 
 def _float_matvec(M, v):
+    if not len(v):
+        return np.zeros(M.shape[0])
     rows, x = M.tolist(), v.tolist()
     out = []
     for r in rows:
@@ -96,6 +98,8 @@ def matvec(M, v):
     if M.ndim <= 2 and v.ndim == 1:
         return _float_matvec(M, v) if M.size <= SMALL else M @ v
     v = v[..., None, :]
+    if M.shape[-1] == 0:
+        return np.zeros(np.broadcast_shapes(M.shape[:-1], v.shape[:-2] + (1,)))
     if M.shape[-1] == 3:
         return M[..., :, 0] * v[..., 0] + M[..., :, 1] * v[..., 1] + M[..., :, 2] * v[..., 2]
     out = M[..., :, 0] * v[..., 0]
@@ -109,6 +113,8 @@ def vecmat(v, M):
     if v.ndim == 1 and M.ndim <= 2:
         return _float_matvec(M.T, v) if M.size <= SMALL else v @ M
     v = v[..., None]
+    if M.shape[-2] == 0:
+        return np.zeros(np.broadcast_shapes(M.shape[:-2] + M.shape[-1:], v.shape[:-2] + (1,)))
     if M.shape[-2] == 3:
         return (v[..., 0, :] * M[..., 0, :] + v[..., 1, :] * M[..., 1, :]
                 + v[..., 2, :] * M[..., 2, :])
@@ -120,6 +126,8 @@ def vecmat(v, M):
 
 def dot(a, b):
     """a . b for two vectors, or for each pair of two stacks of them."""
+    if not a.shape[-1]:
+        return np.zeros(np.broadcast_shapes(a.shape[:-1], b.shape[:-1]))[()]
     if a.ndim == 1 and b.ndim == 1:
         x, y = a.tolist(), b.tolist()
         acc = x[0] * y[0]
