@@ -258,7 +258,7 @@ def test_a_gap_and_its_length_are_counted_when_it_ends():
     tick = loop.tick(0.45, 0.01)
     assert not tick.bridging
     gaps = loop.status(0.45).figures.pose_gaps
-    assert gaps.count == 1 and gaps.longest == pytest.approx(0.25)
+    assert gaps.ridden == 1 and gaps.longest == pytest.approx(0.25)
 
 
 def test_a_non_finite_control_output_disarms_and_publishes_zero(monkeypatch):

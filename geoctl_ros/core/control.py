@@ -28,7 +28,7 @@ and model are shared by the batch. (``x.T`` on a stack of vectors puts the batch
 ``(x.T * a).T`` scales each run's vector by its own scalar and a single vector by a scalar.)
 """
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import NamedTuple, Optional
 
 import numpy as np
 
@@ -102,7 +102,7 @@ class ControlOutput(NamedTuple):
     saturated: bool          # some barrier in its floor band (repulsion saturated)
     adapting: bool           # the estimate was advanced this step
     cones: object = None     # the ConeEval the step used
-    half_angles_deg: np.ndarray = None
+    half_angles_deg: Optional[np.ndarray] = None
     # (in a batch, each field has the batch axis first: psi, violated, ... one per run)
 
     @property

@@ -83,7 +83,7 @@ class Counts(NamedTuple):
 class Gaps(NamedTuple):
     """Gaps of an input stream ridden through since the start, and the longest (s)."""
 
-    count: int
+    ridden: int        # gaps ridden through
     longest: float
 
 

@@ -62,7 +62,7 @@ def pointing_cbf(controller, R, Omega, terms, delta_bar):
     return A, beta, h, h_dot
 
 
-_SUBSETS = {}
+_SUBSETS: dict = {}
 
 
 def _active_sets(n):

@@ -43,7 +43,7 @@ def controller_config(values):
         cbf_rate=values['cbf_rate'])
 
 
-_RECORDS = {}
+_RECORDS: dict = {}
 
 
 def settings(values, prefix=''):

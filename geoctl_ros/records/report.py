@@ -178,7 +178,7 @@ def summary(f):
     out['failsafes'] = len(f.failsafe_t)
     last = f.last_figures
     out['gaps_ridden'] = (None if last is None else
-                          {'pose': last.pose_gaps.count, 'imu': last.imu_gaps.count})
+                          {'pose': last.pose_gaps.ridden, 'imu': last.imu_gaps.ridden})
     out['duration_s'] = float(max([0.0] + [s[0][-1] for s in (f.psi, f.motors) if len(s[0])]
                                   + list(f.attitude_t[-1:])))
     return out

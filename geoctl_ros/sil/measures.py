@@ -48,7 +48,7 @@ def figures(mon, t0, t1, cones):
         'pose to command p99/max [ms]': windows(diags, 'pose_to_command_latency'),
         'closest approach [deg]': min(margins) if margins else float('nan'),
         'gaps ridden (pose, imu)': (('-', '-') if last is None else
-                                    (last.pose_gaps.count, last.imu_gaps.count)),
+                                    (last.pose_gaps.ridden, last.imu_gaps.ridden)),
     }
     return out
 
