@@ -5,6 +5,7 @@ The launch files are checked here for what needs no launcher (they parse, and ev
 parameter file and remapping they name exists); ``test_launch.py`` runs them with ``ros2 launch``.
 """
 import ast
+import importlib.util
 import os
 import pathlib
 import re
@@ -249,6 +250,21 @@ def test_the_linter_finds_what_the_rules_forbid():
     assert r.returncode == 1
     found = set(re.findall(r'\b([A-Z]+[0-9]+)\b', r.stdout))
     assert {'F401', 'PLC0415', 'Q000', 'E501'} <= found, r.stdout
+
+
+def test_the_rclpy_free_layers_are_clean_under_mypy(tmp_path):
+    """mypy (mypy.ini: core, params, sim and esc) finds no type error; a planted one it finds."""
+    if importlib.util.find_spec('mypy') is None:
+        pytest.skip('mypy is installed on the development stack only (requirements.txt)')
+    r = subprocess.run([sys.executable, '-m', 'mypy', '--no-incremental', '--cache-dir',
+                        os.devnull], cwd=ROOT, capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+    planted = tmp_path / 'planted.py'
+    planted.write_text('def f(x: int) -> str:\n    return x\n')
+    r = subprocess.run([sys.executable, '-m', 'mypy', '--no-incremental', '--cache-dir',
+                        os.devnull, '--config-file', os.devnull, str(planted)], cwd=ROOT,
+                       capture_output=True, text=True)
+    assert r.returncode == 1 and 'Incompatible return value' in r.stdout, r.stdout
 
 
 INSTALLED_CONFIG = """
