@@ -16,13 +16,14 @@ numpy 1.26 and 2.x alike: Ubuntu 24.04 (the vehicle's stack) ships numpy 1.26, w
 of the package, and ``test_package.py`` fails on any numpy name 1.26 lacks.
 """
 import math
+from typing import Any, Sequence, Union
 
 import numpy as np
 
 _I3 = np.eye(3)
 
 
-def hat(x):
+def hat(x: np.ndarray) -> np.ndarray:
     """The skew-symmetric matrix of x: ``hat(x) @ y == cross(x, y)``."""
     x = np.asarray(x, dtype=float)
     if x.ndim == 1:
@@ -34,7 +35,7 @@ def hat(x):
     return H - np.swapaxes(H, -1, -2)
 
 
-def cross(a, b):
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Cross product of 3-vectors, or of stacks of them (np.cross costs ~10x more for single
     vectors).
     """
@@ -47,7 +48,7 @@ def cross(a, b):
                      a[0] * b[1] - a[1] * b[0]]).T
 
 
-def vee(M):
+def vee(M: np.ndarray) -> np.ndarray:
     """Inverse of :func:`hat`: the vector of a skew-symmetric matrix (or of each of a stack)."""
     M = M.T
     return np.array([M[1, 2], M[2, 0], M[0, 1]]).T
@@ -76,7 +77,7 @@ def _float_matvec(M, v):
     return np.array(out)
 
 
-def matmul(A, B):
+def matmul(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """A B for two matrices, or for each pair of stacks of them (broadcasting)."""
     if A.ndim == 2 and B.ndim == 2:
         if A.shape == (3, 3) and B.shape == (3, 3):
@@ -93,7 +94,7 @@ def matmul(A, B):
     return out
 
 
-def matvec(M, v):
+def matvec(M: np.ndarray, v: np.ndarray) -> np.ndarray:
     """M v for a matrix and a vector, or for each of a stack of them (broadcasting)."""
     if M.ndim <= 2 and v.ndim == 1:
         return _float_matvec(M, v) if M.size <= SMALL else M @ v
@@ -108,7 +109,7 @@ def matvec(M, v):
     return out
 
 
-def vecmat(v, M):
+def vecmat(v: np.ndarray, M: np.ndarray) -> np.ndarray:
     """v^T M (= M^T v) for a vector and a matrix, or for each of a stack of them."""
     if v.ndim == 1 and M.ndim <= 2:
         return _float_matvec(M.T, v) if M.size <= SMALL else v @ M
@@ -124,8 +125,8 @@ def vecmat(v, M):
     return out
 
 
-def dot(a, b):
-    """a . b for two vectors, or for each pair of two stacks of them."""
+def dot(a: np.ndarray, b: np.ndarray) -> Any:
+    """a . b for two vectors (a numpy float), or for each pair of two stacks of them (an array)."""
     if not a.shape[-1]:
         return np.zeros(np.broadcast_shapes(a.shape[:-1], b.shape[:-1]))[()]
     if a.ndim == 1 and b.ndim == 1:
@@ -142,12 +143,12 @@ def dot(a, b):
     return out
 
 
-def unit(v):
+def unit(v: np.ndarray) -> np.ndarray:
     """v scaled to unit length (v not zero)."""
     return v / math.sqrt(float(v @ v))
 
 
-def direction(axis, angle, azimuth):
+def direction(axis: np.ndarray, angle: float, azimuth: float) -> np.ndarray:
     """The unit vector at angle from the unit vector axis, at azimuth round it."""
     e1 = unit(cross(axis, _I3[int(np.argmin(np.abs(axis)))]))
     e2 = cross(axis, e1)
@@ -155,12 +156,12 @@ def direction(axis, angle, azimuth):
             + math.sin(angle) * (math.cos(azimuth) * e1 + math.sin(azimuth) * e2))
 
 
-def transpose(M):
+def transpose(M: np.ndarray) -> np.ndarray:
     """M^T for a matrix, or for each of a stack of them (a view)."""
     return M.swapaxes(-1, -2)
 
 
-def exp(w):
+def exp(w: np.ndarray) -> np.ndarray:
     """The rotation matrix exp of hat(w) (Rodrigues), accurate for small angles; a stack (..., 3)
     gives a stack of rotations.
 
@@ -192,7 +193,7 @@ def exp(w):
     return out
 
 
-def exp_apply(w, v):
+def exp_apply(w: np.ndarray, v: np.ndarray) -> np.ndarray:
     """exp(hat(w)) v without forming the matrix: v + a w x v + b w x (w x v) (Rodrigues), for one
     pair or stacks of them; equal to matvec(exp(w), v) to rounding.
     """
@@ -230,7 +231,7 @@ def _rodrigues(small, theta2, theta, sin, cos):
             np.where(small, taylor[1], (1.0 - cos) / np.where(small, 1.0, theta2)))
 
 
-def log(R):
+def log(R: np.ndarray) -> np.ndarray:
     """Rotation vector w with |w| <= pi and exp(w) == R; accurate near 0 and near pi.
 
     The angle comes from atan2(sin, cos), so it keeps full precision near pi, where
@@ -254,7 +255,7 @@ def log(R):
     return theta * n
 
 
-def angle(R):
+def angle(R: np.ndarray) -> Union[float, np.ndarray]:
     """Geodesic rotation angle of R in [0, pi] (radians); of each rotation of a stack (..., 3, 3)
     as an array.
     """
@@ -268,14 +269,14 @@ def angle(R):
     return np.arctan2(skew_norm, 0.5 * (R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2] - 1.0))
 
 
-def project(M):
+def project(M: np.ndarray) -> np.ndarray:
     """The rotation closest to M in the Frobenius norm (polar decomposition via SVD)."""
     U, _, Vt = np.linalg.svd(M)
     d = 1.0 if np.linalg.det(U @ Vt) > 0.0 else -1.0
     return U @ np.diag([1.0, 1.0, d]) @ Vt
 
 
-def quat_to_rot(q):
+def quat_to_rot(q: Sequence[float]) -> np.ndarray:
     """Rotation matrix of a quaternion in ROS order (x, y, z, w); q is normalised first."""
     x, y, z, w = (float(v) for v in q)
     n = math.sqrt(x * x + y * y + z * z + w * w)
@@ -287,7 +288,7 @@ def quat_to_rot(q):
     ])
 
 
-def rot_to_quat(R):
+def rot_to_quat(R: np.ndarray) -> np.ndarray:
     """Unit quaternion (x, y, z, w) of R with w >= 0 (Shepperd's method, stable for any R)."""
     tr = R[0, 0] + R[1, 1] + R[2, 2]
     i = int(np.argmax([tr, R[0, 0], R[1, 1], R[2, 2]]))
@@ -303,12 +304,12 @@ def rot_to_quat(R):
     else:
         s = 2.0 * math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
         q = [(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s, (R[1, 0] - R[0, 1]) / s]
-    q = np.array(q)
-    q /= np.linalg.norm(q)
-    return -q if q[3] < 0.0 else q
+    out = np.array(q)
+    out /= np.linalg.norm(out)
+    return -out if out[3] < 0.0 else out
 
 
-def axis_angle(axis, angle_rad):
+def axis_angle(axis: Sequence[float], angle_rad: float) -> np.ndarray:
     """Rotation by angle_rad about a (not necessarily unit) axis."""
     a = np.asarray(axis, dtype=float)
     return exp(a * (angle_rad / np.linalg.norm(a)))

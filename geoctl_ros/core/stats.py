@@ -5,9 +5,11 @@ computed only when the window is reported. A window holds at most ``capacity`` s
 that the newest overwrite the oldest (the count still counts every sample), so a window that
 overflows reports its most recent samples.
 """
+from typing import Optional, Sequence
+
 import numpy as np
 
-from geoctl_ros.core.diagnostics import window
+from geoctl_ros.core.diagnostics import Window, window
 
 
 class WindowStats:
@@ -17,17 +19,17 @@ class WindowStats:
         self._x = np.empty(capacity)
         self.n = 0
 
-    def add(self, x):
+    def add(self, x: float) -> None:
         self._x[self.n % len(self._x)] = x
         self.n += 1
 
-    def reset(self):
+    def reset(self) -> None:
         self.n = 0
 
-    def samples(self):
+    def samples(self) -> np.ndarray:
         return self._x[:min(self.n, len(self._x))]
 
-    def window(self):
+    def window(self) -> Optional[Window]:
         """The diagnostics Window of the samples (mean, std, p99, max), or None for none."""
         return window(self.samples())
 
@@ -35,7 +37,8 @@ class WindowStats:
 SETTLE_PSI = 1e-3          # Psi below this counts as settled (the runner's and report's summary)
 
 
-def settle_time(t, psi, threshold=SETTLE_PSI):
+def settle_time(t: Sequence[float], psi: Sequence[float],
+                threshold: float = SETTLE_PSI) -> Optional[float]:
     """The time from which Psi stays below threshold: t[0] when it always was, None when it is
     not below at the end (t and psi: samples in time order).
     """

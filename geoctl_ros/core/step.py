@@ -6,10 +6,11 @@ closed loop of the scenario runner and the campaigns) both call :class:`ControlT
 core's formulas it takes one run (R (3, 3), Omega (3,)) or a batch of N ((N, 3, 3), (N, 3)).
 """
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple, Optional, Tuple
 
 import numpy as np
 
+from geoctl_ros.core.motors import Mixer
 from geoctl_ros.core.prediction import CommandHistory, DelayPredictor
 from geoctl_ros.core.so3 import matvec
 
@@ -17,7 +18,7 @@ ON_TIME_S = 1e-6       # a step less late than this is on time (the clock's roun
 HISTORY_TICKS = 128    # the commands remembered for prediction (1.28 s at 100 Hz, 0.26 at 500)
 
 
-def blind_time(delay, ages, dt, held):
+def blind_time(delay: float, ages: Tuple[Any, Any], dt: float, held: Optional[float]) -> Any:
     """How long the loop is blind beyond its nominal period (s; one per run of a batch): the age
     of its older input (measurement_delay plus the ages from capture) plus how much later than
     the period this step comes. The barrier widens each cone by the sensor's travel towards it
@@ -51,7 +52,7 @@ class DegradedMode:
         self.peak = 0.0             # s, the blind time held from its last peak
         self.scale_now = 1.0
 
-    def scale(self, blind, held):
+    def scale(self, blind: Any, held: float) -> Any:
         """The gain scale s after a tick of blind time ``blind`` that came ``held`` s after the
         last.
         """
@@ -98,7 +99,7 @@ class ControlTick:
         self._clock = 0.0               # the tick's time: now, or (untimed) periods counted
         self._ticked = False
 
-    def reconfigure(self, mixer, measurement_delay):
+    def reconfigure(self, mixer: Mixer, measurement_delay: float) -> None:
         """A new mixer (that has adopted the old one's lag model) and delay, at run time."""
         self.mixer, self.measurement_delay = mixer, measurement_delay
         self.history.lag = mixer.lag
@@ -169,7 +170,7 @@ class ControlTick:
         end = matvec(B, mixer.sent_thrusts)
         return end, matvec(B, mixer.modelled_thrusts)
 
-    def idle(self, dt, now=None):
+    def idle(self, dt: float, now: Optional[float] = None) -> Command:
         """A tick without a state to control from (before the first pose and rate): zero
         commands, and the time noted.
         """

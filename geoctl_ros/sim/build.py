@@ -9,7 +9,7 @@ from geoctl_ros.sim.plant import Disturbance, PlantConfig
 from geoctl_ros.sim.testbed import RotorActuator, TestbedSim
 
 
-def testbed_sim(values):
+def testbed_sim(values: dict) -> TestbedSim:
     """The TestbedSim of resolved sim parameters, at its initial state."""
     actuator = None
     if values['actuation'] == 'rotors':
@@ -23,7 +23,7 @@ def testbed_sim(values):
                       values['noise.seed'])
 
 
-def plant_config(values):
+def plant_config(values: dict) -> PlantConfig:
     """PlantConfig from resolved sim parameters."""
     return PlantConfig(
         inertia=values['inertia'].reshape(3, 3), mass=values['mass'],

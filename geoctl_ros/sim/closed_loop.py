@@ -19,13 +19,17 @@ noise levels, duration, schedule, the disturbance's varying part) must be the sa
 says which parameter differs otherwise. The node's input supervision (refusals, gap bridging,
 failsafes) is the node's: a scenario's stalls are shorter than the inputs' timeouts.
 """
+from __future__ import annotations
+
 from dataclasses import dataclass
 import math
 import time
+from typing import TYPE_CHECKING, Callable, List, Optional
 
 import numpy as np
 
 from geoctl_ros.core import so3
+from geoctl_ros.core.control import ControlOutput
 from geoctl_ros.core.stats import SETTLE_PSI
 from geoctl_ros.core.step import ControlTick
 from geoctl_ros.params import CONTROLLER, SIM
@@ -39,6 +43,9 @@ from geoctl_ros.sim.runs import (
     stalled_steps,
 )
 
+if TYPE_CHECKING:          # (a type only: sim.scenario imports this module)
+    from geoctl_ros.sim.scenario import Scenario
+
 SETTLED_DEG = 5.0       # attitude error below which a run has converged (at the end) or settled
 
 
@@ -51,7 +58,7 @@ class Flight:
                                    # cone's axis, after every integration step
     half_angle_deg: np.ndarray     # (runs, cones)
     final_error_deg: np.ndarray    # (runs,): attitude error at the end (true attitude)
-    final: object                  # ControlOutput of the true final state (no adaptation)
+    final: ControlOutput           # ControlOutput of the true final state (no adaptation)
     final_angular_velocity: np.ndarray   # (runs, 3)
     saturated_steps: np.ndarray    # (runs,): control steps with the allocation saturated
     max_rate: np.ndarray           # (runs,): largest measured |Omega| (rad/s)
@@ -59,32 +66,33 @@ class Flight:
                                    # SETTLED_DEG (NaN: not below at the end)
     psi_settle_s: np.ndarray       # (runs,): the time from which Psi stays below SETTLE_PSI
                                    # (the paper's; NaN: not below at the end)
-    margin_series: np.ndarray      # (steps, runs): min cone margin at each control step (None
-                                   # unless asked for: series=True)
-    sensor_series: np.ndarray      # (steps, runs, 3): sensor direction R r, world frame (float32;
-                                   # None unless asked for)
-    history: object                # History: every step's state and output (history=True)
+    margin_series: Optional[np.ndarray]   # (steps, runs): min cone margin at each control step
+                                          # (None unless asked for: series=True)
+    sensor_series: Optional[np.ndarray]   # (steps, runs, 3): sensor direction R r, world frame
+                                          # (float32; None unless asked for)
+    history: Optional[History]     # History: every step's state and output (history=True)
     times: np.ndarray              # (steps,): the control steps' times
     dt: float
     wall_s: float = 0.0
 
     @property
-    def min_margin_deg(self):
+    def min_margin_deg(self) -> np.ndarray:
         """(runs, cones): the closest approach to each cone (angle minus half-angle, deg)."""
         return self.min_angle_deg - self.half_angle_deg
 
     @property
-    def saturated_s(self):
+    def saturated_s(self) -> np.ndarray:
         """(runs,): time with the allocation saturated (s)."""
         return self.saturated_steps * self.dt
 
     @property
-    def violated(self):
+    def violated(self) -> np.ndarray:
         """(runs,): the sensor reached or entered a cone."""
         return np.any(self.min_margin_deg <= 0.0, axis=-1)
 
 
-def fly(scenarios, progress=None, series=False, history=False, duration=None):
+def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] = None,
+        series: bool = False, history: bool = False, duration: Optional[float] = None) -> Flight:
     """Fly the scenarios together; a Flight. progress(fraction) is called now and then.
     series: keep the margin and sensor direction at every control step (the figures of a few
     runs; a campaign's batches leave them out and fly its worst runs again for them); history:
@@ -164,7 +172,7 @@ def fly(scenarios, progress=None, series=False, history=False, duration=None):
         saturated += motors.allocation.saturated
         last_unsettled[_cos_error(controller.R_d, R_now) <= cos_settled] = k
         last_psi_above[out.psi >= SETTLE_PSI] = k
-        if series:
+        if margin_series is not None and sensor_series is not None:
             margin_series[k] = cones.margins_deg(R_now).min(axis=-1)
             sensor_series[k] = so3.matvec(R_now, cones.r)
         if record is not None:

@@ -2,10 +2,14 @@
 history=True): the true state, the step's output, what the controller does not model, the cone
 angles and, with rotors, the commands, thrusts and the moment the allocation lost.
 """
+from typing import List
+
 import numpy as np
 
 from geoctl_ros.core import so3
+from geoctl_ros.core.control import ControlOutput
 from geoctl_ros.core.mechanics import gravity_moment
+from geoctl_ros.core.motors import MotorOutput
 
 
 class History:
@@ -38,7 +42,7 @@ class History:
             'moment_lost': np.empty((steps, runs)),
         }
 
-    def add(self, k, t, out, motors):
+    def add(self, k: int, t: float, out: ControlOutput, motors: MotorOutput) -> None:
         """Step k at time t: the plant's state now, the step's ControlOutput and MotorOutput."""
         a, plant = self.arrays, self._plant
         R, Omega = self._bed.state()
@@ -60,7 +64,7 @@ class History:
             a['thrust'][k] = self._actuator.thrusts
             a['moment_lost'][k] = np.linalg.norm(motors.allocation.moment_lost, axis=-1)
 
-    def columns(self):
+    def columns(self) -> List[str]:
         """The history.csv's column names."""
         a = self.arrays
         rotors = a['cmd'].shape[-1]
@@ -73,7 +77,7 @@ class History:
                 + ['thrust_%d' % (i + 1) for i in range(rotors)]
                 + (['moment_lost'] if rotors else []))
 
-    def table(self, run=0):
+    def table(self, run: int = 0) -> np.ndarray:
         """One run's history: a row per step, in the columns' order."""
         a = self.arrays
         steps = len(a['t'])

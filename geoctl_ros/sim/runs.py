@@ -2,8 +2,11 @@
 runs, the controller and testbeds built from their scenarios, the noise each run draws from its
 own seed, the late steps and the stalls.
 """
+from __future__ import annotations
+
 from dataclasses import replace
 import math
+from typing import TYPE_CHECKING, List, Optional, Tuple
 
 import numpy as np
 
@@ -14,6 +17,9 @@ from geoctl_ros.params import CONTROLLER, SIM, airframe, cone_set, controller_se
 from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
 from geoctl_ros.sim.testbed import RotorActuator
 
+if TYPE_CHECKING:          # (a type only: sim.scenario imports closed_loop, which imports this)
+    from geoctl_ros.sim.scenario import Scenario
+
 # What may differ between the runs of a batch (everything else must be equal).
 PER_RUN = {
     CONTROLLER: ('setpoint', 'unmodelled_moment_max'),     # (a set-point check, not in flight)
@@ -22,7 +28,7 @@ PER_RUN = {
 }
 
 
-def differing(scenarios):
+def differing(scenarios: List[Scenario]) -> Optional[str]:
     """The first shared parameter that differs between the scenarios, or None."""
     first = scenarios[0]
     for attr, node in (('controller', CONTROLLER), ('sim', SIM)):
@@ -43,7 +49,7 @@ def differing(scenarios):
     return None
 
 
-def hold_steps(steps, n_sub, jitter, seed):
+def hold_steps(steps: int, n_sub: int, jitter: float, seed: int) -> np.ndarray:
     """How many integration steps each control step's command is held, for a run of ``steps``
     periods of n_sub integration steps: n_sub each, or with jitter (in integration steps, > 0)
     n_sub plus a uniform random whole number in 0..jitter, as on a machine too busy to run the
@@ -57,7 +63,7 @@ def hold_steps(steps, n_sub, jitter, seed):
     return holds[starts < steps * n_sub]
 
 
-def stalled_steps(options, times):
+def stalled_steps(options: dict, times: np.ndarray) -> np.ndarray:
     """Per control step (at times), whether the inputs stall there (scenario stalls.start and
     .duration): no new sample reaches the controller at a step within [start, start + duration).
     """
@@ -67,7 +73,8 @@ def stalled_steps(options, times):
     return out
 
 
-def shared_holds(scenarios, rate, n_sub, duration):
+def shared_holds(scenarios: List[Scenario], rate: float, n_sub: int,
+                 duration: float) -> np.ndarray:
     """The batch's hold sequence (integration steps per control step): the runs must share it."""
     h = 1.0 / (rate * n_sub)
     steps = int(round(duration * rate))
@@ -79,7 +86,7 @@ def shared_holds(scenarios, rate, n_sub, duration):
     return holds[0]
 
 
-def drawn_noise(scenarios, sv, steps):
+def drawn_noise(scenarios: List[Scenario], sv: dict, steps: int) -> np.ndarray:
     """Per run, the motion-capture and gyro noise of every step, (2, steps, runs, 3), drawn from
     the run's seed in TestbedSim's order: per step the attitude's 3, then the gyro's 3.
     """
@@ -138,12 +145,12 @@ class Testbeds:
                                           sv['motor_time_constant'], failed)
         self.gyro_bias = stack('noise.gyro_bias')
 
-    def state(self):
+    def state(self) -> Tuple[np.ndarray, np.ndarray]:
         """The testbeds' attitudes and rates, stacked (runs, ...) also for one run (views)."""
         p = self.plant
         return (p.R[None], p.Omega[None]) if self.single else (p.R, p.Omega)
 
-    def moment(self, command, h):
+    def moment(self, command: np.ndarray, h: float) -> np.ndarray:
         """The moment on the testbeds over the next h with the batch's command held: through
         the rotors (integer commands) or, with torque actuation, the commanded moment itself.
         """

@@ -7,6 +7,7 @@ loop models: latency, stalls, late steps, rotors or torque) and sums the flight 
 """
 from dataclasses import dataclass
 import os
+from typing import Optional
 
 import numpy as np
 
@@ -35,13 +36,13 @@ class Scenario:
     options: dict      # resolved scenario parameters (duration, title)
 
 
-def load(path):
+def load(path: str) -> Scenario:
     """Load and validate a scenario file; raises ConfigError naming every bad parameter."""
     name = os.path.splitext(os.path.basename(str(path)))[0]
     return from_sections(load_parameter_file(path), name)
 
 
-def from_sections(sections, name):
+def from_sections(sections: dict, name: str) -> Scenario:
     """A validated Scenario from parameter-file sections ({'/**' or node: flat parameters}), as
     ``load`` reads them from a file; raises ConfigError naming every bad parameter.
     """
@@ -89,10 +90,11 @@ def _figure(x):
     return None if np.isnan(x) else float(x)
 
 
-def run(scenario, duration=None):
+def run(scenario: Scenario, duration: Optional[float] = None) -> Result:
     """Fly the scenario (a batch of one); a Result with the history and the summary."""
     flight = fly([scenario], history=True, duration=duration)
     history = flight.history
+    assert history is not None           # (asked for)
     table = history.table(0)
     columns = history.columns()
     steps = len(flight.times)
@@ -105,7 +107,7 @@ def run(scenario, duration=None):
         'min_cone_angle_deg': {n: float(a) for n, a in zip(names, flight.min_angle_deg[0])},
         'cone_half_angle_deg': {n: float(a) for n, a in zip(names, flight.half_angle_deg[0])},
         'constraint_violated': bool(flight.violated[0]),
-        'final_psi': float(final.psi[0]),
+        'final_psi': float(np.asarray(final.psi)[0]),
         'final_attitude_error_deg': float(flight.final_error_deg[0]),
         'final_eR_norm': float(np.linalg.norm(final.e_R[0])),
         'final_angular_velocity_norm': float(np.linalg.norm(flight.final_angular_velocity[0])),
