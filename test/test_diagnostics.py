@@ -13,6 +13,7 @@ import pytest
 from geoctl_ros.core import diagnostics
 from geoctl_ros.core.diagnostics import Counts, Figures, Gaps, Window, from_values, key, to_values
 from geoctl_ros.core.stats import WindowStats
+from geoctl_ros.esc import health as esc_health
 from geoctl_ros.mavlink import health
 
 pytestmark = pytest.mark.odroid
@@ -69,16 +70,16 @@ BRIDGE = health.BridgeStatus(
 
 def test_the_bridge_status_reads_back_as_it_was():
     values = health.to_values(BRIDGE)
-    back, rest = health.from_values(list(values.items()) + [('level', '1')])
+    back, rest = health.from_values(values + [('level', '1')])
     assert back == dataclasses.replace(BRIDGE, gcs_age=pytest.approx(1.2, abs=0.051))
     assert rest == {'level': '1'}
-    unsigned, _ = health.from_values(health.to_values(health.BridgeStatus('udp', None)).items())
+    unsigned, _ = health.from_values(health.to_values(health.BridgeStatus('udp', None)))
     assert not unsigned.signing and unsigned.gcs_age is None and unsigned.refused == {}
     assert unsigned.autopilot_messages is None                    # no autopilot link
 
 
 def test_the_bridge_reader_never_fails_on_text_it_does_not_understand():
-    values = health.to_values(BRIDGE)
+    values = dict(health.to_values(BRIDGE))
     for k, v in list(values.items()):          # garble the numbers 13 and 17, and the link id
         values[k] = {'13': 'lots', '17': '?', 'on (link id 0)': 'on (x)'}.get(v, v)
     back, _ = health.from_values(values.items())
@@ -88,17 +89,18 @@ def test_the_bridge_reader_never_fails_on_text_it_does_not_understand():
 
 
 def test_no_other_file_spells_a_diagnostics_key():
-    """Renaming a key changes core/diagnostics.py (the controller's) or mavlink/health.py (the
-    bridge's) only: no other source (package, tools, tests, benchmarks) writes a key of more than
-    one word.
+    """Renaming a key changes one table of the one codec: core/diagnostics.py (the
+    controller's), mavlink/health.py (the bridge's) or esc/health.py (the ESC node's) only: no
+    other source (package, tools, tests, benchmarks) writes a key of more than one word.
     """
-    keys = [k for k, _, _ in diagnostics.KEYS.values() if ' ' in k]
+    keys = [k.key for k in diagnostics.CODEC.table.values() if ' ' in k.key]
     assert len(keys) > 10
-    bridge_keys = [k for k in health.to_values(BRIDGE) if ' ' in k]
+    bridge_keys = [k for k, _ in health.to_values(BRIDGE) if ' ' in k]
     assert len(bridge_keys) > 10
-    keys += bridge_keys
+    keys += bridge_keys + [k.key for k in esc_health.CODEC.table.values() if ' ' in k.key]
     owners = {ROOT / 'geoctl_ros' / 'core' / 'diagnostics.py',
-              ROOT / 'geoctl_ros' / 'mavlink' / 'health.py'}
+              ROOT / 'geoctl_ros' / 'mavlink' / 'health.py',
+              ROOT / 'geoctl_ros' / 'esc' / 'health.py'}
     found = []
     for folder in ('geoctl_ros', 'test', 'benchmarks'):
         for path in (ROOT / folder).rglob('*.py'):

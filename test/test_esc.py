@@ -1,6 +1,8 @@
 """The ESC driver on a recording bus (no rclpy, no hardware): the protocol's bytes, zero at start
 and stop, the watchdog, NACKs and missing ESCs, the motor test; and the virtual ESC bus.
 """
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -235,7 +237,8 @@ def test_the_diagnostics_say_what_is_wrong_with_which_esc():
     d.write()
     r = health.report(d, clock.t, 80.0, 100.0)
     assert r.level == protocol.OK and r.message == 'ESCs commanded'
-    assert r.latency is not None and r.latency.max == pytest.approx(0.004)   # receipt -> bus
+    lat = r.figures.latency
+    assert lat is not None and lat.max == pytest.approx(0.004)   # receipt -> bus
     bus.telemetry[0x2A] = bytes((31, 7, 40))                     # self-test error
     bus.telemetry[0x2B] = bytes((31, 120, 85))                   # limiting, and hot
     for _ in range(6):
@@ -251,13 +254,16 @@ def test_the_diagnostics_say_what_is_wrong_with_which_esc():
     # what the controller reads of it (esc_health): rotor 2 at fault, rotor 4 lost
     H = EscHealth
     assert health.esc_health(d, clock.t, 100.0) == (H.OK, H.FAULT, H.OK, H.LOST, H.OK, H.OK)
-    assert r.i2c_errors == 3                                     # the write and its 2 retries
+    assert r.figures.i2c_errors == 3                             # the write and its 2 retries
     warn = health.report(d, clock.t, 80.0, 100.0, errors_before=0)
     assert warn.level == protocol.ERROR                          # the worst decides
-    values = health.to_values(r)
-    output, set_points, refused, errors, latency, test, escs = health.from_values(
-        values.items())
-    assert output == 'commanded' and set_points == tuple(HOVER) and errors == 3
+    back = health.from_values(health.to_values(r.figures) + [('someone', 'else')])
+    # the codec round trip (the latency to the microsecond it is published in)
+    assert back == dataclasses.replace(r.figures, latency=back.latency)
+    assert np.allclose(back.latency, r.figures.latency, rtol=0, atol=1e-6)
+    escs = back.escs
+    assert back.output == 'commanded' and back.set_points == tuple(HOVER)
+    assert back.i2c_errors == 3
     assert escs[1] == '0x2a: 3.1 A, self-test error 7, 40 C, 0 errors'
     assert 'limited by temperature or current' in escs[2] and '85 C' in escs[2]
     assert 'no answer for 1.0 s' in escs[3]
@@ -267,6 +273,6 @@ def test_the_diagnostics_say_what_is_wrong_with_which_esc():
     d.offer([np.nan] * 6)
     d.write()
     r = health.report(d, clock.t, 80.0, 100.0)
-    assert r.level == protocol.WARN and r.refused == 1
+    assert r.level == protocol.WARN and r.figures.refused == 1
     assert r.message.startswith('motor_commands refused: expected 6 finite values')
-    assert r.output.startswith('refused: expected 6 finite values')
+    assert r.figures.output.startswith('refused: expected 6 finite values')

@@ -15,6 +15,8 @@ from typing import NamedTuple, Optional
 
 import numpy as np
 
+from geoctl_ros.core.codec import Codec, Key
+
 NAME = 'geoctl_ros: controller'     # the controller's DiagnosticStatus name
 # Diagnostics levels (the values of diagnostic_msgs/DiagnosticStatus).
 OK, WARN, ERROR = 0, 1, 2
@@ -138,13 +140,13 @@ _WINDOW = re.compile(r'mean (\S+) std (\S+) p99 (\S+) max (\S+)$')
 _GAPS = re.compile(r'(\d+) \(longest (\S+) s\)$')
 
 
-def _window_text(w):
+def window_text(w):
     if w is None:
         return 'n/a'
     return 'mean %.3f std %.3f p99 %.3f max %.3f' % tuple(1e3 * x for x in w)
 
 
-def _window_value(text):
+def window_value(text):
     m = _WINDOW.match(text)
     return None if m is None else Window(*(1e-3 * float(x) for x in m.groups()))
 
@@ -167,67 +169,59 @@ def _margin_value(text):
     return None if text == 'no cones' else float(text)
 
 
-# field -> (key, to text, from text); the order is the order published. The last four are left
-# out of a report when they are None (psi and the commands before the first control step).
-KEYS = {
-    'armed': ('armed', str, lambda t: t == 'True'),
-    'failsafe': ('failsafe', str, lambda t: t == 'True'),
-    'state': ('state', str, str),
-    'pose_age': ('pose age [s]', '%.4f'.__mod__, float),
-    'imu_age': ('imu age [s]', '%.4f'.__mod__, float),
-    'pose_counts': ('pose accepted/refused', '%d/%d'.__mod__, _counts_value),
-    'imu_counts': ('imu accepted/refused', '%d/%d'.__mod__, _counts_value),
-    'pose_age_at_tick': ('pose age at tick [ms]', _window_text, _window_value),
-    'imu_age_at_tick': ('imu age at tick [ms]', _window_text, _window_value),
-    'pose_gaps': ('pose gaps ridden through', '%d (longest %.3f s)'.__mod__, _gaps_value),
-    'imu_gaps': ('imu gaps ridden through', '%d (longest %.3f s)'.__mod__, _gaps_value),
-    'ticks_bridging': ('ticks bridging a gap', str, int),
-    'ticks': ('ticks', str, int),
-    'cone_entries': ('cone entries since arming', str, int),
-    'loop_period': ('loop period [ms]', _window_text, _window_value),
-    'tick_to_command': ('tick to motor command [ms]', _window_text, _window_value),
-    'pose_to_command_latency': ('pose-to-command latency [ms]', _window_text, _window_value),
-    'psi': ('Psi', '%.6g'.__mod__, float),
-    'min_cone_margin_deg': ('min cone margin [deg]', _margin_text, _margin_value),
-    'motor_commands': ('motor commands', lambda c: ' '.join(str(x) for x in c),
-                       lambda t: tuple(int(x) for x in t.split())),
-}
-_AFTER_FIRST_STEP = ('psi', 'min_cone_margin_deg', 'motor_commands')
-_BY_KEY = {key: (name, parse) for name, (key, _, parse) in KEYS.items()}
-assert set(KEYS) == {f.name for f in fields(Figures)}
+def _after_first_step(figures):
+    return figures.psi is None
+
+
+def _bool(text):
+    return text == 'True'
+
+
+# The controller's keys, in the order published (the one codec: ``core.codec``). psi, the cone
+# margin and the motor commands are left out before the first control step.
+CODEC = Codec(Figures, {
+    'armed': Key('armed', parse=_bool),
+    'failsafe': Key('failsafe', parse=_bool),
+    'state': Key('state'),
+    'pose_age': Key('pose age [s]', '%.4f'.__mod__, float),
+    'imu_age': Key('imu age [s]', '%.4f'.__mod__, float),
+    'pose_counts': Key('pose accepted/refused', '%d/%d'.__mod__, _counts_value),
+    'imu_counts': Key('imu accepted/refused', '%d/%d'.__mod__, _counts_value),
+    'pose_age_at_tick': Key('pose age at tick [ms]', window_text, window_value),
+    'imu_age_at_tick': Key('imu age at tick [ms]', window_text, window_value),
+    'pose_gaps': Key('pose gaps ridden through', '%d (longest %.3f s)'.__mod__, _gaps_value),
+    'imu_gaps': Key('imu gaps ridden through', '%d (longest %.3f s)'.__mod__, _gaps_value),
+    'ticks_bridging': Key('ticks bridging a gap', parse=int),
+    'ticks': Key('ticks', parse=int),
+    'cone_entries': Key('cone entries since arming', parse=int),
+    'loop_period': Key('loop period [ms]', window_text, window_value),
+    'tick_to_command': Key('tick to motor command [ms]', window_text, window_value),
+    'pose_to_command_latency': Key('pose-to-command latency [ms]', window_text, window_value),
+    'psi': Key('Psi', '%.6g'.__mod__, float, _after_first_step),
+    'min_cone_margin_deg': Key('min cone margin [deg]', _margin_text, _margin_value,
+                               _after_first_step),
+    'motor_commands': Key('motor commands', lambda c: ' '.join(str(x) for x in c),
+                          lambda t: tuple(int(x) for x in t.split()), _after_first_step),
+})
+assert set(CODEC.table) == {f.name for f in fields(Figures)}
 
 
 def key(name):
     """The published key of a Figures field (for a reader that wants the text itself)."""
-    return KEYS[name][0]
+    return CODEC.key(name)
 
 
 def to_values(figures):
-    """The figures as (key, text) pairs, in the published order (psi, the cone margin and the
-    motor commands from the first control step on).
-    """
-    pairs = []
-    for name, (k, text, _) in KEYS.items():
-        if name in _AFTER_FIRST_STEP and figures.psi is None:
-            continue
-        pairs.append((k, text(getattr(figures, name))))
-    return pairs
+    """The figures as (key, text) pairs, in the published order."""
+    return CODEC.to_values(figures)
 
 
 def from_values(pairs):
-    """Figures from (key, text) pairs as published. Keys this version does not know are ignored,
-    and a value that does not parse is left at its default, so a reader never fails on a report.
+    """Figures from (key, text) pairs as published (``Codec.from_values``; the other keys are
+    dropped).
     """
-    found = {}
-    for k, text in pairs:
-        entry = _BY_KEY.get(k)
-        if entry is None:
-            continue
-        name, parse = entry
-        try:
-            found[name] = parse(text)
-        except (ValueError, AttributeError):
-            pass
-    if 'failsafe' not in found:     # a record from before the key: its state's words say it
-        found['failsafe'] = str(found.get('state', '')).startswith(FAILSAFE)
-    return Figures(**found)
+    pairs = list(pairs)
+    figures, _ = CODEC.from_values(pairs)
+    if not any(k == CODEC.key('failsafe') for k, _ in pairs):   # a record from before the key:
+        figures = replace(figures, failsafe=figures.state.startswith(FAILSAFE))   # its words
+    return figures

@@ -1,6 +1,7 @@
 """The ESC node's health as typed values, and the one place that spells its diagnostics keys:
-``report`` judges a driver's state, ``to_values`` formats it for a DiagnosticStatus and
-``from_values`` reads one back (as the tests do).
+``report`` judges a driver's state, ``to_values`` formats its figures for a DiagnosticStatus and
+``from_values`` reads them back (as the tests do); the keys are a table of the one codec
+(``core.codec``).
 
 Levels: ERROR for an ESC that has not answered for ``LOST`` s (or a failed start, a self-test
 error, ``esc.temperature_error``); WARN for I2C errors in the last window (retried), an ESC
@@ -9,22 +10,16 @@ commands refused in the window; OK otherwise.
 """
 from dataclasses import dataclass
 import math
-from typing import Optional, Tuple
+from typing import List, NamedTuple, Optional, Tuple
 
-from geoctl_ros.core.diagnostics import Window, window
+from geoctl_ros.core.codec import Codec, Key
+from geoctl_ros.core.diagnostics import Window, window, window_text, window_value
 from geoctl_ros.core.safety import EscHealth
 from geoctl_ros.esc import protocol
 
 NAME = 'geoctl_ros: esc_i2c'
 LOST = 0.5                        # s without a successful transfer: the ESC is lost
 
-_OUTPUT = 'output'
-_SET_POINTS = 'set points'
-_REFUSED = 'commands refused'
-_ERRORS = 'i2c errors'
-_LATENCY = 'command to last byte [ms]'
-_TEST = 'motor test'
-_ESC = 'esc %d'                   # % rotor number
 
 
 def esc_health(driver, now, temperature_error):
@@ -45,21 +40,40 @@ def esc_health(driver, now, temperature_error):
 
 
 @dataclass(frozen=True)
-class EscReport:
-    """What the node reports: why it writes what it writes, the set points (normalised), the
-    commands refused and I2C errors so far, the command-to-bus latency of the window, and per ESC
-    a line of its own.
+class EscFigures:
+    """What the node's diagnostics carry: why it writes what it writes, the set points
+    (normalised), the commands refused and I2C errors so far, the command-to-bus latency of the
+    window, the motor test, and per ESC a line of its own.
     """
+
+    output: str = ''
+    set_points: Tuple[float, ...] = ()
+    refused: int = 0
+    i2c_errors: int = 0
+    latency: Optional[Window] = None
+    motor_test: str = ''
+    escs: Tuple[str, ...] = ()
+
+
+class EscReport(NamedTuple):
+    """One diagnostics status of the ESC node: level, message and figures."""
 
     level: int
     message: str
-    output: str
-    set_points: Tuple[float, ...]
-    refused: int
-    i2c_errors: int
-    latency: Optional[Window]
-    motor_test: str
-    escs: Tuple[str, ...]
+    figures: EscFigures
+
+
+# The ESC node's keys, in the order published (the one codec: ``core.codec``).
+CODEC = Codec(EscFigures, {
+    'output': Key('output'),
+    'set_points': Key('set points', lambda x: ' '.join('%.4f' % v for v in x),
+                      lambda t: tuple(float(v) for v in t.split())),
+    'refused': Key('commands refused', parse=int),
+    'i2c_errors': Key('i2c errors', parse=int),
+    'latency': Key('command to last byte [ms]', window_text, window_value),
+    'motor_test': Key('motor test'),
+    'escs': Key('esc ', expand=True, numbered=True),
+})
 
 
 def _esc_line(address, tel, errors, missing, age):
@@ -115,36 +129,17 @@ def report(driver, now, temperature_warn, temperature_error, errors_before=0, re
     else:
         message = 'ESCs %s' % driver.reason
     test = driver.test
-    return EscReport(level, message, driver.reason, tuple(float(x) for x in driver.output),
-                     driver.refused, total_errors, window(driver.latency.samples()),
-                     'rotor %d at %g' % (test.rotor, test.command) if test else 'none',
-                     tuple(escs))
+    return EscReport(level, message, EscFigures(
+        driver.reason, tuple(float(x) for x in driver.output), driver.refused, total_errors,
+        window(driver.latency.samples()),
+        'rotor %d at %g' % (test.rotor, test.command) if test else 'none', tuple(escs)))
 
 
-def _window_text(w):
-    if w is None:
-        return 'n/a'
-    return 'mean %.3f p99 %.3f max %.3f' % (1e3 * w.mean, 1e3 * w.p99, 1e3 * w.max)
+def to_values(figures: EscFigures) -> List[Tuple[str, str]]:
+    """The diagnostics key/value pairs of the ESC node's figures."""
+    return CODEC.to_values(figures)
 
 
-def to_values(r):
-    """The diagnostics key/values (str -> str) of an EscReport."""
-    values = {_OUTPUT: r.output,
-              _SET_POINTS: ' '.join('%.4f' % x for x in r.set_points),
-              _REFUSED: str(r.refused), _ERRORS: str(r.i2c_errors),
-              _LATENCY: _window_text(r.latency), _TEST: r.motor_test}
-    for k, line in enumerate(r.escs, 1):
-        values[_ESC % k] = line
-    return values
-
-
-def from_values(pairs):
-    """(output, set points, commands refused, I2C errors, latency p99 and max in s or None, motor
-    test, ESC lines) from a status's key/values.
-    """
-    v = dict(pairs)
-    lat = v.get(_LATENCY, 'n/a').split()
-    return (v.get(_OUTPUT, ''), tuple(float(x) for x in v.get(_SET_POINTS, '').split()),
-            int(v.get(_REFUSED, 0)), int(v.get(_ERRORS, 0)),
-            None if lat[0] == 'n/a' else (1e-3 * float(lat[3]), 1e-3 * float(lat[5])),
-            v.get(_TEST, ''), tuple(v[k] for k in sorted(v) if k.startswith('esc ')))
+def from_values(pairs) -> EscFigures:
+    """The ESC node's figures from a status's key/value pairs (others' keys are dropped)."""
+    return CODEC.from_values(pairs)[0]

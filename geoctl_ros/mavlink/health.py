@@ -1,24 +1,17 @@
 """The MAVLink bridge's own health as typed values, and the one place that spells its diagnostics
-keys: ``to_values`` formats a ``BridgeStatus`` for a DiagnosticStatus, ``from_values`` reads one
-back (as the tests and tools do). The controller's keys are ``core/diagnostics.py``'s.
+keys (a table of the one codec, ``core.codec``): ``to_values`` formats a ``BridgeStatus`` for a
+DiagnosticStatus, ``from_values`` reads one back (as the tests and tools do).
 
 Counters keep the names their owners give them (``Link.counts``: received, bad data, ...;
 ``Verifier.refused``: unsigned, bad signature, ...; the bridge's own: arm requests, ...).
 """
 from dataclasses import dataclass, field
-from typing import Dict, NamedTuple, Optional, Tuple
+from typing import Dict, List, NamedTuple, Optional, Tuple
+
+from geoctl_ros.core.codec import Codec, Key
 
 NAME = 'geoctl_ros: mavlink_bridge'
 
-_LINK = 'link'
-_GCS = 'ground station'
-_SIGNING = 'signing'
-_LAST_REFUSED = 'last refused'
-_LAST_ERROR = 'link last error'
-_AUTOPILOT = 'autopilot'
-_AUTOPILOT_IMU = 'autopilot imu messages'
-_LINK_COUNT = 'link '          # + a Link counter's name
-_REFUSED = 'refused '          # + a Verifier refusal's name
 BRIDGE_COUNTS = IGNORED, ARM_REQUESTS, PARAM_SETS, STATUSTEXT, REFUSED_INPUT, HANDLER_ERRORS = (
     'ignored', 'arm requests', 'param sets', 'statustext',      # the bridge's own counters
     'inputs refused', 'handler errors')
@@ -57,60 +50,49 @@ def _age(text):
     return None
 
 
-def to_values(s):
-    """The diagnostics key/values (str -> str) of a BridgeStatus."""
-    values = {_LINK: s.url, _GCS: _age_text(s.gcs_age)}
-    values.update({_LINK_COUNT + k: str(n) for k, n in s.link_counts.items()})
-    values.update({k: str(n) for k, n in s.counts.items()})
-    if s.signing_link_id is None:
-        values[_SIGNING] = 'off'
-    else:
-        values[_SIGNING] = 'on (link id %d)' % s.signing_link_id
-        values.update({_REFUSED + k: str(n) for k, n in s.refused.items()})
-        if s.last_refused:
-            values[_LAST_REFUSED] = s.last_refused
-    if s.last_error:
-        values[_LAST_ERROR] = s.last_error[:80]
-    if s.autopilot_messages is not None:
-        values[_AUTOPILOT] = _age_text(s.autopilot_age)
-        values[_AUTOPILOT_IMU] = str(s.autopilot_messages)
-    return values
+def _signing_text(link_id):
+    return 'off' if link_id is None else 'on (link id %d)' % link_id
+
+
+def _signing(text):
+    if text == 'off':
+        return None
+    if not text.startswith('on (link id '):
+        raise ValueError(text)
+    return int(text[len('on (link id '):].rstrip(')'))
+
+
+def _unsigned(s):
+    return s.signing_link_id is None
+
+
+# The bridge's keys, in the order published (the one codec: ``core.codec``).
+CODEC = Codec(BridgeStatus, {
+    'url': Key('link'),
+    'gcs_age': Key('ground station', _age_text, _age),
+    'link_counts': Key('link ', parse=int, expand=True),
+    'counts': Key('', parse=int, expand=True, entries=BRIDGE_COUNTS),
+    'signing_link_id': Key('signing', _signing_text, _signing),
+    'refused': Key('refused ', parse=int, omit=_unsigned, expand=True),
+    'last_refused': Key('last refused', omit=lambda s: _unsigned(s) or not s.last_refused),
+    'last_error': Key('link last error', lambda e: e[:80], omit=lambda s: not s.last_error),
+    'autopilot_age': Key('autopilot', _age_text, _age,
+                         omit=lambda s: s.autopilot_messages is None),
+    'autopilot_messages': Key('autopilot imu messages', parse=int,
+                              omit=lambda s: s.autopilot_messages is None),
+}, required=('url', 'gcs_age'))
+
+
+def to_values(s: BridgeStatus) -> List[Tuple[str, str]]:
+    """The diagnostics key/value pairs of a BridgeStatus."""
+    return CODEC.to_values(s)
 
 
 def from_values(pairs) -> Tuple[Optional[BridgeStatus], Dict[str, str]]:
     """(BridgeStatus, the other key/values) from a status's key/value pairs; (None, ...) when
-    they are not the bridge's. Unparsable numbers are skipped, never raised.
+    they are not the bridge's. Unparsable values are left at their defaults, never raised.
     """
-    values = dict(pairs)
-    if _LINK not in values or _GCS not in values:
-        return None, values
-    link_counts, counts, refused = {}, {}, {}
-    signing_link_id = None
-    rest = {}
-    for k, v in values.items():
-        try:
-            if k in (_LINK, _GCS, _LAST_REFUSED, _LAST_ERROR, _AUTOPILOT, _AUTOPILOT_IMU):
-                continue
-            if k == _SIGNING:
-                if v.startswith('on (link id '):
-                    signing_link_id = int(v[len('on (link id '):].rstrip(')'))
-            elif k.startswith(_LINK_COUNT):
-                link_counts[k[len(_LINK_COUNT):]] = int(v)
-            elif k.startswith(_REFUSED):
-                refused[k[len(_REFUSED):]] = int(v)
-            elif k in BRIDGE_COUNTS:
-                counts[k] = int(v)
-            else:
-                rest[k] = v
-        except ValueError:
-            continue
-    autopilot = values.get(_AUTOPILOT_IMU)
-    return BridgeStatus(
-        url=values[_LINK], gcs_age=_age(values[_GCS]), link_counts=link_counts, counts=counts,
-        signing_link_id=signing_link_id, refused=refused,
-        last_refused=values.get(_LAST_REFUSED, ''), last_error=values.get(_LAST_ERROR, ''),
-        autopilot_age=_age(values.get(_AUTOPILOT, '')),
-        autopilot_messages=int(autopilot) if autopilot and autopilot.isdigit() else None), rest
+    return CODEC.from_values(pairs)
 
 
 class Report(NamedTuple):

@@ -179,12 +179,12 @@ class EscNode(Node):
                           self.values['esc.temperature_error'], *self._report_base)
         self.pub_health.publish(esc_health_msg(
             d.config.command_max, health.esc_health(d, now, self.values['esc.temperature_error'])))
-        self._report_base = (r.i2c_errors, r.refused)
+        self._report_base = (r.figures.i2c_errors, r.figures.refused)
         d.latency.reset()
         status = DiagnosticStatus(level=bytes([r.level]), name=health.NAME,
                                   hardware_id=self.bus.name, message=r.message,
                                   values=[KeyValue(key=k, value=v)
-                                          for k, v in health.to_values(r).items()])
+                                          for k, v in health.to_values(r.figures)])
         out = DiagnosticArray(status=[status])
         out.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(out)

@@ -146,7 +146,7 @@ class GroundStationReports:
                                   hardware_id='mavlink',
                                   message='; '.join(warnings) or 'ground station connected',
                                   values=[KeyValue(key=k, value=v)
-                                          for k, v in health.to_values(figures).items()])
+                                          for k, v in health.to_values(figures)])
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(msg)
