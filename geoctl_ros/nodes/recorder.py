@@ -24,9 +24,10 @@ from geoctl_ros.nodes.controller_params import ControllerParameters
 from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.params import RECORD, ConfigError, settings
 from geoctl_ros.params.topics import BY_NAME, CONTROLLER_PARAMETERS
-from geoctl_ros.records import bag
+from geoctl_ros.records import bag, health
+from geoctl_ros.records.health import RecordFigures
 
-STATUS_NAME = 'geoctl_ros: record'
+STATUS_NAME = health.NAME
 DEPTH = 50          # a burst of this many per topic waits for the callback, none is lost
 
 
@@ -103,8 +104,8 @@ class Recorder(Node):
             level, text = DiagnosticStatus.OK, 'recording to %s' % self.path
         status = DiagnosticStatus(level=level, name=STATUS_NAME, hardware_id='record',
                                   message=text, values=[
-                                      KeyValue(key='messages', value=str(sum(w.counts.values()))),
-                                      KeyValue(key='dropped', value=str(w.dropped))])
+                                      KeyValue(key=k, value=v) for k, v in health.to_values(
+                                          RecordFigures(sum(w.counts.values()), w.dropped))])
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(msg)
