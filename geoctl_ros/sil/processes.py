@@ -205,8 +205,14 @@ class Monitor(Node):
         return self._call(self.reset_client, Trigger.Request())
 
     def set_parameter(self, name, value):
-        msg = Parameter(name, value=value).to_parameter_msg()
-        return self._call(self.param_client, SetParameters.Request(parameters=[msg])).results[0]
+        return self.set_parameters([(name, value)])[0]
+
+    def set_parameters(self, pairs):
+        """Each (name, value) set on the controller by itself, in one service call (the
+        non-atomic SetParameters: each is judged alone); the results in order.
+        """
+        msgs = [Parameter(name, value=value).to_parameter_msg() for name, value in pairs]
+        return self._call(self.param_client, SetParameters.Request(parameters=msgs)).results
 
 
 def _pose_quat(msg):
