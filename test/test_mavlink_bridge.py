@@ -496,7 +496,9 @@ def test_a_ground_stations_motor_test_spins_one_motor_through_the_esc_node(tmp_p
                 break
             time.sleep(0.1)
         assert set(spun['b0']) == {round(0.12 * 240)}                      # 29 of 240
-        assert 0.9 < spun['t'][-1] - spun['t'][0] < 1.2
+        # the 1 s test, as the bus saw it: its first write may come late on a busy machine (this
+        # is not a real-time test), its last within a write cycle of the end
+        assert 0.5 < spun['t'][-1] - spun['t'][0] < 1.2
         others = log[log['address'] != 0x2B]
         assert len(others) and not others['b0'].any()
         n = escs.count()

@@ -212,7 +212,11 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     assert all(d.figures.armed for d in diags), [d.message for d in diags if d.level == ERROR]
     assert aggregate_ms(diags, 'loop_period').max < 250.0
     diag = mon.last_diagnostic()
-    assert diag.level == OK and diag.figures.armed
+    # OK, or a WARN of the delay bound's watch only (a starved machine makes the loop blind past
+    # its bound, docs/safety.md: said, and the gains come down; not a failure of the flight)
+    assert diag.figures.armed and (diag.level == OK or diag.level == WARN and all(
+        part.startswith(('loop blind', 'degraded:')) for part in diag.message.split('; '))), (
+        diag.message)
     assert diag.figures.pose_counts.refused == 0
     published_values_are_finite(mon)
     # the record, stopped before the disarm (disarmed, the testbed falls): every stream through
