@@ -4,29 +4,7 @@
     ./run soak --case monitoring --duration 600  # the README's monitoring commands for 10 min
     ./run soak --transport rmw-default ...       # the same with the rmw's default transports
 
-Each case flies the sim-in-the-loop (``sim`` and ``controller`` processes on
-``config/testbed.yaml``, armed) while loads run beside it or
-faults are injected into its inputs, and measures what matters for a vehicle on a joint:
-
-- failsafes (each one is counted, then the controller is re-armed, as an operator would; the
-  set-point schedule plays from each arming and then holds R_d),
-- input age at the controller's ticks (p99 of its 0.5 s diagnostics windows, and max),
-- the gap between motor commands at a subscriber (p99, max) and the control loop period (p99,
-  max), and the sensor's closest approach to the cone (from the sim's true attitude).
-
-Loads (other people's processes, in a plain ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` shell):
-``cli`` the README's monitoring commands with the real ``ros2`` command in a loop (topic echo,
-topic hz, param dump and get on both nodes, service call, service list); ``churn`` a ROS process
-joining every second and leaving after 0.5-1.5 s, one in three killed with SIGKILL; ``params``
-an rclpy client reading every parameter of both nodes every 0.5 s; ``cpu`` one busy process
-per core; ``record`` the flight recorder and the live 3D view, on the nodes' loopback profile
-(what recording costs the flight). Faults, through a relay between the sim and the controller:
-inputs delayed by 0-10 ms, duplicated, reordered, held back and released in bursts, poses or IMU
-missing for a while; and the sim process paused with SIGSTOP/SIGCONT (both inputs missing).
-
-``--transport profile`` (default) runs the nodes on the shipped loopback profile
-(``geoctl_ros.sil.rosenv``), ``rmw-default`` on the rmw's defaults (shared memory + UDP,
-LOCALHOST): the "before" of docs/interface.md's table. Everything stays on 127.0.0.1.
+The cases, the loads and faults, and what is measured: ``geoctl_ros.sil.soak``.
 """
 import argparse
 import json

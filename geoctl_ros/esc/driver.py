@@ -27,7 +27,7 @@ from geoctl_ros.core.safety import motor_commands_problem
 from geoctl_ros.core.stats import WindowStats
 from geoctl_ros.esc import protocol
 from geoctl_ros.esc.bus import BusError
-from geoctl_ros.params.schema import MOTOR_TEST_COMMAND_MAX, MOTOR_TEST_DURATION_MAX
+from geoctl_ros.params.param import MOTOR_TEST_COMMAND_MAX, MOTOR_TEST_DURATION_MAX
 
 
 class EscStartError(Exception):

@@ -39,7 +39,7 @@ from geoctl_ros.mavlink.controller_view import (
     ControllerView,
 )
 from geoctl_ros.mavlink.params import BY_ID, TABLE, to_mavlink
-from geoctl_ros.params.schema import MOTOR_TEST_DURATION_MAX
+from geoctl_ros.params.param import MOTOR_TEST_DURATION_MAX
 
 ARRAY_MARGINS, ARRAY_DBAR = 1, 2
 

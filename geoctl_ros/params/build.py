@@ -16,7 +16,7 @@ from geoctl_ros.core.control import AttitudeController, ControllerConfig
 from geoctl_ros.core.loop_types import LoopSettings
 from geoctl_ros.core.motors import Mixer, ThrustCurve
 from geoctl_ros.core.safety import SetpointSchedule, quaternion_problem
-from geoctl_ros.params.schema import ConfigError
+from geoctl_ros.params.param import ConfigError
 
 
 def cone_set(values):

@@ -1,7 +1,8 @@
 """ROS 2 parameter files: reading them as ROS does, and what each node takes from them."""
 import yaml
 
-from geoctl_ros.params.schema import BY_NAME, CONE_KEY, CONTROLLER, ConfigError, schema_for
+from geoctl_ros.params.param import CONTROLLER, ConfigError
+from geoctl_ros.params.schema import BY_NAME, CONE_KEY, schema_for
 
 
 def flatten(tree, prefix=''):

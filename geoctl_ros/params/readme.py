@@ -4,13 +4,8 @@
 """
 import sys
 
-from geoctl_ros.params.schema import (
-    CHANGE_WHILE_ARMED,
-    CONE_SCHEMA,
-    CONTROLLER,
-    LAB_INERTIA,
-    SCHEMA,
-)
+from geoctl_ros.params.param import CONTROLLER, LAB_INERTIA
+from geoctl_ros.params.schema import CHANGE_WHILE_ARMED, CONE_SCHEMA, SCHEMA
 
 
 def markdown_table():

@@ -11,24 +11,7 @@ from dataclasses import replace
 import re
 
 from geoctl_ros.params import schema_controller, schema_testbed, schema_tools
-from geoctl_ros.params.param import (  # noqa: F401 (the schema's public names)
-    BOTH,
-    CONTROLLER,
-    ESC,
-    LAB_INERTIA,
-    MAVLINK,
-    MOTOR_TEST_COMMAND_MAX,
-    MOTOR_TEST_DURATION_MAX,
-    RECORD,
-    RECORD_TOPICS,
-    SCENARIO,
-    SIM,
-    VIEW,
-    ConfigError,
-    Param,
-    half_angle,
-    nonzero_vector,
-)
+from geoctl_ros.params.param import CONTROLLER, half_angle, nonzero_vector
 from geoctl_ros.params.param import declare as _p
 
 SCHEMA = schema_controller.PARAMS + schema_testbed.PARAMS + schema_tools.PARAMS

@@ -4,16 +4,8 @@ import math
 
 import numpy as np
 
-from geoctl_ros.params.schema import (
-    BY_NAME,
-    CONE_KEY,
-    CONE_NAME,
-    CONTROLLER,
-    SCHEMA,
-    ConfigError,
-    cone_param,
-    schema_for,
-)
+from geoctl_ros.params.param import CONTROLLER, ConfigError
+from geoctl_ros.params.schema import BY_NAME, CONE_KEY, CONE_NAME, SCHEMA, cone_param, schema_for
 
 
 def check_value(p, value):

@@ -1,15 +1,7 @@
 """A recorded flight as the paper's figures and a summary (the ``report`` command,
-``geoctl_ros.cli.report``).
-
-BAG is any rosbag2 bag of this package's topics (MCAP or sqlite3; from ``record`` or from
-``ros2 bag record``; one whose writer was killed too). The cones come from the bag (``record``
-writes the controller's in it) or from ``--params-file``. The sensor's path and the closest
-approach come from the sim's true attitude (``/sim/true_pose``) where the bag has it, otherwise
-from the measured one (``/pose``).
-
-Writes ``summary.json``, ``summary.md``, ``flight.png`` and ``sensor_path.png`` to DIR (default:
-BAG/report) and prints the Markdown summary. Topics the bag lacks are named, and what can be
-drawn without them is drawn. What is not a readable bag ends with one line and exit code 2.
+``geoctl_ros.cli.report``, says what it reads and writes): the bag read back as series, the
+cones from the bag or a parameter file, the summary's figures, and the headless replay of the
+flight for ``--compare``.
 """
 import math
 import os

@@ -1,8 +1,4 @@
-"""Load and fault runs over real DDS: does the lab's own workflow ever drop the testbed?
-
-    ./run soak                                   # every case, 60 s each, prints a table
-    ./run soak --case monitoring --duration 600  # the README's monitoring commands for 10 min
-    ./run soak --transport rmw-default ...       # the same with the rmw's default transports
+"""Load and fault runs over real DDS (the ``soak`` command: ``geoctl_ros.cli.soak``).
 
 Each case flies the sim-in-the-loop (``sim`` and ``controller`` processes on
 ``config/testbed.yaml``, armed) while loads run beside it or
