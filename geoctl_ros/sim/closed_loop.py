@@ -112,8 +112,8 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     rate, rate_sub = cv['rate_hz'], sv['integration_rate_hz']
     n_sub = int(round(rate_sub / rate))
     dt, h = 1.0 / rate, 1.0 / (rate * n_sub)
-    holds = shared_holds(scenarios, rate, n_sub, first.options['duration'] if duration is None
-                   else duration)
+    span = first.options['duration'] if duration is None else duration
+    holds = shared_holds(scenarios, rate, n_sub, span)
     steps = len(holds)
     j_at = np.cumsum(holds) - holds                   # integration steps before each step
     times = j_at / rate_sub
@@ -167,7 +167,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
             ages = (age, age)
         else:
             R_seen, W_seen = R_new, W_new
-        max_rate = np.maximum(max_rate, np.linalg.norm(W_seen, axis=-1))
+        max_rate = np.maximum(max_rate, np.sqrt(so3.dot(W_seen, W_seen)))
         out, motors = tick(R_seen, W_seen, dt, t, ages)
         saturated += motors.allocation.saturated
         last_unsettled[_cos_error(controller.R_d, R_now) <= cos_settled] = k
@@ -201,7 +201,8 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
 
 def _cos_error(R_d, R):
     """The cosine of the attitude error angle between R_d and R, per run."""
-    return 0.5 * (np.trace(so3.matmul(so3.transpose(R_d), R), axis1=-2, axis2=-1) - 1.0)
+    M = so3.matmul(so3.transpose(R_d), R)        # (the trace written out, as the products)
+    return 0.5 * (M[..., 0, 0] + M[..., 1, 1] + M[..., 2, 2] - 1.0)
 
 
 def _settled(last_above, times):

@@ -62,7 +62,8 @@ class History:
         if self._actuator is not None:
             a['cmd'][k] = motors.commands
             a['thrust'][k] = self._actuator.thrusts
-            a['moment_lost'][k] = np.linalg.norm(motors.allocation.moment_lost, axis=-1)
+            lost = motors.allocation.moment_lost
+            a['moment_lost'][k] = np.sqrt(so3.dot(lost, lost))
 
     def columns(self) -> List[str]:
         """The history.csv's column names."""
