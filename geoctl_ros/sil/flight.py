@@ -72,8 +72,9 @@ def fly(params_file, out, duration, monitor_factory=None, mavlink=None, record=T
     rclpy.init()
     mon = (monitor_factory or Monitor)()
     try:
-        if record:          # from the first true pose on: the flight is recorded whole
-            mon.wait_for(lambda: 'first message on /sim/true_pose' in recorder.output()
+        if record:          # from the first true pose and diagnostics on: recorded whole
+            mon.wait_for(lambda: all('first message on %s' % t in recorder.output()
+                                     for t in ('/sim/true_pose', '/diagnostics'))
                          or recorder.proc.poll() is not None, 30.0, 'the recorder')
         reply = mon.arm_when_ready(30.0)
         if not reply.success:
