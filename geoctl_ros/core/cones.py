@@ -36,13 +36,15 @@ A batch of cone sets (one per run of a campaign, each with the same number of co
 ConeSet with axes (batch, n, 3) and half-angles (batch, n); it evaluates a stack of attitudes
 (batch, 3, 3) with the same formulas.
 """
+from typing import Any, Optional
+
 import numpy as np
 
 from geoctl_ros.core.flags import any_flag
 from geoctl_ros.core.so3 import hat, matmul, vecmat
 
 
-def angle_deg(s):
+def angle_deg(s: np.ndarray) -> np.ndarray:
     """The angle (degrees) whose cosine is s = r^T R^T v_i (clipped to [-1, 1] against
     round-off).
     """
@@ -68,19 +70,19 @@ class ConeEval:
         self._e_RB = e_RB
 
     @property
-    def e_RB(self):
+    def e_RB(self) -> np.ndarray:
         if self._e_RB is None:
             self._e_RB = self.cross * self.weight[..., None]
         return self._e_RB
 
     @property
-    def e_RB_sum(self):
+    def e_RB_sum(self) -> np.ndarray:
         """sum_i e_RB,i (per run of a batch)."""
         if self._e_RB is None:
             return vecmat(self.weight, self.cross)
         return self._e_RB.sum(axis=-2)
 
-    def margins_deg(self, half_angles_deg):
+    def margins_deg(self, half_angles_deg: np.ndarray) -> np.ndarray:
         """Angle between R r and v_i minus theta_i, degrees (negative inside the cone)."""
         return angle_deg(self.s) - half_angles_deg
 
@@ -130,17 +132,17 @@ class ConeSet:
     def __len__(self):
         return self.theta.shape[-1]
 
-    def terms(self, R):
+    def terms(self, R: np.ndarray) -> np.ndarray:
         """(n, 4) per cone: s_i = r^T R^T v_i, then (R^T v_i) x r; both linear in R (the control
         step evaluates them as part of one precomputed linear map, see ``core.control``).
         """
         return matmul(self.V, matmul(R, self._r_cols))
 
-    def evaluate(self, R):
+    def evaluate(self, R: np.ndarray) -> 'ConeEval':
         """Barrier values, gradients and flags at attitude R."""
         return self.evaluate_terms(self.terms(R))
 
-    def widened(self, extra_rad):
+    def widened(self, extra_rad: Any) -> tuple:
         """The barrier's constants for every cone widened by extra_rad more (an array of one
         angle per cone, or per run and cone): cos, floor gap, B offset, 1 / (alpha g0) and the
         inside field's magnitude, as ``evaluate_terms`` takes them.
@@ -151,7 +153,7 @@ class ConeSet:
         return (cos_theta, g0, 1.0 + np.log(1.0 + cos_theta) / self.alpha,
                 1.0 / (self.alpha * g0), np.sin(theta_b) / (self.alpha * g0))
 
-    def evaluate_terms(self, sc, widened=None):
+    def evaluate_terms(self, sc: np.ndarray, widened: Optional[tuple] = None) -> 'ConeEval':
         """Barrier values, gradients and flags from ``terms(R)``; widened: None, or the constants
         of ``widened(extra)`` for a barrier on wider cones (margins and violations are still
         against the real cones).
@@ -190,7 +192,7 @@ class ConeSet:
                         self._r_perp[None, :])
         return -unit * magnitude[:, None]
 
-    def angles_deg(self, R):
+    def angles_deg(self, R: np.ndarray) -> np.ndarray:
         """Angle between the sensor's world direction R r and each cone axis, degrees.
 
         Written out element by element (not through matmul), so a run's figure is the same bits
@@ -204,11 +206,11 @@ class ConeSet:
         return angle_deg(V[..., 0] * d[..., None, 0] + V[..., 1] * d[..., None, 1]
                          + V[..., 2] * d[..., None, 2])
 
-    def margins_deg(self, R):
+    def margins_deg(self, R: np.ndarray) -> np.ndarray:
         """Cone margins (angle to axis minus half-angle, degrees) at attitude R."""
         return self.angles_deg(R) - self.theta_deg
 
-    def F(self, R):
+    def F(self, R: np.ndarray) -> np.ndarray:
         """The paper's F (eq. 28) at R for each cone, (n, 3, 3): d/dt e_RB,i = F_i Omega.
 
         Valid outside the floor band, where the barrier is the paper's; used by tests and the gain

@@ -28,12 +28,12 @@ and model are shared by the batch. (``x.T`` on a stack of vectors puts the batch
 ``(x.T * a).T`` scales each run's vector by its own scalar and a single vector by a scalar.)
 """
 from dataclasses import dataclass, field
-from typing import NamedTuple, Optional
+from typing import Any, NamedTuple, Optional
 
 import numpy as np
 
 from geoctl_ros.core import so3
-from geoctl_ros.core.cones import ConeSet
+from geoctl_ros.core.cones import ConeEval, ConeSet
 from geoctl_ros.core.errors import (
     LinearMap,
     blind_widening,
@@ -85,7 +85,7 @@ class ControllerConfig:
         object.__setattr__(self, 'm_rho', first_moment(self.mass, self.cog_offset))
 
     @property
-    def n_params(self):
+    def n_params(self) -> int:
         """Number of estimated disturbance parameters (length of Delta_bar)."""
         return DISTURBANCE_MODELS[self.disturbance_model]
 
@@ -101,12 +101,12 @@ class ControlOutput(NamedTuple):
     violated: bool           # sensor on or inside a cone
     saturated: bool          # some barrier in its floor band (repulsion saturated)
     adapting: bool           # the estimate was advanced this step
-    cones: object = None     # the ConeEval the step used
+    cones: Any = None        # the ConeEval the step used
     half_angles_deg: Optional[np.ndarray] = None
     # (in a batch, each field has the batch axis first: psi, violated, ... one per run)
 
     @property
-    def margins_deg(self):
+    def margins_deg(self) -> np.ndarray:
         """Per cone: angle between the sensor and the cone's axis minus its half-angle, degrees
         (computed when asked: the node publishes the motor commands first).
         """
@@ -139,13 +139,14 @@ class AttitudeController:
         self._linear = LinearMap(R_d, self.config)
 
     # --- configuration-time operations -------------------------------------------------------
-    def setpoint_problem(self, R_d, cones=None):
+    def setpoint_problem(self, R_d: np.ndarray, cones: Optional[ConeSet] = None) -> Optional[str]:
         """Why R_d cannot be a set point (a sentence), or None if it can (with this
         configuration's cones, or the given ones).
         """
         return setpoint_problem(self.config, self.config.cones if cones is None else cones, R_d)
 
-    def set_setpoint(self, R_d, Omega_d=None, dOmega_d=None):
+    def set_setpoint(self, R_d: np.ndarray, Omega_d: Optional[np.ndarray] = None,
+                     dOmega_d: Optional[np.ndarray] = None) -> None:
         """Set the desired attitude (and optionally its angular velocity and acceleration, body
         frame of R_d). Raises SetpointRejected with the reason; the old set point then stays.
         """
@@ -159,11 +160,11 @@ class AttitudeController:
                          else np.asarray(dOmega_d, dtype=float).copy())
         self._tracking = bool(self.Omega_d.any() or self.dOmega_d.any())
 
-    def reset_adaptation(self):
+    def reset_adaptation(self) -> None:
         """Zero the disturbance estimate."""
         self.delta_bar[:] = 0.0
 
-    def reconfigure(self, config):
+    def reconfigure(self, config: ControllerConfig) -> None:
         """Switch to a new configuration, keeping the estimate when its size still fits.
 
         Raises SetpointRejected (and changes nothing) if the current set point violates the new
@@ -179,7 +180,7 @@ class AttitudeController:
         self._project()
 
     # --- the hot path ----------------------------------------------------------------------------
-    def regressor(self, R):
+    def regressor(self, R: np.ndarray) -> Optional[np.ndarray]:
         """W(R, Omega): 3 x n_params (a stack of them for a batch); None for the constant model,
         where W = I.
         """
@@ -188,7 +189,8 @@ class AttitudeController:
         Y = cog_regressor(R, self.config.gravity)
         return np.concatenate((np.broadcast_to(np.eye(3), Y.shape), Y), axis=-1)
 
-    def step(self, R, Omega, dt, adapt=True, blind=0.0):
+    def step(self, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool = True,
+             blind: Any = 0.0) -> ControlOutput:
         """One control step at attitude R and body angular velocity Omega, by the configured law
         (``config.law``, one of ``LAWS``).
 
@@ -201,7 +203,7 @@ class AttitudeController:
         return self._law(self, R, Omega, dt, adapt, blind)
 
     # --- the pieces every law is made of -------------------------------------------------------
-    def terms(self, R, Omega, blind=0.0):
+    def terms(self, R: np.ndarray, Omega: np.ndarray, blind: Any = 0.0) -> 'StepTerms':
         """The step's terms at (R, Omega): ``StepTerms`` (the attractive error, the cones
         evaluated, widened by the blind time when it is given, and the gravity moment).
         """
@@ -217,7 +219,8 @@ class AttitudeController:
         ev = cfg.cones.evaluate_terms(sc, widened)
         return StepTerms(y[..., 0:1], y[..., 1:4], ev, y[..., -3:], self.regressor(R))
 
-    def moment(self, R, Omega, dt, adapt, terms, psi, e_R, barrier=True):
+    def moment(self, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool, terms: 'StepTerms',
+               psi: Any, e_R: np.ndarray, barrier: bool = True) -> ControlOutput:
         """The geometric law's moment for the configuration error (psi, e_R), with the adaptive
         estimate advanced: ``ControlOutput``. barrier: the error carries the cones' barrier
         (the estimate then freezes where a barrier saturates).
@@ -280,6 +283,6 @@ class StepTerms(NamedTuple):
 
     A: np.ndarray        # attractive error A, with a trailing axis of 1
     e_RA: np.ndarray     # its gradient
-    cones: object        # ConeEval: the cones at R (widened by the blind time, if any)
+    cones: ConeEval      # the cones at R (widened by the blind time, if any)
     M_g: np.ndarray      # the model's gravity moment
-    W: object            # the regressor W(R) (None for the constant model, W = I)
+    W: Optional[np.ndarray]   # the regressor W(R) (None for the constant model, W = I)

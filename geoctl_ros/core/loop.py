@@ -5,16 +5,17 @@ The node turns messages into calls of this class and its results into messages; 
 adaptation, the diagnostics level and its reasons) is made here, so it is tested without rclpy.
 """
 
+from typing import Any, List, Optional, Sequence
+
 import numpy as np
 
 from geoctl_ros.core import loop_status, preflight, so3
 from geoctl_ros.core.control import AttitudeController, SetpointRejected
-from geoctl_ros.core.diagnostics import (
-    failsafe,
-)
+from geoctl_ros.core.diagnostics import Status, failsafe
 from geoctl_ros.core.gaps import GapBridge
-from geoctl_ros.core.loop_types import LoopTick
+from geoctl_ros.core.loop_types import LoopSettings, LoopTick
 from geoctl_ros.core.safety import (
+    ArmResult,
     EscHealth,
     EscStatus,
     Stream,
@@ -67,7 +68,8 @@ class ControlLoop:
         self.gaps = {'pose': [0, 0.0], 'angular velocity': [0, 0.0]}   # count, longest (s)
 
     # --- inputs ------------------------------------------------------------------------------
-    def offer_pose(self, q, stamp, receipt, stamp_as_given=None, delay=None):
+    def offer_pose(self, q: Sequence[float], stamp: float, receipt: float,
+                   stamp_as_given: Any = None, delay: Optional[float] = None) -> Optional[str]:
         """A motion-capture attitude (x, y, z, w) of stamp (s) received at receipt (s, the loop's
         clock); None if accepted, else why it was refused. stamp_as_given: the stamp in the
         caller's own form, handed back on the ticks that use this pose (default: stamp). delay:
@@ -83,7 +85,8 @@ class ControlLoop:
             self.bridge.pose(self.R, stamp, receipt)
         return problem
 
-    def offer_angular_velocity(self, w, stamp, receipt, delay=None):
+    def offer_angular_velocity(self, w: Sequence[float], stamp: float, receipt: float,
+                               delay: Optional[float] = None) -> Optional[str]:
         """A body angular velocity (rad/s); None if accepted, else why it was refused (delay: as
         offer_pose's).
         """
@@ -97,7 +100,8 @@ class ControlLoop:
             self.bridge.gyro(self.Omega)
         return problem
 
-    def offer_esc_health(self, command_max, escs, receipt):
+    def offer_esc_health(self, command_max: int, escs: Sequence[int],
+                         receipt: float) -> Optional[str]:
         """The ESC node's report: its motor.command_max and each ESC's health (EscHealth values,
         in rotor order); None if taken, else why not.
         """
@@ -108,7 +112,7 @@ class ControlLoop:
         self.esc = EscStatus(int(command_max), tuple(EscHealth(e) for e in escs), receipt)
         return None
 
-    def esc_report_problem(self, now):
+    def esc_report_problem(self, now: float) -> Optional[str]:
         """Why the ESC node's report forbids flight now, or None (no ESC node: None)."""
         return esc_problem(self.esc, now, self.setup.mixer.curve.command_max)
 
@@ -125,7 +129,7 @@ class ControlLoop:
                 g[0] += 1
                 g[1] = max(g[1], age)
 
-    def request_setpoint(self, q):
+    def request_setpoint(self, q: Sequence[float]) -> Optional[str]:
         """A new desired attitude; None if adopted, else why it was refused (old one stays)."""
         problem = quaternion_problem(q)
         if problem is None:
@@ -137,11 +141,11 @@ class ControlLoop:
         return problem
 
     # --- commands ----------------------------------------------------------------------------
-    def arm_problems(self, now, extra_problem=None):
+    def arm_problems(self, now: float, extra_problem: Optional[str] = None) -> List[str]:
         """Every reason not to arm now (``core.preflight.arm_problems``; empty: it may)."""
         return preflight.arm_problems(self, now, extra_problem)
 
-    def arm(self, now, extra_problem=None):
+    def arm(self, now: float, extra_problem: Optional[str] = None) -> ArmResult:
         """Arm unless arm_problems names a reason; the refusal names every one."""
         problems = self.arm_problems(now, extra_problem)
         was_armed = self.supervisor.armed
@@ -154,14 +158,15 @@ class ControlLoop:
                 self.step.predict.reset()
         return result
 
-    def disarm(self, reason='disarm requested', failed=False):
+    def disarm(self, reason: str = 'disarm requested', failed: bool = False) -> ArmResult:
         """Disarm; failed: by a failsafe (reason from core.diagnostics.failsafe)."""
         return self.supervisor.disarm(reason, failed)
 
-    def reset_adaptation(self):
+    def reset_adaptation(self) -> None:
         self.controller.reset_adaptation()
 
-    def reconfigure(self, setup, setpoint_changed=False, schedule_changed=False):
+    def reconfigure(self, setup: Any, setpoint_changed: bool = False,
+                    schedule_changed: bool = False) -> Optional[str]:
         """Adopt a new setup (validated by params.controller_setup); None, or why not.
 
         The set point parameter is applied only when it changed, so that a gain change does not
@@ -188,7 +193,7 @@ class ControlLoop:
         return None
 
     # --- the control tick --------------------------------------------------------------------
-    def tick(self, now, dt):
+    def tick(self, now: float, dt: float) -> LoopTick:
         """One control step at time now (the node's clock); dt is the control period (the time
         the step's command is expected to be held).
         """
@@ -257,15 +262,15 @@ class ControlLoop:
                     self.controller.R_d, bridging)
 
     @property
-    def settings(self):
+    def settings(self) -> LoopSettings:
         """The LoopSettings in effect."""
         return self.setup.loop
 
     @property
-    def rotor_count(self):
+    def rotor_count(self) -> int:
         return self.setup.mixer.allocator.count
 
-    def reconfiguration_problem(self, setup):
+    def reconfiguration_problem(self, setup: Any) -> Optional[str]:
         """Why setup (validated on its own) cannot replace the running one, or None: the set
         point now being flown (it may have come in on the topic) against the new cones.
         """
@@ -273,18 +278,18 @@ class ControlLoop:
         return None if problem is None else 'the current ' + problem
 
     # --- what the diagnostics say ------------------------------------------------------------
-    def status(self, now, other_commanders=None):
+    def status(self, now: float, other_commanders: Optional[str] = None) -> Status:
         """The diagnostics: level, message and figures (``core.loop_status.status``).
         other_commanders is the node's sentence when another node publishes the motor commands
         (an error while armed).
         """
         return loop_status.status(self, now, other_commanders)
 
-    def gap_notes(self, now):
+    def gap_notes(self, now: float) -> List[str]:
         """Sentences for the gaps being ridden through (``core.loop_status.gap_notes``)."""
         return loop_status.gap_notes(self, now)
 
-    def end_window(self):
+    def end_window(self) -> None:
         """Start a new diagnostics window (the node calls this on its fixed period)."""
         self.pose_age.reset()
         self.rate_age.reset()

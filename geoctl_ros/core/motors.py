@@ -1,8 +1,9 @@
 """The motors: the thrust curve of their ESC commands, and the mixer that turns a moment into
 commands (allocation, the lag compensation, the curve).
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
+from typing import Any
 
 import numpy as np
 
@@ -20,8 +21,14 @@ class ThrustCurve:
     c: np.ndarray
     voltage_scale: float
     command_max: int
+    # the command's constants, folded once (__post_init__)
+    _disc0: np.ndarray = field(init=False, repr=False, compare=False)
+    _four_a: np.ndarray = field(init=False, repr=False, compare=False)
+    _k: np.ndarray = field(init=False, repr=False, compare=False)
+    _k0: np.ndarray = field(init=False, repr=False, compare=False)
+    _zero_up_to: np.ndarray = field(init=False, repr=False, compare=False)
 
-    def thrust(self, command):
+    def thrust(self, command: np.ndarray) -> np.ndarray:
         """Thrust (N) of integer commands (n,); never negative."""
         x = self.voltage_scale * np.asarray(command, dtype=float)
         return np.maximum(self.a * x * x + self.b * x + self.c, 0.0)
@@ -35,7 +42,7 @@ class ThrustCurve:
                             ('_k0', -self.b * k - 1e-9), ('_zero_up_to', np.maximum(self.c, 0.0))):
             object.__setattr__(self, name, value)
 
-    def command(self, thrust):
+    def command(self, thrust: np.ndarray) -> np.ndarray:
         """Smallest integer command whose thrust is at least the requested one (the lab's ceil),
         clipped to 0..command_max; negative thrust counts as 0, and a request that command 0
         already meets (the curve is clipped at 0 N) gives 0.
@@ -46,11 +53,11 @@ class ThrustCurve:
         cmd[f <= self._zero_up_to] = 0
         return cmd
 
-    def max_thrust(self):
+    def max_thrust(self) -> np.ndarray:
         """Thrust of each motor at command_max."""
         return self.thrust(np.full(len(self.a), self.command_max))
 
-    def normalised(self, command):
+    def normalised(self, command: np.ndarray) -> np.ndarray:
         """Command as a fraction of command_max, in [0, 1]."""
         return np.asarray(command, dtype=float) / self.command_max
 
@@ -112,7 +119,7 @@ class Mixer:
         self.design_hold = None          # H of the last command (s)
         self.spool_left = 0.0            # s of spooling up left after arming
 
-    def adopt_state(self, other):
+    def adopt_state(self, other: 'Mixer') -> None:
         """Carry the lag model over from the mixer this one replaces (a run-time
         reconfiguration).
         """
@@ -122,7 +129,8 @@ class Mixer:
             self.design_hold = other.design_hold
             self.spool_left = other.spool_left
 
-    def mix(self, moment, armed=True, dt=None, held=None):
+    def mix(self, moment: np.ndarray, armed: Any = True, dt: Any = None,
+            held: Any = None) -> 'MotorOutput':
         """Motor commands for the moment (or a stack of them); all zero when not armed.
 
         dt: how long this command is expected to be held (the control period); held: how long the

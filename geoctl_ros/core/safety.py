@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 import math
 import secrets
-from typing import NamedTuple
+from typing import List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -29,7 +29,7 @@ from geoctl_ros.core.diagnostics import failsafe
 QUATERNION_TOLERANCE = 1e-3
 
 
-def quaternion_problem(q):
+def quaternion_problem(q: Sequence[float]) -> Optional[str]:
     """Why q (x, y, z, w) is not an acceptable attitude, or None."""
     if not all(math.isfinite(v) for v in q):
         return 'quaternion is not finite'
@@ -39,7 +39,7 @@ def quaternion_problem(q):
     return None
 
 
-def attitude_of(q):
+def attitude_of(q: Sequence[float]) -> Tuple[Optional[np.ndarray], Optional[str]]:
     """(R, None) for an acceptable attitude quaternion q (x, y, z, w), else (None, why): what
     the bridge and the view take from a pose or a set point.
     """
@@ -47,7 +47,7 @@ def attitude_of(q):
     return (None, problem) if problem else (so3.quat_to_rot(q), None)
 
 
-def motor_commands_problem(data, n):
+def motor_commands_problem(data: Sequence[float], n: int) -> Optional[str]:
     """Why a motor_commands message cannot be actuated (a sentence), or None: it must hold n
     finite values in [0, 1] (the sim and the ESC node refuse it the same way).
     """
@@ -58,7 +58,7 @@ def motor_commands_problem(data, n):
     return None
 
 
-def angular_velocity_problem(w, limit):
+def angular_velocity_problem(w: Sequence[float], limit: float) -> Optional[str]:
     """Why w is not an acceptable angular velocity, or None."""
     if not all(math.isfinite(v) for v in w):
         return 'angular velocity is not finite'
@@ -106,7 +106,8 @@ class Stream:
         self._not_newer = 0             # good samples refused as not newer, in a row
         self.recent_refusals = []     # distinct reasons since take_refusals(), at most 5
 
-    def offer(self, stamp, receipt, problem=None, delay=None):
+    def offer(self, stamp: float, receipt: float, problem: Optional[str] = None,
+              delay: Optional[float] = None) -> Optional[str]:
         """Record a sample; returns None if accepted, else the reason it was refused. delay: its
         stamp against this computer's clock at receipt (s), or None if unknown.
         """
@@ -133,29 +134,29 @@ class Stream:
         self.accepted += 1
         return None
 
-    def capture_age(self, now):
+    def capture_age(self, now: float) -> float:
         """How old the last accepted sample's content is at now (s): its delay from capture to
         receipt plus the time since receipt.
         """
         return self.last_delay + max(now - self.last_receipt, 0.0)
 
-    def take_refusals(self):
+    def take_refusals(self) -> List[str]:
         """The distinct refusal reasons since the last call (and forget them)."""
         out, self.recent_refusals = self.recent_refusals, []
         return out
 
-    def age(self, now):
+    def age(self, now: float) -> float:
         return math.inf if self.last_receipt is None else now - self.last_receipt
 
-    def fresh(self, now):
+    def fresh(self, now: float) -> bool:
         return self.age(now) < self.timeout
 
     @property
-    def limit(self):
+    def limit(self) -> float:
         """Age at which the stream is lost: the ride-through limit, or the timeout without one."""
         return max(self.ride_through, self.timeout)
 
-    def staleness(self, now):
+    def staleness(self, now: float) -> Optional[str]:
         """A sentence if the stream is stale, else None."""
         if self.last_receipt is None:
             return 'no %s received yet' % self.name
@@ -164,7 +165,7 @@ class Stream:
                                                                  self.timeout)
         return None
 
-    def loss(self, now):
+    def loss(self, now: float) -> Optional[str]:
         """A sentence if the stream is lost (older than its limit, or never received), else
         None.
         """
@@ -209,7 +210,7 @@ class EscStatus(NamedTuple):
 ESC_SILENT_S = 1.5       # s without a report from an ESC node that has reported: it is gone
 
 
-def esc_problem(status, now, command_max):
+def esc_problem(status: Optional[EscStatus], now: float, command_max: int) -> Optional[str]:
     """Why the ESCs cannot carry a flight (a sentence), or None: none reported (no ESC node:
     nothing to judge), the node silent for ESC_SILENT_S, a command scale that is not the
     controller's command_max, or an ESC lost or at fault.
@@ -226,7 +227,7 @@ def esc_problem(status, now, command_max):
     return '; '.join(bad) or None
 
 
-def new_session():
+def new_session() -> int:
     """A controller's session number: random, nonzero, 32 bits."""
     return secrets.randbelow(2 ** 32 - 1) + 1
 
@@ -247,15 +248,15 @@ class Supervisor:
         self.reason = 'disarmed at start-up'
         self.failed = False          # disarmed by a failsafe (reason says why)
 
-    def input_problem(self, now):
+    def input_problem(self, now: float) -> Optional[str]:
         """Why the inputs are not fresh enough to arm (the first stale stream), or None."""
         return next(filter(None, (s.staleness(now) for s in self.streams)), None)
 
-    def input_loss(self, now):
+    def input_loss(self, now: float) -> Optional[str]:
         """Why the inputs can no longer carry a flight (the first lost stream), or None."""
         return next(filter(None, (s.loss(now) for s in self.streams)), None)
 
-    def arm(self, now, extra_problem=None):
+    def arm(self, now: float, extra_problem: Optional[str] = None) -> ArmResult:
         """Try to arm; refused (with the reason) unless every input is fresh."""
         problem = extra_problem or self.input_problem(now)
         if problem:
@@ -265,13 +266,13 @@ class Supervisor:
         self.reason, self.failed = 'armed', False
         return ArmResult(True, 'armed')
 
-    def disarm(self, reason='disarm requested', failed=False):
+    def disarm(self, reason: str = 'disarm requested', failed: bool = False) -> ArmResult:
         """Disarm; failed: by a failsafe (reason then reads 'failsafe: why')."""
         self.armed, self.armed_since = False, None
         self.reason, self.failed = reason, failed
         return ArmResult(True, 'disarmed')
 
-    def check(self, now):
+    def check(self, now: float) -> bool:
         """Called every control tick: disarm if an input is lost. True if the motors may run."""
         if self.armed:
             problem = self.input_loss(now)
@@ -290,6 +291,6 @@ class SetpointSchedule:
     def __len__(self):
         return len(self.times)
 
-    def index_at(self, t):
+    def index_at(self, t: float) -> int:
         """Index of the set point in force t seconds after arming (-1 before the first)."""
         return int(np.searchsorted(self.times, t, side='right')) - 1
