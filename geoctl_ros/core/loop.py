@@ -24,6 +24,7 @@ from geoctl_ros.core.safety import (
     esc_problem,
     quaternion_problem,
 )
+from geoctl_ros.core.so3 import Vector
 from geoctl_ros.core.stats import WindowStats
 from geoctl_ros.core.step import ControlTick
 
@@ -68,7 +69,7 @@ class ControlLoop:
         self.gaps = {'pose': [0, 0.0], 'angular velocity': [0, 0.0]}   # count, longest (s)
 
     # --- inputs ------------------------------------------------------------------------------
-    def offer_pose(self, q: Sequence[float], stamp: float, receipt: float,
+    def offer_pose(self, q: Vector, stamp: float, receipt: float,
                    stamp_as_given: Any = None, delay: Optional[float] = None) -> Optional[str]:
         """A motion-capture attitude (x, y, z, w) of stamp (s) received at receipt (s, the loop's
         clock); None if accepted, else why it was refused. stamp_as_given: the stamp in the
@@ -85,7 +86,7 @@ class ControlLoop:
             self.bridge.pose(self.R, stamp, receipt)
         return problem
 
-    def offer_angular_velocity(self, w: Sequence[float], stamp: float, receipt: float,
+    def offer_angular_velocity(self, w: Vector, stamp: float, receipt: float,
                                delay: Optional[float] = None) -> Optional[str]:
         """A body angular velocity (rad/s); None if accepted, else why it was refused (delay: as
         offer_pose's).
@@ -129,7 +130,7 @@ class ControlLoop:
                 g[0] += 1
                 g[1] = max(g[1], age)
 
-    def request_setpoint(self, q: Sequence[float]) -> Optional[str]:
+    def request_setpoint(self, q: Vector) -> Optional[str]:
         """A new desired attitude; None if adopted, else why it was refused (old one stays)."""
         problem = quaternion_problem(q)
         if problem is None:

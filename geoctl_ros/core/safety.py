@@ -19,17 +19,18 @@ from dataclasses import dataclass
 from enum import IntEnum
 import math
 import secrets
-from typing import List, NamedTuple, Optional, Sequence, Tuple
+from typing import List, NamedTuple, Optional, Tuple
 
 import numpy as np
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.diagnostics import failsafe
+from geoctl_ros.core.so3 import Vector
 
 QUATERNION_TOLERANCE = 1e-3
 
 
-def quaternion_problem(q: Sequence[float]) -> Optional[str]:
+def quaternion_problem(q: Vector) -> Optional[str]:
     """Why q (x, y, z, w) is not an acceptable attitude, or None."""
     if not all(math.isfinite(v) for v in q):
         return 'quaternion is not finite'
@@ -39,7 +40,7 @@ def quaternion_problem(q: Sequence[float]) -> Optional[str]:
     return None
 
 
-def attitude_of(q: Sequence[float]) -> Tuple[Optional[np.ndarray], Optional[str]]:
+def attitude_of(q: Vector) -> Tuple[Optional[np.ndarray], Optional[str]]:
     """(R, None) for an acceptable attitude quaternion q (x, y, z, w), else (None, why): what
     the bridge and the view take from a pose or a set point.
     """
@@ -47,7 +48,7 @@ def attitude_of(q: Sequence[float]) -> Tuple[Optional[np.ndarray], Optional[str]
     return (None, problem) if problem else (so3.quat_to_rot(q), None)
 
 
-def motor_commands_problem(data: Sequence[float], n: int) -> Optional[str]:
+def motor_commands_problem(data: Vector, n: int) -> Optional[str]:
     """Why a motor_commands message cannot be actuated (a sentence), or None: it must hold n
     finite values in [0, 1] (the sim and the ESC node refuse it the same way).
     """
@@ -58,7 +59,7 @@ def motor_commands_problem(data: Sequence[float], n: int) -> Optional[str]:
     return None
 
 
-def angular_velocity_problem(w: Sequence[float], limit: float) -> Optional[str]:
+def angular_velocity_problem(w: Vector, limit: float) -> Optional[str]:
     """Why w is not an acceptable angular velocity, or None."""
     if not all(math.isfinite(v) for v in w):
         return 'angular velocity is not finite'

@@ -22,6 +22,8 @@ import numpy as np
 
 _I3 = np.eye(3)
 
+Vector = Union[Sequence[float], np.ndarray]     # a vector given as a list or an array
+
 
 def hat(x: np.ndarray) -> np.ndarray:
     """The skew-symmetric matrix of x: ``hat(x) @ y == cross(x, y)``."""
@@ -276,7 +278,7 @@ def project(M: np.ndarray) -> np.ndarray:
     return U @ np.diag([1.0, 1.0, d]) @ Vt
 
 
-def quat_to_rot(q: Sequence[float]) -> np.ndarray:
+def quat_to_rot(q: Vector) -> np.ndarray:
     """Rotation matrix of a quaternion in ROS order (x, y, z, w); q is normalised first."""
     x, y, z, w = (float(v) for v in q)
     n = math.sqrt(x * x + y * y + z * z + w * w)
@@ -309,7 +311,7 @@ def rot_to_quat(R: np.ndarray) -> np.ndarray:
     return -out if out[3] < 0.0 else out
 
 
-def axis_angle(axis: Sequence[float], angle_rad: float) -> np.ndarray:
+def axis_angle(axis: Vector, angle_rad: float) -> np.ndarray:
     """Rotation by angle_rad about a (not necessarily unit) axis."""
     a = np.asarray(axis, dtype=float)
     return exp(a * (angle_rad / np.linalg.norm(a)))

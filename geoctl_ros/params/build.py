@@ -5,6 +5,7 @@ airframe that must produce every moment).
 import collections
 from dataclasses import dataclass, fields
 import math
+from typing import Any, Dict, List, Tuple
 
 import numpy as np
 
@@ -19,7 +20,7 @@ from geoctl_ros.core.safety import SetpointSchedule, quaternion_problem
 from geoctl_ros.params.param import ConfigError
 
 
-def cone_set(values):
+def cone_set(values: dict) -> ConeSet:
     """The ConeSet described by resolved controller parameters."""
     names = values['cones.names']
     return ConeSet(values['sensor_axis'],
@@ -29,7 +30,7 @@ def cone_set(values):
                    math.radians(values['cone_guard_deg']))
 
 
-def controller_config(values):
+def controller_config(values: dict) -> ControllerConfig:
     """ControllerConfig from resolved controller parameters (see ``resolve``)."""
     return ControllerConfig(
         k_R=values['k_R'], k_Omega=values['k_Omega'], k_Delta=values['k_Delta'], c=values['c'],
@@ -46,7 +47,7 @@ def controller_config(values):
 _RECORDS: dict = {}
 
 
-def settings(values, prefix=''):
+def settings(values: dict, prefix: str = '') -> Any:
     """Resolved parameters as a read-only record with one attribute per parameter (dots as
     underscores, ``prefix`` such as 'mavlink.' dropped): what a node reads once, at
     configuration, by name instead of by indexing the parameter dict. The names are the schema's,
@@ -60,12 +61,12 @@ def settings(values, prefix=''):
     return record(*values.values())
 
 
-def loop_settings(values):
+def loop_settings(values: dict) -> LoopSettings:
     """The LoopSettings of resolved controller parameters."""
     return LoopSettings(**{f.name: values[f.name] for f in fields(LoopSettings)})
 
 
-def setpoint_rotation(values):
+def setpoint_rotation(values: dict) -> np.ndarray:
     """R_d of the resolved controller parameters."""
     return so3.quat_to_rot(values['setpoint'])
 
@@ -75,14 +76,14 @@ class ControllerSetup:
     """Everything a controller (node or headless) builds from its parameters."""
 
     config: ControllerConfig
-    mixer: object                # geoctl_ros.core.motors.Mixer
+    mixer: Mixer
     setpoint: np.ndarray         # R_d
-    schedule: object             # geoctl_ros.core.safety.SetpointSchedule
+    schedule: SetpointSchedule
     loop: LoopSettings           # the loop's and the node's own settings
     values: dict                 # the resolved parameters it was built from (for reconfiguring)
 
 
-def controller_setup(values):
+def controller_setup(values: dict) -> 'ControllerSetup':
     """Build and cross-check a controller from resolved parameters; ConfigError on any problem,
     including a set point (or scheduled one) that puts the sensor in a cone.
     """
@@ -104,8 +105,10 @@ def controller_setup(values):
     else:
         for k, q in enumerate(quats.reshape(-1, 4)):
             reason = quaternion_problem(q)
-            R = so3.quat_to_rot(q) if reason is None else None
-            reason = reason or probe.setpoint_problem(R)
+            R = None
+            if reason is None:
+                R = so3.quat_to_rot(q)
+                reason = probe.setpoint_problem(R)
             if reason:
                 errors.append(('setpoint_schedule.quaternions',
                                'set point %d: %s' % (k + 1, reason)))
@@ -121,7 +124,7 @@ def controller_setup(values):
                            loop_settings(values), values)
 
 
-def airframe(values):
+def airframe(values: dict) -> Tuple[RotorGeometry, ThrustCurve, List[int]]:
     """(RotorGeometry, ThrustCurve, failed rotor numbers) of resolved parameters; raises
     ConfigError naming the parameter for a layout or curve that does not fit together.
     """
@@ -154,7 +157,7 @@ def airframe(values):
     for v in values['rotors.failed']:
         if not 1 <= v <= n:
             errors.append(('rotors.failed', 'rotor %d does not exist (1..%d)' % (v, n)))
-    coeffs = {}
+    coeffs: Dict[str, Any] = {}
     for k in 'abc':
         arr = values['motor.' + k]
         if arr.size not in (1, n):
@@ -170,7 +173,7 @@ def airframe(values):
     return geometry, curve, sorted(set(values['rotors.failed']))
 
 
-def mixer(values):
+def mixer(values: dict) -> Mixer:
     """The Mixer (allocation + thrust curve) of resolved controller parameters."""
     geometry, curve, failed = airframe(values)
     top = float(np.min(curve.max_thrust()))

@@ -5,7 +5,7 @@ from geoctl_ros.params.param import CONTROLLER, ConfigError
 from geoctl_ros.params.schema import BY_NAME, CONE_KEY, schema_for
 
 
-def flatten(tree, prefix=''):
+def flatten(tree: dict, prefix: str = '') -> dict:
     """Nested dicts -> one dict with dotted keys, as ROS 2 reads parameter files."""
     out = {}
     for key, value in tree.items():
@@ -17,13 +17,13 @@ def flatten(tree, prefix=''):
     return out
 
 
-def write_parameter_file(sections, path, comment):
+def write_parameter_file(sections: dict, path: str, comment: str) -> None:
     """Write sections ({node or '/**': flat parameters}) as a ROS 2 parameter file (nested keys,
     floats exact) under a first line of comment.
     """
     doc = {}
     for node, flat in sections.items():
-        tree = {}
+        tree: dict = {}
         for key, value in flat.items():
             *parents, leaf = key.split('.')
             d = tree
@@ -36,7 +36,7 @@ def write_parameter_file(sections, path, comment):
         yaml.safe_dump(doc, f, sort_keys=False, default_flow_style=None, width=100)
 
 
-def load_parameter_file(path):
+def load_parameter_file(path: str) -> dict:
     """Read a ROS 2 parameter YAML file: {node name or '/**': flat parameter dict}."""
     try:
         with open(path) as f:
@@ -61,7 +61,7 @@ def load_parameter_file(path):
     return sections
 
 
-def node_overrides(sections, node):
+def node_overrides(sections: dict, node: str) -> dict:
     """The flat overrides node gets from a parameter file: '/**' first, then its own section.
 
     Parameters in '/**' that node does not read are dropped (ROS ignores them too); its own section

@@ -2,6 +2,7 @@
 schema's entries use (``geoctl_ros.params.schema`` lists them).
 """
 from dataclasses import dataclass
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
@@ -33,25 +34,25 @@ class ConfigError(ValueError):
 
 
 # --- checks: each returns a reason (str) or None ------------------------------------------------
-def positive(v):
+def positive(v: float) -> Optional[str]:
     return None if v > 0.0 else 'must be > 0 (got %r)' % v
 
 
-def nonzero_vector(v):
+def nonzero_vector(v: np.ndarray) -> Optional[str]:
     # (the largest element, not the norm: a norm of 1e200 overflows)
     return None if np.abs(v).max() > 1e-9 else 'must not be the zero vector'
 
 
-def unit_quaternion(q):
+def unit_quaternion(q: np.ndarray) -> Optional[str]:
     problem = quaternion_problem(q)
     return None if problem is None else 'must be a unit quaternion (x, y, z, w): ' + problem
 
 
-def half_angle(v):
+def half_angle(v: float) -> Optional[str]:
     return None if 0.0 < v < 90.0 else 'must be in (0, 90) degrees (got %r)' % v
 
 
-def diagonal_weights(G):
+def diagonal_weights(G: np.ndarray) -> Optional[str]:
     if min(G) <= 0.0:
         return 'weights must be positive (got %s)' % list(G)
     if len(set(G)) < 3:
@@ -59,7 +60,7 @@ def diagonal_weights(G):
     return None
 
 
-def inertia_matrix(vals):
+def inertia_matrix(vals: np.ndarray) -> Optional[str]:
     J = np.asarray(vals).reshape(3, 3)
     if not np.allclose(J, J.T, rtol=0.0, atol=1e-12 + 1e-9 * np.abs(J).max()):
         return 'must be symmetric (row-major 3x3)'
@@ -71,7 +72,7 @@ def inertia_matrix(vals):
     return None
 
 
-def i2c_addresses(v):
+def i2c_addresses(v: np.ndarray) -> Optional[str]:
     if not len(v) or any(not 0x03 <= a <= 0x77 for a in v):
         return 'must be 7-bit addresses 0x03 to 0x77'
     return None if len(set(v)) == len(v) else 'must be different'
@@ -85,30 +86,31 @@ class Param:
 
     name: str
     type: str
-    default: object
+    default: Any
     unit: str
     doc: str
     nodes: tuple
     length: int = 0
-    check: object = None
+    check: Optional[Callable[[Any], Optional[str]]] = None
     choices: tuple = ()
-    lo: object = None       # the least value (of each element, for arrays); None: not a number
-    hi: object = None       # the greatest
+    lo: Optional[float] = None      # the least value (of each element, for arrays); None: none
+    hi: Optional[float] = None      # the greatest
 
     @property
-    def range_text(self):
+    def range_text(self) -> str:
         """The documented range, as docs/parameters.md shows it ('' for non-numbers)."""
-        if self.lo is None:
+        if self.lo is None or self.hi is None:
             return ''
         return '[%s, %s]' % (number_text(self.lo), number_text(self.hi))
 
 
-def number_text(x):
+def number_text(x: float) -> str:
     return '%d' % x if isinstance(x, int) else '%g' % x
 
 
-def declare(name, type_, default, unit, doc, nodes, length=0, check=None, choices=(), lo=None,
-       hi=None):
+def declare(name: str, type_: str, default: Any, unit: str, doc: str, nodes: Any, length: int = 0,
+            check: Optional[Callable[[Any], Optional[str]]] = None, choices: Sequence = (),
+            lo: Optional[float] = None, hi: Optional[float] = None) -> 'Param':
     return Param(name, type_, default, unit, doc, nodes if isinstance(nodes, tuple) else (nodes,),
-                 length, check, choices, lo, hi)
+                 length, check, tuple(choices), lo, hi)
 

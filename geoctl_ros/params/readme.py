@@ -8,7 +8,7 @@ from geoctl_ros.params.param import CONTROLLER, LAB_INERTIA
 from geoctl_ros.params.schema import CHANGE_WHILE_ARMED, CONE_SCHEMA, SCHEMA
 
 
-def markdown_table():
+def markdown_table() -> str:
     """The parameter table."""
     rows = ['| parameter | node | type | default | range | unit | meaning |',
             '|---|---|---|---|---|---|---|']
@@ -35,7 +35,7 @@ def _fmt_default(value):
 README_MARKERS = ('<!-- params:begin -->', '<!-- params:end -->')
 
 
-def update_readme(path):
+def update_readme(path: str) -> bool:
     """Replace the table between README_MARKERS in the file at path; True if it changed."""
     with open(path) as f:
         text = f.read()

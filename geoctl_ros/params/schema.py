@@ -9,9 +9,10 @@ Each ``Param`` has its ROS 2 type, default, unit, one-line doc, the nodes that r
 """
 from dataclasses import replace
 import re
+from typing import List
 
 from geoctl_ros.params import schema_controller, schema_testbed, schema_tools
-from geoctl_ros.params.param import CONTROLLER, half_angle, nonzero_vector
+from geoctl_ros.params.param import CONTROLLER, Param, half_angle, nonzero_vector
 from geoctl_ros.params.param import declare as _p
 
 SCHEMA = schema_controller.PARAMS + schema_testbed.PARAMS + schema_tools.PARAMS
@@ -41,12 +42,12 @@ CONE_KEY = re.compile(r'^cones\.([^.]+)\.(axis|half_angle_deg)$')
 CONE_NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
 
 
-def schema_for(node):
+def schema_for(node: str) -> List[Param]:
     """The parameters node ('controller', 'sim' or 'scenario') reads, in schema order."""
     return [p for p in SCHEMA if node in p.nodes]
 
 
-def cone_param(name, field_):
+def cone_param(name: str, field_: str) -> Param:
     """The schema entry for cones.<name>.<field_> (field_ is 'axis' or 'half_angle_deg')."""
     template = {'axis': CONE_SCHEMA[0], 'half_angle_deg': CONE_SCHEMA[1]}[field_]
     return replace(template, name=template.name.replace('<name>', name))

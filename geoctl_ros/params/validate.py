@@ -1,16 +1,18 @@
 """Checking values against the schema, ROS-strict, and resolving a node's parameters."""
 import difflib
 import math
+from typing import Any, Iterable, Optional, Sequence, Tuple
 
 import numpy as np
 
-from geoctl_ros.params.param import CONTROLLER, ConfigError
+from geoctl_ros.params.param import CONTROLLER, ConfigError, Param
 from geoctl_ros.params.schema import BY_NAME, CONE_KEY, CONE_NAME, SCHEMA, cone_param, schema_for
 
 
-def check_value(p, value):
+def check_value(p: Param, value: Any) -> Tuple[Any, Optional[str]]:
     """(converted value, None) or (None, reason) for a value of parameter p, ROS-strict."""
     t = p.type
+    out: Any
     if t == 'double':
         if isinstance(value, bool) or not isinstance(value, float):
             hint = ' (write %r)' % float(value) if isinstance(value, int) and not isinstance(
@@ -80,7 +82,7 @@ def _describe(value):
 
 
 # --- resolving a node's parameters ---------------------------------------------------------------
-def resolve(node, overrides, staged_cones=False):
+def resolve(node: str, overrides: dict, staged_cones: bool = False) -> dict:
     """Merge overrides (flat dict) into node's defaults and check everything.
 
     Returns a flat dict of converted values (cone keys included). Raises ConfigError listing every
@@ -134,7 +136,7 @@ def _suggest(key):
     return ' (did you mean %r?)' % close[0] if close else ''
 
 
-def change_problem(changed, allowed, when):
+def change_problem(changed: Iterable[str], allowed: Sequence[str], when: str) -> Optional[str]:
     """Why changing the parameters changed is refused (a sentence naming them), or None: each
     must be one of allowed, or a parameter no node reads; when says when they may change.
     """
@@ -145,7 +147,7 @@ def change_problem(changed, allowed, when):
     return '%s may change %s only' % (', '.join(refused), when)
 
 
-def configuration_given(node, names):
+def configuration_given(node: str, names: Iterable[str]) -> bool:
     """Whether the parameters names, as given to node at start (files and -p), configure it: at
     least one of them is a parameter only this node reads (a cone, for the controller). The
     values a ``/**`` section shares with other nodes (mass, gravity, ...) do not count, so a
