@@ -8,6 +8,7 @@ from collections import deque
 import errno
 import threading
 import time
+from typing import Optional
 
 from smbus2 import SMBus, i2c_msg
 
@@ -38,15 +39,15 @@ class I2cBus:
                     'timeout' if e.errno in TIMEOUT_ERRNOS else 'io')
             raise BusError(address, kind, e.strerror or str(e)) from None
 
-    def write(self, address, data):
+    def write(self, address: int, data: bytes) -> None:
         self._transfer(address, i2c_msg.write(address, bytes(data)))
 
-    def read(self, address, n):
+    def read(self, address: int, n: int) -> bytes:
         msg = i2c_msg.read(address, n)
         self._transfer(address, msg)
         return bytes(msg)
 
-    def close(self):
+    def close(self) -> None:
         self._bus.close()
 
 
@@ -71,7 +72,7 @@ class RecordingBus:
         self._clock = clock
         self._lock = threading.Lock()
 
-    def fail(self, address, kind='nack', count=1):
+    def fail(self, address: int, kind: str = 'nack', count: int = 1) -> None:
         with self._lock:
             self._faults.setdefault(address, deque()).extend([kind] * count)
 
@@ -89,20 +90,20 @@ class RecordingBus:
             self.errors.append((self._clock(), address, kind))
             raise BusError(address, kind)
 
-    def write(self, address, data):
+    def write(self, address: int, data: bytes) -> None:
         self._check(address)
         self.writes.append((self._clock(), address, bytes(data)))
 
-    def read(self, address, n):
+    def read(self, address: int, n: int) -> bytes:
         self._check(address)
         return self.telemetry[address][:n]
 
-    def last(self, address):
+    def last(self, address: int) -> Optional[bytes]:
         """The last bytes written to address, or None."""
         for _, a, data in reversed(self.writes):
             if a == address:
                 return data
         return None
 
-    def close(self):
+    def close(self) -> None:
         pass

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from enum import Enum
 import threading
 import time
+from typing import Any, List, Optional, Tuple
 
 import numpy as np
 
@@ -95,7 +96,7 @@ class EscDriver:
         self._lock = threading.Lock()
 
     # --- start and stop ----------------------------------------------------------------------
-    def start(self):
+    def start(self) -> None:
         """Zero to every ESC, and a read of each; EscStartError if one does not answer within
         probe_timeout and its rotor is not ignored.
         """
@@ -120,7 +121,7 @@ class EscDriver:
                 + '; add the rotor to esc.ignore to run without it')
         self.missing = pending
 
-    def stop(self):
+    def stop(self) -> List[int]:
         """Zero to every ESC (each retried); the addresses that could not be written."""
         failed = []
         for i in range(self.n):
@@ -132,7 +133,7 @@ class EscDriver:
         return failed
 
     # --- commands ----------------------------------------------------------------------------
-    def follow(self, armed, session):
+    def follow(self, armed: bool, session: int) -> None:
         """The armed state of the controller this node follows, and its session number (the
         nonzero number it stamps on its motor_commands; 0: no controller heard). Disarmed, every
         ESC gets zero whatever the commands say.
@@ -142,7 +143,8 @@ class EscDriver:
             if not self.armed:
                 self.command = np.zeros(self.n)
 
-    def offer(self, data, now=None, session=None):
+    def offer(self, data: Any, now: Optional[float] = None,
+              session: Optional[int] = None) -> Optional[str]:
         """A motor_commands message arrived (its data, and the session number it carries; None:
         not checked); the refusal reason, or None.
 
@@ -174,12 +176,12 @@ class EscDriver:
             self.refusal = None
         return None
 
-    def commands_fresh(self, now=None):
+    def commands_fresh(self, now: Optional[float] = None) -> bool:
         now = self.clock() if now is None else now
         t = self.command_time
         return t is not None and now - t <= self.config.timeout
 
-    def targets(self, now=None):
+    def targets(self, now: Optional[float] = None) -> Tuple[np.ndarray, 'Output', str]:
         """(normalised command per rotor, what it is (an Output), why in words) for the next
         write.
         """
@@ -201,7 +203,7 @@ class EscDriver:
                                                         % self.config.timeout)
             return self.command, Output.COMMANDED, 'commanded'
 
-    def write(self):
+    def write(self) -> str:
         """One write cycle: every ESC gets its set point; failed transfers are retried and
         counted. Returns why it wrote what it wrote (in words).
         """
@@ -217,7 +219,7 @@ class EscDriver:
         self.output, self.reason = targets, why
         return why
 
-    def read_next(self):
+    def read_next(self) -> Optional[int]:
         """Read the telemetry of the next ESC (round robin); its index, or None if none."""
         live = [i for i in range(self.n) if i not in self.missing]
         if not live:
@@ -231,7 +233,8 @@ class EscDriver:
         return i
 
     # --- the motor test ----------------------------------------------------------------------
-    def start_test(self, rotor, command, duration, armed, now=None):
+    def start_test(self, rotor: int, command: float, duration: float, armed: bool,
+                   now: Optional[float] = None) -> Optional[str]:
         """Start a motor test; the refusal (a sentence) or None."""
         now = self.clock() if now is None else now
         if armed:
@@ -255,8 +258,10 @@ class EscDriver:
             self.test = Test(rotor, command, now + duration)
         return None
 
-    def abort_test(self):
-        """End a running test (the motors get zero, or the commands, at the next cycle)."""
+    def abort_test(self) -> bool:
+        """End a running test (the motors get zero, or the commands, at the next cycle); whether
+        one was running.
+        """
         with self._lock:
             running, self.test = self.test, None
         return running is not None
@@ -290,7 +295,7 @@ class EscDriver:
         self.telemetry[i] = protocol.parse(data)
 
 
-def config_of(values):
+def config_of(values: dict) -> 'EscConfig':
     """The EscConfig of resolved esc_i2c parameters (``geoctl_ros.params``)."""
     return EscConfig(addresses=tuple(int(a) for a in values['esc.addresses']),
                      command_max=int(values['motor.command_max']),

@@ -10,19 +10,20 @@ commands refused in the window; OK otherwise.
 """
 from dataclasses import dataclass
 import math
-from typing import List, NamedTuple, Optional, Tuple
+from typing import Iterable, List, NamedTuple, Optional, Tuple
 
 from geoctl_ros.core.codec import Codec, Key
 from geoctl_ros.core.diagnostics import Window, window, window_text, window_value
 from geoctl_ros.core.safety import EscHealth
 from geoctl_ros.esc import protocol
+from geoctl_ros.esc.driver import EscDriver
 
 NAME = 'geoctl_ros: esc_i2c'
 LOST = 0.5                        # s without a successful transfer: the ESC is lost
 
 
 
-def esc_health(driver, now, temperature_error):
+def esc_health(driver: EscDriver, now: float, temperature_error: float) -> Tuple[EscHealth, ...]:
     """Per rotor, the EscHealth of the driver's ESCs at now."""
     out = []
     for i in range(len(driver.config.addresses)):
@@ -90,7 +91,8 @@ def _esc_line(address, tel, errors, missing, age):
                                                 lost)
 
 
-def report(driver, now, temperature_warn, temperature_error, errors_before=0, refused_before=0):
+def report(driver: EscDriver, now: float, temperature_warn: float, temperature_error: float,
+           errors_before: int = 0, refused_before: int = 0) -> EscReport:
     """The EscReport of the driver at now; errors_before and refused_before are the totals at the
     last report (what is new since is judged).
     """
@@ -140,6 +142,6 @@ def to_values(figures: EscFigures) -> List[Tuple[str, str]]:
     return CODEC.to_values(figures)
 
 
-def from_values(pairs) -> EscFigures:
+def from_values(pairs: Iterable[Tuple[str, str]]) -> EscFigures:
     """The ESC node's figures from a status's key/value pairs (others' keys are dropped)."""
     return CODEC.from_values(pairs)[0]

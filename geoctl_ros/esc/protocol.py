@@ -16,6 +16,7 @@ A read returns current, a state byte and temperature (BL-Ctrl 2.0: three bytes):
 """
 from dataclasses import dataclass
 import math
+from typing import List, Tuple
 
 import numpy as np
 
@@ -23,7 +24,7 @@ TELEMETRY_BYTES = 3
 OK, WARN, ERROR = 0, 1, 2                 # diagnostic_msgs levels, without rclpy
 
 
-def encode(commands, command_max, resolution=8):
+def encode(commands: np.ndarray, command_max: int, resolution: int = 8) -> List[bytes]:
     """The bytes to write to each ESC for normalised commands in [0, 1]: a list of bytes objects,
     one per rotor.
     """
@@ -34,21 +35,21 @@ def encode(commands, command_max, resolution=8):
     return [bytes((v >> 3, v & 7)) for v in sp]
 
 
-def decode(data, command_max):
+def decode(data: bytes, command_max: int) -> float:
     """The normalised command of the bytes written to one ESC (one byte, or two for 11 bits)."""
     if len(data) == 1:
         return data[0] / command_max
     return ((data[0] << 3) | (data[1] & 7)) / (8.0 * command_max)
 
 
-def current_amps(raw):
+def current_amps(raw: int) -> float:
     """Current of the read's first byte, A (NaN for 255, not valid)."""
     if raw == 255:
         return math.nan
     return raw / 10.0 if raw <= 200 else float(raw - 180)
 
 
-def current_raw(amps):
+def current_raw(amps: float) -> int:
     """The first byte of a read for a current (what an ESC sends; the virtual ESCs use it)."""
     if not amps >= 0.0:
         return 255
@@ -64,7 +65,7 @@ class Telemetry:
     temperature: float
 
 
-def parse(data):
+def parse(data: bytes) -> 'Telemetry':
     """Telemetry of a read's bytes (ValueError if too short)."""
     if len(data) < TELEMETRY_BYTES:
         raise ValueError('an ESC read returned %d bytes, expected %d' % (len(data),
@@ -72,7 +73,7 @@ def parse(data):
     return Telemetry(current_amps(data[0]), int(data[1]), float(data[2]))
 
 
-def state_problem(state):
+def state_problem(state: int) -> Tuple[int, str]:
     """(level, what) of a state byte: OK for running and ready, WARN for limiting or unknown,
     ERROR for a failed start or a self-test error.
     """

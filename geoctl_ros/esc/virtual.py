@@ -16,6 +16,7 @@ import mmap
 import os
 import tempfile
 import time
+from typing import List, Tuple
 
 import numpy as np
 
@@ -85,7 +86,7 @@ class VirtualEscBus:
         return i
 
     # --- the ESC node's side (the bus master) -----------------------------------------------
-    def write(self, address, data):
+    def write(self, address: int, data: bytes) -> None:
         i = self._slot(address)
         data = bytes(data)
         now = time.monotonic()
@@ -101,20 +102,20 @@ class VirtualEscBus:
         e['b1'] = data[1] if len(data) > 1 else 0
         self.header['log_next'] = k + 1
 
-    def read(self, address, n):
+    def read(self, address: int, n: int) -> bytes:
         i = self._slot(address)
         s = self.slots[i]
         return bytes((int(s['current']), int(s['state']), int(s['temperature'])))[:n]
 
-    def close(self):
+    def close(self) -> None:
         self._mm.close()
 
     # --- the ESCs' side (the sim) -----------------------------------------------------------
-    def power(self, on):
+    def power(self, on: bool) -> None:
         """The ESCs answer (on) or not."""
         self.slots['present'] = 1 if on else 0
 
-    def setpoints(self):
+    def setpoints(self) -> List[Tuple[bytes, float]]:
         """[(bytes written last, its time)] per slot (b'' and -inf before the first write)."""
         out = []
         for i in range(len(self.slots)):
@@ -126,12 +127,12 @@ class VirtualEscBus:
             out.append((data, float(s['t_write']) if s['nbytes'] else -np.inf))
         return out
 
-    def answer(self, i, current_raw, state, temperature):
+    def answer(self, i: int, current_raw: int, state: int, temperature: int) -> None:
         """Slot i's telemetry (the bytes its next read returns)."""
         self.slots['current'][i], self.slots['state'][i] = current_raw, state
         self.slots['temperature'][i] = int(min(255, max(0, round(temperature))))
 
-    def log(self, since=0):
+    def log(self, since: int = 0) -> np.ndarray:
         """The writes kept in the ring from write number `since` on (the newest LOG_SIZE at most),
         oldest first: a structured array (t, address, nbytes, b0, b1).
         """
@@ -140,5 +141,5 @@ class VirtualEscBus:
         idx = np.arange(first, k) % LOG_SIZE
         return self.ring[idx].copy()
 
-    def count(self):
+    def count(self) -> int:
         return int(self.header['log_next'])
