@@ -23,6 +23,7 @@ The lab's hexrotor (``tilted_ring`` layout, the defaults), seen from above, nose
 """
 from dataclasses import dataclass
 import math
+from typing import Any
 
 import numpy as np
 
@@ -43,12 +44,13 @@ class RotorGeometry:
     yaw_coefficient: float
 
     @property
-    def count(self):
+    def count(self) -> int:
         return len(self.spins)
 
 
-def tilted_ring(count=6, arm_length=0.31, tilt_deg=15.0, first_azimuth_deg=0.0, height=0.0,
-                yaw_coefficient=0.1):
+def tilted_ring(count: int = 6, arm_length: float = 0.31, tilt_deg: float = 15.0,
+                first_azimuth_deg: float = 0.0, height: float = 0.0,
+                yaw_coefficient: float = 0.1) -> RotorGeometry:
     """The usual layout: rotors numbered clockwise seen from above, alternating spin and tilt."""
     i = np.arange(count)
     azimuth = np.radians(first_azimuth_deg) - 2.0 * np.pi * i / count     # clockwise from above
@@ -64,7 +66,7 @@ def tilted_ring(count=6, arm_length=0.31, tilt_deg=15.0, first_azimuth_deg=0.0, 
     return RotorGeometry(positions, axes, spins, float(yaw_coefficient))
 
 
-def effectiveness(geometry, rho):
+def effectiveness(geometry: RotorGeometry, rho: np.ndarray) -> np.ndarray:
     """The 6 x n matrix mapping rotor thrusts to [force; moment about the pivot] (body frame);
     a stack of them for a stack of centre-of-mass offsets rho (batch, 3).
     """
@@ -86,7 +88,7 @@ class AirframeHealth:
     warnings: list
 
 
-def check(B, alive):
+def check(B: np.ndarray, alive: Any) -> 'AirframeHealth':
     """Check an effectiveness matrix (6 x n_alive); raises AirframeError when a moment cannot be
     produced, returns AirframeHealth with warnings for what is merely degraded.
     """

@@ -7,6 +7,7 @@ down only as far as needed, and the moment not delivered is reported.
 """
 from dataclasses import dataclass
 import math
+from typing import Any
 
 import numpy as np
 
@@ -57,7 +58,7 @@ class Allocator:
         self._inv_d = 1.0 / self._d
         self._thrusts = np.zeros(n)
 
-    def allocate(self, moment, collective):
+    def allocate(self, moment: np.ndarray, collective: Any) -> Allocation:
         """Allocation for the desired moment (3,) about the pivot and collective thrust (N); a
         stack of moments (batch, 3) gives one allocation per row.
         """

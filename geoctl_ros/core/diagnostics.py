@@ -11,7 +11,7 @@ ROS-free: the nodes turn a DiagnosticStatus message into (level, message, pairs)
 from dataclasses import dataclass, fields, replace
 import math
 import re
-from typing import NamedTuple, Optional
+from typing import Any, Iterable, List, NamedTuple, Optional, Tuple
 
 import numpy as np
 
@@ -23,7 +23,7 @@ OK, WARN, ERROR = 0, 1, 2
 FAILSAFE = 'failsafe'          # how the state of a vehicle that failed safe begins
 
 
-def state_kind(figures):
+def state_kind(figures: 'Figures') -> str:
     """The kind of the state a report's figures show, for a table of time in each state:
     'failsafe' for any failsafe (the typed flag), else the state's words up to their first colon
     ('armed', 'disarmed at start-up', ...).
@@ -31,7 +31,7 @@ def state_kind(figures):
     return FAILSAFE if figures.failsafe else figures.state.split(':')[0]
 
 
-def failsafe(why):
+def failsafe(why: str) -> str:
     """The state (and disarm reason) of a vehicle that failed safe because of why."""
     return '%s: %s' % (FAILSAFE, why)
 
@@ -47,7 +47,7 @@ class Window(NamedTuple):
     max: float
 
 
-def window(samples):
+def window(samples: np.ndarray) -> Optional['Window']:
     """The Window of an array of samples (seconds), or None when there are none."""
     if not len(samples):
         return None
@@ -55,7 +55,7 @@ def window(samples):
                   float(samples.max()))
 
 
-def aggregate(windows):
+def aggregate(windows: Iterable[Optional['Window']]) -> Optional['Window']:
     """Several windows (None ones skipped) as one: mean of the means, RMS of the standard
     deviations, 99th percentile of the windows' p99 and the largest maximum; None when there is
     none.
@@ -67,7 +67,7 @@ def aggregate(windows):
                   float(np.percentile(rows[:, 2], 99)), float(rows[:, 3].max()))
 
 
-def aggregate_ms(statuses, name):
+def aggregate_ms(statuses: Iterable[Any], name: str) -> Optional['Window']:
     """The windows of one Figures field (``loop_period``, ...) over several reports, as one
     (``aggregate``), in milliseconds; None when none has it.
     """
@@ -121,7 +121,8 @@ class Figures:
     tick_to_command: Optional[Window] = None
     pose_to_command_latency: Optional[Window] = None
 
-    def with_timing(self, loop_period, tick_to_command, pose_to_command_latency):
+    def with_timing(self, loop_period: Optional['Window'], tick_to_command: Optional['Window'],
+                    pose_to_command_latency: Optional['Window']) -> 'Figures':
         return replace(self, loop_period=loop_period, tick_to_command=tick_to_command,
                        pose_to_command_latency=pose_to_command_latency)
 
@@ -140,13 +141,13 @@ _WINDOW = re.compile(r'mean (\S+) std (\S+) p99 (\S+) max (\S+)$')
 _GAPS = re.compile(r'(\d+) \(longest (\S+) s\)$')
 
 
-def window_text(w):
+def window_text(w: Optional['Window']) -> str:
     if w is None:
         return 'n/a'
     return 'mean %.3f std %.3f p99 %.3f max %.3f' % tuple(1e3 * x for x in w)
 
 
-def window_value(text):
+def window_value(text: str) -> Optional['Window']:
     m = _WINDOW.match(text)
     return None if m is None else Window(*(1e-3 * float(x) for x in m.groups()))
 
@@ -206,17 +207,17 @@ CODEC = Codec(Figures, {
 assert set(CODEC.table) == {f.name for f in fields(Figures)}
 
 
-def key(name):
+def key(name: str) -> str:
     """The published key of a Figures field (for a reader that wants the text itself)."""
     return CODEC.key(name)
 
 
-def to_values(figures):
+def to_values(figures: 'Figures') -> List[Tuple[str, str]]:
     """The figures as (key, text) pairs, in the published order."""
     return CODEC.to_values(figures)
 
 
-def from_values(pairs):
+def from_values(pairs: Iterable[Tuple[str, str]]) -> 'Figures':
     """Figures from (key, text) pairs as published (``Codec.from_values``; the other keys are
     dropped).
     """

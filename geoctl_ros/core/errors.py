@@ -3,14 +3,17 @@ attractive error A and its gradient e_RA, the cones' barrier folded in (Psi, e_R
 linear map of R, and the barrier's widening by the blind time.
 """
 
+from typing import Any, Optional, Tuple
+
 import numpy as np
 
 from geoctl_ros.core import so3
+from geoctl_ros.core.cones import ConeEval, ConeSet
 from geoctl_ros.core.mechanics import gravity_moment
 from geoctl_ros.core.so3 import matvec, transpose, vee
 
 
-def attractive_error(R, R_d, G):
+def attractive_error(R: np.ndarray, R_d: np.ndarray, G: np.ndarray) -> Tuple[Any, np.ndarray]:
     """A (eq. 13) and e_RA (eq. 15) for the diagonal weights G (3,)."""
     RdtR = so3.matmul(transpose(R_d), R)
     A = 0.5 * so3.dot(1.0 - np.diagonal(RdtR, 0, -2, -1), G)
@@ -18,13 +21,13 @@ def attractive_error(R, R_d, G):
     return A, 0.5 * vee(M - transpose(M))
 
 
-def E_matrix(R, R_d, G):
+def E_matrix(R: np.ndarray, R_d: np.ndarray, G: np.ndarray) -> np.ndarray:
     """E(R, R_d) of eq. (27): d/dt e_RA = E e_Omega."""
     M = (R.T @ R_d) * G[None, :]     # R^T R_d G
     return 0.5 * (np.trace(M) * np.eye(3) - M)
 
 
-def configuration_error(R, R_d, G, cones):
+def configuration_error(R: np.ndarray, R_d: np.ndarray, G: np.ndarray, cones: ConeSet) -> tuple:
     """Psi, e_R, A, e_RA and the cone evaluation at R (Prop. 1 generalised to several cones)."""
     A, e_RA = attractive_error(R, R_d, G)
     ev = cones.evaluate(R)
@@ -32,7 +35,7 @@ def configuration_error(R, R_d, G, cones):
     return psi, e_R, A, e_RA, ev
 
 
-def with_cones(A, e_RA, ev):
+def with_cones(A: Any, e_RA: np.ndarray, ev: ConeEval) -> Tuple[Any, np.ndarray]:
     """Psi = A (1 + sum_i (B_i - 1)) and e_R = e_RA (1 + sum_i (B_i - 1)) + A sum_i e_RB,i from
     A (with a trailing axis of 1), e_RA and the cones' evaluation.
     """
@@ -43,7 +46,7 @@ def with_cones(A, e_RA, ev):
 _BASIS = np.eye(9).reshape(9, 3, 3)       # the unit matrices E_jk
 
 
-def linear_terms(R, R_d, config):
+def linear_terms(R: np.ndarray, R_d: np.ndarray, config: Any) -> np.ndarray:
     """The parts of the law that are affine in R, side by side (..., 5 + 4 n): A, e_RA (3), for
     each cone s_i and (R^T v_i) x r (``ConeSet.terms``), and the gravity moment M_g (3).
     """
@@ -55,7 +58,7 @@ def linear_terms(R, R_d, config):
     return np.concatenate([np.broadcast_to(p, batch + p.shape[-1:]) for p in parts], axis=-1)
 
 
-def approach_rates(sc, Omega):
+def approach_rates(sc: np.ndarray, Omega: np.ndarray) -> np.ndarray:
     """Per cone, how fast the sensor's angle to the cone's axis is closing (rad/s; negative when
     it opens), from ``ConeSet.terms`` (s_i, (R^T v_i) x r) and Omega: with s_i = cos(phi_i),
     d/dt s_i = -Omega . ((R^T v_i) x r) and sin(phi_i) = |(R^T v_i) x r|.
@@ -68,7 +71,8 @@ def approach_rates(sc, Omega):
 WIDEN_GAP_SHARE = 0.5     # the widening takes at most this share of the gap to a cone's barrier
 
 
-def blind_widening(sc, Omega, blind, widening_max, theta_b=None):
+def blind_widening(sc: np.ndarray, Omega: np.ndarray, blind: Any, widening_max: float,
+                   theta_b: Optional[np.ndarray] = None) -> np.ndarray:
     """How much wider (rad) the barrier's cones are for a loop blind for ``blind`` seconds (one
     per run of a batch): what the sensor travels towards each cone in that time at its present
     approach rate, at most widening_max and, given the barrier's half-angles theta_b, at most

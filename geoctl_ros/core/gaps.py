@@ -22,6 +22,7 @@ mass above the pivot. So, while a stream is stale but not yet lost
 When a stream is fresh its measurement is used as it is: nothing here changes normal flight.
 """
 from enum import Enum
+from typing import Optional, Tuple
 
 import numpy as np
 
@@ -66,7 +67,7 @@ class GapBridge:
         self.attitude_source = POSE
         self.rate_source = GYRO
 
-    def pose(self, R, stamp, receipt):
+    def pose(self, R: np.ndarray, stamp: float, receipt: float) -> None:
         """An accepted pose."""
         self._head = (self._head + 1) % POSE_HISTORY
         self._t[self._head] = stamp
@@ -74,11 +75,11 @@ class GapBridge:
         self._R_meas = R
         self._pose_receipt = receipt
 
-    def gyro(self, w):
+    def gyro(self, w: np.ndarray) -> None:
         """An accepted angular velocity."""
         self._w_meas = w
 
-    def pose_rate(self):
+    def pose_rate(self) -> Optional[np.ndarray]:
         """Body rate from the newest pose and the one closest to rate_window before it, or None
         when no such pair exists (fewer than two poses, or none within 3 windows).
         """
@@ -92,7 +93,8 @@ class GapBridge:
         k = int(np.argmin(np.where(ok, np.abs(dt - self.rate_window), np.inf)))
         return so3.log(self._R[k].T @ self._R[self._head]) / dt[k]
 
-    def update(self, now, pose_fresh, gyro_fresh):
+    def update(self, now: float, pose_fresh: bool,
+               gyro_fresh: bool) -> Optional[Tuple[np.ndarray, np.ndarray]]:
         """The (R, Omega) to use at time now, given which streams are fresh; None before the first
         pose and the first rate (gyro or poses).
         """
@@ -115,6 +117,6 @@ class GapBridge:
         return self.R, self.Omega
 
     @property
-    def bridging(self):
+    def bridging(self) -> bool:
         """True while either the attitude or the rate is not the fresh measurement."""
         return self.attitude_source is not POSE or self.rate_source is not GYRO

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 
 
-def step_period(since, period):
+def step_period(since: float, period: float) -> float:
     """The dt of a step started by a sample (``step_on``): the time since the last step, within
     half to twice the control period. A burst of samples must not make a step of almost no time:
     the mixer's lag compensation would then command the extreme thrust, and the motors would hold

@@ -82,7 +82,7 @@ class Plant:
         self.R = np.eye(3) if R0 is None else np.array(R0, dtype=float)
         self.Omega = np.zeros(3) if Omega0 is None else np.array(Omega0, dtype=float)
 
-    def external_moment(self, t, R):
+    def external_moment(self, t: float, R: np.ndarray) -> np.ndarray:
         """Gravity moment plus disturbance about the pivot, body frame."""
         c = self.config
         return gravity_moment(R, c.m_rho, c.gravity) + c.disturbance(t)
@@ -94,7 +94,7 @@ class Plant:
         return matvec(self.J_inv, tau + body_gravity_moment(c.m_rho, g_b) + c.disturbance(t)
                       - gyroscopic)
 
-    def step(self, tau, h):
+    def step(self, tau: np.ndarray, h: float) -> None:
         """Advance by h seconds with the actuation moment tau held constant (RKMK4).
 
         The stages need the attitude only through gravity in the body frame: at R0 exp(hat(xi))
@@ -122,10 +122,10 @@ class Plant:
         self.Omega = W0 + (h / 6.0) * (k1w + 2.0 * k2w + 2.0 * k3w + k4w)
         self.t = t + h
 
-    def kinetic_energy(self):
+    def kinetic_energy(self) -> float:
         return 0.5 * float(self.Omega @ self.J @ self.Omega)
 
-    def angular_momentum_world(self):
+    def angular_momentum_world(self) -> np.ndarray:
         return self.R @ (self.J @ self.Omega)
 
 

@@ -15,6 +15,7 @@ campaign drives a batch of testbeds with the same classes (a leading batch axis 
 configuration and state and on the actuator's centre-of-mass offset).
 """
 import math
+from typing import Optional
 
 import numpy as np
 
@@ -37,7 +38,7 @@ class RotorActuator:
             self._alive[i - 1] = 0.0
         self._h = None
 
-    def moment(self, commands, h):
+    def moment(self, commands: np.ndarray, h: float) -> np.ndarray:
         """Advance the rotors by h with the commands held; the moment about the pivot."""
         if h != self._h:
             self._h, self._blend = h, 1.0 - math.exp(-h / self.time_constant)
@@ -64,10 +65,10 @@ class EscWatchdog:
         self.last_command = -math.inf
         self.last_tick = None
 
-    def received(self, now):
+    def received(self, now: float) -> None:
         self.last_command = now
 
-    def fresh(self, now):
+    def fresh(self, now: float) -> bool:
         """Whether the motors run for the integration due at ``now``; call once per tick."""
         stalled = self.last_tick is not None and now - self.last_tick > self.stall
         reference = self.last_tick if stalled else now
@@ -89,19 +90,19 @@ class TestbedSim:
         self.gyro_bias = np.asarray(gyro_bias, dtype=float)
         self.rng = np.random.default_rng(seed)
 
-    def step(self, command, h):
+    def step(self, command: np.ndarray, h: float) -> None:
         """Advance by h: command is the integer ESC commands (rotors) or the moment (torque)."""
         tau = command if self.actuator is None else self.actuator.moment(command, h)
         self.plant.step(tau, h)
 
-    def measure_attitude(self, R=None):
+    def measure_attitude(self, R: Optional[np.ndarray] = None) -> np.ndarray:
         """Motion capture of the attitude now (or of R, a past one, for a delayed measurement)."""
         R = self.plant.R if R is None else R
         if self.attitude_noise > 0.0:
             R = R @ so3.exp(self.rng.normal(0.0, self.attitude_noise, 3))
         return R
 
-    def measure_angular_velocity(self, Omega=None):
+    def measure_angular_velocity(self, Omega: Optional[np.ndarray] = None) -> np.ndarray:
         """The gyro's reading now (or of Omega, a past angular velocity)."""
         w = (self.plant.Omega if Omega is None else Omega) + self.gyro_bias
         if self.gyro_noise > 0.0:
