@@ -267,6 +267,23 @@ def test_the_rclpy_free_layers_are_clean_under_mypy(tmp_path):
     assert r.returncode == 1 and 'Incompatible return value' in r.stdout, r.stdout
 
 
+def test_every_public_function_of_the_typed_layers_has_type_hints():
+    """Every public function and method of core, params, sim and esc (mypy.ini's layers) says
+    the types of its arguments and of what it returns, so that mypy checks it and its callers.
+    """
+    bare = []
+    for layer in ('core', 'params', 'sim', 'esc'):
+        for path in sorted(pathlib.Path(PKG, layer).glob('*.py')):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if not isinstance(node, ast.FunctionDef) or node.name.startswith('_'):
+                    continue
+                args = node.args.posonlyargs + node.args.args + node.args.kwonlyargs
+                if node.returns is None or any(a.annotation is None for a in args
+                                               if a.arg not in ('self', 'cls')):
+                    bare.append('%s/%s:%d %s' % (layer, path.name, node.lineno, node.name))
+    assert not bare, bare
+
+
 INSTALLED_CONFIG = """
 import sys
 from geoctl_ros.sil import rosenv

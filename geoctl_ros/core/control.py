@@ -127,14 +127,14 @@ class AttitudeController:
                                     # the tick past the delay bound (core.step.DegradedMode)
 
     @property
-    def R_d(self):
+    def R_d(self) -> np.ndarray:
         """The desired attitude (a stack of them for a batch); setting it rebuilds the linear
         map.
         """
         return self._R_d
 
     @R_d.setter
-    def R_d(self, R_d):
+    def R_d(self, R_d: np.ndarray) -> None:
         self._R_d = R_d
         self._linear = LinearMap(R_d, self.config)
 

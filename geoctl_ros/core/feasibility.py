@@ -3,11 +3,12 @@ cone that its barrier can hold the largest unmodelled moment near the goal (``se
 which the controller asks at every set point and reconfiguration, never on the hot path).
 """
 import math
+from typing import Any, Optional
 
 import numpy as np
 
 
-def smallest_pair_sum(G):
+def smallest_pair_sum(G: np.ndarray) -> float:
     """min_{i != j} (g_i + g_j): the least A can grow per (1 - cos) of a rotation's angle,
     A = (1 - cos phi) (tr G - n^T G n) / 2 (the paper's h_1).
     """
@@ -15,7 +16,7 @@ def smallest_pair_sum(G):
     return float(g[0] + g[1])
 
 
-def holding_moment(config, cones, R_d):
+def holding_moment(config: Any, cones: Any, R_d: np.ndarray) -> np.ndarray:
     """Per cone: the largest moment its barrier can oppose near the cone, with the set point R_d.
 
     The repulsion k_R A e_RB,i is largest in the floor band (and inside, where it keeps the band's
@@ -34,7 +35,7 @@ def holding_moment(config, cones, R_d):
     return config.k_R * A_min * np.sin(cones.theta_b) / (cones.alpha * cones.g0)
 
 
-def holding_clearance_deg(config, cones, moment):
+def holding_clearance_deg(config: Any, cones: Any, moment: float) -> np.ndarray:
     """Per cone: the set point's clearance (degrees from the real cone) at which
     ``holding_moment`` equals moment.
     """
@@ -43,7 +44,7 @@ def holding_clearance_deg(config, cones, moment):
     return np.degrees(np.arccos(np.clip(1.0 - x, -1.0, 1.0)) + cones.guard)
 
 
-def setpoint_problem(config, cones, R_d):
+def setpoint_problem(config: Any, cones: Any, R_d: np.ndarray) -> Optional[str]:
     """Why R_d cannot be a set point with these cones (a sentence), or None if it can."""
     if not np.all(np.isfinite(R_d)):
         return 'setpoint is not finite'

@@ -3,6 +3,7 @@ second bound) on the operating domain of Prop. 4: checked at configuration, repo
 """
 from dataclasses import dataclass
 import math
+from typing import Any
 
 import numpy as np
 
@@ -21,14 +22,14 @@ class GainCheck:
     margin_deg: float
 
     @property
-    def c_max(self):
+    def c_max(self) -> float:
         return min(self.c_max_paper, self.c_max_dissertation)
 
     @property
-    def ok(self):
+    def ok(self) -> bool:
         return 0.0 < self.c < self.c_max
 
-    def message(self):
+    def message(self) -> str:
         verdict = 'satisfies' if self.ok else 'VIOLATES'
         return ('c = %.4g %s the sufficient condition of Prop. 5: c < min(%.4g (paper eq. 40, '
                 'H = %.4g), %.4g (dissertation)) on the domain Psi < %.3g, every cone at least '
@@ -36,7 +37,7 @@ class GainCheck:
                                     self.c_max_dissertation, self.psi_max, self.margin_deg))
 
 
-def gain_condition(config, margin_deg=5.0):
+def gain_condition(config: Any, margin_deg: float = 5.0) -> 'GainCheck':
     """Evaluate the bound on c of Prop. 5 (eq. 40 with "4k - R" read as 4 k_R, and the
     dissertation's second bound) on the domain D of Prop. 4.
 

@@ -7,6 +7,7 @@ ControlOutput`` (``geoctl_ros.core.control``); the ``law`` parameter names a row
   constraint of relative degree 2, solved exactly by its active set every step.
 """
 import itertools
+from typing import Any
 
 import numpy as np
 
@@ -15,7 +16,8 @@ from geoctl_ros.core.errors import with_cones
 from geoctl_ros.core.so3 import cross, matvec
 
 
-def paper_law(controller, R, Omega, dt, adapt, blind):
+def paper_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool,
+              blind: Any) -> Any:
     """The paper's law (Kulumani, Poole & Lee): the configuration error carries every cone's
     log barrier, the cones widened by the blind time (docs/safety.md, "Delay").
     """
@@ -24,7 +26,8 @@ def paper_law(controller, R, Omega, dt, adapt, blind):
     return controller.moment(R, Omega, dt, adapt, terms, psi, e_R)
 
 
-def geometric_law(controller, R, Omega, dt, adapt, blind):
+def geometric_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool,
+                  blind: Any) -> Any:
     """Lee's geometric controller on SO(3) with the same gains and no barrier: the attractive
     error alone (the baseline that shows what the barrier buys). The cones are still evaluated,
     so margins and violations are reported.
@@ -34,7 +37,8 @@ def geometric_law(controller, R, Omega, dt, adapt, blind):
                              barrier=False)
 
 
-def pointing_cbf(controller, R, Omega, terms, delta_bar):
+def pointing_cbf(controller: Any, R: np.ndarray, Omega: np.ndarray, terms: Any,
+                 delta_bar: np.ndarray) -> tuple:
     """Each cone as a pointing constraint of relative degree 2, as the rows of A u >= beta.
 
     h_i = cos(theta_i + guard) - (R^T v_i) . r >= 0 (the sensor outside the guarded cone). With
@@ -74,7 +78,7 @@ def _active_sets(n):
     return _SUBSETS[n]
 
 
-def closest_admissible(u0, A, beta):
+def closest_admissible(u0: np.ndarray, A: np.ndarray, beta: np.ndarray) -> np.ndarray:
     """The moment closest to u0 with A u >= beta (the QP min |u - u0|^2), exactly, by its active
     set: with none active u0 if it is admissible; else of the sets of at most 3 constraints held
     with equality, u = u0 + A_S^T lambda, (A_S A_S^T) lambda = beta_S - A_S u0, the admissible
@@ -114,7 +118,8 @@ def closest_admissible(u0, A, beta):
     return best
 
 
-def cbf_law(controller, R, Omega, dt, adapt, blind):
+def cbf_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool,
+            blind: Any) -> Any:
     """The geometric baseline filtered by a control-barrier-function QP on SO(3): the moment
     closest to Lee's geometric controller's that keeps every cone's pointing constraint
     (``pointing_cbf``) with a double pole at -``cbf_rate``. The estimate adapts as the

@@ -3,6 +3,7 @@ the level, the message's sentences and the typed figures, and the per-window cou
 """
 from dataclasses import dataclass
 import math
+from typing import Any, List, Optional
 
 import numpy as np
 
@@ -25,7 +26,8 @@ class Window:
     steady_blind_ms: int = 0      # the shortest blind time of an armed tick (a sustained latency)
     gain_pct: int = 100           # the lowest degraded-mode gain scale of an armed tick
 
-    def note(self, armed, saturated, bridging, blind_s, gain_scale):
+    def note(self, armed: bool, saturated: Any, bridging: bool, blind_s: float,
+             gain_scale: Any) -> None:
         """One tick: armed or not, its allocation saturated, riding a gap, its blind time (s)
         and the degraded mode's gain scale.
         """
@@ -42,7 +44,7 @@ class Window:
             self.armed_ticks += 1
 
 
-def gap_notes(loop, now):
+def gap_notes(loop: Any, now: float) -> List[str]:
     """Sentences for the gaps being ridden through (empty in normal flight)."""
     notes = []
     b = loop.bridge
@@ -55,11 +57,12 @@ def gap_notes(loop, now):
     return notes
 
 
-def status(loop, now, other_commanders=None):
+def status(loop: Any, now: float, other_commanders: Optional[str] = None) -> Status:
     """The diagnostics: level, message and figures. other_commanders is the node's sentence
     when another node publishes the motor commands (an error while armed).
     """
-    errors, warnings = [], []
+    errors: List[str] = []
+    warnings: List[str] = []
     sup = loop.supervisor
     if not sup.armed:
         (errors if sup.failed else warnings).append(sup.reason)

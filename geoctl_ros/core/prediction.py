@@ -16,6 +16,7 @@ not yet learnt). Predicting with a constant rate, or with only the last moment, 
 50 ms delay tip the testbed over (docs/safety.md, "Delay").
 """
 import math
+from typing import Any, Optional
 
 import numpy as np
 
@@ -50,7 +51,7 @@ class CommandHistory:
         self._newest = -1                             # the slot of the newest entry
         self.count = 0                                # entries held
 
-    def clear(self):
+    def clear(self) -> None:
         """Forget every command (at arming: the rotors were off, the vehicle on its stops)."""
         self.times[:] = -math.inf
         self.count = 0
@@ -59,11 +60,11 @@ class CommandHistory:
             self.end[:] = 0.0
 
     @property
-    def first(self):
+    def first(self) -> float:
         """When the oldest command held was sent (inf: none yet)."""
         return self.times[-self.count] if self.count else math.inf
 
-    def push(self, t, end, start=None):
+    def push(self, t: float, end: np.ndarray, start: Optional[np.ndarray] = None) -> None:
         end = np.asarray(end, dtype=float)
         if self.end is None or self.end.shape[1:] != end.shape:
             self.start = np.zeros((self.size,) + end.shape)
@@ -76,7 +77,7 @@ class CommandHistory:
         self.times[:-1] = self.times[1:]
         self.times[-1] = t
 
-    def at(self, t):
+    def at(self, t: Any) -> np.ndarray:
         """The moment in force at times t (a scalar, or one per run of a batch: (N,))."""
         if self.end is None:
             return np.zeros(3)
@@ -113,12 +114,12 @@ class DelayPredictor:
         self.controller = controller
         self.reset()
 
-    def reset(self):
+    def reset(self) -> None:
         """Forget the observer (at arming: what held the vehicle on its stops is not its error)."""
         self.acc_error = 0.0          # rad/s^2: model minus measured acceleration, low-passed
-        self._last = None             # (capture time, Omega) of the last rate sample
+        self._last: Optional[tuple] = None    # (capture time, Omega) of the last rate sample
 
-    def acceleration(self, R, Omega, moment):
+    def acceleration(self, R: np.ndarray, Omega: np.ndarray, moment: np.ndarray) -> np.ndarray:
         """The model's angular acceleration at (R, Omega) under the rotors' moment."""
         c = self.controller
         cfg = c.config
@@ -127,7 +128,8 @@ class DelayPredictor:
                       + (c.delta_bar if W is None else matvec(W, c.delta_bar))
                       - cross(Omega, matvec(cfg.J, Omega)))
 
-    def observe(self, R, Omega, captured, history):
+    def observe(self, R: np.ndarray, Omega: np.ndarray, captured: Any,
+                history: 'CommandHistory') -> None:
         """Learn the model's error from a rate sample captured at ``captured`` (a time on the
         history's clock; one per run of a batch). A sample no newer than the last (a stall
         repeats it), one more than ``OBSERVE_GAP_MAX_S`` after it, or an interval that starts

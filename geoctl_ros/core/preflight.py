@@ -1,12 +1,13 @@
 """The arming checks (a preflight): every reason the controller must not arm now, as sentences."""
 import math
+from typing import Any, List, Optional
 
 import numpy as np
 
 ARM_RATE_DISAGREE = 0.3      # rad/s (+ half the poses' rate): gyro against poses, at arming
 
 
-def arm_problems(loop, now, extra_problem=None):
+def arm_problems(loop: Any, now: float, extra_problem: Optional[str] = None) -> List[str]:
     """Every reason not to arm now (sentences; empty: it may), as a preflight check names
     them: no configuration given, extra_problem (the caller's, e.g. another publisher of the
     motor commands), each stale input, and the measured sensor inside a cone or within its

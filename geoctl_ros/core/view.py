@@ -12,7 +12,8 @@ def _perpendiculars(axis):
     return p, np.cross(axis, p)
 
 
-def cone_triangles(axis, half_angle, length=1.0, segments=32):
+def cone_triangles(axis: np.ndarray, half_angle: float, length: float = 1.0,
+                   segments: int = 32) -> np.ndarray:
     """The cone's surface from its apex (the pivot) to a rim at distance length, as a triangle
     list (3 * segments, 3): each triangle is the apex and two neighbouring rim points.
     """
@@ -29,7 +30,7 @@ def cone_triangles(axis, half_angle, length=1.0, segments=32):
     return tris.reshape(-1, 3)
 
 
-def in_warning(margins_deg, band_deg):
+def in_warning(margins_deg: np.ndarray, band_deg: float) -> np.ndarray:
     """Per cone: is the sensor within band_deg of the cone (or inside it)?"""
     return np.asarray(margins_deg, dtype=float) < band_deg
 
@@ -41,11 +42,11 @@ class Trail:
         self._points = np.zeros((n, 3))
         self.count = 0
 
-    def add(self, point):
+    def add(self, point: np.ndarray) -> None:
         self._points[self.count % len(self._points)] = point
         self.count += 1
 
-    def points(self):
+    def points(self) -> np.ndarray:
         n = len(self._points)
         if self.count <= n:
             return self._points[:self.count].copy()

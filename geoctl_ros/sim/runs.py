@@ -109,12 +109,12 @@ class Testbeds:
         n = len(scenarios)
         self.setup = setup = controller_setup(cv)                     # gains, model, mixer
 
-        def stack(key):
+        def stack(key: str) -> np.ndarray:
             return np.array([s.sim[key] for s in scenarios], dtype=float)
 
         # One run flies its testbed unstacked: its small products then go in floats, in the order
         # of a stack's (geoctl_ros.core.so3), the same bits three times faster.
-        def per_run(key):
+        def per_run(key: str) -> np.ndarray:
             return stack(key)[0] if n == 1 else stack(key)
         self.single = n == 1
 
