@@ -267,6 +267,13 @@ def test_the_rclpy_free_layers_are_clean_under_mypy(tmp_path):
     assert r.returncode == 1 and 'Incompatible return value' in r.stdout, r.stdout
 
 
+def test_every_module_of_the_package_has_at_most_300_lines():
+    paths = sorted(pathlib.Path(PKG).rglob('*.py'))
+    long = ['%s: %d' % (path.relative_to(PKG), n) for path in paths
+            if (n := len(path.read_text().splitlines())) > 300]
+    assert not long, long
+
+
 def test_every_public_function_of_the_typed_layers_has_type_hints():
     """Every public function and method of core, params, sim and esc (mypy.ini's layers) says
     the types of its arguments and of what it returns, so that mypy checks it and its callers.

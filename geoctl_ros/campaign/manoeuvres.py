@@ -37,7 +37,7 @@ import os
 
 import numpy as np
 
-from geoctl_ros.core import so3
+from geoctl_ros.core import so3, sphere
 from geoctl_ros.core.control import AttitudeController
 from geoctl_ros.params import (
     CONTROLLER,
@@ -126,13 +126,13 @@ def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None, duration=20.0):
     """
     n = cone_count(seed, index)
     rng = np.random.default_rng(run_seeds(seed, index)[1])
-    r = so3.unit(np.asarray(sensor_axis, dtype=float))
+    r = sphere.unit(np.asarray(sensor_axis, dtype=float))
     while True:
         theta, axes = _place_cones(rng, n)
         v0, th0 = axes[0], math.radians(theta[0])
         azimuth = rng.uniform(0.0, 2.0 * math.pi)
-        d0 = so3.direction(v0, th0 + math.radians(rng.uniform(5.0, 30.0)), azimuth)
-        d1 = so3.direction(v0, th0 + math.radians(rng.uniform(5.0, 30.0)),
+        d0 = sphere.direction(v0, th0 + math.radians(rng.uniform(5.0, 30.0)), azimuth)
+        d1 = sphere.direction(v0, th0 + math.radians(rng.uniform(5.0, 30.0)),
                         azimuth + math.pi + math.radians(rng.uniform(-30.0, 30.0)))
         if any(_angle_deg(d, v) < t + CLEAR_DEG for d in (d0, d1) for v, t in zip(axes, theta)):
             continue
@@ -144,7 +144,7 @@ def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None, duration=20.0):
         if R0 is not None and R_d is not None and (
                 goal_ok is None or goal_ok(list(zip(axes, theta)), R_d)):
             break
-    push = so3.unit(rng.normal(size=3))
+    push = sphere.unit(rng.normal(size=3))
     return {
         'cones': [(list(map(float, v)), float(t)) for v, t in zip(axes, theta)],
         'R0': R0, 'R_d': R_d,

@@ -7,13 +7,11 @@ boundary, see ``geoctl_ros.params`` and the nodes), but all stay accurate for ro
 0 and near pi.
 
 Batches: ``hat``, ``cross``, ``vee``, ``exp``, ``matmul``, ``matvec``, ``vecmat``, ``dot`` and
-``transpose`` also take a stack of vectors (..., 3) or matrices (..., 3, 3) and work on each, so
-the batched simulation (many runs at once) uses the same formulas as a single run. (The trick:
-``x.T[i]`` is component i of a single vector and the column of components i of a stack alike.)
+``transpose`` also take a stack of vectors (..., 3) or matrices (..., 3, 3): a batch of runs uses
+the formulas of one (``x.T[i]`` is component i of one vector and of each of a stack alike).
 
-numpy 1.26 and 2.x alike: Ubuntu 24.04 (the vehicle's stack) ships numpy 1.26, which has neither
-``ndarray.mT`` nor ``np.matvec``/``np.vecmat``/``np.vecdot``; the batched products here are those
-of the package, and ``test_package.py`` fails on any numpy name 1.26 lacks.
+numpy 1.26 (Ubuntu 24.04's) has no ``ndarray.mT`` nor ``np.matvec``/``vecmat``/``vecdot``: the
+products here are the package's own (``test_package.py`` fails on a numpy name 1.26 lacks).
 """
 import math
 from typing import Any, Sequence, Union
@@ -56,13 +54,11 @@ def vee(M: np.ndarray) -> np.ndarray:
     return np.array([M[1, 2], M[2, 0], M[0, 1]]).T
 
 
-# The products of a stack are multiplied out entry by entry (each entry a sum of products taken
-# in index order), not through matmul: matmul hands each pair of a stack to BLAS, and OpenBLAS's
-# kernels round a product by where its matrices fall in memory (0.3.23's Prescott kernel, numpy
-# 1.26's: every other 3x3 matrix of a stack, by its 16-byte alignment). One pair of at most
-# SMALL entries is multiplied out in floats, in the same order: a run flown alone (the
-# simulated testbed of a batch of one) then gives the same bits as in a stack of any size. A
-# larger single pair (the control step's linear map) goes through ``@``.
+# A stack's products are multiplied out entry by entry (sums of products in index order), not
+# through matmul, whose BLAS kernels round a pair by where it falls in memory (OpenBLAS 0.3.23's
+# Prescott kernel: every other 3x3 matrix of a stack). One pair of at most SMALL entries goes in
+# floats in the same order, so a run alone gives the same bits as in a stack of any size; a
+# larger single pair (the step's linear map) goes through ``@``.
 SMALL = 18
 
 
@@ -143,19 +139,6 @@ def dot(a: np.ndarray, b: np.ndarray) -> Any:
     for k in range(1, a.shape[-1]):
         out = out + a[..., k] * b[..., k]
     return out
-
-
-def unit(v: np.ndarray) -> np.ndarray:
-    """v scaled to unit length (v not zero)."""
-    return v / math.sqrt(float(v @ v))
-
-
-def direction(axis: np.ndarray, angle: float, azimuth: float) -> np.ndarray:
-    """The unit vector at angle from the unit vector axis, at azimuth round it."""
-    e1 = unit(cross(axis, _I3[int(np.argmin(np.abs(axis)))]))
-    e2 = cross(axis, e1)
-    return (math.cos(angle) * axis
-            + math.sin(angle) * (math.cos(azimuth) * e1 + math.sin(azimuth) * e2))
 
 
 def transpose(M: np.ndarray) -> np.ndarray:

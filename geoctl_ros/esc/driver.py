@@ -1,20 +1,15 @@
 """What the ESC node decides, without rclpy: the last line of defence between the controller and
 the motors.
 
-- At start: zero to every ESC, and every ESC must answer (a write and a telemetry read) within
-  ``probe_timeout``; one that does not stops the start with its rotor and address, unless its
-  rotor is in ``ignore`` (then it is never written).
+- At start: zero to every ESC, and each must answer (a write and a telemetry read) within
+  ``probe_timeout``, or the start stops naming its rotor and address (unless ``ignore`` has it).
 - The watchdog: the ESCs get the latest valid ``motor_commands`` while it is younger than
-  ``timeout`` (received time, this process's clock), zero otherwise: before the first command,
-  after a malformed one (wrong length, not finite, outside [0, 1]; the previous one is dropped
-  too), and when the commands stop. It needs nothing from the controller: a controller that dies
-  or hangs stops its commands, and the ESCs get zero one timeout later.
-- Every write cycle writes every ESC; a failed transfer is retried up to ``retries`` times in the
-  cycle and counted (by ESC and kind); the next cycle writes again. At stop: zero to every ESC.
-- The motor test: one rotor at a given command for a given time, refused while the controller is
-  armed, while it sends non-zero commands (armed, though its armed state may not have arrived
-  yet), while another test runs, or beyond ``test_command_max``. An arming or a non-zero command
-  during the test ends it (the commands take over at once); a disarmed controller's zeros do not.
+  ``timeout`` (this process's clock), zero otherwise: before the first command, after a malformed
+  one (wrong length, not finite, outside [0, 1]; the previous one dropped too), and when they
+  stop: a controller that dies or hangs gets its ESCs zero one timeout later, by itself.
+- Each cycle writes every ESC (a failed transfer retried ``retries`` times, counted). At stop: 0.
+- The motor test: one rotor, refused while the controller is armed or commands, while another
+  runs, or beyond ``test_command_max``; an arming or a non-zero command ends it.
 """
 from dataclasses import dataclass
 from enum import Enum

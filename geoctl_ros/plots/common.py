@@ -6,7 +6,7 @@ import math
 from matplotlib.figure import Figure
 import numpy as np
 
-from geoctl_ros.core import so3
+from geoctl_ros.core import sphere
 
 
 def subplots(*grid, figsize, **kw):
@@ -51,9 +51,9 @@ def sky(ax, path, controller, title):
         return (np.degrees(np.arctan2(d[:, 1], d[:, 0])),
                 np.degrees(np.arcsin(np.clip(d[:, 2], -1, 1))))
     for name in controller['cones.names']:
-        v = so3.unit(np.asarray(controller['cones.%s.axis' % name], dtype=float))
+        v = sphere.unit(np.asarray(controller['cones.%s.axis' % name], dtype=float))
         th = math.radians(controller['cones.%s.half_angle_deg' % name])
-        ring = np.array([so3.direction(v, th, a)
+        ring = np.array([sphere.direction(v, th, a)
                          for a in np.linspace(0, 2 * math.pi, 181)])
         az, el = az_el(ring)
         ax.plot(az, el, '.', ms=1.5, color='tab:red')
