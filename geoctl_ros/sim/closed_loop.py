@@ -142,7 +142,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     record = History(steps, bed) if history else None
     last_unsettled = np.full(n, -1)        # the last step with the error >= SETTLED_DEG
     last_psi_above = np.full(n, -1)        # the last step with Psi >= SETTLE_PSI
-    cos_settled = math.cos(math.radians(SETTLED_DEG))
+    settled_rad = math.radians(SETTLED_DEG)
     saturated = np.zeros(n)
     max_rate = np.zeros(n)
     scheduled = -1
@@ -170,7 +170,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         max_rate = np.maximum(max_rate, np.sqrt(so3.dot(W_seen, W_seen)))
         out, motors = tick(R_seen, W_seen, dt, t, ages)
         saturated += motors.allocation.saturated
-        last_unsettled[_cos_error(controller.R_d, R_now) <= cos_settled] = k
+        last_unsettled[_error(controller.R_d, R_now) >= settled_rad] = k
         last_psi_above[out.psi >= SETTLE_PSI] = k
         if margin_series is not None and sensor_series is not None:
             margin_series[k] = cones.margins_deg(R_now).min(axis=-1)
@@ -191,7 +191,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     return Flight(
         names=[s.name for s in scenarios], min_angle_deg=min_angle,
         half_angle_deg=cones.theta_deg * np.ones((n, 1)),
-        final_error_deg=np.degrees(so3.angle(so3.matmul(so3.transpose(controller.R_d), R_now))),
+        final_error_deg=np.degrees(_error(controller.R_d, R_now)),
         final=final, final_angular_velocity=W_now, saturated_steps=saturated,
         max_rate=max_rate, settle_s=_settled(last_unsettled, times),
         psi_settle_s=_settled(last_psi_above, times),
@@ -199,10 +199,9 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         dt=dt, wall_s=wall)
 
 
-def _cos_error(R_d, R):
-    """The cosine of the attitude error angle between R_d and R, per run."""
-    M = so3.matmul(so3.transpose(R_d), R)        # (the trace written out, as the products)
-    return 0.5 * (M[..., 0, 0] + M[..., 1, 1] + M[..., 2, 2] - 1.0)
+def _error(R_d: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """The attitude error angle between R_d and R, per run (rad)."""
+    return np.asarray(so3.angle(so3.matmul(so3.transpose(R_d), R)))
 
 
 def _settled(last_above, times):
