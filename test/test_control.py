@@ -480,14 +480,14 @@ def test_a_set_point_too_close_to_hold_against_the_unmodelled_moment_is_refused(
 
 
 @odroid
-@pytest.mark.parametrize('law', ['paper', 'geometric'])
+@pytest.mark.parametrize('law', ['paper', 'delay_robust', 'geometric', 'cbf'])
 def test_each_law_flies_the_derived_yaw_past_a_cone_as_expected(law):
     """The control-law interface (``law``) on a case derived here: testbed_yaw90 with ideal
     torque and no noise, a 90 deg yaw from exp(pi/2 e3^) to I. Without a barrier the error
     e_RA of a pure yaw stays about e3, so the motion is a pure yaw: the sensor (body x) sweeps the
     horizon from 90 to 0 deg of azimuth through the axis of the 12 deg cone at 45 deg, i.e. 12 deg
-    deep. So the geometric baseline's closest approach is -12 deg and the paper's law keeps
-    the cone.
+    deep. So the geometric baseline's closest approach is -12 deg; the paper's law (and its
+    delay-robust variant, the same here: nothing is late) and the cbf filter keep the cone.
     """
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     s = scenario.load(os.path.join(root, 'config', 'scenarios', 'testbed_yaw90.yaml'))
@@ -524,7 +524,7 @@ def test_the_cbf_laws_constraint_terms_match_finite_differences_of_h():
     def h(t):
         R_t, _ = flow(t)
         return np.cos(cones.theta_b) - (cones.V @ R_t) @ cones.r
-    A, beta, h0, h_dot = pointing_cbf(c, R, Omega, c.terms(R, Omega), c.delta_bar)
+    A, beta, h0, h_dot = pointing_cbf(c, R, Omega, c.terms(R, Omega))
     eps = 1e-4
     np.testing.assert_allclose(h0, h(0.0), atol=1e-12)
     np.testing.assert_allclose(h_dot, (h(eps) - h(-eps)) / (2 * eps), rtol=1e-6, atol=1e-9)
@@ -583,3 +583,38 @@ def test_the_cbf_law_holds_the_guarded_cone_in_the_ideal_loop():
             R, W = R @ so3.exp(W * h + 0.5 * acc * h * h), W + acc * h
             closest = min(closest, float(cfg.cones.margins_deg(R)[0]))
     assert 1.99 < closest < 2.1, closest
+
+
+@odroid
+def test_the_cbf_filter_holds_the_cone_against_an_unlearnt_moment_up_to_its_bound():
+    """The robust condition: with ``cbf_moment_bound`` D every row's beta_i grows by exactly
+    D |a_i| (the worst a moment |d| <= D does to h''). Flown from a goal 1 deg outside a 20 deg
+    cone against 0.05 N m that turns the sensor towards it, not learnt (adaptive off): the filter
+    on its exact model (D = 0) lets the sensor in; with D = 0.05 it holds it out.
+    """
+    cones = one_cone(theta_deg=20.0)
+    axis = np.array([1.0, 1.0, 0.0]) / math.sqrt(2.0)
+    R0, W0 = so3.exp(np.array([0.1, -0.2, 0.3])), np.array([0.2, 0.1, -0.3])
+    exact = AttitudeController(config(cones, law='cbf', adaptive=False))
+    robust = AttitudeController(config(cones, law='cbf', adaptive=False, cbf_moment_bound=0.05))
+    A0, beta0, _, _ = pointing_cbf(exact, R0, W0, exact.terms(R0, W0))
+    A1, beta1, _, _ = pointing_cbf(robust, R0, W0, robust.terms(R0, W0))
+    np.testing.assert_array_equal(A0, A1)
+    np.testing.assert_allclose(beta1 - beta0, 0.05 * np.linalg.norm(A0, axis=-1), rtol=1e-12)
+
+    def fly(bound):
+        c = AttitudeController(config(cones, law='cbf', adaptive=False, cbf_moment_bound=bound,
+                                      cbf_rate=8.0))
+        c.set_setpoint(so3.axis_angle([0, 0, 1], math.pi / 4 - math.radians(21.0)))
+        R, w, dt, closest = c.R_d.copy(), np.zeros(3), 0.002, 90.0
+        J = c.config.J
+        for _ in range(2500):
+            towards = np.cross(R @ [1.0, 0.0, 0.0], axis)     # turns the sensor to the cone
+            d = R.T @ (0.05 * towards / np.linalg.norm(towards))
+            u = c.step(R, w, dt).u
+            w = w + dt * np.linalg.solve(J, u + d - np.cross(w, J @ w))
+            R = R @ so3.exp(w * dt)
+            closest = min(closest, float(cones.margins_deg(R)[0]))
+        return closest
+    assert fly(0.0) < 0.0                  # the exact model's filter: pushed in
+    assert fly(0.05) > 0.0                 # the robust one: held out

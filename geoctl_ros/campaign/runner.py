@@ -8,7 +8,8 @@ the same, bit for bit, on one worker or many, in any batch size, here or on a cl
 
 Per run: the closest approach to each cone (after every 1 ms integration step), whether the sensor
 touched a cone (a violation), convergence (attitude error below 5 deg at the end), the settle time
-(the error below 5 deg from then on), and the time the allocation was saturated. Writes
+(the error below 5 deg from then on), the time the allocation was saturated, and the effort
+(the integral of the law's |u|). Writes
 DIR/runs.csv (every figure exact: Python's shortest repr of each float), DIR/summary.md (the
 table), DIR/closest_approach.png, DIR/worst_runs.png and DIR/worst/*.yaml; the worst runs are
 flown again for their figure, and the files fly them again (``campaign --replay``, ``scenario``).
@@ -31,7 +32,8 @@ from geoctl_ros.sim.scenario import from_sections
 BATCH = 1024               # runs flown together at most (docs/campaigns.md, "Campaign speed")
 # runs.csv's columns, in order (gain_set only in a gain study)
 COLUMNS = ('gain_set', 'run', 'cones', 'closest_deg', 'violated', 'final_error_deg', 'converged',
-           'settle_s', 'saturated_s', 'max_rate', 'latency_ms', 'disturbance_Nm', 'goal_refused')
+           'settle_s', 'saturated_s', 'max_rate', 'effort_Nms', 'latency_ms', 'disturbance_Nm',
+           'goal_refused')
 
 
 def plan(groups, workers, batch=BATCH):
@@ -92,6 +94,7 @@ def fly_batch(job):
         'final_error_deg': res.final_error_deg,
         'converged': res.final_error_deg < study.CONVERGED_DEG,
         'settle_s': res.settle_s, 'saturated_s': res.saturated_s, 'max_rate': res.max_rate,
+        'effort_Nms': res.effort,
         'latency_ms': np.array([int(round(1000 * s['scenario']['latency'])) for s in sections]),
         'disturbance_Nm': np.array([float(np.linalg.norm(s['sim']['disturbance.constant']))
                                     for s in sections]),

@@ -15,13 +15,13 @@ from geoctl_ros.params import ConfigError, load_parameter_file
 from geoctl_ros.sil.rosenv import config_dir
 
 
-def progress_printer(total):
+def progress_printer(total, prog='campaign'):
     tty = sys.stderr.isatty()
     shown = [-1]
 
     def report(done, seconds):
         percent = 100.0 * done / total
-        line = 'campaign: %5.1f %% of %d runs flown, %.0f s' % (percent, total, seconds)
+        line = '%s: %5.1f %% of %d runs flown, %.0f s' % (prog, percent, total, seconds)
         if tty:
             print('\r' + line, end='', file=sys.stderr, flush=True)
         elif int(percent // 10) > shown[0]:          # a log file: a line every 10 %

@@ -75,8 +75,9 @@ class ControllerConfig:
     cog_estimate_max: float = 0.0    # bound on |m rho estimate| (kg m); 0 = none
     unmodelled_moment_max: float = 0.0   # what a set point must be held against (N m); 0 = none
     blind_guard_max: float = 0.0     # rad, the most a blind loop widens a cone's barrier
-    law: str = 'paper'               # the control law, a key of LAWS
+    law: str = 'delay_robust'        # the control law, a key of LAWS
     cbf_rate: float = 4.0            # 1/s, the cbf law's double pole
+    cbf_moment_bound: float = 0.0    # N m, the unlearnt moment the cbf law's filter holds against
     J: np.ndarray = field(init=False, repr=False)        # inertia about the pivot
     m_rho: np.ndarray = field(init=False, repr=False)    # mass times pivot -> centre of mass
 

@@ -41,7 +41,7 @@ def controller_config(values: dict) -> ControllerConfig:
         cog_estimate_max=values['cog_estimate_max'],
         unmodelled_moment_max=values['unmodelled_moment_max'],
         blind_guard_max=math.radians(values['blind_guard_max_deg']), law=values['law'],
-        cbf_rate=values['cbf_rate'])
+        cbf_rate=values['cbf_rate'], cbf_moment_bound=values['cbf_moment_bound'])
 
 
 _RECORDS: dict = {}

@@ -27,13 +27,19 @@ PARAMS = [
     _p('G', 'double_array', [0.9, 1.1, 1.0], '-',
        'diagonal weights g1, g2, g3 of the attitude error A (distinct, positive)', CONTROLLER,
        length=3, check=diagonal_weights, lo=0.0, hi=10.0),
-    _p('law', 'string', 'paper', '-',
-       'the control law: paper (the barrier of Kulumani, Poole & Lee), geometric (the same '
-       'gains, no barrier: a baseline that does not keep the cones) or cbf (geometric, filtered '
-       'by a control-barrier-function QP per cone)', CONTROLLER, choices=tuple(LAWS)),
+    _p('law', 'string', 'delay_robust', '-',
+       'the control law: delay_robust (the barrier of Kulumani, Poole & Lee, each cone widened by '
+       'the blind time: blind_guard_max_deg), paper (that barrier as published), geometric (the '
+       'same gains, no barrier: a baseline that does not keep the cones) or cbf (geometric, '
+       'filtered by a control-barrier-function QP per cone; docs/control-law.md, "Laws")',
+       CONTROLLER, choices=tuple(LAWS)),
     _p('cbf_rate', 'double', 4.0, '1/s',
        "the cbf law: double pole lambda of h'' + 2 lambda h' + lambda^2 h >= 0 for each cone",
        CONTROLLER, check=positive, lo=0.1, hi=100.0),
+    _p('cbf_moment_bound', 'double', 0.0, 'N m',
+       'the cbf law: each cone holds against an unlearnt moment up to this (a robust CBF: '
+       'a_i . u >= beta_i + bound |a_i|); 0 = the model taken as exact', CONTROLLER,
+       lo=0.0, hi=10.0),
     _p('adaptive', 'bool', True, '-', 'run the adaptive law (else Delta_bar stays 0)', CONTROLLER),
     _p('disturbance_model', 'string', 'constant', '-',
        'regressor W: constant (W = I) or constant+cog (also estimates the error in m*rho)',

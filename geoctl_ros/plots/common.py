@@ -44,12 +44,15 @@ def sphere_path(ax, path, cones):
     ax.legend(loc='upper left')
 
 
-def sky(ax, path, controller, title):
-    """The sensor's world direction in azimuth / elevation, with the cones' boundaries."""
-    def az_el(d):
-        d = np.atleast_2d(d)
-        return (np.degrees(np.arctan2(d[:, 1], d[:, 0])),
-                np.degrees(np.arcsin(np.clip(d[:, 2], -1, 1))))
+def az_el(d):
+    """Azimuth and elevation (deg) of world directions (..., 3)."""
+    d = np.atleast_2d(d)
+    return (np.degrees(np.arctan2(d[:, 1], d[:, 0])),
+            np.degrees(np.arcsin(np.clip(d[:, 2], -1, 1))))
+
+
+def sky_cones(ax, controller, title):
+    """A sky map (azimuth / elevation) with the cones' boundaries of controller parameters."""
     for name in controller['cones.names']:
         v = sphere.unit(np.asarray(controller['cones.%s.axis' % name], dtype=float))
         th = math.radians(controller['cones.%s.half_angle_deg' % name])
@@ -57,12 +60,23 @@ def sky(ax, path, controller, title):
                          for a in np.linspace(0, 2 * math.pi, 181)])
         az, el = az_el(ring)
         ax.plot(az, el, '.', ms=1.5, color='tab:red')
-    az, el = az_el(path)
-    ax.plot(az, el, '.', ms=1.5, color='tab:blue')
-    ax.plot(az[0], el[0], 'o', color='tab:green', label='start')
-    ax.plot(az[-1], el[-1], 's', color='k', label='end')
     ax.set(xlabel='azimuth [deg]', ylabel='elevation [deg]', title=title, xlim=(-180, 180),
            ylim=(-90, 90))
-    ax.legend(fontsize=7)
     ax.grid(True, alpha=0.3)
 
+
+def sky_path(ax, path, color, label=None):
+    """The sensor's world direction (path: (N, 3)) on a sky map, its end marked."""
+    az, el = az_el(path)
+    ax.plot(az, el, '.', ms=1.5, color=color)
+    ax.plot(az[-1], el[-1], 's', color=color, ms=5, label=label)
+
+
+def sky(ax, path, controller, title):
+    """The sensor's world direction in azimuth / elevation, with the cones' boundaries."""
+    sky_cones(ax, controller, title)
+    sky_path(ax, path, 'tab:blue')
+    az, el = az_el(path)
+    ax.plot(az[0], el[0], 'o', color='tab:green', label='start')
+    ax.plot(az[-1], el[-1], 's', color='k', label='end')
+    ax.legend(fontsize=7)

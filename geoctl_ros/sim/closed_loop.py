@@ -62,6 +62,7 @@ class Flight:
     final_angular_velocity: np.ndarray   # (runs, 3)
     saturated_steps: np.ndarray    # (runs,): control steps with the allocation saturated
     max_rate: np.ndarray           # (runs,): largest measured |Omega| (rad/s)
+    effort: np.ndarray             # (runs,): the integral of the law's |u| over the flight (N m s)
     settle_s: np.ndarray           # (runs,): the time from which the attitude error stays below
                                    # SETTLED_DEG (NaN: not below at the end)
     psi_settle_s: np.ndarray       # (runs,): the time from which Psi stays below SETTLE_PSI
@@ -145,6 +146,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     settled_rad = math.radians(SETTLED_DEG)
     saturated = np.zeros(n)
     max_rate = np.zeros(n)
+    effort = np.zeros(n)
     scheduled = -1
     j = 0                                                     # integration steps so far
     t0 = time.perf_counter()
@@ -170,6 +172,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         max_rate = np.maximum(max_rate, np.sqrt(so3.dot(W_seen, W_seen)))
         out, motors = tick(R_seen, W_seen, dt, t, ages)
         saturated += motors.allocation.saturated
+        effort += np.sqrt(so3.dot(out.u, out.u)) * (holds[k] * h)
         last_unsettled[_error(controller.R_d, R_now) >= settled_rad] = k
         last_psi_above[out.psi >= SETTLE_PSI] = k
         if margin_series is not None and sensor_series is not None:
@@ -193,7 +196,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         half_angle_deg=cones.theta_deg * np.ones((n, 1)),
         final_error_deg=np.degrees(_error(controller.R_d, R_now)),
         final=final, final_angular_velocity=W_now, saturated_steps=saturated,
-        max_rate=max_rate, settle_s=_settled(last_unsettled, times),
+        max_rate=max_rate, effort=effort, settle_s=_settled(last_unsettled, times),
         psi_settle_s=_settled(last_psi_above, times),
         margin_series=margin_series, sensor_series=sensor_series, history=record, times=times,
         dt=dt, wall_s=wall)
