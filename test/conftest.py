@@ -5,7 +5,26 @@ starts) uses the loopback DDS profile (geoctl_ros.sil.rosenv), so nothing can le
 """
 import os
 
+import pytest
+
 from geoctl_ros.sil.rosenv import use_node_env
 
 use_node_env()
 os.environ['MPLBACKEND'] = 'Agg'
+
+
+@pytest.fixture(scope='session')
+def dask_scheduler():
+    """A Dask cluster of two worker processes on 127.0.0.1 (as `dask scheduler` and two `dask
+    worker`s would make one), shared by the tests that fly on a cluster they are given
+    (``--scheduler``): its address. Made once, on first use.
+    """
+    import dask
+    from distributed import LocalCluster
+
+    from geoctl_ros.campaign.cluster import LOOPBACK, WORKER_CONFIG
+    with dask.config.set(WORKER_CONFIG):
+        cluster = LocalCluster(n_workers=2, threads_per_worker=1, host=LOOPBACK,
+                               dashboard_address=None)
+    with cluster:
+        yield cluster.scheduler_address

@@ -1,7 +1,8 @@
 """Campaigns on a real Dask cluster (127.0.0.1 only): the same runs.csv on 2 workers as on 1
 worker in another batch size, none lost or doubled when a worker is killed mid-campaign, Ctrl-C
 writes the runs flown so far, and a small gain study whose best parameter file the controller
-accepts. The last runs on the vehicle's stack too (Ubuntu 24.04's Dask 2023.12, which ran every
+accepts. The 1-worker reference makes a local cluster (the command's default); the killed worker's
+test a cluster of its own; the rest fly on a shared one (conftest.py's ``dask_scheduler``). The last runs on the vehicle's stack too (Ubuntu 24.04's Dask 2023.12, which ran every
 test here when checked by hand; the clusters' are left out of ./run test's vehicle run for time).
 """
 import csv
@@ -28,7 +29,7 @@ from geoctl_ros.params import (
 # (not marked `headless`: in ./run test these run in the foreground stream, which is the shorter
 # of the two; the headless stream was the first phase's longest)
 
-RUNS, DURATION = '40', '2'
+RUNS, DURATION = '16', '2'          # (runs 0-3 have 1, 2, 3 and 4 cones)
 
 
 def read(path):
@@ -38,26 +39,26 @@ def read(path):
 
 @pytest.fixture(scope='module')
 def reference(tmp_path_factory):
-    """The 40-run campaign on one worker, in batches of 7: its runs.csv."""
+    """The campaign on one worker of a local cluster, in batches of 3: its runs.csv."""
     out = tmp_path_factory.mktemp('one_worker')
     code = campaign.main(['--runs', RUNS, '--duration', DURATION, '--workers', '1',
-                          '--batch', '7', '--worst', '1', '--out', str(out)])
+                          '--batch', '3', '--worst', '1', '--out', str(out)])
     assert code == 0
     return out / 'runs.csv'
 
 
 def test_two_workers_give_the_runs_csv_of_one_worker_in_another_batch_size(
-        reference, tmp_path, capsys):
+        reference, dask_scheduler, tmp_path, capsys):
     out = tmp_path / 'two_workers'
-    code = campaign.main(['--runs', RUNS, '--duration', DURATION, '--workers', '2',
+    code = campaign.main(['--runs', RUNS, '--duration', DURATION, '--scheduler', dask_scheduler,
                           '--out', str(out)])
     printed = capsys.readouterr()
     assert code == 0, printed.out
-    assert 'a local cluster of 2 worker processes on 127.0.0.1' in printed.err
-    assert '100.0 % of 40 runs flown' in printed.err                   # progress was shown
+    assert 'on scheduler %s (2 workers now)' % dask_scheduler in printed.err
+    assert '100.0 % of 16 runs flown' in printed.err                   # progress was shown
     assert (out / 'runs.csv').read_bytes() == reference.read_bytes()
     rows = read(out / 'runs.csv')
-    assert [int(r['run']) for r in rows] == list(range(40))
+    assert [int(r['run']) for r in rows] == list(range(16))
     assert all(r['violated'] == 'False' and float(r['closest_deg']) > 0.0 for r in rows)
     assert len({r['cones'] for r in rows}) == 4
     assert '| violations | 0 |' in printed.out
@@ -100,11 +101,12 @@ def test_a_worker_killed_mid_campaign_loses_no_run_and_doubles_none(reference, t
     assert (out / 'runs.csv').read_bytes() == reference.read_bytes()
 
 
-def test_ctrl_c_writes_the_runs_flown_so_far(tmp_path):
+def test_ctrl_c_writes_the_runs_flown_so_far(dask_scheduler, tmp_path):
     out = tmp_path / 'interrupted'
     proc = subprocess.Popen([sys.executable, '-m', 'geoctl_ros.cli.campaign', '--runs', '60',
                              '--duration', '2', '--batch', '2', '--worst', '1',
-                             '--out', str(out)], stderr=subprocess.PIPE, text=True)
+                             '--scheduler', dask_scheduler, '--out', str(out)],
+                            stderr=subprocess.PIPE, text=True)
     seen = []
     for line in proc.stderr:                 # progress every 10 % (not a terminal)
         seen.append(line)
@@ -121,10 +123,11 @@ def test_ctrl_c_writes_the_runs_flown_so_far(tmp_path):
 
 
 def test_a_gain_study_flies_every_set_on_the_same_runs_and_writes_files_the_controller_takes(
-        tmp_path, capsys):
+        dask_scheduler, tmp_path, capsys):
     out = tmp_path / 'study'
     code = campaign.main(['--runs', '8', '--duration', '4', '--grid', 'k_R=0.4,0.8',
-                          '--grid', 'alpha=8', '--worst', '1', '--out', str(out)])
+                          '--grid', 'alpha=8', '--worst', '1', '--scheduler', dask_scheduler,
+                          '--out', str(out)])
     printed = capsys.readouterr()
     assert code == 0, printed.err
     rows = read(out / 'runs.csv')

@@ -14,7 +14,7 @@ numpy 1.26 (Ubuntu 24.04's) has no ``ndarray.mT`` nor ``np.matvec``/``vecmat``/`
 products here are the package's own (``test_package.py`` fails on a numpy name 1.26 lacks).
 """
 import math
-from typing import Any, Sequence, Union
+from typing import Any, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -157,9 +157,7 @@ def exp(w: np.ndarray) -> np.ndarray:
     w = np.asarray(w, dtype=float)
     if w.ndim == 1:       # one rotation, in floats
         x, y, z = w.tolist()
-        theta2 = x * x + y * y + z * z
-        theta = math.sqrt(theta2)
-        a, b = _rodrigues(theta2 < 1e-8, theta2, theta, *_sin_cos(theta))
+        a, b = rodrigues_ab(x, y, z)
         bxy, bxz, byz, ax, ay, az = b * x * y, b * x * z, b * y * z, a * x, a * y, a * z
         return np.array([[1.0 - b * (y * y + z * z), bxy - az, bxz + ay],
                          [bxy + az, 1.0 - b * (x * x + z * z), byz - ax],
@@ -183,10 +181,7 @@ def exp_apply(w: np.ndarray, v: np.ndarray) -> np.ndarray:
     pair or stacks of them; equal to matvec(exp(w), v) to rounding.
     """
     if w.ndim == 1 and v.ndim == 1:
-        x, y, z = w.tolist()
-        theta2 = x * x + y * y + z * z
-        theta = math.sqrt(theta2)
-        a, b = _rodrigues(theta2 < 1e-8, theta2, theta, *_sin_cos(theta))
+        a, b = rodrigues_ab(*w.tolist())
     else:
         x, y, z = w[..., 0], w[..., 1], w[..., 2]
         theta2 = x * x + y * y + z * z
@@ -195,6 +190,15 @@ def exp_apply(w: np.ndarray, v: np.ndarray) -> np.ndarray:
         a, b = a[..., None], b[..., None]
     wv = cross(w, v)
     return v + a * wv + b * cross(w, wv)
+
+
+def rodrigues_ab(x: float, y: float, z: float) -> Tuple[float, float]:
+    """sin(t)/t and (1 - cos t)/t^2 of one rotation vector (x, y, z), t its angle, in floats
+    (as a stack's entries are: exp(hat(w)) = I + a hat(w) + b hat(w)^2).
+    """
+    theta2 = x * x + y * y + z * z
+    theta = math.sqrt(theta2)
+    return _rodrigues(theta2 < 1e-8, theta2, theta, *_sin_cos(theta))
 
 
 def _sin_cos(theta):

@@ -37,10 +37,10 @@ def closest_figure(closest_by_law, path):
     cumulative distributions.
     """
     fig, ax = subplots(figsize=(7, 4))
-    for (law, closest), color in zip(closest_by_law.items(), COLORS):
+    for (law, closest), color, style in zip(closest_by_law.items(), COLORS, STYLES):
         x = np.sort(np.asarray(closest, dtype=float))
         ax.step(x, np.arange(1, len(x) + 1) / max(len(x), 1), where='post', color=color,
-                label='%s (%d runs)' % (law, len(x)))
+                ls=style, label='%s (%d runs)' % (law, len(x)))
     ax.axvline(0.0, color='tab:red', lw=1.2, label='cone boundary')
     ax.set(xlabel='closest approach to a cone [deg] (negative: inside)',
            ylabel='share of runs at or below', title='random manoeuvres: closest approach')

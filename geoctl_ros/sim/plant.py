@@ -99,8 +99,11 @@ class Plant:
 
         The stages need the attitude only through gravity in the body frame: at R0 exp(hat(xi))
         that is exp(-hat(xi)) R0^T g_w, so the stages rotate a vector; only the step's end forms
-        its rotation matrix.
+        its rotation matrix. One testbed (not a batch) steps in floats (``_step_one``).
         """
+        if self.R.ndim == 2:
+            _step_one(self, tau, h)
+            return
         t, R0, W0 = self.t, self.R, self.Omega
         acc = self._angular_acceleration
         g0 = vecmat(self.config.gravity, R0)                     # R0^T g_w
@@ -136,3 +139,62 @@ def _dexpinv(xi, w):
     """
     xw = cross(xi, w)
     return w + 0.5 * xw + cross(xi, xw) / 12.0
+
+
+def _step_one(plant: Plant, tau: np.ndarray, h: float) -> None:
+    """``Plant.step`` for one testbed, in floats: every operation a batch's arrays do, on the
+    same operands in the same order (so3's float paths: sums left to right, the same cross
+    products and Rodrigues coefficients), so a run alone steps to the same bits as in a batch,
+    about four times faster than through 3-vector arrays.
+    """
+    c = plant.config
+    J, J_inv, m_rho = plant.J.tolist(), plant.J_inv.tolist(), c.m_rho.tolist()
+    t, R0 = plant.t, plant.R.tolist()
+    W0, tau_ = plant.Omega.tolist(), np.asarray(tau, dtype=float).tolist()
+    g = c.gravity.tolist()
+
+    def mv(M, v):                       # M v (so3.matvec's float path)
+        return [r[0] * v[0] + r[1] * v[1] + r[2] * v[2] for r in M]
+
+    def cross(a, b):
+        return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+    def acc(t, g_b, W):                 # Plant._angular_acceleration
+        gyroscopic = cross(W, mv(J, W))
+        bgm = cross(m_rho, g_b)
+        d = c.disturbance(t).tolist()
+        return mv(J_inv, [tau_[i] + bgm[i] + d[i] - gyroscopic[i] for i in range(3)])
+
+    def dexpinv(xi, w):                 # _dexpinv
+        xw = cross(xi, w)
+        xxw = cross(xi, xw)
+        return [w[i] + 0.5 * xw[i] + xxw[i] / 12.0 for i in range(3)]
+
+    def rotate_back(xi, v):             # so3.exp_apply(-xi, v)
+        w = [-xi[0], -xi[1], -xi[2]]
+        a, b = so3.rodrigues_ab(*w)
+        wv = cross(w, v)
+        wwv = cross(w, wv)
+        return [v[i] + a * wv[i] + b * wwv[i] for i in range(3)]
+
+    def ahead(base, f, k):              # base + f k
+        return [base[0] + f * k[0], base[1] + f * k[1], base[2] + f * k[2]]
+
+    g0 = [R0[0][j] * g[0] + R0[1][j] * g[1] + R0[2][j] * g[2] for j in range(3)]   # R0^T g_w
+    half = 0.5 * h
+    k1x, k1w = W0, acc(t, g0, W0)
+    xi = [half * v for v in k1x]
+    W = ahead(W0, half, k1w)
+    k2x, k2w = dexpinv(xi, W), acc(t + 0.5 * h, rotate_back(xi, g0), W)
+    xi = [half * v for v in k2x]
+    W = ahead(W0, half, k2w)
+    k3x, k3w = dexpinv(xi, W), acc(t + 0.5 * h, rotate_back(xi, g0), W)
+    xi = [h * v for v in k3x]
+    W = ahead(W0, h, k3w)
+    k4x, k4w = dexpinv(xi, W), acc(t + h, rotate_back(xi, g0), W)
+    sixth = h / 6.0
+    xi = [sixth * (k1x[i] + 2.0 * k2x[i] + 2.0 * k3x[i] + k4x[i]) for i in range(3)]
+    plant.R = so3.matmul(plant.R, so3.exp(np.array(xi)))
+    plant.Omega = np.array([W0[i] + sixth * (k1w[i] + 2.0 * k2w[i] + 2.0 * k3w[i] + k4w[i])
+                            for i in range(3)])
+    plant.t = t + h
