@@ -19,10 +19,11 @@ def dask_scheduler():
     worker`s would make one), shared by the tests that fly on a cluster they are given
     (``--scheduler``): its address. Made once, on first use.
     """
-    import dask
-    from distributed import LocalCluster
+    # (imported on first use: most runs of the tests never make a cluster)
+    import dask  # noqa: PLC0415
+    from distributed import LocalCluster  # noqa: PLC0415
 
-    from geoctl_ros.campaign.cluster import LOOPBACK, WORKER_CONFIG
+    from geoctl_ros.campaign.cluster import LOOPBACK, WORKER_CONFIG  # noqa: PLC0415
     with dask.config.set(WORKER_CONFIG):
         cluster = LocalCluster(n_workers=2, threads_per_worker=1, host=LOOPBACK,
                                dashboard_address=None)

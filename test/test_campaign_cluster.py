@@ -1,9 +1,10 @@
 """Campaigns on a real Dask cluster (127.0.0.1 only): the same runs.csv on 2 workers as on 1
 worker in another batch size, none lost or doubled when a worker is killed mid-campaign, Ctrl-C
 writes the runs flown so far, and a small gain study whose best parameter file the controller
-accepts. The 1-worker reference makes a local cluster (the command's default); the killed worker's
-test a cluster of its own; the rest fly on a shared one (conftest.py's ``dask_scheduler``). The last runs on the vehicle's stack too (Ubuntu 24.04's Dask 2023.12, which ran every
-test here when checked by hand; the clusters' are left out of ./run test's vehicle run for time).
+accepts. The 1-worker reference makes a local cluster (the command's default), the killed
+worker's test a cluster of its own, and the rest fly on a shared one (conftest.py's
+``dask_scheduler``). On the vehicle's stack (Ubuntu 24.04's Dask 2023.12) every test here passed
+when checked by hand; ./run test's vehicle run leaves the clusters out for time.
 """
 import csv
 import os

@@ -36,9 +36,7 @@ def hat(x: np.ndarray) -> np.ndarray:
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product of 3-vectors, or of stacks of them (np.cross costs ~10x more for single
-    vectors).
-    """
+    """Cross product of 3-vectors, or of stacks of them (np.cross: 10x the time for one pair)."""
     if a.ndim == 1 and b.ndim == 1:      # one pair: float arithmetic beats array indexing
         a0, a1, a2 = a.tolist()
         b0, b1, b2 = b.tolist()
@@ -193,9 +191,7 @@ def exp_apply(w: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def rodrigues_ab(x: float, y: float, z: float) -> Tuple[float, float]:
-    """sin(t)/t and (1 - cos t)/t^2 of one rotation vector (x, y, z), t its angle, in floats
-    (as a stack's entries are: exp(hat(w)) = I + a hat(w) + b hat(w)^2).
-    """
+    """(a, b) of exp(hat(w)) = I + a hat(w) + b hat(w)^2 for one w = (x, y, z), in floats."""
     theta2 = x * x + y * y + z * z
     theta = math.sqrt(theta2)
     return _rodrigues(theta2 < 1e-8, theta2, theta, *_sin_cos(theta))
