@@ -94,3 +94,18 @@ def test_the_cbf_filter_never_enters_a_cone_in_the_standard_cases(case):
     flight = fly([from_sections(sections, case)])
     closest = float(flight.min_margin_deg.min())
     assert math.isfinite(closest) and closest > 0.0, closest
+
+
+@pytest.mark.parametrize('argv', [
+    ['--runs', '-1'], ['--duration', 'inf'], ['--duration', 'nan'], ['--case-duration', '0'],
+    ['--case-duration', 'soon'], ['--cases', 'no_such_case'], ['--cases', ','],
+    ['--workers', '0']])
+def test_the_benchmark_refuses_bad_arguments_in_one_line_and_flies_nothing(argv, tmp_path,
+                                                                           capsys):
+    out = tmp_path / 'never'
+    with pytest.raises(SystemExit) as e:
+        benchmark.main(['--out', str(out)] + argv)
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith('benchmark: error: '), err
+    assert not out.exists()

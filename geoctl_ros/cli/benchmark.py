@@ -12,6 +12,7 @@ import sys
 from geoctl_ros.benchmark import cases
 from geoctl_ros.benchmark.run import benchmark
 from geoctl_ros.campaign import cluster, runner
+from geoctl_ros.cli.args import positive_seconds
 from geoctl_ros.cli.campaign import progress_printer
 from geoctl_ros.params import ConfigError, load_parameter_file
 from geoctl_ros.sil.rosenv import config_dir
@@ -23,9 +24,9 @@ def main(argv=None):
     parser.add_argument('--runs', type=int, default=1000,
                         help='random manoeuvres, each flown by every law (1000; 0: none)')
     parser.add_argument('--seed', type=int, default=1, help='campaign seed of the random runs (1)')
-    parser.add_argument('--duration', type=float, default=20.0,
+    parser.add_argument('--duration', type=positive_seconds, default=20.0,
                         help='seconds per random run (20)')
-    parser.add_argument('--case-duration', type=float, default=None,
+    parser.add_argument('--case-duration', type=positive_seconds, default=None,
                         help="simulated seconds of each standard case (default: its file's)")
     parser.add_argument('--cases', default=','.join(cases.CASES),
                         help='standard cases to fly (default: all: %s)' % ','.join(cases.CASES))
@@ -36,10 +37,8 @@ def main(argv=None):
     parser.add_argument('--batch', type=int, default=runner.BATCH,
                         help='random runs flown together at most (%d)' % runner.BATCH)
     args = parser.parse_args(argv)
-    if (args.runs < 0 or args.workers < 1 or args.batch < 1 or not args.duration > 0
-            or not (args.case_duration is None or args.case_duration > 0)):
-        parser.error('--runs must be at least 0, and --workers, --batch, --duration and '
-                     '--case-duration positive')
+    if args.runs < 0 or args.workers < 1 or args.batch < 1:
+        parser.error('--runs must be at least 0, and --workers and --batch positive')
     names = [c for c in args.cases.split(',') if c]
     unknown = sorted(set(names) - set(cases.CASES))
     if unknown or not names:

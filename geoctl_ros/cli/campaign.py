@@ -11,6 +11,7 @@ import sys
 import time
 
 from geoctl_ros.campaign import cluster, manoeuvres, runner, study
+from geoctl_ros.cli.args import positive_seconds
 from geoctl_ros.params import ConfigError, load_parameter_file
 from geoctl_ros.sil.rosenv import config_dir
 
@@ -46,7 +47,8 @@ def main(argv=None):
     parser.add_argument('--grid', action='append', default=[], metavar='NAME=V1,V2,...',
                         help='a gain study: fly every run with each combination of these '
                              'controller parameters')
-    parser.add_argument('--duration', type=float, default=20.0, help='seconds per run (20)')
+    parser.add_argument('--duration', type=positive_seconds, default=20.0,
+                        help='seconds per run (20)')
     parser.add_argument('--worst', type=int, default=5, help='worst runs written out (5)')
     parser.add_argument('--best', type=int, default=3,
                         help='gain study: non-dominated gain sets written out, at most (3)')
@@ -57,8 +59,8 @@ def main(argv=None):
     parser.add_argument('--replay', nargs='+', metavar='FILE',
                         help='fly these scenario files (written by a campaign) instead')
     args = parser.parse_args(argv)
-    if args.runs < 1 or args.workers < 1 or args.batch < 1 or not args.duration > 0:
-        parser.error('--runs, --workers, --batch and --duration must be positive')
+    if args.runs < 1 or args.workers < 1 or args.batch < 1:
+        parser.error('--runs, --workers and --batch must be positive')
     try:
         if args.replay:
             return runner.replay(args.replay)

@@ -14,10 +14,10 @@ the control steps late, as a busy machine's timer does: each command is held unt
 comes.
 """
 import argparse
-import math
 import os
 import sys
 
+from geoctl_ros.cli.args import positive_seconds
 from geoctl_ros.core.gains import gain_condition
 from geoctl_ros.params import ConfigError, controller_config
 from geoctl_ros.records import scenario as scenario_files
@@ -39,11 +39,10 @@ def main(argv=None):
     parser = argparse.ArgumentParser(prog='scenario', description=__doc__.split('\n\n')[0])
     parser.add_argument('config', help='scenario file (ROS 2 parameter YAML)')
     parser.add_argument('--out', required=True, help='output directory')
-    parser.add_argument('--duration', type=float, help="simulated seconds (default: the file's)")
+    parser.add_argument('--duration', type=positive_seconds,
+                        help="simulated seconds (default: the file's)")
     parser.add_argument('--no-plots', action='store_true', help='skip the PNG figures')
     args = parser.parse_args(argv)
-    if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
-        parser.error('--duration must be a positive number of seconds')
     try:
         scenario = load(args.config)
     except ConfigError as e:
