@@ -1,6 +1,7 @@
 """What the command-line front ends share: argparse types."""
 import argparse
 import math
+import sys
 
 
 def positive_seconds(text: str) -> float:
@@ -12,3 +13,16 @@ def positive_seconds(text: str) -> float:
     if not (value > 0 and math.isfinite(value)):
         raise argparse.ArgumentTypeError('%r is not a positive number of seconds' % text)
     return value
+
+
+def cannot_start(prog: str, error: Exception, path: str) -> int:
+    """Say in one line why a command cannot start: a bad parameter file (ConfigError, its own
+    message) or a file it cannot read or write (OSError, on path unless the error names one);
+    the exit code, 2.
+    """
+    if isinstance(error, OSError):
+        print('%s: %s: %s' % (prog, error.filename or path, error.strerror or error),
+              file=sys.stderr)
+    else:
+        print('%s: %s' % (prog, error), file=sys.stderr)
+    return 2

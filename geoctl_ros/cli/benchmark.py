@@ -12,7 +12,7 @@ import sys
 from geoctl_ros.benchmark import cases
 from geoctl_ros.benchmark.run import benchmark
 from geoctl_ros.campaign import cluster, runner
-from geoctl_ros.cli.args import positive_seconds
+from geoctl_ros.cli.args import cannot_start, positive_seconds
 from geoctl_ros.cli.campaign import progress_printer
 from geoctl_ros.params import ConfigError, load_parameter_file
 from geoctl_ros.sil.rosenv import config_dir
@@ -50,12 +50,8 @@ def main(argv=None):
         sections = {n: load_parameter_file(os.path.join(config, 'scenarios', n + '.yaml'))
                     for n in names}
         base = load_parameter_file(os.path.join(config, 'testbed.yaml'))
-    except ConfigError as e:
-        print('benchmark: %s' % e, file=sys.stderr)
-        return 2
-    except OSError as e:
-        print('benchmark: %s: %s' % (e.filename or args.out, e.strerror or e), file=sys.stderr)
-        return 2
+    except (ConfigError, OSError) as e:
+        return cannot_start('benchmark', e, args.out)
 
     def say(line):
         print(line, file=sys.stderr, flush=True)

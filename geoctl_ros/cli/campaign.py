@@ -11,7 +11,7 @@ import sys
 import time
 
 from geoctl_ros.campaign import cluster, manoeuvres, runner, study
-from geoctl_ros.cli.args import positive_seconds
+from geoctl_ros.cli.args import cannot_start, positive_seconds
 from geoctl_ros.params import ConfigError, load_parameter_file
 from geoctl_ros.sil.rosenv import config_dir
 
@@ -68,12 +68,8 @@ def main(argv=None):
         base = load_parameter_file(args.params_file or os.path.join(config_dir(), 'testbed.yaml'))
         gain_sets = study.parse_grid(args.grid) if args.grid else [{}]
         study.check_gain_sets(base, gain_sets)
-    except ConfigError as e:
-        print('campaign: %s' % e, file=sys.stderr)
-        return 2
-    except OSError as e:
-        print('campaign: %s: %s' % (e.filename or args.out, e.strerror or e), file=sys.stderr)
-        return 2
+    except (ConfigError, OSError) as e:
+        return cannot_start('campaign', e, args.out)
     total = args.runs * len(gain_sets)
     t0 = time.monotonic()
     with cluster.connect(args.scheduler, args.workers, args.dashboard) as (client, where):
