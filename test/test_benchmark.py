@@ -10,7 +10,7 @@ from matplotlib.image import imread
 import numpy as np
 import pytest
 
-from geoctl_ros.benchmark import cases
+from geoctl_ros.benchmark import cases, run
 from geoctl_ros.cli import benchmark
 from geoctl_ros.params import load_parameter_file
 from geoctl_ros.sim.closed_loop import fly
@@ -109,3 +109,25 @@ def test_the_benchmark_refuses_bad_arguments_in_one_line_and_flies_nothing(argv,
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith('benchmark: error: '), err
     assert not out.exists()
+
+
+def test_a_law_that_diverges_is_counted_as_a_violation_and_the_benchmark_goes_on(tmp_path):
+    """The cbf filter told to hold 10 N m with a slow pole cannot keep the paper's goal an
+    equilibrium; on the ideal-torque plant its moment grows without bound within 0.1 s. That flight
+    is counted (a violation, its figures not numbers: '-' in the table, nan in the CSV, named in
+    the figure's legend), and the other laws' rows and the files are written as ever.
+    """
+    name = 'paper_four_cones_adaptive'
+    sections = load_parameter_file(os.path.join(SCENARIOS, name + '.yaml'))
+    sections['controller'].update(cbf_rate=0.5, cbf_moment_bound=10.0)
+    flights = [cases.fly_case((name, law, sections, 0.5)) for law in cases.BENCHED]
+    assert [f['law'] for f in flights if f['diverged']] == ['cbf']
+    lines = run.write(str(tmp_path), flights, {}, run.time_steps(flights, rounds=1),
+                      {name: 'four cones'}, [])
+    rows = {r['law']: r for r in read(tmp_path / 'cases.csv')}
+    assert rows['cbf']['violations'] == '1' and rows['cbf']['closest_min_deg'] == 'nan'
+    assert rows['paper']['violations'] == '0' and float(rows['paper']['closest_min_deg']) > 2.0
+    assert any(line.startswith('| cbf | 1 | 1 | - | - |') for line in lines), lines
+    overall = {r['law']: r for r in read(tmp_path / 'overall.csv')}
+    assert overall['cbf']['violations'] == '1'
+    assert imread(str(tmp_path / (name + '.png'))).shape[1] > 600
