@@ -135,10 +135,10 @@ def test_sil_launch_flies_each_law_on_loopback_and_the_barrier_laws_keep_the_con
             ).encode() in environ
         reply = mon.arm_when_ready()
         assert reply.success, reply.message
-        t0 = time.monotonic()
         mon.spin_for(6.0)                   # past the cone (closest about 2-4 s after arming)
         status = mon.last_diagnostic()
         assert status.figures.armed
+        t1 = time.monotonic()
         assert mon.arm(False).success
     finally:
         launch.stop()
@@ -146,8 +146,10 @@ def test_sil_launch_flies_each_law_on_loopback_and_the_barrier_laws_keep_the_con
     assert '[sim-1]' in out and '[controller-2]' in out, out[-2000:]
     values = resolve('controller', node_overrides(load_parameter_file(str(params)), 'controller'))
     cones = cone_set(values)
+    # every true pose heard until the disarm, from before the arming (at rest, 33 deg clear): an
+    # arm reply that comes late (seen once, under load) must not hide the start of the flight
     margins = [cones.margins_deg(so3.quat_to_rot(q))[0]
-               for t, (_, q) in mon.log['true_pose'] if t >= t0]
+               for t, (_, q) in mon.log['true_pose'] if t <= t1]
     assert len(margins) > 100
     if law == 'geometric':                # through the cone, near its axis (headless: -12 deg)
         assert min(margins) < -6.0, min(margins)
