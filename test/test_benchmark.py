@@ -111,6 +111,7 @@ def test_the_benchmark_refuses_bad_arguments_in_one_line_and_flies_nothing(argv,
     assert not out.exists()
 
 
+@pytest.mark.filterwarnings('ignore:invalid value encountered:RuntimeWarning')   # (diverging)
 def test_a_law_that_diverges_is_counted_as_a_violation_and_the_benchmark_goes_on(tmp_path):
     """The cbf filter told to hold 10 N m with a slow pole cannot keep the paper's goal an
     equilibrium; on the ideal-torque plant its moment grows without bound within 0.1 s. That flight
