@@ -185,12 +185,12 @@ def test_a_params_file_that_does_not_exist_stops_the_launch_naming_it(installed,
 
 
 @needs_launch
-def test_testbed_launch_remaps_and_prefix_reach_the_controller(installed, ros, tmp_path):
+def test_testbed_launch_remaps_prefix_and_law_reach_the_controller(installed, ros, tmp_path):
     env, _ = installed
     mon = ros
     launch = Launch(env, tmp_path / 'launch.log', 'testbed.launch.xml',
                     'pose_topic:=/mocap/body/pose', 'imu_topic:=/board/imu',
-                    'prefix:=nice -n 3')
+                    'prefix:=nice -n 3', 'law:=cbf')
     pub_pose = mon.create_publisher(PoseStamped, '/mocap/body/pose', qos.SENSOR)
     pub_imu = mon.create_publisher(Imu, '/board/imu', qos.SENSOR)
 
@@ -210,7 +210,9 @@ def test_testbed_launch_remaps_and_prefix_reach_the_controller(installed, ros, t
         # the prefix: nice -n 3, three more than this process's own niceness (at most 19)
         assert os.getpriority(os.PRIO_PROCESS, pid) == min(19, os.nice(0) + 3)
         with open('/proc/%d/cmdline' % pid, 'rb') as fh:
-            assert b'controller' in fh.read()
+            cmdline = fh.read().split(b'\0')
+        assert any(arg.endswith(b'controller') for arg in cmdline), cmdline
+        assert b'law:=cbf' in cmdline, cmdline                   # the law, over the file's
     finally:
         mon.destroy_timer(timer)
         launch.stop()
