@@ -99,13 +99,14 @@ def ros():
 @needs_launch
 @pytest.mark.realtime
 @pytest.mark.parametrize('law', ['delay_robust', 'paper', 'geometric', 'cbf'])
-def test_sil_launch_flies_each_law_on_loopback_and_the_barrier_laws_keep_the_cone(
+def test_sil_launch_flies_each_law_on_loopback_and_keeps_the_cone(
         installed, ros, tmp_path, law):
     """``ros2 launch geoctl_ros sil.launch.xml law:=LAW`` flies the testbed's 90 deg yaw past its
-    cone over DDS, straight to the goal (the shipped file's set points that go round the cone
-    left out). The laws that keep cones keep it; the geometric baseline goes through it, as its
-    headless flight does (test_control.py derives it; docs/benchmark.md), and the controller
-    says so (ERROR, counted).
+    cone over DDS, and every law keeps the cone. The laws with a barrier or a filter fly straight
+    to the goal (the shipped file's set points that go round the cone left out). The geometric
+    baseline has neither: straight, it goes through the cone (test_control.py derives it, -12
+    deg), so it flies the shipped file's detour round the cone, and keeps it by as much as its
+    headless twin does (+10.3 deg, where the barrier's keeps +13.9: the law is the one asked for).
     """
     env, prefix = installed
     mon = ros
@@ -116,7 +117,9 @@ def test_sil_launch_flies_each_law_on_loopback_and_the_barrier_laws_keep_the_con
         doc = yaml.safe_load(fh)
     controller = doc['controller']['ros__parameters']
     controller.update(pose_ride_through=1.0, imu_ride_through=1.0)
-    del controller['setpoint_schedule']
+    detour = law == 'geometric'
+    if not detour:
+        del controller['setpoint_schedule']
     params = tmp_path / 'testbed_roomy.yaml'
     params.write_text(yaml.safe_dump(doc))
     launch = Launch(env, tmp_path / 'launch.log', 'sil.launch.xml', 'params_file:=%s' % params,
@@ -135,7 +138,8 @@ def test_sil_launch_flies_each_law_on_loopback_and_the_barrier_laws_keep_the_con
             ).encode() in environ
         reply = mon.arm_when_ready()
         assert reply.success, reply.message
-        mon.spin_for(6.0)                   # past the cone (closest about 2-4 s after arming)
+        # past the cone: its closest approach about 2-4 s after the arming, on the detour 7.5 s
+        mon.spin_for(9.0 if detour else 6.0)
         status = mon.last_diagnostic()
         assert status.figures.armed
         t1 = time.monotonic()
@@ -151,17 +155,14 @@ def test_sil_launch_flies_each_law_on_loopback_and_the_barrier_laws_keep_the_con
     margins = [cones.margins_deg(so3.quat_to_rot(q))[0]
                for t, (_, q) in mon.log['true_pose'] if t <= t1]
     assert len(margins) > 100
-    if law == 'geometric':                # through the cone, near its axis (headless: -12 deg)
-        assert min(margins) < -6.0, min(margins)
-        assert status.figures.cone_entries >= 1
-        assert "sensor entered cone 'obstacle'" in status.message, status.message
-        return
     assert min(margins) > 0.0, min(margins)
     assert status.figures.cone_entries == 0, status.message
-    if law == 'delay_robust':
-        # as its headless twin does (test_nodes.py flies the same through the ESC node and
-        # checks it against the same twin)
-        twin = scenario.run(scenario.load(str(params)), duration=8.0).summary
+    if law in ('delay_robust', 'geometric'):
+        # as its headless twin does (test_nodes.py flies the barrier's detour through the ESC
+        # node and checks it against the same twin)
+        twin_scenario = scenario.load(str(params))
+        twin_scenario.controller['law'] = law
+        twin = scenario.run(twin_scenario, duration=10.0).summary
         headless = twin['min_cone_angle_deg']['obstacle'] - twin['cone_half_angle_deg'][
             'obstacle']
         assert abs(min(margins) - headless) < 0.5, (min(margins), headless)
