@@ -12,6 +12,7 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
+from geoctl_ros.campaign.study import percentile
 from geoctl_ros.sim.closed_loop import SETTLED_DEG, Flight
 
 # a run's figures (the campaign's runs.csv's names)
@@ -69,15 +70,14 @@ def law_row(law: str, columns: Dict[str, np.ndarray], step_us: Optional[Sequence
         'law': law, 'runs': len(closest),
         'violations': int(np.sum(columns['violated'])),
         'closest_min_deg': float(closest.min()) if len(closest) else math.nan,
-        'closest_p1_deg': float(np.percentile(p1_of, 1)) if len(p1_of) else math.nan,
+        'closest_p1_deg': percentile(p1_of, 1),
         'settled': len(settled),
         'settle_s': _median(settled),
         'final_error_deg': _median(columns['final_error_deg']),
         'effort_Nms': _median(columns['effort_Nms']),
         'max_rate': _median(columns['max_rate']),
         'saturated_s': _median(columns['saturated_s']),
-        'step_p50_us': float(np.percentile(steps, 50)) if len(steps) else math.nan,
-        'step_p99_us': float(np.percentile(steps, 99)) if len(steps) else math.nan,
+        'step_p50_us': percentile(steps, 50), 'step_p99_us': percentile(steps, 99),
     }
 
 

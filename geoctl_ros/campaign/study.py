@@ -98,7 +98,8 @@ def parameter_file(base, gains):
 
 # --- figures ------------------------------------------------------------------------------------
 
-def _percentile(x, q):
+def percentile(x, q):
+    """The q-th percentile of x, NaN for no samples."""
     return float(np.percentile(x, q)) if len(x) else math.nan
 
 
@@ -108,7 +109,7 @@ def set_figures(columns):
     return {
         'runs': len(settle),
         'violations': int(np.sum(columns['violated'])),
-        'closest_p1_deg': _percentile(columns['closest_deg'], 1),
+        'closest_p1_deg': percentile(columns['closest_deg'], 1),
         'converged_share': float(np.mean(columns['converged'])) if len(settle) else math.nan,
         'settle_median_s': float(np.median(settle)) if len(settle) else math.nan,
         'saturated_mean_s': float(np.mean(columns['saturated_s'])) if len(settle) else math.nan,

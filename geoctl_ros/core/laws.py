@@ -17,16 +17,6 @@ from geoctl_ros.core.errors import with_cones
 from geoctl_ros.core.so3 import cross, matvec
 
 
-def paper_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool,
-              blind: Any) -> Any:
-    """The paper's law as published (Kulumani, Poole & Lee): the configuration error carries every
-    cone's log barrier, on the cones as configured (the blind time is not used).
-    """
-    terms = controller.terms(R, Omega)
-    psi, e_R = with_cones(terms.A, terms.e_RA, terms.cones)
-    return controller.moment(R, Omega, dt, adapt, terms, psi, e_R)
-
-
 def delay_robust_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool,
                      blind: Any) -> Any:
     """The paper's law made robust to delay (the safety envelope; the default): each cone's
@@ -38,15 +28,29 @@ def delay_robust_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: floa
     return controller.moment(R, Omega, dt, adapt, terms, psi, e_R)
 
 
+def paper_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool,
+              blind: Any) -> Any:
+    """The paper's law as published (Kulumani, Poole & Lee): the configuration error carries every
+    cone's log barrier, on the cones as configured (the delay-robust law never blind).
+    """
+    return delay_robust_law(controller, R, Omega, dt, adapt, 0.0)
+
+
+def _unconstrained(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float,
+                   adapt: bool) -> tuple:
+    """(the terms at R, Lee's geometric moment): the attractive error alone, no barrier."""
+    terms = controller.terms(R, Omega)
+    return terms, controller.moment(R, Omega, dt, adapt, terms, terms.A[..., 0], terms.e_RA,
+                                    barrier=False)
+
+
 def geometric_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool,
                   blind: Any) -> Any:
     """Lee's geometric controller on SO(3) with the same gains and no barrier: the attractive
     error alone (the baseline that shows what the barrier buys). The cones are still evaluated,
     so margins and violations are reported.
     """
-    terms = controller.terms(R, Omega)
-    return controller.moment(R, Omega, dt, adapt, terms, terms.A[..., 0], terms.e_RA,
-                             barrier=False)
+    return _unconstrained(controller, R, Omega, dt, adapt)[1]
 
 
 def pointing_cbf(controller: Any, R: np.ndarray, Omega: np.ndarray, terms: Any) -> tuple:
@@ -142,9 +146,7 @@ def cbf_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt:
     (``pointing_cbf``) with a double pole at -``cbf_rate``, against any unlearnt moment up to
     ``cbf_moment_bound``. The estimate adapts as the baseline's.
     """
-    terms = controller.terms(R, Omega)
-    out = controller.moment(R, Omega, dt, adapt, terms, terms.A[..., 0], terms.e_RA,
-                            barrier=False)
+    terms, out = _unconstrained(controller, R, Omega, dt, adapt)
     if not len(controller.config.cones):
         return out
     A, beta, _, _ = pointing_cbf(controller, R, Omega, terms)

@@ -65,18 +65,17 @@ def sky_cones(ax, controller, title):
     ax.grid(True, alpha=0.3)
 
 
-def sky_path(ax, path, color, label=None):
+def sky_path(ax, path, color, label=None, end_color=None):
     """The sensor's world direction (path: (N, 3)) on a sky map, its end marked."""
     az, el = az_el(path)
     ax.plot(az, el, '.', ms=1.5, color=color)
-    ax.plot(az[-1], el[-1], 's', color=color, ms=5, label=label)
+    ax.plot(az[-1], el[-1], 's', color=end_color or color, ms=5, label=label)
 
 
 def sky(ax, path, controller, title):
     """The sensor's world direction in azimuth / elevation, with the cones' boundaries."""
     sky_cones(ax, controller, title)
-    sky_path(ax, path, 'tab:blue')
     az, el = az_el(path)
     ax.plot(az[0], el[0], 'o', color='tab:green', label='start')
-    ax.plot(az[-1], el[-1], 's', color='k', label='end')
+    sky_path(ax, path, 'tab:blue', label='end', end_color='k')
     ax.legend(fontsize=7)

@@ -81,6 +81,9 @@ class Plant:
         self.t = 0.0
         self.R = np.eye(3) if R0 is None else np.array(R0, dtype=float)
         self.Omega = np.zeros(3) if Omega0 is None else np.array(Omega0, dtype=float)
+        # one testbed: its constants as floats for _step_one, once
+        self._floats = None if self.R.ndim != 2 else (
+            self.J.tolist(), self.J_inv.tolist(), config.m_rho.tolist(), config.gravity.tolist())
 
     def external_moment(self, t: float, R: np.ndarray) -> np.ndarray:
         """Gravity moment plus disturbance about the pivot, body frame."""
@@ -101,7 +104,7 @@ class Plant:
         that is exp(-hat(xi)) R0^T g_w, so the stages rotate a vector; only the step's end forms
         its rotation matrix. One testbed (not a batch) steps in floats (``_step_one``).
         """
-        if self.R.ndim == 2:
+        if self._floats is not None:
             _step_one(self, tau, h)
             return
         t, R0, W0 = self.t, self.R, self.Omega
@@ -148,10 +151,9 @@ def _step_one(plant: Plant, tau: np.ndarray, h: float) -> None:
     about four times faster than through 3-vector arrays.
     """
     c = plant.config
-    J, J_inv, m_rho = plant.J.tolist(), plant.J_inv.tolist(), c.m_rho.tolist()
+    J, J_inv, m_rho, g = plant._floats
     t, R0 = plant.t, plant.R.tolist()
     W0, tau_ = plant.Omega.tolist(), np.asarray(tau, dtype=float).tolist()
-    g = c.gravity.tolist()
 
     def _mv(M, v):                      # M v (so3.matvec's float path)
         return [r[0] * v[0] + r[1] * v[1] + r[2] * v[2] for r in M]
