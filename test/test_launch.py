@@ -106,7 +106,8 @@ def test_sil_launch_flies_each_law_on_loopback_and_keeps_the_cone(
     to the goal (the shipped file's set points that go round the cone left out). The geometric
     baseline has neither: straight, it goes through the cone (test_control.py derives it, -12
     deg), so it flies the shipped file's detour round the cone, and keeps it by as much as its
-    headless twin does (+10.3 deg, where the barrier's keeps +13.9: the law is the one asked for).
+    headless twin does, to 1.5 deg (+10.3 deg, where the barrier's keeps +13.9: the law is the
+    one asked for).
     """
     env, prefix = installed
     mon = ros
@@ -165,7 +166,10 @@ def test_sil_launch_flies_each_law_on_loopback_and_keeps_the_cone(
         twin = scenario.run(twin_scenario, duration=10.0).summary
         headless = twin['min_cone_angle_deg']['obstacle'] - twin['cone_half_angle_deg'][
             'obstacle']
-        assert abs(min(margins) - headless) < 0.5, (min(margins), headless)
+        # within 1.5 deg: half the 3.6 deg between the two laws' margins on this path, so that
+        # it tells them apart; a flight over DDS keeps the loop's own timing, and the baseline,
+        # with no barrier to hold it off the cone, shows it (0.77 deg from its twin under load)
+        assert abs(min(margins) - headless) < 1.5, (min(margins), headless)
 
 
 @needs_launch
