@@ -157,9 +157,9 @@ def exp(w: np.ndarray) -> np.ndarray:
         x, y, z = w.tolist()
         a, b = rodrigues_ab(x, y, z)
         bxy, bxz, byz, ax, ay, az = b * x * y, b * x * z, b * y * z, a * x, a * y, a * z
-        return np.array([[1.0 - b * (y * y + z * z), bxy - az, bxz + ay],
-                         [bxy + az, 1.0 - b * (x * x + z * z), byz - ax],
-                         [bxz - ay, byz + ax, 1.0 - b * (x * x + y * y)]])
+        return np.array([1.0 - b * (y * y + z * z), bxy - az, bxz + ay,
+                         bxy + az, 1.0 - b * (x * x + z * z), byz - ax,
+                         bxz - ay, byz + ax, 1.0 - b * (x * x + y * y)]).reshape(3, 3)
     x, y, z = w[..., 0], w[..., 1], w[..., 2]
     xx, yy, zz = x * x, y * y, z * z
     theta2 = xx + yy + zz
@@ -191,27 +191,28 @@ def exp_apply(w: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def rodrigues_ab(x: float, y: float, z: float) -> Tuple[float, float]:
-    """(a, b) of exp(hat(w)) = I + a hat(w) + b hat(w)^2 for one w = (x, y, z), in floats."""
-    theta2 = x * x + y * y + z * z
-    theta = math.sqrt(theta2)
-    return _rodrigues(theta2 < 1e-8, theta2, theta, *_sin_cos(theta))
-
-
-def _sin_cos(theta):
-    """sin and cos of one angle, by numpy's functions: a stack's entries get numpy's, which need
-    not round as the math module's do.
+    """(a, b) of exp(hat(w)) = I + a hat(w) + b hat(w)^2 for one w = (x, y, z), in floats: the
+    formulas of ``_rodrigues`` for a stack, entry for entry, with numpy's sine and cosine (a
+    stack's entries get numpy's, which need not round as the math module's do), taken only where
+    the series is not.
     """
-    return float(np.sin(theta)), float(np.cos(theta))
+    theta2 = x * x + y * y + z * z
+    if theta2 < 1e-8:
+        return (1.0 - theta2 / 6.0 + theta2 * theta2 / 120.0,
+                0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0)
+    theta = math.sqrt(theta2)
+    return float(_sin(theta)) / theta, (1.0 - float(_cos(theta))) / theta2
+
+
+_sin, _cos = np.sin, np.cos
 
 
 def _rodrigues(small, theta2, theta, sin, cos):
-    """sin(t)/t and (1 - cos t)/t^2, by their Taylor series to O(t^4) where t^2 < 1e-8 (error below
-    1e-20); scalars, or arrays entry by entry.
+    """sin(t)/t and (1 - cos t)/t^2 for arrays, entry by entry, by their Taylor series to O(t^4)
+    where t^2 < 1e-8 (error below 1e-20); ``rodrigues_ab`` is the same for one.
     """
     taylor = (1.0 - theta2 / 6.0 + theta2 * theta2 / 120.0,
               0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0)
-    if isinstance(small, (bool, np.bool_)):
-        return taylor if small else (sin / theta, (1.0 - cos) / theta2)
     return (np.where(small, taylor[0], sin / np.where(small, 1.0, theta)),
             np.where(small, taylor[1], (1.0 - cos) / np.where(small, 1.0, theta2)))
 
