@@ -175,6 +175,9 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     assert 45 <= spacing <= 55, spacing                             # 20 Hz
     beats = [m for m in gcs.since(t0, 'HEARTBEAT') if is_ours(m)]
     assert 1 <= len(beats) <= time.monotonic() - t0 + 2              # 1 Hz
+    # (this process hears the sim once DDS discovery has matched them, which can come after the
+    # controller already flies on it)
+    mon.wait_for(lambda: mon.last('true_pose') is not None, 15.0, "the sim's true pose")
     R_true = so3.quat_to_rot(mon.last('true_pose')[1])
     R_mav = frames.from_wxyz((atts[-1].q1, atts[-1].q2, atts[-1].q3, atts[-1].q4))
     assert math.degrees(so3.angle(frames.ned_frd(R_true).T @ R_mav)) < 3.0

@@ -201,10 +201,7 @@ def rodrigues_ab(x: float, y: float, z: float) -> Tuple[float, float]:
         return (1.0 - theta2 / 6.0 + theta2 * theta2 / 120.0,
                 0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0)
     theta = math.sqrt(theta2)
-    return float(_sin(theta)) / theta, (1.0 - float(_cos(theta))) / theta2
-
-
-_sin, _cos = np.sin, np.cos
+    return float(np.sin(theta)) / theta, (1.0 - float(np.cos(theta))) / theta2
 
 
 def _rodrigues(small, theta2, theta, sin, cos):

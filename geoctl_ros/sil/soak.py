@@ -111,6 +111,9 @@ class Session:
             reply = self.mon.arm_when_ready(40.0)
             if not reply.success:
                 raise RuntimeError('could not arm: ' + reply.message)
+            # the margins are judged on the sim's true pose: heard here once discovery has
+            # matched this process with the sim, which can come after the controller flies
+            self.mon.wait_for(lambda: self.mon.log['true_pose'], 15.0, "the sim's true pose")
             self.mon.spin_for(1.0)
         except BaseException:
             self.close()
