@@ -172,9 +172,8 @@ class DelayPredictor:
         the attitude only after its own (the attitude with the mean of the rates at either end of
         the piece).
         """
-        self.observe(R, Omega, now - age_Omega, history)
-        moment_now = history.at(now - age_Omega)
-        acc0 = self.acceleration(R, Omega, moment_now)
+        captured = now - age_Omega               # when the rate sample was captured
+        self.observe(R, Omega, captured, history)
         # nothing is predicted from before the first command held: what moved the vehicle then
         # (its stops, a hand) is not in the model
         known = max(now - history.first, 0.0)
@@ -183,13 +182,15 @@ class DelayPredictor:
         age_R, age_Omega = np.minimum(age_R, known), np.minimum(age_Omega, known)
         if np.ndim(age_R) == 0 and np.ndim(age_Omega) == 0:
             return self._scalar_ages(R, Omega, float(age_R), float(age_Omega), history, now,
-                                     lead, acc0, moment_now)
+                                     lead, captured)
         age_R = np.asarray(age_R, dtype=float)
         age_Omega = np.asarray(age_Omega, dtype=float)
         horizon = np.maximum(age_R, age_Omega)
         span = horizon + lead
         if float(np.max(span)) <= 0.0:
             return R, Omega
+        moment_now = history.at(captured)         # (the moment then, before any clipping)
+        acc0 = self.acceleration(R, Omega, moment_now)
         # each run in its own number of equal pieces (so a run's prediction does not depend on
         # the other runs of its batch); a run with fewer pieces than the most idles (h = 0)
         pieces = np.maximum(np.ceil(span / SUBSTEP_MAX_S - 1e-9), 1.0)
@@ -217,15 +218,17 @@ class DelayPredictor:
             return acc0 + matvec(self.controller.J_inv, moment - moment_now)
         return self.acceleration(R, Omega, moment)
 
-    def _scalar_ages(self, R, Omega, age_R, age_Omega, history, now, lead, acc0, moment_now):
+    def _scalar_ages(self, R, Omega, age_R, age_Omega, history, now, lead, captured):
         """``__call__`` for ages shared by every run (one run, or a batch on one clock): the
         same pieces, in plain floats (the node's tick; numpy on scalars costs more than the
         arithmetic).
         """
         horizon = max(age_R, age_Omega)
         span = horizon + lead
-        if span <= 0.0:
+        if span <= 0.0:              # (nothing to predict: no model evaluated)
             return R, Omega
+        moment_now = history.at(captured)         # (the moment then, before any clipping)
+        acc0 = self.acceleration(R, Omega, moment_now)
         pieces = max(math.ceil(span / SUBSTEP_MAX_S - 1e-9), 1)
         h = span / pieces
         start = now - horizon
