@@ -213,7 +213,7 @@ class AttitudeController:
         n = self._linear.n_cones
         sc = y[..., 4:4 + 4 * n].reshape(y.shape[:-1] + (n, 4))
         widened = None
-        if n and any_flag(np.asarray(blind) > 0.0):
+        if n and (blind > 0.0 if isinstance(blind, float) else any_flag(np.asarray(blind) > 0.0)):
             extra = blind_widening(sc, Omega, blind, cfg.blind_guard_max, cfg.cones.theta_b)
             if extra.max() > 0.0:                  # (else no cone is being approached)
                 widened = cfg.cones.widened(extra)
