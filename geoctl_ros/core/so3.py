@@ -1,4 +1,5 @@
-"""Rotations on SO(3): hat/vee, exp/log, projection, quaternions in ROS (x, y, z, w) order.
+"""Rotations on SO(3): hat/vee, exp/log, projection; quaternions in ROS (x, y, z, w) order (from
+``geoctl_ros.core.quaternions``).
 
 Conventions (as in the paper): R maps body-frame vectors to the world frame, ``hat(x) @ y ==
 np.cross(x, y)`` and ``vee`` is the inverse of ``hat`` on skew-symmetric matrices. Every function
@@ -14,13 +15,16 @@ numpy 1.26 (Ubuntu 24.04's) has no ``ndarray.mT`` nor ``np.matvec``/``vecmat``/`
 products here are the package's own (``test_package.py`` fails on a numpy name 1.26 lacks).
 """
 import math
-from typing import Any, Sequence, Tuple, Union
+from typing import Any, Tuple, Union
 
 import numpy as np
 
+from geoctl_ros.core.quaternions import Vector as Vector  # (so3's own names)
+from geoctl_ros.core.quaternions import quat_to_rot as quat_to_rot
+from geoctl_ros.core.quaternions import rot_to_quat as rot_to_quat
+
 _I3 = np.eye(3)
 
-Vector = Union[Sequence[float], np.ndarray]     # a vector given as a list or an array
 
 
 def hat(x: np.ndarray) -> np.ndarray:
@@ -41,6 +45,8 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         a0, a1, a2 = a.tolist()
         b0, b1, b2 = b.tolist()
         return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+    if a.shape == ONE and b.shape == ONE:    # a batch of one: the same, in floats
+        return cross(a[0], b[0])[None]
     a, b = a.T, b.T
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
                      a[0] * b[1] - a[1] * b[0]]).T
@@ -58,6 +64,9 @@ def vee(M: np.ndarray) -> np.ndarray:
 # floats in the same order, so a run alone gives the same bits as in a stack of any size; a
 # larger single pair (the step's linear map) goes through ``@``.
 SMALL = 18
+# A batch of one run (the scenario runner's) goes the same float way: ONE and ONE_M are its
+# vectors' and matrices' shapes.
+ONE, ONE_M = (1, 3), (1, 3, 3)
 
 
 def _float_matvec(M, v):
@@ -81,6 +90,8 @@ def matmul(A: np.ndarray, B: np.ndarray) -> np.ndarray:
             return np.array([[r[0] * b[0][j] + r[1] * b[1][j] + r[2] * b[2][j] for j in range(3)]
                              for r in a])
         return A @ B
+    if A.shape == ONE_M and B.shape == ONE_M:
+        return matmul(A[0], B[0])[None]
     if A.shape[-1] == 3:
         return (A[..., :, 0, None] * B[..., None, 0, :] + A[..., :, 1, None] * B[..., None, 1, :]
                 + A[..., :, 2, None] * B[..., None, 2, :])
@@ -94,6 +105,8 @@ def matvec(M: np.ndarray, v: np.ndarray) -> np.ndarray:
     """M v for a matrix and a vector, or for each of a stack of them (broadcasting)."""
     if M.ndim <= 2 and v.ndim == 1:
         return _float_matvec(M, v) if M.size <= SMALL else M @ v
+    if v.shape == ONE and (M.ndim == 2 and M.size <= SMALL or M.shape == ONE_M):
+        return _float_matvec(M[0] if M.ndim == 3 else M, v[0])[None]
     v = v[..., None, :]
     if M.shape[-1] == 0:
         return np.zeros(np.broadcast_shapes(M.shape[:-1], v.shape[:-2] + (1,)))
@@ -109,6 +122,8 @@ def vecmat(v: np.ndarray, M: np.ndarray) -> np.ndarray:
     """v^T M (= M^T v) for a vector and a matrix, or for each of a stack of them."""
     if v.ndim == 1 and M.ndim <= 2:
         return _float_matvec(M.T, v) if M.size <= SMALL else v @ M
+    if v.shape == ONE and (M.ndim == 2 and M.size <= SMALL or M.shape == ONE_M):
+        return _float_matvec((M[0] if M.ndim == 3 else M).T, v[0])[None]
     v = v[..., None]
     if M.shape[-2] == 0:
         return np.zeros(np.broadcast_shapes(M.shape[:-2] + M.shape[-1:], v.shape[:-2] + (1,)))
@@ -131,6 +146,8 @@ def dot(a: np.ndarray, b: np.ndarray) -> Any:
         for k in range(1, len(x)):
             acc = acc + x[k] * y[k]
         return np.float64(acc)
+    if a.shape == ONE and b.shape == ONE:
+        return np.array([dot(a[0], b[0])])
     if a.shape[-1] == 3:
         return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
     out = a[..., 0] * b[..., 0]
@@ -160,6 +177,8 @@ def exp(w: np.ndarray) -> np.ndarray:
         return np.array([1.0 - b * (y * y + z * z), bxy - az, bxz + ay,
                          bxy + az, 1.0 - b * (x * x + z * z), byz - ax,
                          bxz - ay, byz + ax, 1.0 - b * (x * x + y * y)]).reshape(3, 3)
+    if w.shape == ONE:
+        return exp(w[0])[None]
     x, y, z = w[..., 0], w[..., 1], w[..., 2]
     xx, yy, zz = x * x, y * y, z * z
     theta2 = xx + yy + zz
@@ -180,6 +199,8 @@ def exp_apply(w: np.ndarray, v: np.ndarray) -> np.ndarray:
     """
     if w.ndim == 1 and v.ndim == 1:
         a, b = rodrigues_ab(*w.tolist())
+    elif w.shape == ONE and v.shape == ONE:
+        return exp_apply(w[0], v[0])[None]
     else:
         x, y, z = w[..., 0], w[..., 1], w[..., 2]
         theta2 = x * x + y * y + z * z
@@ -257,39 +278,6 @@ def project(M: np.ndarray) -> np.ndarray:
     U, _, Vt = np.linalg.svd(M)
     d = 1.0 if np.linalg.det(U @ Vt) > 0.0 else -1.0
     return U @ np.diag([1.0, 1.0, d]) @ Vt
-
-
-def quat_to_rot(q: Vector) -> np.ndarray:
-    """Rotation matrix of a quaternion in ROS order (x, y, z, w); q is normalised first."""
-    x, y, z, w = (float(v) for v in q)
-    n = math.sqrt(x * x + y * y + z * z + w * w)
-    x, y, z, w = x / n, y / n, z / n, w / n
-    return np.array([
-        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
-        [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
-        [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
-    ])
-
-
-def rot_to_quat(R: np.ndarray) -> np.ndarray:
-    """Unit quaternion (x, y, z, w) of R with w >= 0 (Shepperd's method, stable for any R)."""
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    i = int(np.argmax([tr, R[0, 0], R[1, 1], R[2, 2]]))
-    if i == 0:
-        s = 2.0 * math.sqrt(1.0 + tr)
-        q = [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s]
-    elif i == 1:
-        s = 2.0 * math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
-        q = [0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s]
-    elif i == 2:
-        s = 2.0 * math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
-        q = [(R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s]
-    else:
-        s = 2.0 * math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
-        q = [(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s, (R[1, 0] - R[0, 1]) / s]
-    out = np.array(q)
-    out /= np.linalg.norm(out)
-    return -out if out[3] < 0.0 else out
 
 
 def axis_angle(axis: Vector, angle_rad: float) -> np.ndarray:
