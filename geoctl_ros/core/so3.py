@@ -183,7 +183,7 @@ def exp(w: np.ndarray) -> np.ndarray:
     xx, yy, zz = x * x, y * y, z * z
     theta2 = xx + yy + zz
     theta = np.sqrt(theta2)
-    a, b = _rodrigues(theta2 < 1e-8, theta2, theta, np.sin(theta), np.cos(theta))
+    a, b = _rodrigues(theta2, theta)
     bx, by = b * x, b * y
     bxy, bxz, byz, ax, ay, az = bx * y, bx * z, by * z, a * x, a * y, a * z
     out = np.empty(w.shape + (3,))
@@ -205,7 +205,7 @@ def exp_apply(w: np.ndarray, v: np.ndarray) -> np.ndarray:
         x, y, z = w[..., 0], w[..., 1], w[..., 2]
         theta2 = x * x + y * y + z * z
         theta = np.sqrt(theta2)
-        a, b = _rodrigues(theta2 < 1e-8, theta2, theta, np.sin(theta), np.cos(theta))
+        a, b = _rodrigues(theta2, theta)
         a, b = a[..., None], b[..., None]
     wv = cross(w, v)
     return v + a * wv + b * cross(w, wv)
@@ -225,14 +225,20 @@ def rodrigues_ab(x: float, y: float, z: float) -> Tuple[float, float]:
     return float(np.sin(theta)) / theta, (1.0 - float(np.cos(theta))) / theta2
 
 
-def _rodrigues(small, theta2, theta, sin, cos):
+def _rodrigues(theta2, theta):
     """sin(t)/t and (1 - cos t)/t^2 for arrays, entry by entry, by their Taylor series to O(t^4)
-    where t^2 < 1e-8 (error below 1e-20); ``rodrigues_ab`` is the same for one.
+    where t^2 < 1e-8 (error below 1e-20); ``rodrigues_ab`` is the same for one. (A stack with no
+    small angle, or only small ones, skips the other branch: the same bits.)
     """
+    small = theta2 < 1e-8
+    if not small.any():
+        return np.sin(theta) / theta, (1.0 - np.cos(theta)) / theta2
     taylor = (1.0 - theta2 / 6.0 + theta2 * theta2 / 120.0,
               0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0)
-    return (np.where(small, taylor[0], sin / np.where(small, 1.0, theta)),
-            np.where(small, taylor[1], (1.0 - cos) / np.where(small, 1.0, theta2)))
+    if small.all():
+        return taylor
+    return (np.where(small, taylor[0], np.sin(theta) / np.where(small, 1.0, theta)),
+            np.where(small, taylor[1], (1.0 - np.cos(theta)) / np.where(small, 1.0, theta2)))
 
 
 def log(R: np.ndarray) -> np.ndarray:
