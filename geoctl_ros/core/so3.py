@@ -26,7 +26,6 @@ from geoctl_ros.core.quaternions import rot_to_quat as rot_to_quat
 _I3 = np.eye(3)
 
 
-
 def hat(x: np.ndarray) -> np.ndarray:
     """The skew-symmetric matrix of x: ``hat(x) @ y == cross(x, y)``."""
     x = np.asarray(x, dtype=float)
