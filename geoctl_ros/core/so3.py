@@ -15,7 +15,7 @@ numpy 1.26 (Ubuntu 24.04's) has no ``ndarray.mT`` nor ``np.matvec``/``vecmat``/`
 products here are the package's own (``test_package.py`` fails on a numpy name 1.26 lacks).
 """
 import math
-from typing import Any, Tuple, Union
+from typing import Any, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -41,14 +41,17 @@ def hat(x: np.ndarray) -> np.ndarray:
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Cross product of 3-vectors, or of stacks of them (np.cross: 10x the time for one pair)."""
     if a.ndim == 1 and b.ndim == 1:      # one pair: float arithmetic beats array indexing
-        a0, a1, a2 = a.tolist()
-        b0, b1, b2 = b.tolist()
-        return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+        return np.array(cross_floats(a.tolist(), b.tolist()))
     if a.shape == ONE and b.shape == ONE:    # a batch of one: the same, in floats
         return cross(a[0], b[0])[None]
     a, b = a.T, b.T
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
                      a[0] * b[1] - a[1] * b[0]]).T
+
+
+def cross_floats(a: Sequence[float], b: Sequence[float]) -> list:
+    """a x b for two 3-vectors as lists of floats (the formula of a stack's entries)."""
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 
 
 def vee(M: np.ndarray) -> np.ndarray:
