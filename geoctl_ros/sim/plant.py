@@ -155,7 +155,7 @@ def _step_one(plant: Plant, tau: np.ndarray, h: float) -> None:
     W0, tau_ = plant.Omega.tolist(), np.asarray(tau, dtype=float).tolist()
     disturbance = plant.config.disturbance
 
-    def acc(t, g_b, W):                 # Plant._angular_acceleration
+    def _acc(t, g_b, W):                # Plant._angular_acceleration
         gyroscopic = cross_floats(W, _mv(J, W))
         bgm = cross_floats(m_rho, g_b)
         d = disturbance(t).tolist()
@@ -163,16 +163,16 @@ def _step_one(plant: Plant, tau: np.ndarray, h: float) -> None:
 
     g0 = [R0[0][j] * g[0] + R0[1][j] * g[1] + R0[2][j] * g[2] for j in range(3)]   # R0^T g_w
     half = 0.5 * h
-    k1x, k1w = W0, acc(t, g0, W0)
+    k1x, k1w = W0, _acc(t, g0, W0)
     xi = [half * v for v in k1x]
     W = _ahead(W0, half, k1w)
-    k2x, k2w = _xi_rate(xi, W), acc(t + 0.5 * h, _rotate_back(xi, g0), W)
+    k2x, k2w = _xi_rate(xi, W), _acc(t + 0.5 * h, _rotate_back(xi, g0), W)
     xi = [half * v for v in k2x]
     W = _ahead(W0, half, k2w)
-    k3x, k3w = _xi_rate(xi, W), acc(t + 0.5 * h, _rotate_back(xi, g0), W)
+    k3x, k3w = _xi_rate(xi, W), _acc(t + 0.5 * h, _rotate_back(xi, g0), W)
     xi = [h * v for v in k3x]
     W = _ahead(W0, h, k3w)
-    k4x, k4w = _xi_rate(xi, W), acc(t + h, _rotate_back(xi, g0), W)
+    k4x, k4w = _xi_rate(xi, W), _acc(t + h, _rotate_back(xi, g0), W)
     sixth = h / 6.0
     xi = [sixth * (k1x[i] + 2.0 * k2x[i] + 2.0 * k3x[i] + k4x[i]) for i in range(3)]
     plant.R = so3.matmul(plant.R, so3.exp(np.array(xi)))
