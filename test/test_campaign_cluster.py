@@ -30,7 +30,7 @@ from geoctl_ros.params import (
 # (not marked `headless`: in ./run test these run in the foreground stream, which is the shorter
 # of the two; the headless stream was the first phase's longest)
 
-RUNS, DURATION = '16', '2'          # (runs 0-3 have 1, 2, 3 and 4 cones)
+RUNS, DURATION = '16', '1'          # (runs 0-3 have 1, 2, 3 and 4 cones)
 
 
 def read(path):
@@ -84,7 +84,7 @@ def test_a_worker_killed_mid_campaign_loses_no_run_and_doubles_none(reference, t
         result = {}
         flying = threading.Thread(target=lambda: result.setdefault('code', campaign.main(
             ['--scheduler', cluster.scheduler_address, '--runs', RUNS, '--duration', DURATION,
-             '--batch', '4', '--worst', '1', '--out', str(out)])))
+             '--batch', '8', '--worst', '1', '--out', str(out)])))
         flying.start()
         pids = client.run(os.getpid)
         victim = None
@@ -105,7 +105,7 @@ def test_a_worker_killed_mid_campaign_loses_no_run_and_doubles_none(reference, t
 def test_ctrl_c_writes_the_runs_flown_so_far(dask_scheduler, tmp_path):
     out = tmp_path / 'interrupted'
     proc = subprocess.Popen([sys.executable, '-m', 'geoctl_ros.cli.campaign', '--runs', '60',
-                             '--duration', '2', '--batch', '2', '--worst', '1',
+                             '--duration', '1', '--batch', '2', '--worst', '1',
                              '--scheduler', dask_scheduler, '--out', str(out)],
                             stderr=subprocess.PIPE, text=True)
     seen = []
@@ -126,7 +126,7 @@ def test_ctrl_c_writes_the_runs_flown_so_far(dask_scheduler, tmp_path):
 def test_a_gain_study_flies_every_set_on_the_same_runs_and_writes_files_the_controller_takes(
         dask_scheduler, tmp_path, capsys):
     out = tmp_path / 'study'
-    code = campaign.main(['--runs', '8', '--duration', '4', '--grid', 'k_R=0.4,0.8',
+    code = campaign.main(['--runs', '8', '--duration', '2', '--grid', 'k_R=0.4,0.8',
                           '--grid', 'alpha=8', '--worst', '1', '--scheduler', dask_scheduler,
                           '--out', str(out)])
     printed = capsys.readouterr()

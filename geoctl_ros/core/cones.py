@@ -192,8 +192,9 @@ class ConeSet:
                         self._r_perp[None, :])
         return -unit * magnitude[:, None]
 
-    def angles_deg(self, R: np.ndarray) -> np.ndarray:
-        """Angle between the sensor's world direction R r and each cone axis, degrees.
+    def cosines(self, R: np.ndarray) -> np.ndarray:
+        """s_i = v_i . R r per cone: the cosine of the angle between the sensor's world direction
+        and each cone's axis, for R or a stack of them (any leading axes before the batch's).
 
         Written out element by element (not through matmul), so a run's figure is the same bits
         whatever the batch it flies in: a stacked matmul may go to BLAS as one product, whose
@@ -203,8 +204,12 @@ class ConeSet:
         r = self.r
         d = R[..., :, 0] * r[0] + R[..., :, 1] * r[1] + R[..., :, 2] * r[2]     # R r
         V = self.V
-        return angle_deg(V[..., 0] * d[..., None, 0] + V[..., 1] * d[..., None, 1]
-                         + V[..., 2] * d[..., None, 2])
+        return (V[..., 0] * d[..., None, 0] + V[..., 1] * d[..., None, 1]
+                + V[..., 2] * d[..., None, 2])
+
+    def angles_deg(self, R: np.ndarray) -> np.ndarray:
+        """Angle between the sensor's world direction R r and each cone axis, degrees."""
+        return angle_deg(self.cosines(R))
 
     def margins_deg(self, R: np.ndarray) -> np.ndarray:
         """Cone margins (angle to axis minus half-angle, degrees) at attitude R."""

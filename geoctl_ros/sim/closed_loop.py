@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Callable, List, Optional
 import numpy as np
 
 from geoctl_ros.core import so3
+from geoctl_ros.core.cones import angle_deg
 from geoctl_ros.core.control import ControlOutput
 from geoctl_ros.core.stats import SETTLE_PSI
 from geoctl_ros.core.step import ControlTick
@@ -137,7 +138,9 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     receipt = np.zeros(n)
     ages = (delay * h,) * 2 if stamped else (0.0, 0.0)
     R_seen, W_seen = R_now, W_now
-    min_angle = cones.angles_deg(R_now)
+    # the closest approach: the largest cosine to each cone's axis after any integration step
+    # (arccos decreases), taken over each control step's steps at once
+    max_cos = cones.cosines(R_now)
     margin_series = np.empty((steps, n)) if series else None
     sensor_series = np.empty((steps, n, 3), dtype=np.float32) if series else None
     record = History(steps, bed) if history else None
@@ -181,18 +184,20 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         if record is not None:
             record.add(k, t, out, motors)
         command = out.u if actuator is None else motors.commands
+        held = []
         for _ in range(holds[k]):
             plant.step(bed.moment(command, h), h)
             j += 1
             R_now, W_now = bed.state()
             R_past[j % ring], W_past[j % ring] = R_now, W_now
-            min_angle = np.minimum(min_angle, cones.angles_deg(R_now))
+            held.append(R_now)
+        max_cos = np.maximum(max_cos, cones.cosines(np.stack(held)).max(axis=0))
         if progress is not None and (k + 1) % 100 == 0:
             progress((k + 1) / steps)
     wall = time.perf_counter() - t0
     final = controller.step(R_now, W_now, dt, adapt=False)
     return Flight(
-        names=[s.name for s in scenarios], min_angle_deg=min_angle,
+        names=[s.name for s in scenarios], min_angle_deg=angle_deg(max_cos),
         half_angle_deg=cones.theta_deg * np.ones((n, 1)),
         final_error_deg=np.degrees(_error(controller.R_d, R_now)),
         final=final, final_angular_velocity=W_now, saturated_steps=saturated,
