@@ -39,7 +39,11 @@ def with_cones(A: Any, e_RA: np.ndarray, ev: ConeEval) -> Tuple[Any, np.ndarray]
     """Psi = A (1 + sum_i (B_i - 1)) and e_R = e_RA (1 + sum_i (B_i - 1)) + A sum_i e_RB,i from
     A (with a trailing axis of 1), e_RA and the cones' evaluation.
     """
-    scale = (1.0 - ev.B.shape[-1]) + ev.B.sum(axis=-1, keepdims=True)
+    B = ev.B
+    if B.ndim == 1:                     # one run (the node's step): its one sum as a float
+        scale = (1.0 - len(B)) + (B.sum() if len(B) else 0.0)
+        return A[0] * scale, e_RA * scale + A * ev.e_RB_sum
+    scale = (1.0 - B.shape[-1]) + B.sum(axis=-1, keepdims=True)
     return (A * scale)[..., 0], e_RA * scale + A * ev.e_RB_sum
 
 

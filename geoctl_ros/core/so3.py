@@ -62,26 +62,30 @@ def vee(M: np.ndarray) -> np.ndarray:
 
 # A stack's products are multiplied out entry by entry (sums of products in index order), not
 # through matmul, whose BLAS kernels round a pair by where it falls in memory (OpenBLAS 0.3.23's
-# Prescott kernel: every other 3x3 matrix of a stack). One pair of at most SMALL entries goes in
-# floats in the same order, so a run alone gives the same bits as in a stack of any size; a
-# larger single pair (the step's linear map) goes through ``@``.
+# Prescott kernel: every other 3x3 matrix of a stack). A matrix of at most SMALL entries times a
+# vector goes in floats in the same order, so a run alone (a batch of one, of shapes ONE and
+# ONE_M; one testbed's rotors) gives the same bits as in a stack of any size; a larger one (the
+# step's linear map), and v^T M unstacked (the node's step alone), go through ``@``.
 SMALL = 18
-# A batch of one run (the scenario runner's) goes the same float way: ONE and ONE_M are its
-# vectors' and matrices' shapes.
 ONE, ONE_M = (1, 3), (1, 3, 3)
 
 
 def _float_matvec(M, v):
-    if not len(v):
-        return np.zeros(M.shape[0])
-    rows, x = M.tolist(), v.tolist()
+    x = v.tolist()
+    if len(x) == 3:                      # (sums left to right, as the loop below)
+        x0, x1, x2 = x
+        return np.array([r[0] * x0 + r[1] * x1 + r[2] * x2 for r in M.tolist()])
+    if len(x) == 6:                      # (six rotors; the regressor with the cog model)
+        x0, x1, x2, x3, x4, x5 = x
+        return np.array([r[0] * x0 + r[1] * x1 + r[2] * x2 + r[3] * x3 + r[4] * x4 + r[5] * x5
+                         for r in M.tolist()])
     out = []
-    for r in rows:
-        acc = r[0] * x[0]
+    for r in M.tolist():
+        acc = r[0] * x[0] if x else 0.0
         for k in range(1, len(x)):
             acc = acc + r[k] * x[k]
         out.append(acc)
-    return np.array(out)
+    return np.array(out, dtype=float)
 
 
 def matmul(A: np.ndarray, B: np.ndarray) -> np.ndarray:
@@ -123,7 +127,7 @@ def matvec(M: np.ndarray, v: np.ndarray) -> np.ndarray:
 def vecmat(v: np.ndarray, M: np.ndarray) -> np.ndarray:
     """v^T M (= M^T v) for a vector and a matrix, or for each of a stack of them."""
     if v.ndim == 1 and M.ndim <= 2:
-        return _float_matvec(M.T, v) if M.size <= SMALL else v @ M
+        return v @ M
     if v.shape == ONE and (M.ndim == 2 and M.size <= SMALL or M.shape == ONE_M):
         return _float_matvec((M[0] if M.ndim == 3 else M).T, v[0])[None]
     v = v[..., None]
@@ -144,6 +148,8 @@ def dot(a: np.ndarray, b: np.ndarray) -> Any:
         return np.zeros(np.broadcast_shapes(a.shape[:-1], b.shape[:-1]))[()]
     if a.ndim == 1 and b.ndim == 1:
         x, y = a.tolist(), b.tolist()
+        if len(x) == 3:
+            return np.float64(x[0] * y[0] + x[1] * y[1] + x[2] * y[2])
         acc = x[0] * y[0]
         for k in range(1, len(x)):
             acc = acc + x[k] * y[k]
