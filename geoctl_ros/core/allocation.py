@@ -63,7 +63,12 @@ class Allocator:
         stack of moments (batch, 3) gives one allocation per row.
         """
         moment = np.asarray(moment, dtype=float)
-        valid = np.isfinite(moment).all(axis=-1) & math.isfinite(collective)
+        valid: Any                          # a flag, or one per row
+        if moment.ndim == 1:                # one moment: its check in floats
+            valid = np.bool_(math.isfinite(collective)
+                             and all(map(math.isfinite, moment.tolist())))
+        else:
+            valid = np.isfinite(moment).all(axis=-1) & math.isfinite(collective)
         all_valid = all_flag(valid)
         m = moment if all_valid else np.where(np.asarray(valid)[..., None], moment, 0.0)
         # (one moment, the node's: a plain product, the fastest; a batch's rows go entry by
@@ -73,7 +78,7 @@ class Allocator:
                                     else matvec(self._p_moment, m))
         met = (f.min(axis=-1) >= self.lo) & (f.max(axis=-1) <= self.hi)
         if not all_flag(met):
-            f_rp = matvec(self._p_rp, m[..., :2])
+            f_rp = self._p_rp @ m[:2] if m.ndim == 1 else matvec(self._p_rp, m[..., :2])
             f_y = self._p_y * m[..., 2:]
             # roll and pitch scaled first, then yaw (only when roll and pitch are whole), then the
             # collective thrust moved within what the rotors allow
