@@ -3,6 +3,7 @@
     ./run shell benchmarks/bench.py                   # print figures and the ratio to the baseline
     ./run shell benchmarks/bench.py --update-baseline  # this machine's figures as the baseline
     ./run shell benchmarks/bench.py --against REV [--rounds 3]  # this tree against a revision
+                                                      # (against.py)
     ./run --odroid shell benchmarks/bench.py ...      # the same on the vehicle's stack
 
 Figures are microseconds per call (the fastest of several repeats). The control tick must fit in
@@ -20,15 +21,12 @@ skips it).
 """
 import json
 import os
-import subprocess
 import sys
-import tempfile
 import time
 import timeit
 
 from geometry_msgs.msg import PoseStamped
 import latency
-import numpy
 import numpy as np
 from paper_law import PaperLaw
 import rclpy
@@ -196,60 +194,36 @@ def batched():
     return rows
 
 
-def figures():
-    """The figures that can be set side by side across trees and stacks: name -> microseconds
-    (for the batched loop, microseconds of wall time per simulated second per run).
+# The figure groups a tree is measured by, each named by the function of its bench.py that
+# measures it (every revision since --json has them), and how a group's result reads as figures
+GROUPS = ('measure', 'side_by_side', 'batched')
+
+
+def named(group, result):
+    """A group's result as figures: name -> microseconds (for the batched loop, microseconds of
+    wall time per simulated second per run).
     """
-    out = measure()
-    rows, tick = side_by_side()
-    for n, a, _, _, _ in rows:
-        out['control step vs transcription, %d cones' % n] = a
-    for label, (p50, p99, _) in zip(('node tick to motor command', 'node tick, whole'), tick):
-        out[label + ' p50'], out[label + ' p99'] = p50, p99
-    for n, wall, _ in batched():
+    if group == 'measure':
+        return dict(result)
+    out = {}
+    if group == 'side_by_side':
+        rows, tick = result
+        for n, a, _, _, _ in rows:
+            out['control step vs transcription, %d cones' % n] = a
+        for label, (p50, p99, _) in zip(('node tick to motor command', 'node tick, whole'), tick):
+            out[label + ' p50'], out[label + ' p99'] = p50, p99
+        return out
+    for n, wall, _ in result:
         out['batched loop, %d runs, per run-second' % n] = 1e6 * wall / n
     return out
 
 
-def against(rev, rounds=3):
-    """This tree against git revision `rev`, on this interpreter, alternating rounds (A B A B ..)
-    in fresh processes so that a busy machine slows both alike; the fastest round of each. Each
-    tree runs its own bench.py (from a revision that has ``--json``).
-    """
-    root = os.path.dirname(HERE)
-    with tempfile.TemporaryDirectory() as tmp:
-        archive = subprocess.run(['git', 'archive', rev, 'geoctl_ros', 'config', 'benchmarks'],
-                                 cwd=root, capture_output=True, check=True).stdout
-        subprocess.run(['tar', '-x', '-C', tmp], input=archive, check=True)
-        trees = {rev: tmp, 'this tree': root}
-        # each tree is measured by its own bench.py, which knows that tree's modules
-        best, failed = {}, {}
-        for _ in range(rounds):
-            for label, tree in trees.items():
-                if label in failed:
-                    continue
-                env = dict(os.environ, PYTHONPATH=tree)   # ahead of the editable install
-                r = subprocess.run([sys.executable, os.path.join(tree, 'benchmarks', 'bench.py'),
-                                    '--json'], env=env, capture_output=True, text=True)
-                if r.returncode != 0:
-                    lines = r.stderr.strip().splitlines() or ['exit %d' % r.returncode]
-                    failed[label] = lines[-1]
-                    continue
-                got = json.loads(r.stdout.strip().splitlines()[-1])
-                assert got.pop('tree') == tree, 'ran %s, not %s' % (got, tree)
-                for k, v in got.items():
-                    best.setdefault(label, {})[k] = min(v, best.get(label, {}).get(k, v))
-    print('%s (Python %s, numpy %s): fastest of %d alternating rounds, us'
-          % (rev, sys.version.split()[0], numpy.__version__, rounds))
-    for label, why in failed.items():
-        print('%s: fails: %s' % (label, why))
-    mine, theirs = best.get('this tree', {}), best.get(rev, {})
-    print('%-46s %10s %10s %7s' % ('figure', rev[:10], 'this tree', 'ratio'))
-    for k, v in mine.items():
-        old = theirs.get(k)
-        print('%-46s %10s %10.1f %7s' % (k, '%.1f' % old if old else '-', v,
-                                          '%.2f' % (v / old) if old else '-'))
-    return 0
+def figures():
+    """The figures that can be set side by side across trees and stacks (``named``)."""
+    out = {}
+    for group in GROUPS:
+        out.update(named(group, globals()[group]()))
+    return out
 
 
 def main(argv):
@@ -260,6 +234,7 @@ def main(argv):
         return 0
     if '--against' in argv:
         rounds = int(argv[argv.index('--rounds') + 1]) if '--rounds' in argv else 3
+        from against import against  # noqa: PLC0415 (it imports this module)
         return against(argv[argv.index('--against') + 1], rounds)
     results = measure()
     if '--update-baseline' in argv:
