@@ -84,7 +84,7 @@ def test_the_benchmark_flies_every_law_on_a_case_and_the_same_random_runs(
         assert np.std(image) > 0.05                                 # something is drawn
 
 
-@pytest.mark.headless      # (./run test flies them beside the rest; on CPU time left over)
+# (not marked `headless`: ./run test's headless stream, with the shipped scenarios, is the longer)
 @pytest.mark.parametrize('case', cases.CASES)
 def test_the_cbf_filter_never_enters_a_cone_in_the_standard_cases(case):
     """Each standard case as its file has it (the cbf law's tuning included), flown whole by the
