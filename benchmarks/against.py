@@ -41,8 +41,11 @@ def against(rev, rounds=3):
             env = dict(os.environ, PYTHONPATH=tree)   # ahead of the editable install
             workers[label] = subprocess.Popen(
                 [sys.executable, '-c', SERVE, os.path.join(tree, 'benchmarks')], env=env,
-                stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-            ran = json.loads(workers[label].stdout.readline())
+                cwd=tree, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+            first = workers[label].stdout.readline()          # (its error, if any, on stderr)
+            if not first:
+                sys.exit('against: the worker of %s did not start' % label)
+            ran = json.loads(first)
             assert ran.startswith(tree), 'ran %s, not %s' % (ran, tree)
         best = {label: {} for label in trees}
         try:
