@@ -41,7 +41,7 @@ def with_cones(A: Any, e_RA: np.ndarray, ev: ConeEval) -> Tuple[Any, np.ndarray]
     """
     B = ev.B
     if B.ndim == 1:                     # one run (the node's step): its one sum as a float
-        scale = (1.0 - len(B)) + (B.sum() if len(B) else 0.0)
+        scale = (1.0 - len(B)) + B.sum()
         return A[0] * scale, e_RA * scale + A * ev.e_RB_sum
     scale = (1.0 - B.shape[-1]) + B.sum(axis=-1, keepdims=True)
     return (A * scale)[..., 0], e_RA * scale + A * ev.e_RB_sum

@@ -62,23 +62,23 @@ def vee(M: np.ndarray) -> np.ndarray:
 
 # A stack's products are multiplied out entry by entry (sums of products in index order), not
 # through matmul, whose BLAS kernels round a pair by where it falls in memory (OpenBLAS 0.3.23's
-# Prescott kernel: every other 3x3 matrix of a stack). A matrix of at most SMALL entries times a
-# vector goes in floats in the same order, so a run alone (a batch of one, of shapes ONE and
-# ONE_M; one testbed's rotors) gives the same bits as in a stack of any size; a larger one (the
-# step's linear map), and v^T M unstacked (the node's step alone), go through ``@``.
+# Prescott kernel: every other 3x3 matrix of a stack). A matrix of <= SMALL entries times a vector
+# goes in floats in the same order, so a run alone (a batch of one, shapes ONE and ONE_M; one
+# testbed's rotors) gives a stack's bits; a larger one, and v^T M unstacked (the node's), ``@``.
 SMALL = 18
 ONE, ONE_M = (1, 3), (1, 3, 3)
 
 
+def matvec_floats(M: Sequence[Sequence[float]], v: Sequence[float]) -> list:
+    """M v for rows of 3 and a 3-vector as lists of floats (sums left to right, as a stack's)."""
+    x0, x1, x2 = v
+    return [r[0] * x0 + r[1] * x1 + r[2] * x2 for r in M]
+
+
 def _float_matvec(M, v):
     x = v.tolist()
-    if len(x) == 3:                      # (sums left to right, as the loop below)
-        x0, x1, x2 = x
-        return np.array([r[0] * x0 + r[1] * x1 + r[2] * x2 for r in M.tolist()])
-    if len(x) == 6:                      # (six rotors; the regressor with the cog model)
-        x0, x1, x2, x3, x4, x5 = x
-        return np.array([r[0] * x0 + r[1] * x1 + r[2] * x2 + r[3] * x3 + r[4] * x4 + r[5] * x5
-                         for r in M.tolist()])
+    if len(x) == 3:
+        return np.array(matvec_floats(M.tolist(), x))
     out = []
     for r in M.tolist():
         acc = r[0] * x[0] if x else 0.0

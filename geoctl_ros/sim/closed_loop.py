@@ -141,6 +141,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     # the closest approach: the largest cosine to each cone's axis after any integration step
     # (arccos decreases), taken over each control step's steps at once
     max_cos = cones.cosines(R_now)
+    held = np.empty((int(holds.max()) if steps else 0,) + R_now.shape)   # a step's attitudes
     margin_series = np.empty((steps, n)) if series else None
     sensor_series = np.empty((steps, n, 3), dtype=np.float32) if series else None
     record = History(steps, bed) if history else None
@@ -184,14 +185,13 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         if record is not None:
             record.add(k, t, out, motors)
         command = out.u if actuator is None else motors.commands
-        held = []
-        for _ in range(holds[k]):
+        for i in range(holds[k]):
             plant.step(bed.moment(command, h), h)
             j += 1
             R_now, W_now = bed.state()
             R_past[j % ring], W_past[j % ring] = R_now, W_now
-            held.append(R_now)
-        max_cos = np.maximum(max_cos, cones.cosines(np.stack(held)).max(axis=0))
+            held[i] = R_now
+        max_cos = np.maximum(max_cos, cones.cosines(held[:holds[k]]).max(axis=0))
         if progress is not None and (k + 1) % 100 == 0:
             progress((k + 1) / steps)
     wall = time.perf_counter() - t0

@@ -33,7 +33,7 @@ from geoctl_ros.core.mechanics import (
     gravity_moment,
     pivot_inertia,
 )
-from geoctl_ros.core.so3 import cross, cross_floats, matvec, vecmat
+from geoctl_ros.core.so3 import cross, cross_floats, matvec, matvec_floats, vecmat
 
 
 @dataclass(frozen=True)
@@ -156,10 +156,10 @@ def _step_one(plant: Plant, tau: np.ndarray, h: float) -> None:
     disturbance = plant.config.disturbance
 
     def _acc(t, g_b, W):                # Plant._angular_acceleration
-        gyroscopic = cross_floats(W, _mv(J, W))
+        gyroscopic = cross_floats(W, matvec_floats(J, W))
         bgm = cross_floats(m_rho, g_b)
         d = disturbance(t).tolist()
-        return _mv(J_inv, [tau_[i] + bgm[i] + d[i] - gyroscopic[i] for i in range(3)])
+        return matvec_floats(J_inv, [tau_[i] + bgm[i] + d[i] - gyroscopic[i] for i in range(3)])
 
     g0 = [R0[0][j] * g[0] + R0[1][j] * g[1] + R0[2][j] * g[2] for j in range(3)]   # R0^T g_w
     half = 0.5 * h
@@ -182,10 +182,6 @@ def _step_one(plant: Plant, tau: np.ndarray, h: float) -> None:
 
 
 # _step_one's pieces, in floats (lists of 3)
-def _mv(M, v):                          # M v (so3.matvec's float path)
-    return [r[0] * v[0] + r[1] * v[1] + r[2] * v[2] for r in M]
-
-
 def _xi_rate(xi, w):                    # _dexpinv
     xw = cross_floats(xi, w)
     xxw = cross_floats(xi, xw)
