@@ -9,7 +9,13 @@ Notation follows the paper and ../shared/design/control-law.md:
     e_Omega = Omega - R^T R_d Omega_d                       (= Omega when stabilising)
     u     = -k_R e_R - k_Omega e_Omega + Omega x J Omega - W Delta_bar - M_g
             [+ the tracking feed-forward]
-    Delta_bar' = k_Delta W^T (e_Omega + c e_R)                adaptive law (eq. 39)
+    Delta_bar' = Gamma W^T (e_Omega + c e_R)                  adaptive law (eq. 39)
+
+Gamma is the adaptation gain: k_Delta for the constant moment (the paper's scalar) and, with the
+constant+cog model, k_Delta_cog for the m*rho block, whose regressor -hat(R^T g_w) is |g| (about
+10) times larger: one scalar for both would learn m*rho some 100 times faster than the moment
+(docs/control-law.md, "Gravity moment"). A positive diagonal Gamma leaves Prop. 5's argument as
+it is, with 1/2 Delta_tilde^T Gamma^-1 Delta_tilde in the Lyapunov function.
 
 J is the inertia about the pivot, M_g the gravity moment of the centre of mass offset rho (both
 from ``geoctl_ros.core.mechanics``). The tracking feed-forward
@@ -40,6 +46,7 @@ from geoctl_ros.core.errors import (
 )
 from geoctl_ros.core.feasibility import setpoint_problem
 from geoctl_ros.core.flags import any_flag
+from geoctl_ros.core.guidance import Guidance
 from geoctl_ros.core.laws import LAWS
 from geoctl_ros.core.mechanics import cog_regressor, first_moment, pivot_inertia
 from geoctl_ros.core.so3 import cross, matvec, transpose
@@ -78,6 +85,9 @@ class ControllerConfig:
     law: str = 'delay_robust'        # the control law, a key of LAWS
     cbf_rate: float = 4.0            # 1/s, the cbf law's double pole
     cbf_moment_bound: float = 0.0    # N m, the unlearnt moment the cbf law's filter holds against
+    k_Delta_cog: float = 0.0         # adaptation gain of the m*rho block (constant+cog model)
+    guidance_lookahead: float = 0.0  # rad, guidance's set point at most this far ahead; 0 = off
+    guidance_clearance: float = 0.0  # rad, guidance's path this far outside each cone's barrier
     J: np.ndarray = field(init=False, repr=False)        # inertia about the pivot
     m_rho: np.ndarray = field(init=False, repr=False)    # mass times pivot -> centre of mass
 
@@ -138,6 +148,24 @@ class AttitudeController:
     def R_d(self, R_d: np.ndarray) -> None:
         self._R_d = R_d
         self._linear = LinearMap(R_d, self.config)
+        self._carrot_index = None
+        if self.guidance is not None:
+            self.guidance.reset()
+
+    @property
+    def setpoint_now(self) -> np.ndarray:
+        """The set point the law is flying to now: guidance's on its way to R_d, else R_d."""
+        if self.guidance is None or self.guidance.paths is None:
+            return self._R_d
+        P = self.guidance.paths[np.arange(len(self.guidance.index)), self.guidance.index]
+        return P[0] if self._R_d.ndim == 2 else P
+
+    def replan(self) -> None:
+        """Plan guidance's way to R_d again from the attitude of the next step (at arming)."""
+        if self.guidance is not None:
+            self.guidance.reset()
+            self._linear = LinearMap(self._R_d, self.config)
+            self._carrot_index = None
 
     # --- configuration-time operations -------------------------------------------------------
     def setpoint_problem(self, R_d: np.ndarray, cones: Optional[ConeSet] = None) -> Optional[str]:
@@ -201,7 +229,21 @@ class AttitudeController:
         barrier then acts on each cone widened by how far the sensor travels towards it in that
         time (``blind_widening``).
         """
+        if self.guidance is not None and not self._tracking:
+            self._follow(R)
         return self._law(self, R, Omega, dt, adapt, blind)
+
+    def _follow(self, R: np.ndarray) -> None:
+        """Move the law's set point along guidance's path (``core.guidance``): its linear map is
+        rebuilt only when the set point moves on.
+        """
+        guidance = self.guidance
+        assert guidance is not None
+        carrot = guidance.carrot(R, self._R_d, self.config.cones)
+        index = guidance.index
+        if self._carrot_index is None or not np.array_equal(index, self._carrot_index):
+            self._linear = LinearMap(carrot, self.config)
+            self._carrot_index = index
 
     # --- the pieces every law is made of -------------------------------------------------------
     def terms(self, R: np.ndarray, Omega: np.ndarray, blind: Any = 0.0) -> 'StepTerms':
@@ -251,7 +293,8 @@ class AttitudeController:
         adapting = adapt and cfg.adaptive and ~saturated      # a flag per run
         if adapting is not False and any_flag(adapting):
             v = e_Omega + cfg.c * e_R
-            rate = (dt * cfg.k_Delta) * (v if W is None else matvec(transpose(W), v))
+            rate = (dt * cfg.k_Delta) * v if W is None else dt * (
+                self._gamma * matvec(transpose(W), v))
             if rate.ndim > 1:                   # a batch: only the runs that adapt
                 rate *= adapting[..., None]
             self.delta_bar += rate
@@ -272,8 +315,11 @@ class AttitudeController:
 
     def _set_config(self, config):
         self.config = config
+        self.guidance = (Guidance(config.guidance_lookahead, config.guidance_clearance)
+                         if config.guidance_lookahead > 0.0 else None)
         self._law = LAWS[config.law]
         self.J_inv = np.linalg.inv(config.J)     # the model's, for the prediction too
+        self._gamma = np.array([config.k_Delta] * 3 + [config.k_Delta_cog] * 3)[:config.n_params]
         self._balls = [(block, bound) for block, bound in ((slice(0, 3), config.delta_bar_max),
                                                            (slice(3, 6), config.cog_estimate_max))
                        if bound > 0.0 and block.start < config.n_params]

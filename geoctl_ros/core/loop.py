@@ -157,6 +157,7 @@ class ControlLoop:
                 self.cone_entries, self.entry, self._inside = 0, None, False
                 self.step.history.clear()
                 self.step.predict.reset()
+                self.controller.replan()        # guidance's way from where the vehicle is
         return result
 
     def disarm(self, reason: str = 'disarm requested', failed: bool = False) -> ArmResult:

@@ -11,6 +11,7 @@ TABLE = [
     ('k_R', 'GC_K_R', 'REAL32'),
     ('k_Omega', 'GC_K_OMEGA', 'REAL32'),
     ('k_Delta', 'GC_K_DELTA', 'REAL32'),
+    ('k_Delta_cog', 'GC_K_DELTA_COG', 'REAL32'),
     ('c', 'GC_C', 'REAL32'),
     ('alpha', 'GC_ALPHA', 'REAL32'),
     ('adaptive', 'GC_ADAPTIVE', 'INT32'),

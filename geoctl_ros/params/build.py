@@ -34,6 +34,7 @@ def controller_config(values: dict) -> ControllerConfig:
     """ControllerConfig from resolved controller parameters (see ``resolve``)."""
     return ControllerConfig(
         k_R=values['k_R'], k_Omega=values['k_Omega'], k_Delta=values['k_Delta'], c=values['c'],
+        k_Delta_cog=values['k_Delta_cog'],
         G=values['G'], cones=cone_set(values), inertia=values['inertia'].reshape(3, 3),
         mass=values['mass'], cog_offset=values['cog_offset'], gravity=values['gravity'],
         adaptive=values['adaptive'], gravity_compensation=values['gravity_compensation'],
@@ -41,7 +42,9 @@ def controller_config(values: dict) -> ControllerConfig:
         cog_estimate_max=values['cog_estimate_max'],
         unmodelled_moment_max=values['unmodelled_moment_max'],
         blind_guard_max=math.radians(values['blind_guard_max_deg']), law=values['law'],
-        cbf_rate=values['cbf_rate'], cbf_moment_bound=values['cbf_moment_bound'])
+        cbf_rate=values['cbf_rate'], cbf_moment_bound=values['cbf_moment_bound'],
+        guidance_lookahead=math.radians(values['guidance_lookahead_deg']),
+        guidance_clearance=math.radians(values['guidance_clearance_deg']))
 
 
 _RECORDS: dict = {}

@@ -20,6 +20,10 @@ PARAMS = [
        check=positive, lo=0.001, hi=10.0),
     _p('k_Delta', 'double', 0.05, '-', 'adaptation gain k_Delta', CONTROLLER, check=positive,
        lo=1e-06, hi=10.0),
+    _p('k_Delta_cog', 'double', 0.0005, '(kg m)^2 / (N m s)',
+       'adaptation gain of the m*rho estimate (constant+cog model): its regressor is about |g| '
+       'times the constant one, so this is about k_Delta / |g|^2 for the same learning rate',
+       CONTROLLER, check=positive, lo=1e-07, hi=1.0),
     _p('c', 'double', 0.1, '1/s', 'weight of e_R in the adaptive law (Prop. 5)', CONTROLLER,
        check=positive, lo=0.0001, hi=100.0),
     _p('alpha', 'double', 8.0, '-', 'barrier shape alpha (larger: barrier acts closer to a cone)',
@@ -40,6 +44,15 @@ PARAMS = [
        'the cbf law: each cone holds against an unlearnt moment up to this (a robust CBF: '
        'a_i . u >= beta_i + bound |a_i|); 0 = the model taken as exact', CONTROLLER,
        lo=0.0, hi=10.0),
+    _p('guidance_lookahead_deg', 'double', 0.0, 'deg',
+       'guidance: the law flies to set points along a path planned round the cones to the goal, '
+       'each at most this far ahead of the measured attitude (also bounding the moment and the '
+       'speed far from the goal); 0 = off, the law flies straight to the goal '
+       '(docs/control-law.md, "Guidance")', CONTROLLER, lo=0.0, hi=90.0),
+    _p('guidance_clearance_deg', 'double', 8.0, 'deg',
+       "guidance: the planned path keeps this far outside each cone's barrier (its half-angle "
+       'plus cone_guard_deg); less where the start or the goal is nearer', CONTROLLER,
+       lo=0.0, hi=30.0),
     _p('adaptive', 'bool', True, '-', 'run the adaptive law (else Delta_bar stays 0)', CONTROLLER),
     _p('disturbance_model', 'string', 'constant', '-',
        'regressor W: constant (W = I) or constant+cog (also estimates the error in m*rho)',
