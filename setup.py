@@ -33,6 +33,7 @@ setup(
             'soak = geoctl_ros.cli.soak:main',
             'mavlink_bridge = geoctl_ros.nodes.mavlink_bridge:main',
             'campaign = geoctl_ros.cli.campaign:main',
+            'tune = geoctl_ros.cli.tune:main',
             'benchmark = geoctl_ros.cli.benchmark:main',
             'record = geoctl_ros.nodes.recorder:main',
             'report = geoctl_ros.cli.report:main',

@@ -32,6 +32,11 @@ class ConfigError(ValueError):
         super().__init__('invalid parameters:\n' + '\n'.join(
             '  %s: %s' % (name, reason) for name, reason in self.errors))
 
+    def __reduce__(self):
+        # (rebuilt from its pairs in another process, a Dask worker's or a pool's; the default
+        # would pass the message as the pairs)
+        return (ConfigError, (self.errors,))
+
 
 # --- checks: each returns a reason (str) or None ------------------------------------------------
 def positive(v: float) -> Optional[str]:

@@ -120,7 +120,7 @@ PARAMS = [
     _p('title', 'string', '', '-', "title for a scenario run's plots and summary", SCENARIO),
     _p('latency', 'double', 0.0, 's', 'measurement latency of a scenario run: the controller sees '
        'the state this long ago (a whole number of integration steps)', SCENARIO,
-       lo=0.0, hi=0.1),
+       lo=0.0, hi=0.2),
     _p('stalls.start', 'double_array', [], 's',
        'input stalls of a scenario run: when each begins (the controller then gets no new '
        'sample, as behind a starved executor, and flies on the last one, older by the stall)',

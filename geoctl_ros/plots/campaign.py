@@ -64,3 +64,42 @@ def gain_study_figure(figures, labels, front, path):
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 
+
+
+def tuning_figure(done, front, path):
+    """A tuning: each trial's median settle time against its 95th percentile, the feasible ones
+    filled and the Pareto front joined (``geoctl_ros.campaign.tune``); and the best feasible p95
+    so far against the trials.
+    """
+    fig, (a1, a2) = subplots(1, 2, figsize=(11, 4.2))
+    ok = [d for d in done if d[2].feasible]
+    bad = [d for d in done if not d[2].feasible]
+    if bad:
+        a1.scatter([d[2].settle_p50_s for d in bad], [d[2].settle_p95_s for d in bad],
+                   facecolors='none', edgecolors='tab:red', label='infeasible (%d)' % len(bad))
+    if ok:
+        a1.scatter([d[2].settle_p50_s for d in ok], [d[2].settle_p95_s for d in ok],
+                   color='tab:blue', label='feasible (%d)' % len(ok))
+    if front:
+        xs = [d[2].settle_p50_s for d in front]
+        ys = [d[2].settle_p95_s for d in front]
+        order = np.argsort(xs)
+        a1.plot(np.array(xs)[order], np.array(ys)[order], 'k-', lw=1, label='Pareto front')
+        for d in front:
+            a1.annotate('trial %d' % d[0], (d[2].settle_p50_s, d[2].settle_p95_s), fontsize=7,
+                        xytext=(4, 4), textcoords='offset points')
+    a1.set(xscale='log', yscale='log', xlabel='settle time, median [s]',
+           ylabel='settle time, 95th percentile [s]',
+           title='%d trials (unsettled runs count as twice the run)' % len(done))
+    a1.legend(fontsize=8)
+    a1.grid(True, which='both', alpha=0.3)
+    best, so_far = np.inf, []
+    for d in done:
+        if d[2].feasible:
+            best = min(best, d[2].settle_p95_s)
+        so_far.append(best)
+    a2.step(np.arange(len(done)), so_far, where='post', color='tab:blue')
+    a2.set(xlabel='trial', ylabel='best feasible p95 so far [s]', title='the search')
+    a2.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)

@@ -48,6 +48,7 @@ if TYPE_CHECKING:          # (a type only: sim.scenario imports this module)
     from geoctl_ros.sim.scenario import Scenario
 
 SETTLED_DEG = 5.0       # attitude error below which a run has converged (at the end) or settled
+FINE_DEG = 1.0          # attitude error below which a run has arrived (settle_fine_s)
 
 
 @dataclass
@@ -66,6 +67,7 @@ class Flight:
     effort: np.ndarray             # (runs,): the integral of the law's |u| over the flight (N m s)
     settle_s: np.ndarray           # (runs,): the time from which the attitude error stays below
                                    # SETTLED_DEG (NaN: not below at the end)
+    settle_fine_s: np.ndarray      # (runs,): the same for FINE_DEG (NaN: not below at the end)
     psi_settle_s: np.ndarray       # (runs,): the time from which Psi stays below SETTLE_PSI
                                    # (the paper's; NaN: not below at the end)
     margin_series: Optional[np.ndarray]   # (steps, runs): min cone margin at each control step
@@ -146,8 +148,9 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     sensor_series = np.empty((steps, n, 3), dtype=np.float32) if series else None
     record = History(steps, bed) if history else None
     last_unsettled = np.full(n, -1)        # the last step with the error >= SETTLED_DEG
+    last_coarse = np.full(n, -1)           # the last step with the error >= FINE_DEG
     last_psi_above = np.full(n, -1)        # the last step with Psi >= SETTLE_PSI
-    settled_rad = math.radians(SETTLED_DEG)
+    settled_rad, fine_rad = math.radians(SETTLED_DEG), math.radians(FINE_DEG)
     saturated = np.zeros(n)
     max_rate = np.zeros(n)
     effort = np.zeros(n)
@@ -177,7 +180,9 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         out, motors = tick(R_seen, W_seen, dt, t, ages)
         saturated += motors.allocation.saturated
         effort += np.sqrt(so3.dot(out.u, out.u)) * (holds[k] * h)
-        last_unsettled[_error(controller.R_d, R_now) >= settled_rad] = k
+        error = _error(controller.R_d, R_now)
+        last_unsettled[error >= settled_rad] = k
+        last_coarse[error >= fine_rad] = k
         last_psi_above[out.psi >= SETTLE_PSI] = k
         if margin_series is not None and sensor_series is not None:
             margin_series[k] = cones.margins_deg(R_now).min(axis=-1)
@@ -202,6 +207,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         final_error_deg=np.degrees(_error(controller.R_d, R_now)),
         final=final, final_angular_velocity=W_now, saturated_steps=saturated,
         max_rate=max_rate, effort=effort, settle_s=_settled(last_unsettled, times),
+        settle_fine_s=_settled(last_coarse, times),
         psi_settle_s=_settled(last_psi_above, times),
         margin_series=margin_series, sensor_series=sensor_series, history=record, times=times,
         dt=dt, wall_s=wall)

@@ -114,6 +114,7 @@ def run(scenario: Scenario, duration: Optional[float] = None) -> Result:
         'final_disturbance_estimate': [float(v) for v in final.delta_bar[0]],
         'settle_time_s': _figure(flight.psi_settle_s[0]),
         'time_to_5deg_s': _figure(flight.settle_s[0]),
+        'time_to_1deg_s': _figure(flight.settle_fine_s[0]),
         'max_abs_moment_Nm': float(np.abs(history.arrays['u'][:, 0]).max()) if steps else 0.0,
         'control_steps': steps,
         'wall_time_s': flight.wall_s,

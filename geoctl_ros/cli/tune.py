@@ -1,0 +1,122 @@
+"""Gain tuning: ``tune --trials 40 [--runs 64] [--seed 7] [--out DIR] [--workers N | --scheduler
+tcp://HOST:PORT]``.
+
+Optuna searches the controller's gains on the campaign's random manoeuvres, with all of the
+campaign's draw, and on docs/safety.md's latency rows, on the Dask cluster
+(``geoctl_ros.campaign.tune`` says what a trial flies and what it must keep). Writes DIR/trials.csv
+(a row per trial, floats exact), DIR/pareto.png, DIR/summary.md and the Pareto front's gain sets as
+parameter files DIR/best/gain_set_K.yaml (the testbed's file with the gains put over it: load it
+in place of config/testbed.yaml, or copy its gains). The front's sets also fly the whole latency
+table. The same --seed gives the same trials and the same best sets.
+"""
+import argparse
+import os
+import sys
+import time
+
+from geoctl_ros.campaign import cluster, study, tune
+from geoctl_ros.cli.args import cannot_start, positive_seconds
+from geoctl_ros.params import (
+    CONTROLLER,
+    ConfigError,
+    load_parameter_file,
+    node_overrides,
+    resolve,
+    write_parameter_file,
+)
+from geoctl_ros.plots.campaign import tuning_figure
+from geoctl_ros.sil.rosenv import config_dir
+
+
+def _line(number, gains, got):
+    return ('trial %3d: settle p50 %.2f s, p95 %.2f s, settled %.0f %%, violations %d, closest '
+            '%.2f deg, latency rows %.2f deg%s | %s'
+            % (number, got.settle_p50_s, got.settle_p95_s, 100 * got.settled_share,
+               got.violations, got.closest_min_deg, min(got.latency_margins_deg),
+               '' if got.feasible else ' (infeasible)',
+               ' '.join('%s=%.4g' % kv for kv in gains.items())))
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog='tune', description=__doc__.split('\n\n')[0])
+    parser.add_argument('--trials', type=int, default=40, help='gain sets tried (40)')
+    parser.add_argument('--runs', type=int, default=64,
+                        help='random manoeuvres each gain set flies (64)')
+    parser.add_argument('--seed', type=int, default=7,
+                        help="the campaign's seed and the sampler's (7)")
+    parser.add_argument('--duration', type=positive_seconds, default=8.0,
+                        help='seconds per manoeuvre (8)')
+    parser.add_argument('--latency-duration', type=positive_seconds, default=10.0,
+                        help='seconds per latency row (10)')
+    parser.add_argument('--best', type=int, default=3,
+                        help='Pareto-front gain sets written out, at most (3)')
+    parser.add_argument('--out', default=os.path.join('out', 'tune'),
+                        help='output directory (out/tune)')
+    parser.add_argument('--workers', type=int, default=os.cpu_count() or 1,
+                        help='local cluster: worker processes (one per core)')
+    parser.add_argument('--scheduler', metavar='tcp://HOST:PORT', default=None,
+                        help='fly on this Dask scheduler instead of a local cluster')
+    parser.add_argument('--params-file', default=None,
+                        help='the testbed (default: config/testbed.yaml)')
+    args = parser.parse_args(argv)
+    if args.trials < 1 or args.runs < 1 or args.workers < 1 or args.best < 1:
+        parser.error('--trials, --runs, --workers and --best must be positive')
+    latency_path = os.path.join(config_dir(), 'scenarios', 'testbed_yaw90.yaml')
+    try:
+        os.makedirs(os.path.join(args.out, 'best'), exist_ok=True)
+        base = load_parameter_file(args.params_file or os.path.join(config_dir(), 'testbed.yaml'))
+        load_parameter_file(latency_path)
+        nominal = resolve(CONTROLLER, node_overrides(base, CONTROLLER))
+    except (ConfigError, OSError) as e:
+        return cannot_start('tune', e, args.out)
+    start = {k: float(nominal[k]) for k in tune.SPACE
+             if tune.SPACE[k][0] <= nominal[k] <= tune.SPACE[k][1]}
+    targs = tune.TuneArgs(args.runs, args.seed, args.duration, latency_path,
+                          args.latency_duration)
+    t0 = time.monotonic()
+    with cluster.connect(args.scheduler, args.workers) as (client, where):
+        print('tune: %d trials of %d manoeuvres (seed %d) on %s'
+              % (args.trials, args.runs, args.seed, where), file=sys.stderr, flush=True)
+        try:
+            _, done = tune.tune(client, base, targs, args.trials, args.seed,
+                                lambda *t: print(_line(*t), file=sys.stderr, flush=True),
+                                start if len(start) == len(tune.SPACE) else None)
+        except KeyboardInterrupt:
+            print('tune: interrupted; nothing written', file=sys.stderr)
+            return 130
+        front = tune.pareto(done)[:args.best]
+        tables = [tune.latency_margins(client, latency_path, gains, tune.LATENCY_ROWS,
+                                       args.latency_duration) for _, gains, _ in front]
+    wall = time.monotonic() - t0
+    tune.write_trials(os.path.join(args.out, 'trials.csv'), done)
+    tuning_figure(done, front, os.path.join(args.out, 'pareto.png'))
+    lines = ['# Tuning: %d trials, %d manoeuvres of %g s each (campaign seed %d), %.0f s'
+             % (args.trials, args.runs, args.duration, args.seed, wall), '',
+             '%d feasible (%s <= 0); the Pareto front of settle p50 and p95:'
+             % (sum(d[2].feasible for d in done), ', '.join(tune.CONSTRAINTS)), '',
+             '| set | trial | settle p50 / p95 [s] | settled | closest min / p1 [deg] | '
+             'latency table, closest [deg] | gains |', '|---|---|---|---|---|---|---|']
+    for k, ((number, gains, got), table) in enumerate(zip(front, tables), 1):
+        lines.append('| %d | %d | %.2f / %.2f | %.0f %% | %.2f / %.2f | %s | %s |' % (
+            k, number, got.settle_p50_s, got.settle_p95_s, 100 * got.settled_share,
+            got.closest_min_deg, got.closest_p1_deg, ' '.join('%.2f' % m for m in table),
+            ' '.join('%s=%.4g' % kv for kv in gains.items())))
+        write_parameter_file(
+            study.parameter_file(base, gains), os.path.join(args.out, tune.best_file_name(k)),
+            'Written by `tune` (trial %d of seed %d): settle p50 %.2f s, p95 %.2f s over %d '
+            'manoeuvres, closest approach %.2f deg; latency table (docs/safety.md) closest '
+            '%.2f deg.' % (number, args.seed, got.settle_p50_s, got.settle_p95_s, got.runs,
+                           got.closest_min_deg, min(table)))
+    if not front:
+        lines.append('(no feasible trial: try more trials, or look at trials.csv)')
+    lines += ['', 'latency rows (latency, jitter) [ms]: ' + ' '.join(
+        '(%.0f, %.0f)' % (1e3 * a, 1e3 * b) for a, b in tune.LATENCY_ROWS)]
+    with open(os.path.join(args.out, 'summary.md'), 'w') as f:
+        f.write('\n'.join(lines) + '\n')
+    print('\n'.join(lines))
+    print('wrote %s' % args.out)
+    return 0 if front else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,144 @@
+"""Guidance round the cones (geoctl_ros.core.guidance) and the m*rho estimate, against values
+derived here: brute-force sampling of arcs, the campaign's random cones, the sim's true m*rho.
+"""
+import math
+import os
+
+import numpy as np
+import pytest
+
+from geoctl_ros.campaign import manoeuvres
+from geoctl_ros.core import guidance, so3
+from geoctl_ros.params import load_parameter_file
+from geoctl_ros.sim import scenario
+from geoctl_ros.sim.closed_loop import fly
+
+pytestmark = pytest.mark.odroid
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCENARIOS = os.path.join(ROOT, 'config', 'scenarios')
+R_AXIS = np.array([1.0, 0.0, 0.0])
+
+
+def _unit(v):
+    v = np.asarray(v, dtype=float)
+    return v / np.linalg.norm(v)
+
+
+def _arc_points(a, b, n=2001):
+    """n points along the short great-circle arc from a to b (brute force)."""
+    angle = math.acos(min(1.0, float(a @ b)))
+    axis = _unit(np.cross(a, b))
+    return np.array([so3.exp(axis * (angle * t)) @ a for t in np.linspace(0.0, 1.0, n)])
+
+
+def test_arc_clearance_is_the_closest_approach_of_the_sampled_arc():
+    rng = np.random.default_rng(3)
+    a = np.array([_unit(rng.normal(size=3)) for _ in range(6)])
+    b = np.array([_unit(rng.normal(size=3)) for _ in range(5)])
+    axes = np.array([_unit(rng.normal(size=3)) for _ in range(4)])
+    got = guidance.arc_clearance(a, b, axes)
+    for i in range(len(a)):
+        for j in range(len(b)):
+            pts = _arc_points(a[i], b[j])
+            sampled = np.degrees(np.arccos(np.clip(pts @ axes.T, -1.0, 1.0))).min(axis=0)
+            assert np.degrees(got[i, j]) == pytest.approx(sampled, abs=0.1)
+
+
+def _campaign_case(seed, index):
+    """A run's cones (axes, half-angles rad), start and goal of the campaign's draw."""
+    m = manoeuvres.draw_manoeuvre(seed, index, R_AXIS)
+    axes = np.array([_unit(v) for v, _ in m['cones']])
+    theta = np.radians([t for _, t in m['cones']])
+    return axes, theta, m['R0'], m['R_d']
+
+
+@pytest.mark.parametrize('index', range(12))
+def test_the_planned_path_keeps_every_cone_clear_and_ends_at_the_goal(index):
+    """On the campaign's random cones (a straight way through the first one): every point of the
+    attitude path keeps the sensor the clearance outside every cone's rim (less the rim points'
+    slack and the arcs' sag), steps at most PATH_STEP, starts from the start's sensor direction
+    and ends at the goal exactly.
+    """
+    axes, theta, R0, R_goal = _campaign_case(11, index)
+    rims = theta + math.radians(2.0)                  # the barrier's half-angles (a 2 deg guard)
+    clearance = math.radians(8.0)
+    path = guidance.plan(R0, R_goal, R_AXIS, axes, rims, clearance)
+    assert len(path) > 2
+    assert np.array_equal(path[-1], R_goal)
+    d = path @ R_AXIS
+    assert np.allclose(d[0], R0 @ R_AXIS, atol=1e-9)
+    steps = np.degrees(np.arccos(np.clip(np.einsum('ij,ij->i', d[:-1], d[1:]), -1.0, 1.0)))
+    assert steps.max() <= math.degrees(guidance.PATH_STEP) + 1e-6
+    ends = np.arccos(np.clip(np.stack([d[0], d[-1]]) @ axes.T, -1.0, 1.0)).min(axis=0)
+    need = rims + np.minimum(clearance, 0.5 * (ends - rims))
+    dense = np.concatenate([_arc_points(p, q, 20) for p, q in zip(d[:-1], d[1:])])
+    angle = np.arccos(np.clip(dense @ axes.T, -1.0, 1.0))
+    assert np.all(angle >= need - math.radians(0.2)), np.degrees((angle - need).min())
+    # the straight way crosses the first cone: the path goes round, so it is longer
+    assert np.sum(np.radians(steps)) > math.acos(float(d[0] @ d[-1]))
+
+
+def test_the_set_point_runs_at_most_the_lookahead_ahead_and_never_back():
+    axes, theta, R0, R_goal = _campaign_case(11, 0)
+    from geoctl_ros.core.cones import ConeSet
+    cones = ConeSet(R_AXIS, axes, theta, 8.0, math.radians(0.25), guard_rad=math.radians(2.0))
+    g = guidance.Guidance(math.radians(20.0), math.radians(8.0))
+    R = R0.copy()
+    seen = []
+    for _ in range(400):                   # a vehicle that moves 40 % of the way each step
+        P = g.carrot(R, R_goal, cones)
+        assert math.degrees(so3.angle(P.T @ R)) <= 20.0 + 1e-6
+        seen.append(int(g.index[0]))
+        R = R @ so3.exp(0.4 * so3.log(R.T @ P))
+    assert seen == sorted(seen)
+    assert np.array_equal(P, R_goal)
+    assert math.degrees(so3.angle(R_goal.T @ R)) < 0.01
+
+
+def test_the_set_point_is_planned_again_for_a_vehicle_pushed_off_its_way():
+    axes, theta, R0, R_goal = _campaign_case(11, 1)
+    from geoctl_ros.core.cones import ConeSet
+    cones = ConeSet(R_AXIS, axes, theta, 8.0, math.radians(0.25))
+    g = guidance.Guidance(math.radians(20.0), math.radians(8.0))
+    g.carrot(R0, R_goal, cones)
+    pushed = so3.exp(np.array([0.0, 0.0, math.radians(70.0)])) @ R0
+    P = g.carrot(pushed, R_goal, cones)
+    assert math.degrees(so3.angle(P.T @ pushed)) <= 20.0 + 1e-6
+    assert np.allclose(g.paths[0, 0] @ R_AXIS, pushed @ R_AXIS)
+
+
+def test_the_straight_yaw_arrives_round_the_cone():
+    """The issue's case: config/scenarios/testbed_yaw90.yaml (no schedule) is under 5 deg by 8 s
+    and under 1 deg by 15 s, at least 2 deg clear of the cone all the way.
+    """
+    s = scenario.load(os.path.join(SCENARIOS, 'testbed_yaw90.yaml'))
+    f = fly([s], duration=16.0)
+    assert f.min_margin_deg.min() >= 2.0
+    assert f.settle_s[0] <= 8.0
+    assert f.settle_fine_s[0] <= 15.0
+    assert f.final_error_deg[0] < 1.0
+
+
+def test_the_estimate_learns_the_true_m_rho_within_seconds():
+    """The sim's centre of mass 20 % higher than the model's and its mass 20 % heavier (m*rho
+    44 % off): flown to a set point tilted 30 deg, within 4 s the model's m*rho plus the
+    estimate agrees with the sim's true m*rho in the components that gravity shows there (those
+    across it; the one along it is not observable at one attitude) to 10 % of the model's error,
+    and the attitude error is under 1 deg.
+    """
+    s = scenario.load(os.path.join(SCENARIOS, 'testbed_yaw90.yaml'))
+    s.controller['cones.names'] = []
+    tilt = so3.exp(np.array([math.radians(30.0), 0.0, 0.0]))
+    s.controller['setpoint'] = so3.rot_to_quat(tilt)
+    s.sim['mass'] = 1.26 * 1.2
+    s.sim['cog_offset'] = np.array([0.0, 0.0, 0.12])
+    f = fly([s], duration=4.0)
+    model = 1.26 * np.array([0.0, 0.0, 0.1])
+    truth = s.sim['mass'] * s.sim['cog_offset']
+    learnt = model + f.final.delta_bar[0][3:]
+    g_b = tilt.T @ np.array([0.0, 0.0, -1.0])            # gravity's direction, body frame
+    across = np.eye(3) - np.outer(g_b, g_b)
+    error = np.linalg.norm(across @ (learnt - truth))
+    assert error <= 0.1 * np.linalg.norm(across @ (model - truth)), (learnt, truth)
+    assert f.final_error_deg[0] < 1.0
