@@ -74,8 +74,18 @@ def test_the_benchmark_flies_every_law_on_a_case_and_the_same_random_runs(
         assert float(random[law]['closest_p1_deg']) == pytest.approx(np.percentile(closest, 1))
         assert float(overall[law]['closest_min_deg']) == min(
             closest + [float(rows[law]['closest_min_deg'])])
+    # the gain sets: the default law with the testbed's tuned gains (its row above) and with the
+    # paper's experiment's, over the same runs; the experiment's settle no sooner
+    sets = read(out / 'gain_sets.csv')
+    assert [r['law'] for r in sets] == list(run.GAIN_SETS)
+    tuned, experiment = sets
+    figures = [k for k in tuned if k not in ('law', 'step_p50_us', 'step_p99_us')]
+    assert [tuned[k] for k in figures] == [random[cases.DEFAULT_LAW][k] for k in figures]
+    assert experiment['runs'] == '6'
+    assert int(experiment['settled_in_time']) <= int(tuned['settled_in_time'])
     text = (out / 'benchmark.md').read_text()
-    for heading in ('## testbed_yaw90: ', '## 6 random manoeuvres', '## Overall'):
+    for heading in ('## testbed_yaw90: ', '## 6 random manoeuvres', '## Overall',
+                    '## Gain sets: the default law'):
         assert heading in text
     assert text.count('| geometric | 1 | 1 |') == 1                 # the case's row
     for png in ('testbed_yaw90.png', 'random_closest.png'):

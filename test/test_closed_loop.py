@@ -20,7 +20,8 @@ TESTBED = os.path.join(ROOT, 'config', 'testbed.yaml')
 SCENARIOS = os.path.join(ROOT, 'config', 'scenarios')
 
 FIGURES = ('min_angle_deg', 'final_error_deg', 'final_angular_velocity', 'saturated_steps',
-           'max_rate', 'settle_s', 'settle_fine_s', 'psi_settle_s', 'margin_series', 'sensor_series')
+           'max_rate', 'settle_s', 'settle_fine_s', 'psi_settle_s', 'margin_series',
+           'sensor_series')
 
 
 def assert_same_bits(batch, alone, p):

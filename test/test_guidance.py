@@ -9,7 +9,7 @@ import pytest
 
 from geoctl_ros.campaign import manoeuvres
 from geoctl_ros.core import guidance, so3
-from geoctl_ros.params import load_parameter_file
+from geoctl_ros.core.cones import ConeSet
 from geoctl_ros.sim import scenario
 from geoctl_ros.sim.closed_loop import fly
 
@@ -81,7 +81,6 @@ def test_the_planned_path_keeps_every_cone_clear_and_ends_at_the_goal(index):
 
 def test_the_set_point_runs_at_most_the_lookahead_ahead_and_never_back():
     axes, theta, R0, R_goal = _campaign_case(11, 0)
-    from geoctl_ros.core.cones import ConeSet
     cones = ConeSet(R_AXIS, axes, theta, 8.0, math.radians(0.25), guard_rad=math.radians(2.0))
     g = guidance.Guidance(math.radians(20.0), math.radians(8.0))
     R = R0.copy()
@@ -98,7 +97,6 @@ def test_the_set_point_runs_at_most_the_lookahead_ahead_and_never_back():
 
 def test_the_set_point_is_planned_again_for_a_vehicle_pushed_off_its_way():
     axes, theta, R0, R_goal = _campaign_case(11, 1)
-    from geoctl_ros.core.cones import ConeSet
     cones = ConeSet(R_AXIS, axes, theta, 8.0, math.radians(0.25))
     g = guidance.Guidance(math.radians(20.0), math.radians(8.0))
     g.carrot(R0, R_goal, cones)

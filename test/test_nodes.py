@@ -119,7 +119,7 @@ def read_back(path, axis):
                 np.array(stamps))
 
 
-FLIGHT_S = 16.0        # the schedule's last step is at 12 s; Psi is down to 2 % of its peak by 16
+FLIGHT_S = 8.0         # the guided yaw is under 1 deg in about 3 s
 
 
 @pytest.mark.odroid          # the one flight over DDS on the vehicle's stack too
@@ -206,8 +206,9 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     assert all(0 < data[0] < 240 for data, _ in bus.setpoints())             # flying
     psi = mon.between('psi', t0, t1)
     assert psi[-1] < 0.05 * max(psi)
-    final = controller_setup(values).schedule.rotations[-1]
-    assert math.degrees(so3.angle(final.T @ true[-1])) < 8.0
+    setup = controller_setup(values)
+    final = setup.schedule.rotations[-1] if len(setup.schedule) else setup.setpoint
+    assert math.degrees(so3.angle(final.T @ true[-1])) < 1.0          # arrived (guided, tuned)
     cmds = np.array(mon.between('motors', t0, t1))
     cmds = cmds[~np.all(cmds == intruder, axis=1)]         # (this monitor hears its own too)
     assert len(cmds) > 0.75 * 100 * FLIGHT_S and cmds.shape[1] == 6

@@ -112,6 +112,9 @@ ROSDEP_KEYS = {'numpy': 'python3-numpy', 'yaml': 'python3-yaml',
                'pytest': 'python3-pytest', 'rosbags': 'python3-rosbags-pip',
                'dask': 'python3-dask', 'distributed': 'python3-distributed',
                'smbus2': 'python3-smbus2', 'hypothesis': 'python3-hypothesis'}
+# imported by development tools only, never on the vehicle: not in package.xml, pinned in
+# requirements.txt (`./run tune`: the gains are tuned on a development machine or a cluster)
+DEVELOPMENT_ONLY = {'optuna'}
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python', 'std_msgs',
                 'geometry_msgs', 'sensor_msgs', 'std_srvs', 'diagnostic_msgs', 'rosgraph_msgs',
                 'launch_ros', 'visualization_msgs'}
@@ -137,6 +140,7 @@ def test_package_xml_declares_what_the_code_imports():
     test_deps = set(re.findall(r'<test_depend>([\w-]+)</test_depend>', xml)) | exec_deps
     for top, declared in (('geoctl_ros', exec_deps), ('test', test_deps)):
         imported = _third_party_imports(top)
+        imported -= DEVELOPMENT_ONLY
         unknown = imported - ROS_PACKAGES - set(ROSDEP_KEYS)
         assert not unknown, '%s imports %s: add its rosdep key here and to package.xml' % (
             top, sorted(unknown))
@@ -267,10 +271,13 @@ def test_the_rclpy_free_layers_are_clean_under_mypy(tmp_path):
     assert r.returncode == 1 and 'Incompatible return value' in r.stdout, r.stdout
 
 
-def test_every_module_of_the_package_has_at_most_300_lines():
+def test_every_module_of_the_package_has_at_most_400_lines():
+    """A ceiling, not a rule for where to cut: files are cut by concept (issue 40 raised it from
+    300, where a class was being split across files to fit).
+    """
     paths = sorted(pathlib.Path(PKG).rglob('*.py'))
     long = ['%s: %d' % (path.relative_to(PKG), n) for path in paths
-            if (n := len(path.read_text().splitlines())) > 300]
+            if (n := len(path.read_text().splitlines())) > 400]
     assert not long, long
 
 

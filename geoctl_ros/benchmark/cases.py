@@ -25,6 +25,7 @@ CASES = ('paper_four_cones_adaptive', 'paper_four_cones_no_adaptation',
          'paper_four_cones_code_variant', 'dissertation_time_varying', 'testbed_yaw90')
 # the laws in the tables' order: the paper's, its delay-robust variant, the baseline, the filter
 BENCHED = ('paper', 'delay_robust', 'geometric', 'cbf')
+DEFAULT_LAW = 'delay_robust'   # the schema's default law: the one the gain sets are compared with
 assert set(BENCHED) == set(LAWS)
 TIMED_STATES = 300          # states of each flight the steps are timed at
 

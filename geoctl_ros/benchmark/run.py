@@ -11,19 +11,36 @@ flights. Writes into the output folder:
 - cases.csv, random.csv, overall.csv: the same rows (floats exact);
 - random_runs.csv: every random run's figures, per law;
 - CASE.png: per case, every law's sensor path with the cones, and its margins in time;
-- random_closest.png: the random runs' closest approach per law.
+- random_closest.png: the random runs' closest approach per law;
+- gain_sets.csv and a table in benchmark.md: the default law over the random runs with each gain
+  set (``GAIN_SETS``: the testbed's tuned gains, and the paper's experiment's).
 """
 import os
 import time
 from types import SimpleNamespace
-from typing import Callable, Dict, List, Optional
+from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
 from geoctl_ros.benchmark import cases
 from geoctl_ros.benchmark.scores import RUN_COLUMNS, csv_lines, law_row, markdown
-from geoctl_ros.campaign import cluster, manoeuvres, runner
+from geoctl_ros.campaign import cluster, manoeuvres, runner, tune
+from geoctl_ros.params import CONTROLLER, load_parameter_file, node_overrides, resolve
 from geoctl_ros.plots import benchmark as plots
+
+# The gain sets the default law flies the random runs with: name -> the scenario file (under
+# config/scenarios) whose gains go over config/testbed.yaml's; None: the testbed's own
+GAIN_SETS = {'tuned (config/testbed.yaml)': None,
+             "the experiment's (testbed_experiment.yaml)": 'testbed_experiment.yaml'}
+GAIN_KEYS = tuple(tune.SPACE) + ('disturbance_model',)
+
+
+def gain_set(path: Optional[str]) -> dict:
+    """The gains (GAIN_KEYS) of a scenario file, its defaults included; {} for None."""
+    if path is None:
+        return {}
+    values = resolve(CONTROLLER, node_overrides(load_parameter_file(path), CONTROLLER))
+    return {k: values[k] for k in GAIN_KEYS}
 
 
 def fly_cases(client, sections: Dict[str, dict], say: Callable[[str], None],
@@ -47,18 +64,30 @@ def fly_cases(client, sections: Dict[str, dict], say: Callable[[str], None],
 
 
 def fly_random(client, base: dict, runs: int, seed: int, duration: float, batch: int,
-               progress: Optional[Callable] = None) -> Dict[str, Dict[str, np.ndarray]]:
-    """Fly the campaign's random runs 0..runs-1 of seed with every law, on the cluster (the same
-    manoeuvres for each); {law: {column: array over the runs}}.
+               progress: Optional[Callable] = None, gain_sets: Optional[Dict[str, dict]] = None
+               ) -> Tuple[Dict[str, Dict[str, np.ndarray]], Dict[str, Dict[str, np.ndarray]]]:
+    """Fly the campaign's random runs 0..runs-1 of seed with every law, and with the default law
+    under each of gain_sets ({name: gains}; the testbed's own, {}, is the default law's row), on
+    the cluster (the same manoeuvres for each); ({law: {column: array over the runs}}, {gain set
+    name: the same}).
     """
     args = SimpleNamespace(runs=runs, seed=seed, duration=duration, batch=batch,
                            disturbance_max=manoeuvres.DISTURBANCE_MAX, worst=0)
-    gain_sets = [{'law': law} for law in cases.BENCHED]
-    columns, _, interrupted, _ = runner.fly(client, base, args, gain_sets, progress)
+    sets = [{'law': law} for law in cases.BENCHED]
+    extra = {name: gains for name, gains in (gain_sets or {}).items() if gains}
+    sets += [dict(gains, law=cases.DEFAULT_LAW) for gains in extra.values()]
+    columns, _, interrupted, _ = runner.fly(client, base, args, sets, progress)
     if interrupted:
         raise KeyboardInterrupt
-    return {law: {c: v[columns['gain_set'] == k + 1] for c, v in columns.items()}
-            for k, law in enumerate(cases.BENCHED)}
+
+    def of(k):
+        return {c: v[columns['gain_set'] == k + 1] for c, v in columns.items()}
+    by_law = {law: of(k) for k, law in enumerate(cases.BENCHED)}
+    by_set = {}
+    for name, gains in (gain_sets or {}).items():
+        by_set[name] = (by_law[cases.DEFAULT_LAW] if not gains
+                        else of(len(cases.BENCHED) + list(extra).index(name)))
+    return by_law, by_set
 
 
 def time_steps(flights: List[dict], rounds: int = 3) -> Dict[str, Dict[str, np.ndarray]]:
@@ -97,9 +126,10 @@ def tables(flights, random, timed):
     return per_case, random_rows, overall
 
 
-def write(out_dir, flights, random, timed, titles, notes):
+def write(out_dir, flights, random, timed, titles, notes, by_set=None):
     """benchmark.md, the CSV files and the figures; benchmark.md's lines."""
     per_case, random_rows, overall = tables(flights, random, timed)
+    set_rows = [law_row(name, columns) for name, columns in (by_set or {}).items()]
     lines = ['# Benchmark of the control laws', ''] + notes
     for name, rows in per_case.items():
         lines += ['', '## %s: %s' % (name, titles[name]), ''] + markdown(rows)
@@ -120,10 +150,16 @@ def write(out_dir, flights, random, timed, titles, notes):
             for law in cases.BENCHED:
                 for row in zip(*(random[law][k].tolist() for k in keys)):
                     f.write(law + ',' + ','.join(map(repr, row)) + '\n')
+    if set_rows:
+        lines += ['', '## Gain sets: the default law (%s) over the same random manoeuvres'
+                  % cases.DEFAULT_LAW, '']
+        lines += [line.replace('| law |', '| gain set |', 1) for line in markdown(set_rows)]
     lines += ['', '## Overall (every run: the standard cases and the random ones)', '']
     lines += markdown(overall)
     files = {'cases.csv': csv_lines([r for rows in per_case.values() for r in rows], ['case']),
              'random.csv': csv_lines(random_rows), 'overall.csv': csv_lines(overall)}
+    if set_rows:
+        files['gain_sets.csv'] = csv_lines(set_rows)
     for name, text in files.items():
         with open(os.path.join(out_dir, name), 'w') as f:
             f.write('\n'.join(text) + '\n')
@@ -139,8 +175,8 @@ def benchmark(client, case_sections, base, args, say, progress=None):
     t0 = time.monotonic()
     flights = fly_cases(client, case_sections, say, args.case_duration)
     t1 = time.monotonic()
-    random = (fly_random(client, base, args.runs, args.seed, args.duration, args.batch, progress)
-              if args.runs else {})
+    random, by_set = (fly_random(client, base, args.runs, args.seed, args.duration, args.batch,
+                                 progress, args.gain_sets) if args.runs else ({}, {}))
     t2 = time.monotonic()
     timed = time_steps(flights)
     workers = cluster.worker_count(client)
@@ -153,4 +189,4 @@ def benchmark(client, case_sections, base, args, say, progress=None):
              % (', '.join(cases.BENCHED), t1 - t0, args.runs, args.seed, args.duration,
                 t2 - t1, workers, 3, cases.TIMED_STATES) + shortened]
     titles = {f['case']: f['title'] for f in flights}
-    return write(args.out, flights, random, timed, titles, notes)
+    return write(args.out, flights, random, timed, titles, notes, by_set)

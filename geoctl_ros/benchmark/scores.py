@@ -19,6 +19,8 @@ from geoctl_ros.sim.closed_loop import SETTLED_DEG, Flight
 RUN_COLUMNS = ('violated', 'closest_deg', 'settle_s', 'final_error_deg', 'effort_Nms', 'max_rate',
                'saturated_s')
 
+SETTLE_WITHIN_S = 10.0     # a run 'settled within' this (the issue's figure of a manoeuvre)
+
 # a law's row: (key, heading, format)
 ROW = (
     ('law', 'law', '%s'),
@@ -27,7 +29,9 @@ ROW = (
     ('closest_min_deg', 'closest min [deg]', '%+.2f'),
     ('closest_p1_deg', 'closest p1 [deg]', '%+.2f'),
     ('settled', 'settled (< %g deg)' % SETTLED_DEG, '%d'),
+    ('settled_in_time', 'settled within %g s' % SETTLE_WITHIN_S, '%d'),
     ('settle_s', 'time to %g deg, median [s]' % SETTLED_DEG, '%.2f'),
+    ('settle_p95_s', 'time to %g deg, p95 [s]' % SETTLED_DEG, '%.2f'),
     ('final_error_deg', 'final error, median [deg]', '%.2f'),
     ('effort_Nms', 'effort, median [N m s]', '%.3f'),
     ('max_rate', 'peak rate, median [rad/s]', '%.2f'),
@@ -58,12 +62,14 @@ def law_row(law: str, columns: Dict[str, np.ndarray], step_us: Optional[Sequence
             margins: Optional[np.ndarray] = None) -> dict:
     """A law's row (ROW's keys) over its runs (columns: RUN_COLUMNS' arrays). The closest
     approach's p1 is over the runs, or with margins (one run's margin at each control step) over
-    those. The time to 5 deg is the median of the runs that settled (``settled`` counts them).
+    those. The time to 5 deg's median and p95 are over every run, one that never settled counting
+    as infinitely late ('-' when that is where the percentile falls).
     step_us: the law's step times, microseconds.
     """
     closest = np.asarray(columns['closest_deg'], dtype=float)
     settle = np.asarray(columns['settle_s'], dtype=float)
     settled = settle[~np.isnan(settle)]
+    late = np.where(np.isnan(settle), np.inf, settle)
     p1_of = closest if margins is None else np.asarray(margins, dtype=float)
     steps = np.asarray(step_us if step_us is not None else [], dtype=float)
     return {
@@ -72,7 +78,9 @@ def law_row(law: str, columns: Dict[str, np.ndarray], step_us: Optional[Sequence
         'closest_min_deg': float(closest.min()) if len(closest) else math.nan,
         'closest_p1_deg': percentile(p1_of, 1),
         'settled': len(settled),
-        'settle_s': _median(settled),
+        'settled_in_time': int(np.sum(settled <= SETTLE_WITHIN_S)),
+        'settle_s': _median(late),
+        'settle_p95_s': float(np.percentile(late, 95)) if len(late) else math.nan,
         'final_error_deg': _median(columns['final_error_deg']),
         'effort_Nms': _median(columns['effort_Nms']),
         'max_rate': _median(columns['max_rate']),

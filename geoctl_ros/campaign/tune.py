@@ -1,18 +1,21 @@
 """Gain tuning: Optuna searches the controller's gains on the campaign's random manoeuvres.
 
-Each trial is a gain set (``SPACE``: the feedback gains, the adaptation, guidance's lookahead),
-flown over the same ``runs`` manoeuvres of campaign seed ``seed`` with all of the campaign's draw
-(latency and stalls, model errors, noise, the motors' lag; ``geoctl_ros.campaign.manoeuvres``) and
-over the latency rows of docs/safety.md (``LATENCY_ROWS``: config/scenarios/testbed_yaw90.yaml
-with its measurements that old and its steps that late), all on the Dask cluster.
+Each trial is a gain set: a point of ``SPACE`` (the feedback gains, the adaptation's weight c as a
+share of k_R / k_Omega, the time constants with which the estimate learns m*rho and a constant
+moment, guidance's lookahead), which ``controller_gains`` turns into the controller's parameters.
+It flies the same ``runs`` manoeuvres of campaign seed ``seed`` with all of the campaign's draw
+(latency and stalls, model errors, noise, the motors' lag; ``geoctl_ros.campaign.manoeuvres``),
+and the hardest rows of docs/safety.md's latency table (``TRIAL_LATENCY_ROWS``:
+config/scenarios/testbed_yaw90.yaml with its measurements that old and its steps that late), all
+on the Dask cluster.
 
 - **Objectives** (both minimised): the settle time's median and 95th percentile over the runs
   (the time from which the attitude error stays under 5 deg; a run that never settles counts as
   ``UNSETTLED_FACTOR`` times the run's duration).
 - **Constraints** (Optuna's: feasible when every value is <= 0): no violation in the runs, the
   closest approach at least ``CLOSEST_FLOOR_DEG``, the rotors saturated at most
-  ``SATURATED_SHARE_MAX`` of the time on average (their authority), and every latency row clear
-  of the cone.
+  ``SATURATED_SHARE_MAX`` of the time on average (their authority), and every latency row at
+  least ``CLOSEST_FLOOR_DEG`` clear of the cone too.
 
 The sampler is Optuna's TPE (multivariate) with ``seed``, and a trial's figures are a pure
 function of its gains and the campaign seed (``runs.csv`` is the same on any cluster), so a
@@ -26,19 +29,26 @@ from typing import Any, Dict, List, Optional, Sequence
 import numpy as np
 
 from geoctl_ros.campaign import runner, study
+from geoctl_ros.core.gains import learning_gain, learning_time
 from geoctl_ros.params import load_parameter_file
 from geoctl_ros.sim import closed_loop
 from geoctl_ros.sim.scenario import from_sections
 
-# name: (low, high, log scale); everything else is the testbed's
+# The search's coordinates, name: (low, high, log scale). The adaptation is searched by what it
+# does rather than by its raw gains: c as a share of k_R / k_Omega (at 1, e_Omega + c e_R vanishes
+# along the loop's own slow decay, so the estimate learns from what the model misses, not from the
+# manoeuvre itself), and each block's learning time constant (``core.gains.learning_time``),
+# m*rho's within a few seconds (docs/control-law.md, "Learning the gravity moment").
 SPACE = {
-    'k_R': (0.3, 3.0, True),
+    'k_R': (0.5, 3.0, True),
     'k_Omega': (0.15, 1.5, True),
-    'c': (0.1, 5.0, True),
-    'k_Delta': (0.005, 0.5, True),
-    'k_Delta_cog': (0.0005, 0.05, True),
+    'c_share': (0.25, 1.5, False),
+    'cog_learning_s': (0.5, 3.0, True),
+    'moment_learning_s': (2.0, 30.0, True),
     'guidance_lookahead_deg': (10.0, 45.0, False),
 }
+# the controller's parameters a trial sets (over the testbed's file)
+GAINS = ('k_R', 'k_Omega', 'c', 'k_Delta', 'k_Delta_cog', 'guidance_lookahead_deg')
 CLOSEST_FLOOR_DEG = 2.0        # the closest approach of any run, at least
 SATURATED_SHARE_MAX = 0.02     # the rotors saturated at most this share of the time, on average
 UNSETTLED_FACTOR = 2.0         # a run that never settles counts as this many durations
@@ -47,7 +57,27 @@ LATENCY_ROWS = ((0.0, 0.0), (0.02, 0.0), (0.05, 0.0), (0.05, 0.01), (0.08, 0.02)
                 (0.1, 0.05), (0.15, 0.05))
 TRIAL_LATENCY_ROWS = ((0.05, 0.01), (0.1, 0.05), (0.15, 0.05))    # the hardest, in every trial
 CONSTRAINTS = ('violations', 'closest below the floor [deg]', 'saturated share over the limit',
-               'latency rows into the cone')
+               'latency rows below the floor [deg]')
+TRIALS_AT_ONCE = 2      # trials asked and flown together (a constant: the same on any cluster)
+
+
+def controller_gains(point: Dict[str, float], gravity: float) -> Dict[str, float]:
+    """The controller's parameters (GAINS) of a point of SPACE; gravity: |g| (m/s^2)."""
+    k_R, k_Omega = point['k_R'], point['k_Omega']
+    c = point['c_share'] * k_R / k_Omega
+    return {'k_R': k_R, 'k_Omega': k_Omega, 'c': c,
+            'k_Delta': learning_gain(k_R, c, point['moment_learning_s'], 1.0),
+            'k_Delta_cog': learning_gain(k_R, c, point['cog_learning_s'], gravity),
+            'guidance_lookahead_deg': point['guidance_lookahead_deg']}
+
+
+def search_point(gains: Dict[str, float], gravity: float) -> Dict[str, float]:
+    """The point of SPACE of the controller's parameters (``controller_gains``' inverse)."""
+    k_R, k_Omega, c = gains['k_R'], gains['k_Omega'], gains['c']
+    return {'k_R': k_R, 'k_Omega': k_Omega, 'c_share': c * k_Omega / k_R,
+            'cog_learning_s': learning_time(k_R, c, gains['k_Delta_cog'], gravity),
+            'moment_learning_s': learning_time(k_R, c, gains['k_Delta'], 1.0),
+            'guidance_lookahead_deg': gains['guidance_lookahead_deg']}
 
 
 @dataclass
@@ -68,7 +98,7 @@ class TrialFigures:
         """Optuna's constraint values, feasible when all are <= 0 (in CONSTRAINTS' order)."""
         return [float(self.violations), CLOSEST_FLOOR_DEG - self.closest_min_deg,
                 self.saturated_share - SATURATED_SHARE_MAX,
-                float(sum(m <= 0.0 for m in self.latency_margins_deg))]
+                CLOSEST_FLOOR_DEG - min(self.latency_margins_deg, default=math.inf)]
 
     @property
     def feasible(self) -> bool:
@@ -108,12 +138,6 @@ def latency_margins(client, path, gains, rows, duration):
     return client.gather(client.map(latency_row, jobs, pure=False))
 
 
-def suggest(trial) -> Dict[str, Any]:
-    """The trial's gain set from SPACE (floats, as the schema wants them)."""
-    return {name: float(trial.suggest_float(name, lo, hi, log=log))
-            for name, (lo, hi, log) in SPACE.items()}
-
-
 @dataclass
 class TuneArgs:
     """What a tuning flies (the campaign runner's arguments, and the latency rows')."""
@@ -123,49 +147,64 @@ class TuneArgs:
     duration: float
     latency_path: str
     latency_duration: float
+    gravity: float = 9.81          # |g| of the testbed (m/s^2)
     batch: int = runner.BATCH
     disturbance_max: float = 0.05
     worst: int = 0
 
 
-def evaluate(client, base, args: TuneArgs, gains, rows=TRIAL_LATENCY_ROWS) -> TrialFigures:
-    """Fly one gain set: the campaign's runs and the latency rows; its TrialFigures."""
-    columns, _, interrupted, _ = runner.fly(client, base, args, [gains])
+def evaluate(client, base, args: TuneArgs, gain_sets, rows=TRIAL_LATENCY_ROWS):
+    """Fly gain sets together on the cluster: the campaign's runs and the latency rows of each;
+    their TrialFigures, in order.
+    """
+    columns, _, interrupted, _ = runner.fly(client, base, args, gain_sets)
     if interrupted:
         raise KeyboardInterrupt
-    margins = latency_margins(client, args.latency_path, gains, rows, args.latency_duration)
-    return figures(columns, args.duration, margins)
+    jobs = [(args.latency_path, gains, lat, jit, args.latency_duration)
+            for gains in gain_sets for lat, jit in rows]
+    margins = client.gather(client.map(latency_row, jobs, pure=False))
+    n = len(rows)
+    return [figures({c: v[columns['gain_set'] == k + 1] for c, v in columns.items()},
+                    args.duration, margins[k * n:(k + 1) * n]) for k in range(len(gain_sets))]
+
+
+def suggest(trial, gravity: float) -> Dict[str, Any]:
+    """The trial's gain set (GAINS, floats as the schema wants them) from its point of SPACE."""
+    return controller_gains({name: float(trial.suggest_float(name, lo, hi, log=log))
+                             for name, (lo, hi, log) in SPACE.items()}, gravity)
 
 
 def tune(client, base, args: TuneArgs, trials: int, sampler_seed: int,
          report=None, start: Optional[Dict[str, float]] = None):
     """Run the study; (the Optuna study, [(trial number, gains, TrialFigures)]). start: a gain set
-    tried first (the testbed's own, so the study knows where it stands).
+    (GAINS) tried first where it lies in SPACE (the testbed's own, so that the study knows where
+    it stands). TRIALS_AT_ONCE trials are asked, flown together and told at a time.
     """
-    import optuna                    # (imported here: only the tuner needs it)
+    import optuna  # noqa: PLC0415  (here: only the tuner needs it, on a development machine)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     sampler = optuna.samplers.TPESampler(
         seed=sampler_seed, multivariate=True, n_startup_trials=min(10, max(1, trials // 4)))
     optuna_study = optuna.create_study(directions=['minimize', 'minimize'], sampler=sampler)
     if start:
-        optuna_study.enqueue_trial({k: v for k, v in start.items() if k in SPACE},
-                                   skip_if_exists=True)
-    done = []
-    for _ in range(trials):
-        trial = optuna_study.ask()
-        gains = suggest(trial)
-        got = evaluate(client, base, args, gains)
-        for name, value in zip(CONSTRAINTS, got.constraints()):
-            trial.set_constraint(name, value)        # (feasible: every value <= 0)
-        optuna_study.tell(trial, [got.settle_p50_s, got.settle_p95_s])
-        done.append((trial.number, gains, got))
-        if report is not None:
-            report(trial.number, gains, got)
+        point = search_point(start, args.gravity)
+        if all(lo <= point[k] <= hi for k, (lo, hi, _) in SPACE.items()):
+            optuna_study.enqueue_trial(point, skip_if_exists=True)
+    done: list = []
+    while len(done) < trials:
+        asked = [optuna_study.ask() for _ in range(min(TRIALS_AT_ONCE, trials - len(done)))]
+        gain_sets = [suggest(t, args.gravity) for t in asked]
+        for trial, gains, got in zip(asked, gain_sets, evaluate(client, base, args, gain_sets)):
+            for name, value in zip(CONSTRAINTS, got.constraints()):
+                trial.set_constraint(name, value)        # (feasible: every value <= 0)
+            optuna_study.tell(trial, [got.settle_p50_s, got.settle_p95_s])
+            done.append((trial.number, gains, got))
+            if report is not None:
+                report(trial.number, gains, got)
     return optuna_study, done
 
 
 def pareto(done):
-    """The feasible trials no other feasible trial beats in both settle figures, by p50."""
+    """The feasible trials no other feasible trial beats in both settle figures, by p95."""
     feasible = [d for d in done if d[2].feasible]
     front = [d for d in feasible
              if not any((o[2].settle_p50_s <= d[2].settle_p50_s and
@@ -175,14 +214,14 @@ def pareto(done):
     return sorted(front, key=lambda d: (d[2].settle_p95_s, d[2].settle_p50_s, d[0]))
 
 
-TRIAL_COLUMNS = ('trial',) + tuple(SPACE) + (
+TRIAL_COLUMNS = ('trial',) + GAINS + (
     'runs', 'violations', 'closest_min_deg', 'closest_p1_deg', 'settled_share', 'settle_p50_s',
     'settle_p95_s', 'saturated_share', 'latency_min_margin_deg', 'feasible')
 
 
 def trial_row(number, gains, got: TrialFigures) -> list:
     """A row of trials.csv (TRIAL_COLUMNS)."""
-    return ([number] + [gains[k] for k in SPACE] +
+    return ([number] + [gains[k] for k in GAINS] +
             [got.runs, got.violations, got.closest_min_deg, got.closest_p1_deg,
              got.settled_share, got.settle_p50_s, got.settle_p95_s, got.saturated_share,
              min(got.latency_margins_deg) if got.latency_margins_deg else math.nan,

@@ -10,7 +10,7 @@ import os
 import sys
 
 from geoctl_ros.benchmark import cases
-from geoctl_ros.benchmark.run import benchmark
+from geoctl_ros.benchmark.run import GAIN_SETS, benchmark, gain_set
 from geoctl_ros.campaign import cluster, runner
 from geoctl_ros.cli.args import cannot_start, positive_seconds
 from geoctl_ros.cli.campaign import progress_printer
@@ -50,13 +50,15 @@ def main(argv=None):
         sections = {n: load_parameter_file(os.path.join(config, 'scenarios', n + '.yaml'))
                     for n in names}
         base = load_parameter_file(os.path.join(config, 'testbed.yaml'))
+        args.gain_sets = {name: gain_set(f and os.path.join(config, 'scenarios', f))
+                          for name, f in GAIN_SETS.items()}
     except (ConfigError, OSError) as e:
         return cannot_start('benchmark', e, args.out)
 
     def say(line):
         print(line, file=sys.stderr, flush=True)
 
-    total = args.runs * len(cases.BENCHED)
+    total = args.runs * (len(cases.BENCHED) + sum(1 for g in args.gain_sets.values() if g))
     with cluster.connect(args.scheduler, args.workers) as (client, where):
         say('benchmark: %d laws on %d cases and %d random runs, on %s'
             % (len(cases.BENCHED), len(names), args.runs, where))

@@ -1,4 +1,4 @@
-"""Gain tuning: ``tune --trials 40 [--runs 64] [--seed 7] [--out DIR] [--workers N | --scheduler
+"""Gain tuning: ``tune --trials 40 [--runs 48] [--seed 7] [--out DIR] [--workers N | --scheduler
 tcp://HOST:PORT]``.
 
 Optuna searches the controller's gains on the campaign's random manoeuvres, with all of the
@@ -13,6 +13,8 @@ import argparse
 import os
 import sys
 import time
+
+import numpy as np
 
 from geoctl_ros.campaign import cluster, study, tune
 from geoctl_ros.cli.args import cannot_start, positive_seconds
@@ -40,12 +42,12 @@ def _line(number, gains, got):
 def main(argv=None):
     parser = argparse.ArgumentParser(prog='tune', description=__doc__.split('\n\n')[0])
     parser.add_argument('--trials', type=int, default=40, help='gain sets tried (40)')
-    parser.add_argument('--runs', type=int, default=64,
-                        help='random manoeuvres each gain set flies (64)')
+    parser.add_argument('--runs', type=int, default=48,
+                        help='random manoeuvres each gain set flies (48)')
     parser.add_argument('--seed', type=int, default=7,
                         help="the campaign's seed and the sampler's (7)")
-    parser.add_argument('--duration', type=positive_seconds, default=8.0,
-                        help='seconds per manoeuvre (8)')
+    parser.add_argument('--duration', type=positive_seconds, default=6.0,
+                        help='seconds per manoeuvre (6)')
     parser.add_argument('--latency-duration', type=positive_seconds, default=10.0,
                         help='seconds per latency row (10)')
     parser.add_argument('--best', type=int, default=3,
@@ -69,10 +71,9 @@ def main(argv=None):
         nominal = resolve(CONTROLLER, node_overrides(base, CONTROLLER))
     except (ConfigError, OSError) as e:
         return cannot_start('tune', e, args.out)
-    start = {k: float(nominal[k]) for k in tune.SPACE
-             if tune.SPACE[k][0] <= nominal[k] <= tune.SPACE[k][1]}
+    start = {k: float(nominal[k]) for k in tune.GAINS}
     targs = tune.TuneArgs(args.runs, args.seed, args.duration, latency_path,
-                          args.latency_duration)
+                          args.latency_duration, gravity=float(np.linalg.norm(nominal['gravity'])))
     t0 = time.monotonic()
     with cluster.connect(args.scheduler, args.workers) as (client, where):
         print('tune: %d trials of %d manoeuvres (seed %d) on %s'
@@ -80,7 +81,7 @@ def main(argv=None):
         try:
             _, done = tune.tune(client, base, targs, args.trials, args.seed,
                                 lambda *t: print(_line(*t), file=sys.stderr, flush=True),
-                                start if len(start) == len(tune.SPACE) else None)
+                                start)
         except KeyboardInterrupt:
             print('tune: interrupted; nothing written', file=sys.stderr)
             return 130

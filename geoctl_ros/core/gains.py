@@ -75,3 +75,20 @@ def gain_condition(config: Any, margin_deg: float = 5.0) -> 'GainCheck':
     c_diss = math.sqrt(2.0 * lam_m * config.k_R * n1 / lam_M ** 2)
     return GainCheck(c=config.c, c_max_paper=c_paper, c_max_dissertation=c_diss, H=H,
                      psi_max=psi, margin_deg=margin_deg)
+
+
+def learning_time(k_R: float, c: float, gain: float, regressor: float) -> float:
+    """The time constant (s) with which the adaptive estimate learns a block of Delta near an
+    equilibrium: the moment error W Delta_tilde shows as e_R = W Delta_tilde / k_R, which the
+    adaptive law's c e_R term integrates back at the rate gain |W|^2, so tau = k_R / (c gain
+    |W|^2). regressor: |W| of the block (1 for the constant moment, |g| for m*rho). See
+    docs/control-law.md, "Learning the gravity moment".
+    """
+    return k_R / (c * gain * regressor * regressor)
+
+
+def learning_gain(k_R: float, c: float, tau: float, regressor: float) -> float:
+    """The adaptation gain of a block that learns with time constant tau (``learning_time``'s
+    inverse).
+    """
+    return k_R / (c * tau * regressor * regressor)

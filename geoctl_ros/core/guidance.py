@@ -76,7 +76,7 @@ def _rim(axis: np.ndarray, radius: float, count: int) -> np.ndarray:
 
 
 def sensor_path(d0: np.ndarray, d1: np.ndarray, axes: np.ndarray, rims: np.ndarray,
-                clearance: float) -> List[np.ndarray]:
+                clearance: float) -> Optional[List[np.ndarray]]:
     """The shortest way on the sphere from d0 to d1 that keeps every cone i (unit axis axes[i],
     the barrier's half-angle rims[i]) at least rims[i] + clearance away: the corner points, d0
     first and d1 last. Where d0 or d1 is nearer a cone than that, the cone is widened only up to

@@ -29,8 +29,8 @@ CONE_SCHEMA = [
 # What may change while the controller is armed: its gains and its goals. The envelope (cones,
 # sensor axis, guards), the model and the airframe, the input checks and the loop's timing are
 # refused while armed, with the reason (docs/safety.md, "Parameters").
-CHANGE_WHILE_ARMED = ('k_R', 'k_Omega', 'k_Delta', 'k_Delta_cog', 'c', 'alpha', 'G', 'delta_bar_max',
-                      'cog_estimate_max', 'unmodelled_moment_max', 'setpoint',
+CHANGE_WHILE_ARMED = ('k_R', 'k_Omega', 'k_Delta', 'k_Delta_cog', 'c', 'alpha', 'G',
+                      'delta_bar_max', 'cog_estimate_max', 'unmodelled_moment_max', 'setpoint',
                       'setpoint_schedule.times', 'setpoint_schedule.quaternions')
 # What esc_i2c applies at run time; the rest of its parameters take effect at start only, and a
 # change of them at run time is refused.
