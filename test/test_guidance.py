@@ -37,7 +37,7 @@ def test_arc_clearance_is_the_closest_approach_of_the_sampled_arc():
     a = np.array([_unit(rng.normal(size=3)) for _ in range(6)])
     b = np.array([_unit(rng.normal(size=3)) for _ in range(5)])
     axes = np.array([_unit(rng.normal(size=3)) for _ in range(4)])
-    got = guidance.arc_clearance(a, b, axes)
+    got = guidance.arc_clearance(a[:, None], b[None, :], axes)
     for i in range(len(a)):
         for j in range(len(b)):
             pts = _arc_points(a[i], b[j])

@@ -175,14 +175,14 @@ def _history(d):
 def test_testbed_rotors_keep_the_cone_converge_and_plot_motor_commands(runs):
     s, d = runs['testbed_yaw90']
     assert s['actuation'] == 'rotors' and not s['constraint_violated']
-    assert 12.0 < s['min_cone_angle_deg']['obstacle'] < 20.0
+    assert 12.0 + 2.0 < s['min_cone_angle_deg']['obstacle'] < 12.0 + 20.0
     rows = _history(d)
     psi = [float(r['psi']) for r in rows]
-    assert psi[-1] < 0.01 * psi[0]
-    assert s['final_attitude_error_deg'] < 6.0
-    # still converging at the end (the slow tail of the adaptive law), not stuck
-    err = [float(r['eR_z']) for r in rows]
-    assert abs(err[-1]) < abs(err[-1000])
+    assert psi[-1] < 0.01 * max(psi)
+    # guided round the cone and tuned: there in seconds (issue 37: under 5 deg by 8 s and under
+    # 1 deg by 15 s), and the estimate does not wander off once there
+    assert s['time_to_5deg_s'] <= 8.0 and s['time_to_1deg_s'] <= 15.0
+    assert s['final_attitude_error_deg'] < 1.0
     assert s['min_command'] > 60 and s['max_command'] < 240              # never saturated
     assert s['saturated_fraction'] == 0.0
     cmds = [int(float(rows[-1]['cmd_%d' % i])) for i in range(1, 7)]
@@ -224,7 +224,7 @@ def test_a_late_loop_keeps_the_lag_compensated_testbed_steady():
     holds = r.history[1:, 0] - r.history[:-1, 0]
     assert holds.min() < 0.012 and holds.max() > 0.05          # the loop really was late
     assert r.summary['saturated_fraction'] == 0.0
-    assert abs(r.history[:, 5:8]).max() < 1.5                   # rad/s
+    assert abs(r.history[:, 5:8]).max() < 3.0                   # rad/s
     assert not r.summary['constraint_violated']
     assert min(r.summary['min_cone_angle_deg'].values()) > 12.0 + 10.0
 

@@ -13,7 +13,7 @@ on the Dask cluster.
   (the time from which the attitude error stays under 5 deg; a run that never settles counts as
   ``UNSETTLED_FACTOR`` times the run's duration).
 - **Constraints** (Optuna's: feasible when every value is <= 0): no violation in the runs, the
-  closest approach at least ``CLOSEST_FLOOR_DEG``, the rotors saturated at most
+  closest approach's 1st percentile at least ``CLOSEST_FLOOR_DEG``, the rotors saturated at most
   ``SATURATED_SHARE_MAX`` of the time on average (their authority), and every latency row at
   least ``CLOSEST_FLOOR_DEG`` clear of the cone too.
 
@@ -49,14 +49,17 @@ SPACE = {
 }
 # the controller's parameters a trial sets (over the testbed's file)
 GAINS = ('k_R', 'k_Omega', 'c', 'k_Delta', 'k_Delta_cog', 'guidance_lookahead_deg')
-CLOSEST_FLOOR_DEG = 2.0        # the closest approach of any run, at least
+# the closest approach's 1st percentile over the runs, and every latency row's, at least: a
+# degree over the 2 deg that the gains must keep on other draws (the benchmark's 1,000 runs of
+# another seed), for what a tuning's few hundred runs do not show
+CLOSEST_FLOOR_DEG = 3.0
 SATURATED_SHARE_MAX = 0.02     # the rotors saturated at most this share of the time, on average
 UNSETTLED_FACTOR = 2.0         # a run that never settles counts as this many durations
 # docs/safety.md's latency table: (latency s, tick jitter s) of testbed_yaw90
 LATENCY_ROWS = ((0.0, 0.0), (0.02, 0.0), (0.05, 0.0), (0.05, 0.01), (0.08, 0.02), (0.1, 0.02),
                 (0.1, 0.05), (0.15, 0.05))
 TRIAL_LATENCY_ROWS = ((0.05, 0.01), (0.1, 0.05), (0.15, 0.05))    # the hardest, in every trial
-CONSTRAINTS = ('violations', 'closest below the floor [deg]', 'saturated share over the limit',
+CONSTRAINTS = ('violations', 'closest p1 below the floor [deg]', 'saturated share over the limit',
                'latency rows below the floor [deg]')
 TRIALS_AT_ONCE = 2      # trials asked and flown together (a constant: the same on any cluster)
 
@@ -96,7 +99,7 @@ class TrialFigures:
 
     def constraints(self) -> List[float]:
         """Optuna's constraint values, feasible when all are <= 0 (in CONSTRAINTS' order)."""
-        return [float(self.violations), CLOSEST_FLOOR_DEG - self.closest_min_deg,
+        return [float(self.violations), CLOSEST_FLOOR_DEG - self.closest_p1_deg,
                 self.saturated_share - SATURATED_SHARE_MAX,
                 CLOSEST_FLOOR_DEG - min(self.latency_margins_deg, default=math.inf)]
 

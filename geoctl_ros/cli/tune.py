@@ -1,4 +1,4 @@
-"""Gain tuning: ``tune --trials 40 [--runs 48] [--seed 7] [--out DIR] [--workers N | --scheduler
+"""Gain tuning: ``tune --trials 40 [--runs 320] [--seed 7] [--out DIR] [--workers N | --scheduler
 tcp://HOST:PORT]``.
 
 Optuna searches the controller's gains on the campaign's random manoeuvres, with all of the
@@ -42,12 +42,12 @@ def _line(number, gains, got):
 def main(argv=None):
     parser = argparse.ArgumentParser(prog='tune', description=__doc__.split('\n\n')[0])
     parser.add_argument('--trials', type=int, default=40, help='gain sets tried (40)')
-    parser.add_argument('--runs', type=int, default=48,
-                        help='random manoeuvres each gain set flies (48)')
+    parser.add_argument('--runs', type=int, default=320,
+                        help='random manoeuvres each gain set flies (320)')
     parser.add_argument('--seed', type=int, default=7,
                         help="the campaign's seed and the sampler's (7)")
-    parser.add_argument('--duration', type=positive_seconds, default=6.0,
-                        help='seconds per manoeuvre (6)')
+    parser.add_argument('--duration', type=positive_seconds, default=4.0,
+                        help='seconds per manoeuvre (4)')
     parser.add_argument('--latency-duration', type=positive_seconds, default=10.0,
                         help='seconds per latency row (10)')
     parser.add_argument('--best', type=int, default=3,

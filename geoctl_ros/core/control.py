@@ -42,6 +42,7 @@ from geoctl_ros.core import so3
 from geoctl_ros.core.cones import ConeEval, ConeSet
 from geoctl_ros.core.errors import (
     LinearMap,
+    attractive_error,
     blind_widening,
 )
 from geoctl_ros.core.feasibility import setpoint_problem
@@ -54,6 +55,7 @@ from geoctl_ros.core.so3 import cross, matvec, transpose
 # Disturbance models: name -> number of estimated parameters (the columns of W).
 #   constant:      W = I,                     Delta = a constant moment (the paper's case)
 #   constant+cog:  W = [I, -hat(R^T g_w)],    Delta = [constant moment; error of m * rho]
+GOAL_WEIGHTED = False
 DISTURBANCE_MODELS = {'constant': 3, 'constant+cog': 6}
 
 
@@ -242,8 +244,8 @@ class AttitudeController:
         carrot = guidance.carrot(R, self._R_d, self.config.cones)
         index = guidance.index
         if self._carrot_index is None or not np.array_equal(index, self._carrot_index):
-            self._linear = LinearMap(carrot, self.config)
-            self._carrot_index = index
+            self._linear = self._linear.retargeted(carrot, self.config.G)
+            self._carrot_index = index.copy()
 
     # --- the pieces every law is made of -------------------------------------------------------
     def terms(self, R: np.ndarray, Omega: np.ndarray, blind: Any = 0.0) -> 'StepTerms':
@@ -260,7 +262,11 @@ class AttitudeController:
             if extra.max() > 0.0:                  # (else no cone is being approached)
                 widened = cfg.cones.widened(extra)
         ev = cfg.cones.evaluate_terms(sc, widened)
-        return StepTerms(y[..., 0:1], y[..., 1:4], ev, y[..., -3:], self.regressor(R))
+        goal = None
+        if GOAL_WEIGHTED and self._carrot_index is not None and n:   # guided: the goal weighs
+            A_g, e_RA_g = attractive_error(R, self._R_d, cfg.G)
+            goal = (np.asarray(A_g)[..., None], e_RA_g)
+        return StepTerms(y[..., 0:1], y[..., 1:4], ev, y[..., -3:], self.regressor(R), goal)
 
     def moment(self, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool, terms: 'StepTerms',
                psi: Any, e_R: np.ndarray, barrier: bool = True) -> ControlOutput:
@@ -333,3 +339,4 @@ class StepTerms(NamedTuple):
     cones: ConeEval      # the cones at R (widened by the blind time, if any)
     M_g: np.ndarray      # the model's gravity moment
     W: Optional[np.ndarray]   # the regressor W(R) (None for the constant model, W = I)
+    goal: Optional[tuple] = None   # guided: (A, e_RA) of the goal, for the barrier's weight

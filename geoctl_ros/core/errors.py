@@ -35,11 +35,21 @@ def configuration_error(R: np.ndarray, R_d: np.ndarray, G: np.ndarray, cones: Co
     return psi, e_R, A, e_RA, ev
 
 
-def with_cones(A: Any, e_RA: np.ndarray, ev: ConeEval) -> Tuple[Any, np.ndarray]:
+def with_cones(A: Any, e_RA: np.ndarray, ev: ConeEval,
+               goal: Optional[Tuple[Any, np.ndarray]] = None) -> Tuple[Any, np.ndarray]:
     """Psi = A (1 + sum_i (B_i - 1)) and e_R = e_RA (1 + sum_i (B_i - 1)) + A sum_i e_RB,i from
     A (with a trailing axis of 1), e_RA and the cones' evaluation.
+
+    goal: (A_g, e_RA_g) of the goal, when A and e_RA are of a set point on the way to it
+    (guidance's): then the barrier keeps the goal's weight, Psi = A + A_g sum_i (B_i - 1) and
+    e_R = e_RA + e_RA_g sum_i (B_i - 1) + A_g sum_i e_RB,i (docs/control-law.md, "Guidance"),
+    the paper's Psi where the set point is the goal.
     """
     B = ev.B
+    if goal is not None:
+        A_g, e_RA_g = goal
+        extra = (B - 1.0).sum(axis=-1, keepdims=True)
+        return (A + A_g * extra)[..., 0], e_RA + e_RA_g * extra + A_g * ev.e_RB_sum
     if B.ndim == 1:                     # one run (the node's step): its one sum as a float
         scale = (1.0 - len(B)) + B.sum()
         return A[0] * scale, e_RA * scale + A * ev.e_RB_sum
@@ -110,4 +120,24 @@ class LinearMap:
     def __call__(self, R):
         """The terms y = linear_terms(R, R_d, config), to rounding."""
         return matvec(self.L, R.reshape(R.shape[:-2] + (9,))) + self.y0
+
+    def retargeted(self, R_d: np.ndarray, G: np.ndarray) -> 'LinearMap':
+        """This map for another set point R_d (guidance's next): only A and e_RA, its first four
+        rows, depend on the set point, so only they are evaluated again, by ``attractive_error``
+        on the same basis (the same bits as a map built anew, at a third of the cost).
+        """
+        lead = self.y0.shape[:-1]
+        new = object.__new__(LinearMap)
+        new.n_cones = self.n_cones
+        A0, e0 = attractive_error(np.zeros((3, 3)), R_d, G)
+        A, e = attractive_error(_BASIS.reshape((9,) + (1,) * len(lead) + (3, 3)), R_d, G)
+        at_zero = np.concatenate([np.broadcast_to(A0, lead)[..., None],
+                                  np.broadcast_to(e0, lead + (3,))], axis=-1)
+        rows = np.concatenate([np.broadcast_to(A, (9,) + lead)[..., None],
+                               np.broadcast_to(e, (9,) + lead + (3,))], axis=-1) - at_zero
+        new.y0 = self.y0.copy()
+        new.y0[..., 0:4] = at_zero
+        new.L = self.L.copy()
+        new.L[..., 0:4, :] = np.moveaxis(rows, 0, -1)
+        return new
 

@@ -40,28 +40,31 @@ RIM_SLACK = math.radians(1.0)   # the rim's points lie this far outside the wide
                                 # the arc between two neighbours (its sag 0.15 deg) clears it
 PATH_STEP = math.radians(2.0)   # the path's attitudes at most this far apart (sensor arc)
 REPLAN_FACTOR = 2.0         # a set point this many lookaheads away from the vehicle: plan again
+LOOKAHEAD_MIN = math.radians(5.0)   # the lookahead near a cone, at least
+LOOKAHEAD_PER_GAP = 2.0     # near a cone the lookahead is at most this many times the gap to it
 
 
 def arc_clearance(a: np.ndarray, b: np.ndarray, axes: np.ndarray) -> np.ndarray:
-    """The smallest angle (rad) between each axis and the short great-circle arc from a to b,
-    for every pair: a (N, 3), b (M, 3) unit vectors, axes (C, 3) unit; returns (N, M, C).
+    """The smallest angle (rad) between each axis and the short great-circle arc from a to b:
+    a and b unit vectors (..., 3) that broadcast together, axes unit (..., C, 3) broadcasting
+    against them; returns (..., C).
 
     The great circle through a and b has the unit normal n; its point nearest an axis v is v's
     projection on its plane, at arcsin |v . n| from v. Where that point lies outside the arc,
     the nearer end is the nearest point.
     """
-    n = np.cross(a[:, None, :], b[None, :, :])                         # (N, M, 3)
-    norm = np.linalg.norm(n, axis=-1, keepdims=True)
+    a, b = np.broadcast_arrays(a, b)
+    n = np.cross(a, b)
+    norm = np.sqrt(np.sum(n * n, axis=-1, keepdims=True))
     n = np.where(norm > 1e-12, n / np.maximum(norm, 1e-12), 0.0)
-    vn = np.einsum('nmk,ck->nmc', n, axes)                              # (N, M, C)
-    p = axes[None, None, :, :] - vn[..., None] * n[:, :, None, :]      # (N, M, C, 3)
-    # p within the arc: a x p and p x b both along n
-    ap = np.einsum('nmck,nmk->nmc', np.cross(a[:, None, None, :], p), n)
-    pb = np.einsum('nmck,nmk->nmc', np.cross(p, b[None, :, None, :]), n)
-    inside = (ap >= 0.0) & (pb >= 0.0) & (norm > 1e-12)
+    a, b, n = a[..., None, :], b[..., None, :], n[..., None, :]
+    vn = np.sum(axes * n, axis=-1)                                     # (..., C)
+    p = axes - vn[..., None] * n
+    inside = ((np.sum(np.cross(a, p) * n, axis=-1) >= 0.0) &
+              (np.sum(np.cross(p, b) * n, axis=-1) >= 0.0) & (norm > 1e-12))
     mid = np.arcsin(np.clip(np.abs(vn), 0.0, 1.0))
-    ends = np.minimum(np.arccos(np.clip(a @ axes.T, -1.0, 1.0))[:, None, :],
-                      np.arccos(np.clip(b @ axes.T, -1.0, 1.0))[None, :, :])
+    ends = np.minimum(np.arccos(np.clip(np.sum(a * axes, axis=-1), -1.0, 1.0)),
+                      np.arccos(np.clip(np.sum(b * axes, axis=-1), -1.0, 1.0)))
     return np.where(inside, mid, ends)
 
 
@@ -92,7 +95,7 @@ def sensor_path(d0: np.ndarray, d1: np.ndarray, axes: np.ndarray, rims: np.ndarr
     keep = rims + np.clip(np.minimum(clearance, 0.5 * gap), 0.0, None)        # widened radii
     nodes = [ends] + [_rim(v, k + RIM_SLACK, RIM_POINTS) for v, k in zip(axes, keep)]
     X = np.concatenate(nodes)
-    clear = np.all(arc_clearance(X, X, axes) >= keep - 1e-9, axis=-1)        # (N, N)
+    clear = np.all(arc_clearance(X[:, None], X[None, :], axes) >= keep - 1e-9, axis=-1)  # (N, N)
     # a point of one rim inside another widened cone is no way
     inside = np.any(np.arccos(np.clip(X @ axes.T, -1.0, 1.0)) < keep - 1e-9, axis=-1)
     clear &= ~inside[:, None] & ~inside[None, :]
@@ -196,48 +199,109 @@ class Guidance:
         self.clearance = clearance
         self.cos_lookahead = math.cos(lookahead)
         self.cos_replan = math.cos(min(math.pi, REPLAN_FACTOR * lookahead))
+        # the path's points within the lookahead lie at most this many places ahead (its steps
+        # turn the sensor at least PATH_STEP / 2, and the body at least as far)
+        self.window = 2 * int(math.ceil(lookahead / PATH_STEP)) + 2
         self.paths: Optional[np.ndarray] = None   # (runs, K, 3, 3), each padded with its goal
+        self.sensor: Optional[np.ndarray] = None  # (runs, K, 3): the sensor's direction on it
+        self.last: Optional[np.ndarray] = None    # (runs,): the goal's place on each path
+        self.sight: Optional[np.ndarray] = None   # (runs, K): the furthest point each one sees
         self.index: Optional[np.ndarray] = None   # (runs,), the set point's place on its path
 
     def reset(self) -> None:
         """Forget the plan: the next set point is planned from where the vehicle is then."""
-        self.paths = self.index = None
+        self.paths = self.sensor = self.last = self.sight = self.index = None
 
     def carrot(self, R: np.ndarray, R_goal: np.ndarray, cones: Any) -> np.ndarray:
         """The set point for the measured attitude R (one (3, 3) or a stack), with the goal
-        R_goal and the ConeSet cones: the furthest attitude of the path within the lookahead.
+        R_goal and the ConeSet cones: from the path's point nearest the vehicle (its sensor's),
+        the furthest point within the lookahead that the path's point sees (``_sight``), so that
+        the set point never cuts a corner into a cone.
         """
         single = R.ndim == 2
         Rs = R[None] if single else R
+        goals = R_goal[None] if single else R_goal
         if self.paths is None:
-            self._plan(Rs, R_goal[None] if single else R_goal, cones, np.arange(len(Rs)))
+            self._plan(Rs, goals, cones, np.arange(len(Rs)))
         assert self.paths is not None and self.index is not None
-        P = self.paths[np.arange(len(Rs)), self.index]
+        runs = np.arange(len(Rs))
+        P = self.paths[runs, self.index]
         cos_now = 0.5 * (np.einsum('nij,nij->n', P, Rs) - 1.0)     # cos of the angle R to P
         far = np.flatnonzero(cos_now < self.cos_replan)
         if len(far):
-            self._plan(Rs, R_goal[None] if single else R_goal, cones, far)
-        cos_all = 0.5 * (np.einsum('nkij,nij->nk', self.paths, Rs) - 1.0)     # (runs, K)
-        K = self.paths.shape[1]
-        ahead = (np.arange(K)[None, :] >= self.index[:, None]) & (cos_all >= self.cos_lookahead)
-        furthest = K - 1 - np.argmax(ahead[:, ::-1], axis=1)
-        self.index = np.where(ahead.any(axis=1), furthest, self.index)
-        P = self.paths[np.arange(len(Rs)), self.index]
+            self._plan(Rs, goals, cones, far)
+        moving = np.flatnonzero(self.index < self.last)        # (the others hold their goal)
+        if len(moving):
+            self._advance(Rs[moving], moving, cones)
+        P = self.paths[runs, self.index]
         return P[0] if single else P
+
+    def _advance(self, Rs, runs, cones):
+        """Move the set points of the runs (indices) along their paths (see ``carrot``). Near a
+        cone the lookahead shrinks to LOOKAHEAD_PER_GAP times the sensor's gap to the cone's barrier
+        rim (down to LOOKAHEAD_MIN): the pull, and with it the speed, falls as the sensor nears a cone.
+        """
+        assert self.paths is not None and self.sensor is not None and self.index is not None
+        assert self.sight is not None
+        K, W = self.paths.shape[1], self.window
+        m = np.arange(len(runs))
+        around = np.clip(self.index[runs, None] + np.arange(-W, W + 1)[None, :], 0, K - 1)
+        d = Rs @ cones.r
+        V, rims = _cone_rows(cones, runs)
+        gap = np.min(np.arccos(np.clip(np.einsum('nck,nk->nc', V, d), -1.0, 1.0)) - rims,
+                     axis=-1, initial=np.inf)
+        cos_lookahead = np.cos(np.clip(LOOKAHEAD_PER_GAP * gap, LOOKAHEAD_MIN, self.lookahead))
+        near = around[m, np.argmax(np.einsum('nwk,nk->nw', self.sensor[runs[:, None], around],
+                                             d), axis=1)]             # the nearest path point
+        ahead = np.minimum(near[:, None] + np.arange(W)[None, :], K - 1)
+        within = 0.5 * (np.einsum('nkij,nij->nk', self.paths[runs[:, None], ahead], Rs)
+                        - 1.0) >= cos_lookahead[:, None]
+        within[:, 0] = True
+        furthest = ahead[m, W - 1 - np.argmax(within[:, ::-1], axis=1)]
+        self.index[runs] = np.minimum(furthest, self.sight[runs, near])
 
     def _plan(self, Rs, goals, cones, runs):
         """Plan the paths of the runs (indices) from the attitudes Rs to their goals."""
-        V = cones.V.reshape(len(Rs) if cones.V.ndim == 3 else 1, -1, 3)
-        rims = np.asarray(cones.theta_b).reshape(V.shape[0], -1)
-        new = {}
-        for i in runs:
-            j = i if V.shape[0] > 1 else 0
-            new[i] = plan(Rs[i], goals[i], cones.r, V[j], rims[j], self.clearance)
+        V, rims = _cone_rows(cones, np.arange(len(Rs)))
+        new = {i: plan(Rs[i], goals[i], cones.r, V[i], rims[i], self.clearance) for i in runs}
         old = [] if self.paths is None else [self.paths[i] for i in range(len(Rs))]
         paths = [new[i] if i in new else old[i] for i in range(len(Rs))]
         K = max(len(p) for p in paths)
         self.paths = np.array([np.concatenate([p, np.repeat(p[-1:], K - len(p), axis=0)])
                                for p in paths])
+        self.sensor = self.paths @ cones.r
+        self.last = np.array([len(p) - 1 for p in paths])
+        self.sight = self._sight(V, rims)
         index = np.zeros(len(Rs), dtype=int) if self.index is None else self.index.copy()
         index[list(runs)] = 0
         self.index = index
+
+    def _sight(self, V, rims):
+        """Per run and path point k, the furthest point j of the path (within the window) that k
+        sees: the straight way from k to each point up to j keeps every cone's barrier rim plus
+        half k's own gap to it (at most the clearance) away.
+        """
+        assert self.sensor is not None
+        n, K = self.sensor.shape[:2]
+        W = self.window
+        ahead = np.minimum(np.arange(K)[:, None] + np.arange(1, W)[None, :], K - 1)   # (K, W-1)
+        D = self.sensor
+        gap = np.arccos(np.clip(np.einsum('nkx,ncx->nkc', D, V), -1.0, 1.0)) - rims[:, None]
+        need = rims[:, None] + np.clip(0.5 * gap, 0.0, self.clearance)             # (n, K, C)
+        clear = np.all(arc_clearance(D[:, :, None, :], D[:, ahead], V[:, None, None])
+                       >= need[:, :, None] - 1e-9, axis=-1)                        # (n, K, W-1)
+        blocked = np.cumsum(~clear, axis=-1) > 0          # from the first point it does not see
+        seen = np.sum(~blocked, axis=-1)                  # how many points ahead it sees
+        return np.minimum(np.arange(K)[None, :] + np.maximum(seen, 1), K - 1)
+
+
+def _cone_rows(cones: Any, runs: np.ndarray) -> tuple:
+    """The cones' axes (m, C, 3) and barrier half-angles (m, C) of the runs (indices) of a
+    batched ConeSet, or of its one set for each.
+    """
+    C = cones.V.shape[-2] if cones.V.ndim >= 2 else 0
+    V = cones.V.reshape(-1, C, 3) if C else np.zeros((1, 0, 3))
+    rims = np.asarray(cones.theta_b).reshape(V.shape[0], C)
+    if V.shape[0] == 1:
+        return np.repeat(V, len(runs), axis=0), np.repeat(rims, len(runs), axis=0)
+    return V[runs], rims[runs]

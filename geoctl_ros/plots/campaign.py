@@ -1,5 +1,6 @@
 """A campaign's figures: the closest approaches, the worst runs, a gain study's front."""
 
+from matplotlib.ticker import FormatStrFormatter
 import numpy as np
 
 from geoctl_ros.plots.common import sky, subplots
@@ -91,6 +92,9 @@ def tuning_figure(done, front, path):
     a1.set(xscale='log', yscale='log', xlabel='settle time, median [s]',
            ylabel='settle time, 95th percentile [s]',
            title='%d trials (unsettled runs count as twice the run)' % len(done))
+    for axis in (a1.xaxis, a1.yaxis):        # plain numbers on the log scales
+        axis.set_major_formatter(FormatStrFormatter('%g'))
+        axis.set_minor_formatter(FormatStrFormatter('%g'))
     a1.legend(fontsize=8)
     a1.grid(True, which='both', alpha=0.3)
     best, so_far = np.inf, []
