@@ -42,7 +42,6 @@ from geoctl_ros.core import so3
 from geoctl_ros.core.cones import ConeEval, ConeSet
 from geoctl_ros.core.errors import (
     LinearMap,
-    attractive_error,
     blind_widening,
 )
 from geoctl_ros.core.feasibility import setpoint_problem
@@ -55,7 +54,6 @@ from geoctl_ros.core.so3 import cross, matvec, transpose
 # Disturbance models: name -> number of estimated parameters (the columns of W).
 #   constant:      W = I,                     Delta = a constant moment (the paper's case)
 #   constant+cog:  W = [I, -hat(R^T g_w)],    Delta = [constant moment; error of m * rho]
-GOAL_WEIGHTED = False
 DISTURBANCE_MODELS = {'constant': 3, 'constant+cog': 6}
 
 
@@ -262,11 +260,7 @@ class AttitudeController:
             if extra.max() > 0.0:                  # (else no cone is being approached)
                 widened = cfg.cones.widened(extra)
         ev = cfg.cones.evaluate_terms(sc, widened)
-        goal = None
-        if GOAL_WEIGHTED and self._carrot_index is not None and n:   # guided: the goal weighs
-            A_g, e_RA_g = attractive_error(R, self._R_d, cfg.G)
-            goal = (np.asarray(A_g)[..., None], e_RA_g)
-        return StepTerms(y[..., 0:1], y[..., 1:4], ev, y[..., -3:], self.regressor(R), goal)
+        return StepTerms(y[..., 0:1], y[..., 1:4], ev, y[..., -3:], self.regressor(R))
 
     def moment(self, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool, terms: 'StepTerms',
                psi: Any, e_R: np.ndarray, barrier: bool = True) -> ControlOutput:
@@ -339,4 +333,3 @@ class StepTerms(NamedTuple):
     cones: ConeEval      # the cones at R (widened by the blind time, if any)
     M_g: np.ndarray      # the model's gravity moment
     W: Optional[np.ndarray]   # the regressor W(R) (None for the constant model, W = I)
-    goal: Optional[tuple] = None   # guided: (A, e_RA) of the goal, for the barrier's weight

@@ -35,21 +35,11 @@ def configuration_error(R: np.ndarray, R_d: np.ndarray, G: np.ndarray, cones: Co
     return psi, e_R, A, e_RA, ev
 
 
-def with_cones(A: Any, e_RA: np.ndarray, ev: ConeEval,
-               goal: Optional[Tuple[Any, np.ndarray]] = None) -> Tuple[Any, np.ndarray]:
+def with_cones(A: Any, e_RA: np.ndarray, ev: ConeEval) -> Tuple[Any, np.ndarray]:
     """Psi = A (1 + sum_i (B_i - 1)) and e_R = e_RA (1 + sum_i (B_i - 1)) + A sum_i e_RB,i from
     A (with a trailing axis of 1), e_RA and the cones' evaluation.
-
-    goal: (A_g, e_RA_g) of the goal, when A and e_RA are of a set point on the way to it
-    (guidance's): then the barrier keeps the goal's weight, Psi = A + A_g sum_i (B_i - 1) and
-    e_R = e_RA + e_RA_g sum_i (B_i - 1) + A_g sum_i e_RB,i (docs/control-law.md, "Guidance"),
-    the paper's Psi where the set point is the goal.
     """
     B = ev.B
-    if goal is not None:
-        A_g, e_RA_g = goal
-        extra = (B - 1.0).sum(axis=-1, keepdims=True)
-        return (A + A_g * extra)[..., 0], e_RA + e_RA_g * extra + A_g * ev.e_RB_sum
     if B.ndim == 1:                     # one run (the node's step): its one sum as a float
         scale = (1.0 - len(B)) + B.sum()
         return A[0] * scale, e_RA * scale + A * ev.e_RB_sum

@@ -14,17 +14,21 @@ hand-made set points round the cone. Guidance does that by itself, for any start
    rotation that takes the sensor from one point of the path to the next (parallel transport),
    and the turn about the sensor axis that is left at the end (the goal's twist) is spread
    along the way in proportion to the arc; the last attitude is the goal itself.
-3. **The set point** (``Guidance.carrot``): the furthest attitude of the path within
-   ``lookahead`` of the measured one (never one behind the last chosen), so the law always
-   chases a set point at most ``lookahead`` away. That also bounds the attractive error A, and
-   with it the moment and the speed, however far away the goal is; the last set point is the
-   goal, held as the paper's law holds any constant set point. A vehicle pushed more than twice
-   ``lookahead`` off its set point gets a new plan from where it is.
+3. **The set point** (``Guidance.carrot``): from the path's point nearest the vehicle (by the
+   sensor's direction), the furthest attitude of the path within the lookahead of the measured
+   one that this point sees (the straight way to it keeps each cone's barrier rim plus half the
+   point's own gap to it away: no corner cut into a cone). The lookahead is ``lookahead``, and
+   near a cone LOOKAHEAD_PER_GAP times the sensor's gap to that cone's barrier rim (at least
+   LOOKAHEAD_MIN). So the law always chases a set point at most that far away: that bounds the
+   attractive error A, and with it the moment and the speed, however far away the goal is, and
+   slows the sensor as it nears a cone (where a fast approach bounced off the barrier's stiff
+   rim under latency). The last set point is the goal, held as the paper's law holds any
+   constant set point. A vehicle pushed more than twice ``lookahead`` off its set point gets a
+   new plan from where it is.
 
-Every set point it feeds keeps the cones at least the path's clearance away, less the corner the
-lookahead cuts; the barrier of the law is still on between them. The law's proof covers each
-constant set point; the switches between them are not covered by it (docs/control-law.md,
-"Guidance"). A batch plans each run's path on its own (at a set point's start only) and picks
+The barrier of the law stays whole between the set points. The law's proof covers each constant
+set point; the switches between them are not covered by it (docs/control-law.md, "Guidance").
+A batch plans each run's path on its own (at a set point's start only) and picks
 every run's set point at once.
 """
 import heapq
@@ -238,8 +242,9 @@ class Guidance:
 
     def _advance(self, Rs, runs, cones):
         """Move the set points of the runs (indices) along their paths (see ``carrot``). Near a
-        cone the lookahead shrinks to LOOKAHEAD_PER_GAP times the sensor's gap to the cone's barrier
-        rim (down to LOOKAHEAD_MIN): the pull, and with it the speed, falls as the sensor nears a cone.
+        cone the lookahead shrinks to LOOKAHEAD_PER_GAP times the sensor's gap to the cone's
+        barrier rim (down to LOOKAHEAD_MIN): the pull, and with it the speed, falls as the sensor
+        nears a cone.
         """
         assert self.paths is not None and self.sensor is not None and self.index is not None
         assert self.sight is not None
@@ -264,35 +269,43 @@ class Guidance:
         """Plan the paths of the runs (indices) from the attitudes Rs to their goals."""
         V, rims = _cone_rows(cones, np.arange(len(Rs)))
         new = {i: plan(Rs[i], goals[i], cones.r, V[i], rims[i], self.clearance) for i in runs}
-        old = [] if self.paths is None else [self.paths[i] for i in range(len(Rs))]
+        old = [] if self.paths is None else [self.paths[i, :self.last[i] + 1]
+                                             for i in range(len(Rs))]
         paths = [new[i] if i in new else old[i] for i in range(len(Rs))]
         K = max(len(p) for p in paths)
         self.paths = np.array([np.concatenate([p, np.repeat(p[-1:], K - len(p), axis=0)])
                                for p in paths])
         self.sensor = self.paths @ cones.r
         self.last = np.array([len(p) - 1 for p in paths])
-        self.sight = self._sight(V, rims)
+        runs = np.asarray(runs)
+        sight = np.full((len(Rs), K), K - 1)
+        if self.sight is not None:              # (the others' as they were)
+            keep = min(K, self.sight.shape[1])
+            sight[:, :keep] = np.minimum(self.sight[:, :keep], K - 1)
+        sight[runs] = _sight(self.sensor[runs], V[runs], rims[runs], self.window,
+                             self.clearance)
+        self.sight = sight
         index = np.zeros(len(Rs), dtype=int) if self.index is None else self.index.copy()
-        index[list(runs)] = 0
+        index[runs] = 0
         self.index = index
 
-    def _sight(self, V, rims):
-        """Per run and path point k, the furthest point j of the path (within the window) that k
-        sees: the straight way from k to each point up to j keeps every cone's barrier rim plus
-        half k's own gap to it (at most the clearance) away.
-        """
-        assert self.sensor is not None
-        n, K = self.sensor.shape[:2]
-        W = self.window
-        ahead = np.minimum(np.arange(K)[:, None] + np.arange(1, W)[None, :], K - 1)   # (K, W-1)
-        D = self.sensor
-        gap = np.arccos(np.clip(np.einsum('nkx,ncx->nkc', D, V), -1.0, 1.0)) - rims[:, None]
-        need = rims[:, None] + np.clip(0.5 * gap, 0.0, self.clearance)             # (n, K, C)
-        clear = np.all(arc_clearance(D[:, :, None, :], D[:, ahead], V[:, None, None])
-                       >= need[:, :, None] - 1e-9, axis=-1)                        # (n, K, W-1)
-        blocked = np.cumsum(~clear, axis=-1) > 0          # from the first point it does not see
-        seen = np.sum(~blocked, axis=-1)                  # how many points ahead it sees
-        return np.minimum(np.arange(K)[None, :] + np.maximum(seen, 1), K - 1)
+
+def _sight(D: np.ndarray, V: np.ndarray, rims: np.ndarray, window: int,
+           clearance: float) -> np.ndarray:
+    """Per run and path point k (D: the paths' sensor directions, (n, K, 3)), the furthest point
+    j of the path within window places that k sees: the straight way from k to each point up to
+    j keeps every cone (axes V (n, C, 3), barrier half-angles rims (n, C)) at its rim plus half
+    k's own gap to it (at most the clearance) away.
+    """
+    n, K = D.shape[:2]
+    ahead = np.minimum(np.arange(K)[:, None] + np.arange(1, window)[None, :], K - 1)
+    gap = np.arccos(np.clip(np.einsum('nkx,ncx->nkc', D, V), -1.0, 1.0)) - rims[:, None]
+    need = rims[:, None] + np.clip(0.5 * gap, 0.0, clearance)                  # (n, K, C)
+    clear = np.all(arc_clearance(D[:, :, None, :], D[:, ahead], V[:, None, None])
+                   >= need[:, :, None] - 1e-9, axis=-1)                         # (n, K, W-1)
+    blocked = np.cumsum(~clear, axis=-1) > 0          # from the first point it does not see
+    seen = np.sum(~blocked, axis=-1)                  # how many points ahead it sees
+    return np.minimum(np.arange(K)[None, :] + np.maximum(seen, 1), K - 1)
 
 
 def _cone_rows(cones: Any, runs: np.ndarray) -> tuple:

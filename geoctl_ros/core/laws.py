@@ -24,7 +24,7 @@ def delay_robust_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: floa
     ``blind_guard_max_deg`` (docs/safety.md, "Delay"). With fresh inputs on time it is the paper's.
     """
     terms = controller.terms(R, Omega, blind)
-    psi, e_R = with_cones(terms.A, terms.e_RA, terms.cones, terms.goal)
+    psi, e_R = with_cones(terms.A, terms.e_RA, terms.cones)
     return controller.moment(R, Omega, dt, adapt, terms, psi, e_R)
 
 
