@@ -12,7 +12,9 @@ import matplotlib.image
 import pytest
 
 from geoctl_ros.cli import scenario as scenario_cli
+from geoctl_ros.benchmark.run import GAIN_KEYS
 from geoctl_ros.cli.demo import table_row
+from geoctl_ros.params import load_parameter_file, node_overrides, resolve
 from geoctl_ros.sim import scenario
 
 # On the vehicle's stack the tests without the shipped scenarios' full runs: their summaries were
@@ -252,3 +254,21 @@ def test_scenario_reports_a_bad_file_or_output_in_one_line(tmp_path):
     assert r.returncode == 2 and 'Traceback' not in r.stderr, r.stderr
     assert str(blocker / 'out') in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_the_testbed_scenarios_fly_the_testbeds_own_gains():
+    """testbed_yaw90 and its wrong-mass variant are config/testbed.yaml's manoeuvre with its gains,
+    its estimate and its guidance (the files repeat them: a scenario file is whole in itself), and
+    testbed_experiment the paper's experiment's.
+    """
+    def gains(name):
+        path = os.path.join(ROOT, 'config', *name)
+        return {k: v for k, v in resolve('controller', node_overrides(
+            load_parameter_file(path), 'controller')).items() if k in GAIN_KEYS}
+    testbed = gains(['testbed.yaml'])
+    for name in ('testbed_yaw90.yaml', 'testbed_yaw90_wrong_mass.yaml'):
+        assert gains(['scenarios', name]) == testbed, name
+    experiment = gains(['scenarios', 'testbed_experiment.yaml'])
+    assert (experiment['k_R'], experiment['k_Omega'], experiment['c'], experiment['k_Delta'],
+            experiment['disturbance_model'], experiment['guidance_lookahead_deg']) == (
+        0.4, 0.7, 0.1, 0.05, 'constant', 0.0)

@@ -15,7 +15,7 @@ from geoctl_ros.params import CONTROLLER, load_parameter_file, node_overrides, r
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SHORT = ['--trials', '4', '--runs', '6', '--duration', '2', '--latency-duration', '2',
-         '--seed', '3']
+         '--seed', '3', '--check-runs', '6']
 
 
 def test_a_short_tuning_writes_its_trials_front_and_figure_and_repeats_from_its_seed(
@@ -25,7 +25,7 @@ def test_a_short_tuning_writes_its_trials_front_and_figure_and_repeats_from_its_
         out = tmp_path / ('tune%d' % k)
         code = tune_cli.main(SHORT + ['--out', str(out), '--scheduler', dask_scheduler])
         printed = capsys.readouterr()
-        assert code in (0, 1), printed.err
+        assert code == (0 if (out / 'best.yaml').exists() else 1), printed.err
         outs.append(out)
     first, second = ((o / 'trials.csv').read_text() for o in outs)
     assert first == second                                  # the same trials, to the bit
@@ -43,9 +43,9 @@ def test_a_short_tuning_writes_its_trials_front_and_figure_and_repeats_from_its_
             assert lo * (1 - 1e-9) <= point[name] <= hi * (1 + 1e-9), (name, point[name])
         assert int(r['runs']) == 6
         assert (r['feasible'] == 'True') == (int(r['violations']) == 0 and
-                                             float(r['closest_p1_deg']) >= 3.0 and
+                                             float(r['closest_p1_deg']) >= 2.5 and
                                              float(r['saturated_share']) <= 0.02 and
-                                             float(r['latency_min_margin_deg']) >= 3.0)
+                                             float(r['latency_min_margin_deg']) >= 2.5)
     best = sorted(outs[0].glob('best/*.yaml'))
     feasible = [r for r in rows if r['feasible'] == 'True']
     assert bool(best) == bool(feasible)
@@ -55,7 +55,10 @@ def test_a_short_tuning_writes_its_trials_front_and_figure_and_repeats_from_its_
         assert any(all(values[k] == float(r[k]) for k in tune.GAINS) for r in feasible)
     image = imread(str(outs[0] / 'pareto.png'))
     assert image.shape[0] > 300 and np.std(image) > 0.05
-    assert 'Pareto front' in (outs[0] / 'summary.md').read_text()
+    summary = (outs[0] / 'summary.md').read_text()
+    assert 'checked on' in summary
+    # the chosen set is the first checked one that passed; none passed: no best.yaml, exit 1
+    assert (outs[0] / 'best.yaml').exists() == (' (chosen) ' in summary)
 
 
 @pytest.mark.parametrize('argv', [['--trials', '0'], ['--runs', '-1'], ['--duration', 'nan']])

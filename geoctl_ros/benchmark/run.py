@@ -32,7 +32,7 @@ from geoctl_ros.plots import benchmark as plots
 # config/scenarios) whose gains go over config/testbed.yaml's; None: the testbed's own
 GAIN_SETS = {'tuned (config/testbed.yaml)': None,
              "the experiment's (testbed_experiment.yaml)": 'testbed_experiment.yaml'}
-GAIN_KEYS = tuple(tune.SPACE) + ('disturbance_model',)
+GAIN_KEYS = tune.GAINS + ('disturbance_model',)
 
 
 def gain_set(path: Optional[str]) -> dict:

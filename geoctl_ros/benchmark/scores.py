@@ -13,13 +13,11 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 
 from geoctl_ros.campaign.study import percentile
-from geoctl_ros.sim.closed_loop import SETTLED_DEG, Flight
+from geoctl_ros.sim.closed_loop import SETTLE_WITHIN_S, SETTLED_DEG, Flight
 
 # a run's figures (the campaign's runs.csv's names)
 RUN_COLUMNS = ('violated', 'closest_deg', 'settle_s', 'final_error_deg', 'effort_Nms', 'max_rate',
                'saturated_s')
-
-SETTLE_WITHIN_S = 10.0     # a run 'settled within' this (the figure of a manoeuvre)
 
 # a law's row: (key, heading, format)
 ROW = (

@@ -34,6 +34,7 @@ from geoctl_ros.params import (
     write_parameter_file,
 )
 from geoctl_ros.plots import campaign as campaign_plots
+from geoctl_ros.sim.closed_loop import SETTLE_WITHIN_S
 from geoctl_ros.sim.closed_loop import SETTLED_DEG as CONVERGED_DEG
 
 # what a gain set may not change: what each run draws for itself
@@ -135,18 +136,27 @@ def non_dominated(figures):
     return front
 
 
+def _seconds(x):
+    return '%.2f' % x if np.isfinite(x) else 'not settled'
+
+
 def summary_table(columns):
     """The campaign's figures over all its runs (name -> value)."""
     margins = columns['closest_deg']
     sat = columns['saturated_s']
     final = columns['final_error_deg']
     settled = columns['settle_s'][~np.isnan(columns['settle_s'])]
+    late = np.where(np.isnan(columns['settle_s']), np.inf, columns['settle_s'])
     table = {
         'runs': len(margins),
         'violations': int(np.sum(columns['violated'])),
         'converged (error < %g deg at the end)' % CONVERGED_DEG: int(np.sum(columns['converged'])),
         'settled (error < %g deg to the end): runs, median time [s]' % CONVERGED_DEG:
             '%d, %s' % (len(settled), '%.1f' % np.median(settled) if len(settled) else '-'),
+        'settled within %g s: share; time to settle median / p95 over all runs [s]' % (
+            SETTLE_WITHIN_S): '%.1f %%; %s / %s' % (
+            100.0 * np.mean(late <= SETTLE_WITHIN_S), _seconds(np.median(late)),
+            _seconds(np.percentile(late, 95))),
         'final attitude error median / p95 [deg]': '%.1f / %.1f' % (
             np.median(final), np.percentile(final, 95)),
         'closest approach min / p1 / p5 / median [deg]': '%.2f / %.2f / %.2f / %.2f' % (

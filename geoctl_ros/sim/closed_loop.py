@@ -49,6 +49,7 @@ if TYPE_CHECKING:          # (a type only: sim.scenario imports this module)
 
 SETTLED_DEG = 5.0       # attitude error below which a run has converged (at the end) or settled
 FINE_DEG = 1.0          # attitude error below which a run has arrived (settle_fine_s)
+SETTLE_WITHIN_S = 10.0  # the reports count the runs settled within this (a manoeuvre's figure)
 
 
 @dataclass
