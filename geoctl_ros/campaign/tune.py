@@ -13,9 +13,11 @@ on the Dask cluster.
   (the time from which the attitude error stays under 5 deg; a run that never settles counts as
   ``UNSETTLED_FACTOR`` times the run's duration).
 - **Constraints** (Optuna's: feasible when every value is <= 0): no violation in the runs, the
-  closest approach's 1st percentile at least ``CLOSEST_FLOOR_DEG``, the rotors saturated at most
-  ``SATURATED_SHARE_MAX`` of the time on average (their authority), and every latency row at
-  least ``CLOSEST_FLOOR_DEG`` clear of the cone too.
+  closest approach's 1st percentile at least ``CLOSEST_FLOOR_DEG``, at most
+  ``SATURATED_RUNS_MAX`` of the runs with the rotors saturated for longer than ``SATURATED_RUN_S``
+  (their authority: a mean over the runs let a set through that saturated 41 % of a 10,000-run
+  campaign's runs and went into the cone in 5), and every latency row at least
+  ``CLOSEST_FLOOR_DEG`` clear of the cone too.
 
 The sampler is Optuna's TPE (multivariate) with ``seed``, and a trial's figures are a pure
 function of its gains and the campaign seed (``runs.csv`` is the same on any cluster), so a
@@ -53,14 +55,15 @@ GAINS = ('k_R', 'k_Omega', 'c', 'k_Delta', 'k_Delta_cog', 'guidance_lookahead_de
 # degree over the 2 deg that the gains must keep on other draws (the benchmark's 1,000 runs of
 # another seed), for what a tuning's few hundred runs do not show
 CLOSEST_FLOOR_DEG = 2.5
-SATURATED_SHARE_MAX = 0.02     # the rotors saturated at most this share of the time, on average
+SATURATED_RUN_S = 0.1          # a run whose rotors saturate longer than this (s) in all
+SATURATED_RUNS_MAX = 0.01      # may be at most this share of the runs
 UNSETTLED_FACTOR = 2.0         # a run that never settles counts as this many durations
 # docs/safety.md's latency table: (latency s, tick jitter s) of testbed_yaw90
 LATENCY_ROWS = ((0.0, 0.0), (0.02, 0.0), (0.05, 0.0), (0.05, 0.01), (0.08, 0.02), (0.1, 0.02),
                 (0.1, 0.05), (0.15, 0.05))
 TRIAL_LATENCY_ROWS = ((0.05, 0.01), (0.1, 0.05), (0.15, 0.05))    # the hardest, in every trial
-CONSTRAINTS = ('violations', 'closest p1 below the floor [deg]', 'saturated share over the limit',
-               'latency rows below the floor [deg]')
+CONSTRAINTS = ('violations', 'closest p1 below the floor [deg]',
+               'share of runs saturated over the limit', 'latency rows below the floor [deg]')
 TRIALS_AT_ONCE = 2      # trials asked and flown together (a constant: the same on any cluster)
 
 
@@ -94,13 +97,13 @@ class TrialFigures:
     settled_share: float           # settled within the run
     settle_p50_s: float            # (unsettled runs count as UNSETTLED_FACTOR durations)
     settle_p95_s: float
-    saturated_share: float
+    saturated_runs: float         # the share of the runs saturated longer than SATURATED_RUN_S
     latency_margins_deg: List[float]   # closest approach of each latency row
 
     def constraints(self) -> List[float]:
         """Optuna's constraint values, feasible when all are <= 0 (in CONSTRAINTS' order)."""
         return [float(self.violations), CLOSEST_FLOOR_DEG - self.closest_p1_deg,
-                self.saturated_share - SATURATED_SHARE_MAX,
+                self.saturated_runs - SATURATED_RUNS_MAX,
                 CLOSEST_FLOOR_DEG - min(self.latency_margins_deg, default=math.inf)]
 
     @property
@@ -119,7 +122,7 @@ def figures(columns: Dict[str, np.ndarray], duration: float,
         closest_p1_deg=study.percentile(columns['closest_deg'], 1),
         settled_share=float(np.mean(~np.isnan(columns['settle_s']))),
         settle_p50_s=float(np.median(settle)), settle_p95_s=float(np.percentile(settle, 95)),
-        saturated_share=float(np.mean(columns['saturated_s'])) / duration,
+        saturated_runs=float(np.mean(columns['saturated_s'] > SATURATED_RUN_S)),
         latency_margins_deg=[float(m) for m in latency_margins])
 
 
@@ -249,14 +252,14 @@ def pareto(done):
 
 TRIAL_COLUMNS = ('trial',) + GAINS + (
     'runs', 'violations', 'closest_min_deg', 'closest_p1_deg', 'settled_share', 'settle_p50_s',
-    'settle_p95_s', 'saturated_share', 'latency_min_margin_deg', 'feasible')
+    'settle_p95_s', 'saturated_runs', 'latency_min_margin_deg', 'feasible')
 
 
 def trial_row(number, gains, got: TrialFigures) -> list:
     """A row of trials.csv (TRIAL_COLUMNS)."""
     return ([number] + [gains[k] for k in GAINS] +
             [got.runs, got.violations, got.closest_min_deg, got.closest_p1_deg,
-             got.settled_share, got.settle_p50_s, got.settle_p95_s, got.saturated_share,
+             got.settled_share, got.settle_p50_s, got.settle_p95_s, got.saturated_runs,
              min(got.latency_margins_deg) if got.latency_margins_deg else math.nan,
              got.feasible])
 
