@@ -56,7 +56,7 @@ def test_a_short_tuning_writes_its_trials_front_and_figure_and_repeats_from_its_
     image = imread(str(outs[0] / 'pareto.png'))
     assert image.shape[0] > 300 and np.std(image) > 0.05
     summary = (outs[0] / 'summary.md').read_text()
-    assert 'checked on' in summary
+    assert 'checked in turn on' in summary
     # the chosen set is the first checked one that passed; none passed: no best.yaml, exit 1
     assert (outs[0] / 'best.yaml').exists() == (' (chosen) ' in summary)
 
