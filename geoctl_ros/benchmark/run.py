@@ -30,7 +30,7 @@ from geoctl_ros.plots import benchmark as plots
 
 # The gain sets the default law flies the random runs with: name -> the scenario file (under
 # config/scenarios) whose gains go over config/testbed.yaml's; None: the testbed's own
-GAIN_SETS = {'tuned (config/testbed.yaml)': None,
+GAIN_SETS = {"the testbed's (config/testbed.yaml)": None,
              "the experiment's (testbed_experiment.yaml)": 'testbed_experiment.yaml'}
 GAIN_KEYS = tune.GAINS + ('disturbance_model',)
 
