@@ -101,4 +101,6 @@ def test_a_gain_studys_goals_are_checked_with_its_own_barrier_and_a_refused_one_
             s = draw.sections(7, i, gains)
             scenario.from_sections(s, 'run')                      # no ConfigError
             refused += draw.goal_refused(s)
-    assert refused == 5                                           # (4 and 1: gain_sets.csv)
+    # (the runs' goals are those the testbed's own controller, k_R 1.2, accepts: the softer
+    # k_R 0.35 and 0.45 refuse more of them)
+    assert refused == 17

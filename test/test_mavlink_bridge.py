@@ -158,7 +158,7 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE' and m.param_index == len(TABLE) - 1, 5.0,
              'the whole parameter list')
     values = {p.param_id: p.param_value for p in gcs.since(t0, 'PARAM_VALUE')}
-    assert len(values) == len(TABLE) and values['GC_K_R'] == pytest.approx(0.4)
+    assert len(values) == len(TABLE) and values['GC_K_R'] == pytest.approx(1.2)
     g.mission_request_list_send(SYSID, 1)
     assert gcs.wait(lambda m: m.get_type() == 'MISSION_COUNT', 5.0, 'MISSION_COUNT').count == 0
     # telemetry at its rates, in NED/FRD

@@ -29,6 +29,7 @@ from geoctl_ros.sim import scenario
 pytestmark = pytest.mark.odroid
 TESTBED = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config',
                        'testbed.yaml')
+EXPERIMENT = os.path.join(os.path.dirname(TESTBED), 'scenarios', 'testbed_experiment.yaml')
 
 
 class Ran(NamedTuple):
@@ -109,12 +110,13 @@ def test_the_view_draws_each_cone_at_its_half_angle_and_the_trail_oldest_first()
 
 
 def test_compare_flies_a_record_again_headless_and_finds_the_same_flight(tmp_path, report):
-    """A record made from a headless run of the testbed (its true attitude, Psi, set points and
-    armed diagnostics, at the runner's steps), compared with the testbed's file stripped of its
-    start and its set points: the headless twin starts at the record's attitude at arming and
-    flies the record's set points, so it finds the same closest approach.
+    """A record made from a headless run of the testbed flying the lab's hand-made set points
+    (config/scenarios/testbed_experiment.yaml: its true attitude, Psi, set points and armed
+    diagnostics, at the runner's steps), compared with that file stripped of its start and its
+    set points: the headless twin starts at the record's attitude at arming and flies the
+    record's set points, so it finds the same closest approach.
     """
-    flown = scenario.run(scenario.load(TESTBED), duration=8.0)
+    flown = scenario.run(scenario.load(EXPERIMENT), duration=8.0)
     cols = flown.columns
     t = flown.history[:, 0]
     names = [n for n in BY_NAME if n in ('/sim/true_pose', '/configuration_error',
@@ -142,13 +144,13 @@ def test_compare_flies_a_record_again_headless_and_finds_the_same_flight(tmp_pat
     w.close()
     # the scenario file compared with has neither the start nor the set points: they must come
     # from the record
-    doc = yaml.safe_load(open(TESTBED))
+    doc = yaml.safe_load(open(EXPERIMENT))
     del doc['controller']['ros__parameters']['setpoint_schedule']
     doc['sim']['ros__parameters']['initial_attitude'] = [0.0, 0.0, 0.0, 1.0]
     bare = tmp_path / 'bare.yaml'
     bare.write_text(yaml.safe_dump(doc))
     out = tmp_path / 'out'
-    r = report(tmp_path / 'flight', '--out', out, '--params-file', TESTBED, '--compare', bare)
+    r = report(tmp_path / 'flight', '--out', out, '--params-file', EXPERIMENT, '--compare', bare)
     assert r.returncode == 0, r.stderr
     s = json.loads((out / 'summary.json').read_text())
     recorded = s['closest_approach_deg']['obstacle']['angle']
