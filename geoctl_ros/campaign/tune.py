@@ -30,7 +30,7 @@ from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
-from geoctl_ros.campaign import runner, study
+from geoctl_ros.campaign import manoeuvres, runner, study
 from geoctl_ros.core.gains import learning_gain, learning_time
 from geoctl_ros.params import load_parameter_file
 from geoctl_ros.sim import closed_loop
@@ -138,12 +138,6 @@ def latency_row(job):
     return float(flight.min_margin_deg.min())
 
 
-def latency_margins(client, path, gains, rows, duration):
-    """The closest approach of each latency row, flown on the cluster."""
-    jobs = [(path, gains, lat, jit, duration) for lat, jit in rows]
-    return client.gather(client.map(latency_row, jobs, pure=False))
-
-
 @dataclass
 class TuneArgs:
     """What a tuning flies (the campaign runner's arguments, and the latency rows')."""
@@ -155,7 +149,7 @@ class TuneArgs:
     latency_duration: float
     gravity: float = 9.81          # |g| of the testbed (m/s^2)
     batch: int = runner.BATCH
-    disturbance_max: float = 0.05
+    disturbance_max: float = manoeuvres.DISTURBANCE_MAX
     worst: int = 0
 
 

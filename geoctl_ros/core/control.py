@@ -152,14 +152,6 @@ class AttitudeController:
         if self.guidance is not None:
             self.guidance.reset()
 
-    @property
-    def setpoint_now(self) -> np.ndarray:
-        """The set point the law is flying to now: guidance's on its way to R_d, else R_d."""
-        if self.guidance is None or self.guidance.paths is None:
-            return self._R_d
-        P = self.guidance.paths[np.arange(len(self.guidance.index)), self.guidance.index]
-        return P[0] if self._R_d.ndim == 2 else P
-
     def replan(self) -> None:
         """Plan guidance's way to R_d again from the attitude of the next step (at arming)."""
         if self.guidance is not None:
