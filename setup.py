@@ -34,6 +34,7 @@ setup(
             'mavlink_bridge = geoctl_ros.nodes.mavlink_bridge:main',
             'campaign = geoctl_ros.cli.campaign:main',
             'tune = geoctl_ros.cli.tune:main',
+            'falsify = geoctl_ros.cli.falsify:main',
             'benchmark = geoctl_ros.cli.benchmark:main',
             'record = geoctl_ros.nodes.recorder:main',
             'report = geoctl_ros.cli.report:main',

@@ -113,8 +113,9 @@ ROSDEP_KEYS = {'numpy': 'python3-numpy', 'yaml': 'python3-yaml',
                'dask': 'python3-dask', 'distributed': 'python3-distributed',
                'smbus2': 'python3-smbus2', 'hypothesis': 'python3-hypothesis'}
 # imported by development tools only, never on the vehicle: not in package.xml, pinned in
-# requirements.txt (`./run tune`: the gains are tuned on a development machine or a cluster)
-DEVELOPMENT_ONLY = {'optuna'}
+# requirements.txt (`./run tune` and `./run falsify`: the gains are tuned, and the envelope
+# attacked, on a development machine or a cluster)
+DEVELOPMENT_ONLY = {'optuna', 'rtamt', 'staliro', 'scipy'}
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python', 'std_msgs',
                 'geometry_msgs', 'sensor_msgs', 'std_srvs', 'diagnostic_msgs', 'rosgraph_msgs',
                 'launch_ros', 'visualization_msgs'}

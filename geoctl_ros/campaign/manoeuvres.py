@@ -72,20 +72,33 @@ def _aligning(r, d):
                    * math.atan2(np.linalg.norm(axis), float(r @ d)))
 
 
-def _angle_deg(a, b):
+def angle_deg(a, b):
+    """The angle between unit vectors a and b (deg)."""
     return math.degrees(math.acos(min(1.0, max(-1.0, float(a @ b)))))
 
 
-def _attitude(rng, r, d):
-    """An attitude with the sensor axis r pointing along d and the body as upright as it can be
-    (then turned about d by up to +-TWIST_DEG); None if that leaves the body tilted more than
-    TILT_DEG (the joint's range).
+def upright(r, d, turn_deg):
+    """An attitude with the sensor axis r pointing along d and the body as upright as it can be,
+    then turned about d by turn_deg; None if that leaves the body tilted more than TILT_DEG (the
+    joint's range).
     """
     base = _aligning(r, d)
     ups = so3.exp_apply(d * _TWISTS[:, None], base @ UP)        # body z for each twist
-    twist = _TWISTS[int(np.argmax(ups[:, 2]))] + math.radians(rng.uniform(-TWIST_DEG, TWIST_DEG))
+    twist = _TWISTS[int(np.argmax(ups[:, 2]))] + math.radians(turn_deg)
     R = so3.exp(d * twist) @ base
-    return R if _angle_deg(R @ UP, UP) <= TILT_DEG else None
+    return R if angle_deg(R @ UP, UP) <= TILT_DEG else None
+
+
+def _attitude(rng, r, d):
+    """``upright`` turned by a uniform draw within +-TWIST_DEG."""
+    return upright(r, d, rng.uniform(-TWIST_DEG, TWIST_DEG))
+
+
+def crosses(d0, d1, axis, half_angle_deg):
+    """Whether the straight way of the sensor from d0 to d1 crosses the cone (axis, half-angle)."""
+    arc = (1.0 - _ARC[:, None]) * d0 + _ARC[:, None] * d1
+    cos_arc = (arc @ axis) / np.sqrt(np.sum(arc * arc, axis=1))
+    return math.degrees(math.acos(min(1.0, float(cos_arc.max())))) < half_angle_deg
 
 
 def run_seeds(seed, index):
@@ -134,11 +147,9 @@ def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None, duration=20.0):
         d0 = sphere.direction(v0, th0 + math.radians(rng.uniform(5.0, 30.0)), azimuth)
         d1 = sphere.direction(v0, th0 + math.radians(rng.uniform(5.0, 30.0)),
                         azimuth + math.pi + math.radians(rng.uniform(-30.0, 30.0)))
-        if any(_angle_deg(d, v) < t + CLEAR_DEG for d in (d0, d1) for v, t in zip(axes, theta)):
+        if any(angle_deg(d, v) < t + CLEAR_DEG for d in (d0, d1) for v, t in zip(axes, theta)):
             continue
-        arc = (1.0 - _ARC[:, None]) * d0 + _ARC[:, None] * d1
-        cos_arc = (arc @ v0) / np.sqrt(np.sum(arc * arc, axis=1))
-        if math.degrees(math.acos(min(1.0, float(cos_arc.max())))) >= theta[0]:
+        if not crosses(d0, d1, v0, theta[0]):
             continue                                    # the straight way misses the cone
         R0, R_d = _attitude(rng, r, d0), _attitude(rng, r, d1)
         if R0 is not None and R_d is not None and (
@@ -197,7 +208,7 @@ class Manoeuvres:
         self.unmodelled = unmodelled_moment(self.nominal_s, disturbance_max)
         self._probes = {}
 
-    def _goal_ok(self, cones, R_d, gains=None):     # the controller's own set-point check
+    def goal_ok(self, cones, R_d, gains=None):     # the controller's own set-point check
         key = tuple(sorted((gains or {}).items()))
         if key not in self._probes:
             self._probes[key] = AttitudeController(controller_config(dict(
@@ -222,8 +233,14 @@ class Manoeuvres:
         flown all the same, with the check off (0), so that every gain set flies every run;
         ``goal_refused`` tells.
         """
-        m = draw_manoeuvre(seed, index, self.nominal_c['sensor_axis'], self._goal_ok,
+        m = draw_manoeuvre(seed, index, self.nominal_c['sensor_axis'], self.goal_ok,
                            self.duration)
+        return self.sections_of(m, 'campaign seed %d, run %d' % (seed, index), gains)
+
+    def sections_of(self, m, title, gains=None):
+        """The scenario file's sections of a manoeuvre m (``draw_manoeuvre``'s dict, drawn or
+        chosen: the falsifier's), titled title, with gains over the testbed's (see ``sections``).
+        """
         base = self.base
         controller = {k: v for k, v in base.get('controller', {}).items()
                       if not k.startswith(('cones.', 'setpoint'))}
@@ -235,7 +252,7 @@ class Manoeuvres:
             controller['cones.%s.axis' % name] = axis
             controller['cones.%s.half_angle_deg' % name] = half_angle
         controller['setpoint'] = _floats(so3.rot_to_quat(m['R_d']))
-        if gains and not self._goal_ok(m['cones'], m['R_d'], gains):
+        if gains and not self.goal_ok(m['cones'], m['R_d'], gains):
             controller['unmodelled_moment_max'] = 0.0
         S = np.diag(np.sqrt(m['inertia_factors']))
         J = self.nominal_s['inertia'].reshape(3, 3)
@@ -250,13 +267,14 @@ class Manoeuvres:
             'disturbance.constant': _floats(m['disturbance'] * self.disturbance_max),
             'noise.seed': m['noise_seed'],
         })
-        return {
-            '/**': dict(base.get('/**', {})), 'controller': controller, 'sim': sim,
-            'scenario': {'title': 'campaign seed %d, run %d' % (seed, index),
-                         'duration': self.duration, 'latency': m['latency_ms'] / 1000.0,
-                         'stalls.start': [a for a, _ in m['stalls']],
-                         'stalls.duration': [b for _, b in m['stalls']]},
-        }
+        scenario = {'title': title, 'duration': self.duration,
+                    'latency': m['latency_ms'] / 1000.0,
+                    'stalls.start': [a for a, _ in m['stalls']],
+                    'stalls.duration': [b for _, b in m['stalls']]}
+        if m.get('jitter_ms'):                  # (the falsifier's: steps up to this late)
+            scenario['tick_jitter'] = m['jitter_ms'] / 1000.0
+        return {'/**': dict(base.get('/**', {})), 'controller': controller, 'sim': sim,
+                'scenario': scenario}
 
 
 def run_sections(base, seed, index, duration=20.0, disturbance_max=DISTURBANCE_MAX):

@@ -107,3 +107,25 @@ def tuning_figure(done, front, path):
     a2.grid(True, alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
+
+
+def falsification_figure(searches, outside, path):
+    """A falsification: each search's lowest robustness found against the evaluations spent, one
+    panel per requirement searched (``geoctl_ros.falsify.search.Search``; outside: the
+    robustness of a point outside the envelope).
+    """
+    targets = sorted({s.target for s in searches})
+    fig, axes = subplots(1, len(targets), figsize=(5.5 * len(targets), 3.8), squeeze=False)
+    for ax, target in zip(axes[0], targets):
+        for s in searches:
+            if s.target == target:
+                low = s.running_min()
+                low = np.where(low >= outside, np.nan, low)      # none inside yet
+                ax.step(np.arange(1, len(low) + 1), low, where='post', label=s.optimizer)
+        ax.axhline(0.0, color='tab:red', lw=1, label='violated below')
+        ax.set(xlabel='evaluations', ylabel='lowest robustness found [deg]',
+               title='requirement %r' % target)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)

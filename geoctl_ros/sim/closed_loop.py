@@ -75,6 +75,8 @@ class Flight:
                                           # (None unless asked for: series=True)
     sensor_series: Optional[np.ndarray]   # (steps, runs, 3): sensor direction R r, world frame
                                           # (float32; None unless asked for)
+    error_series: Optional[np.ndarray]    # (steps, runs): attitude error to the goal (deg; the
+                                          # true attitude; None unless asked for)
     history: Optional[History]     # History: every step's state and output (history=True)
     times: np.ndarray              # (steps,): the control steps' times
     dt: float
@@ -147,6 +149,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     held = np.empty((int(holds.max()) if steps else 0,) + R_now.shape)   # a step's attitudes
     margin_series = np.empty((steps, n)) if series else None
     sensor_series = np.empty((steps, n, 3), dtype=np.float32) if series else None
+    error_series = np.empty((steps, n)) if series else None
     record = History(steps, bed) if history else None
     last_unsettled = np.full(n, -1)        # the last step with the error >= SETTLED_DEG
     last_coarse = np.full(n, -1)           # the last step with the error >= FINE_DEG
@@ -185,9 +188,10 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         last_unsettled[error >= settled_rad] = k
         last_coarse[error >= fine_rad] = k
         last_psi_above[out.psi >= SETTLE_PSI] = k
-        if margin_series is not None and sensor_series is not None:
+        if margin_series is not None and sensor_series is not None and error_series is not None:
             margin_series[k] = cones.margins_deg(R_now).min(axis=-1)
             sensor_series[k] = so3.matvec(R_now, cones.r)
+            error_series[k] = np.degrees(error)
         if record is not None:
             record.add(k, t, out, motors)
         command = out.u if actuator is None else motors.commands
@@ -210,7 +214,8 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         max_rate=max_rate, effort=effort, settle_s=_settled(last_unsettled, times),
         settle_fine_s=_settled(last_coarse, times),
         psi_settle_s=_settled(last_psi_above, times),
-        margin_series=margin_series, sensor_series=sensor_series, history=record, times=times,
+        margin_series=margin_series, sensor_series=sensor_series, error_series=error_series,
+        history=record, times=times,
         dt=dt, wall_s=wall)
 
 
