@@ -106,6 +106,30 @@ def test_the_set_point_is_planned_again_for_a_vehicle_pushed_off_its_way():
     assert np.allclose(g.paths[0, 0] @ R_AXIS, pushed @ R_AXIS)
 
 
+def test_a_batch_gives_each_run_the_set_points_it_gets_alone_when_one_is_planned_again():
+    """Found by the falsifier: a run near its goal had its set point in its path's padding, past
+    its own goal; a shorter plan of another run of the batch then put it off the end (an
+    IndexError in the control step). Each run of a batch, moved and pushed as below, gets the
+    set points it gets flown alone.
+    """
+    axes, theta, R0, R_goal = _campaign_case(11, 0)
+    cones = ConeSet(R_AXIS, axes, theta, 8.0, math.radians(0.25), guard_rad=math.radians(2.0))
+    near_goal = R_goal @ so3.exp(np.array([0.0, 0.0, math.radians(3.0)]))
+    starts = [near_goal, R0]                 # a short path, and a long one
+    batch = guidance.Guidance(math.radians(20.0), math.radians(8.0))
+    alone = [guidance.Guidance(math.radians(20.0), math.radians(8.0)) for _ in starts]
+    R = np.array(starts)
+    goals = np.array([R_goal, R_goal])
+    for k in range(30):
+        if k == 10:             # the long run pushed next to its goal: a plan of a few points
+            R[1] = R_goal @ so3.exp(np.array([0.0, math.radians(30.0), 0.0]))
+        P = batch.carrot(R, goals, cones)
+        assert np.all(batch.index <= batch.last)
+        for i, g in enumerate(alone):
+            assert np.array_equal(P[i], g.carrot(R[i], R_goal, cones))
+        R = np.array([R[i] @ so3.exp(0.4 * so3.log(R[i].T @ P[i])) for i in range(2)])
+
+
 def test_the_straight_yaw_arrives_round_the_cone():
     """The issue's case: config/scenarios/testbed_yaw90.yaml (no schedule) is under 5 deg by 8 s
     and under 1 deg by 15 s, at least 2 deg clear of the cone all the way.

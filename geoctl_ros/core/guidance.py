@@ -263,7 +263,10 @@ class Guidance:
                         - 1.0) >= cos_lookahead[:, None]
         within[:, 0] = True
         furthest = ahead[m, W - 1 - np.argmax(within[:, ::-1], axis=1)]
-        self.index[runs] = np.minimum(furthest, self.sight[runs, near])
+        # (never past its own goal, into the padding up to the batch's longest path: a shorter
+        # plan of another run would leave it off the end)
+        self.index[runs] = np.minimum(np.minimum(furthest, self.sight[runs, near]),
+                                      self.last[runs])
 
     def _plan(self, Rs, goals, cones, runs):
         """Plan the paths of the runs (indices) from the attitudes Rs to their goals."""
