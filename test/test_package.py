@@ -23,8 +23,8 @@ pytestmark = pytest.mark.odroid
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PKG = os.path.join(ROOT, 'geoctl_ros')
-LAYERS = ['core', 'params', 'sim', 'plots', 'records', 'esc', 'mavlink', 'campaign', 'benchmark',
-          'nodes', 'sil', 'fuzz', 'cli']    # lowest first
+LAYERS = ['core', 'params', 'sim', 'plots', 'records', 'esc', 'mavlink', 'campaign', 'falsify',
+          'benchmark', 'nodes', 'sil', 'fuzz', 'cli']    # lowest first
 
 
 def test_core_sim_params_and_mavlink_import_without_rclpy():

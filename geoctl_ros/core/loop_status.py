@@ -103,12 +103,13 @@ def status(loop: Any, now: float, other_commanders: Optional[str] = None) -> Sta
     w = loop.window
     if sup.armed and w.steady_blind_ms > 1e3 * SUSTAINED_BLIND_BOUND_S:
         warnings.append('loop blind at least %d ms at every tick of the window (a sustained '
-                        'latency): beyond the %.0f ms the cone is kept for'
+                        'latency): beyond the %.0f ms of the envelope tested and attacked '
+                        '(docs/safety.md)'
                         % (w.steady_blind_ms, 1e3 * SUSTAINED_BLIND_BOUND_S))
     elif sup.armed and w.blind_ms > 1e3 * BLIND_BOUND_S:
         warnings.append('loop blind up to %d ms (inputs up to %.0f ms old by receipt, plus '
-                        'their delay to receipt and late steps): beyond the %.0f ms the cone '
-                        'is kept for' % (w.blind_ms, 1e3 * max(
+                        'their delay to receipt and late steps): beyond the %.0f ms of the '
+                        'envelope tested and attacked (docs/safety.md)' % (w.blind_ms, 1e3 * max(
                             np.max(loop.pose_age.samples(), initial=0.0),
                             np.max(loop.rate_age.samples(), initial=0.0)),
                             1e3 * BLIND_BOUND_S))

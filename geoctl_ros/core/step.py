@@ -30,8 +30,8 @@ def blind_time(delay: float, ages: Tuple[Any, Any], dt: float, held: Optional[fl
     return age + (held - dt)
 
 
-# The delay bound (docs/safety.md, "The bound"): the blind time the cone is kept for at any tick,
-# and sustained
+# The delay envelope (docs/safety.md, "The bound"): the blind time at any tick, and sustained,
+# that the safety campaign draws and the falsifier searches (tested and attacked, not derived)
 BLIND_BOUND_S = 0.10
 SUSTAINED_BLIND_BOUND_S = 0.06
 SUSTAINED_TAU_S = 0.25      # s, the low-pass that tells a sustained blindness from a stall
