@@ -1,6 +1,7 @@
 """What the command-line front ends share: argparse types."""
 import argparse
 import math
+import os
 import sys
 
 
@@ -26,3 +27,11 @@ def cannot_start(prog: str, error: Exception, path: str) -> int:
     else:
         print('%s: %s' % (prog, error), file=sys.stderr)
     return 2
+
+
+def add_cluster_arguments(parser: argparse.ArgumentParser, *worker_aliases: str) -> None:
+    """--workers (and its aliases) and --scheduler: where a command's batches fly."""
+    parser.add_argument('--workers', *worker_aliases, type=int, default=os.cpu_count() or 1,
+                        dest='workers', help='local cluster: worker processes (one per core)')
+    parser.add_argument('--scheduler', metavar='tcp://HOST:PORT', default=None,
+                        help='fly on this Dask scheduler instead of a local cluster')

@@ -12,7 +12,7 @@ import sys
 from geoctl_ros.benchmark import cases
 from geoctl_ros.benchmark.run import GAIN_SETS, benchmark, gain_set
 from geoctl_ros.campaign import cluster, runner
-from geoctl_ros.cli.args import cannot_start, positive_seconds
+from geoctl_ros.cli.args import add_cluster_arguments, cannot_start, positive_seconds
 from geoctl_ros.cli.campaign import progress_printer
 from geoctl_ros.params import ConfigError, load_parameter_file
 from geoctl_ros.sil.rosenv import config_dir
@@ -30,10 +30,7 @@ def main(argv=None):
                         help="simulated seconds of each standard case (default: its file's)")
     parser.add_argument('--cases', default=','.join(cases.CASES),
                         help='standard cases to fly (default: all: %s)' % ','.join(cases.CASES))
-    parser.add_argument('--workers', type=int, default=os.cpu_count() or 1,
-                        help='local cluster: worker processes (one per core)')
-    parser.add_argument('--scheduler', metavar='tcp://HOST:PORT', default=None,
-                        help='fly on this Dask scheduler instead of a local cluster')
+    add_cluster_arguments(parser)
     parser.add_argument('--batch', type=int, default=runner.BATCH,
                         help='random runs flown together at most (%d)' % runner.BATCH)
     args = parser.parse_args(argv)

@@ -11,7 +11,7 @@ import sys
 import time
 
 from geoctl_ros.campaign import cluster, manoeuvres, runner, study
-from geoctl_ros.cli.args import cannot_start, positive_seconds
+from geoctl_ros.cli.args import add_cluster_arguments, cannot_start, positive_seconds
 from geoctl_ros.params import ConfigError, load_parameter_file
 from geoctl_ros.sil.rosenv import config_dir
 
@@ -36,10 +36,7 @@ def main(argv=None):
     parser.add_argument('--runs', type=int, default=1000, help='number of manoeuvres (1000)')
     parser.add_argument('--seed', type=int, default=1, help='campaign seed (1)')
     parser.add_argument('--out', required=True, help='output directory')
-    parser.add_argument('--workers', '--jobs', type=int, default=os.cpu_count() or 1,
-                        dest='workers', help='local cluster: worker processes (one per core)')
-    parser.add_argument('--scheduler', metavar='tcp://HOST:PORT', default=None,
-                        help='fly on this Dask scheduler instead of a local cluster')
+    add_cluster_arguments(parser, '--jobs')
     parser.add_argument('--dashboard', action='store_true',
                         help='local cluster: serve the Dask dashboard on 127.0.0.1:8787')
     parser.add_argument('--batch', type=int, default=runner.BATCH,

@@ -18,7 +18,7 @@ import sys
 import time
 
 from geoctl_ros.campaign import cluster, manoeuvres
-from geoctl_ros.cli.args import cannot_start, positive_seconds
+from geoctl_ros.cli.args import add_cluster_arguments, cannot_start, positive_seconds
 from geoctl_ros.falsify.envelope import OUTSIDE, Envelope, Space
 from geoctl_ros.falsify.requirements import REQUIREMENTS
 from geoctl_ros.falsify.search import OPTIMIZERS, Search, search
@@ -95,10 +95,7 @@ def main(argv=None):
     parser.add_argument('--seed', type=int, default=1, help="the optimizers' seed (1)")
     parser.add_argument('--out', default=os.path.join('out', 'falsify'),
                         help='output directory (out/falsify)')
-    parser.add_argument('--workers', type=int, default=os.cpu_count() or 1,
-                        help='local cluster: worker processes (one per core)')
-    parser.add_argument('--scheduler', metavar='tcp://HOST:PORT', default=None,
-                        help='fly on this Dask scheduler instead of a local cluster')
+    add_cluster_arguments(parser)
     parser.add_argument('--params-file', default=None,
                         help='the testbed and its gains (default: config/testbed.yaml)')
     args = parser.parse_args(argv)

@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 from geoctl_ros.campaign import cluster, study, tune
-from geoctl_ros.cli.args import cannot_start, positive_seconds
+from geoctl_ros.cli.args import add_cluster_arguments, cannot_start, positive_seconds
 from geoctl_ros.params import (
     CONTROLLER,
     ConfigError,
@@ -61,10 +61,7 @@ def main(argv=None):
                         help="the held-out manoeuvres' campaign seed (the tuning's + 1000)")
     parser.add_argument('--out', default=os.path.join('out', 'tune'),
                         help='output directory (out/tune)')
-    parser.add_argument('--workers', type=int, default=os.cpu_count() or 1,
-                        help='local cluster: worker processes (one per core)')
-    parser.add_argument('--scheduler', metavar='tcp://HOST:PORT', default=None,
-                        help='fly on this Dask scheduler instead of a local cluster')
+    add_cluster_arguments(parser)
     parser.add_argument('--params-file', default=None,
                         help='the testbed (default: config/testbed.yaml)')
     args = parser.parse_args(argv)
