@@ -245,6 +245,9 @@ class Manoeuvres:
         controller = {k: v for k, v in base.get('controller', {}).items()
                       if not k.startswith(('cones.', 'setpoint'))}
         controller['unmodelled_moment_max'] = self.unmodelled
+        # the robust terms hold against the same unlearnt moment (the draw's own bound)
+        controller['cbf_moment_bound'] = max(controller.get('cbf_moment_bound', 0.0),
+                                             self.unmodelled)
         controller.update(gains or {})
         names = ['c%d' % (i + 1) for i in range(len(m['cones']))]
         controller['cones.names'] = names

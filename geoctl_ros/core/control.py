@@ -39,6 +39,7 @@ from typing import Any, NamedTuple, Optional
 import numpy as np
 
 from geoctl_ros.core import so3
+from geoctl_ros.core.brake import ApproachBrake
 from geoctl_ros.core.cones import ConeEval, ConeSet
 from geoctl_ros.core.errors import (
     LinearMap,
@@ -88,6 +89,9 @@ class ControllerConfig:
     k_Delta_cog: float = 0.0         # adaptation gain of the m*rho block (constant+cog model)
     guidance_lookahead: float = 0.0  # rad, guidance's set point at most this far ahead; 0 = off
     guidance_clearance: float = 0.0  # rad, guidance's path this far outside each cone's barrier
+    approach_brake_rate: float = 0.0  # 1/s, the delay-robust law's approach brake; 0 = off
+    brake_acceleration: float = 40.0  # rad/s^2, what the rotors can spare to brake an approach
+    attitude_noise: float = 0.0       # rad, the attitude measurement's standard deviation
     J: np.ndarray = field(init=False, repr=False)        # inertia about the pivot
     m_rho: np.ndarray = field(init=False, repr=False)    # mass times pivot -> centre of mass
 
@@ -310,6 +314,7 @@ class AttitudeController:
         self.guidance = (Guidance(config.guidance_lookahead, config.guidance_clearance)
                          if config.guidance_lookahead > 0.0 else None)
         self._law = LAWS[config.law]
+        self.brake = ApproachBrake.of(config)
         self.J_inv = np.linalg.inv(config.J)     # the model's, for the prediction too
         self._gamma = np.array([config.k_Delta] * 3 + [config.k_Delta_cog] * 3)[:config.n_params]
         self._balls = [(block, bound) for block, bound in ((slice(0, 3), config.delta_bar_max),

@@ -17,23 +17,40 @@ from geoctl_ros.core.errors import with_cones
 from geoctl_ros.core.so3 import cross, matvec
 
 
-def delay_robust_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool,
-                     blind: Any) -> Any:
-    """The paper's law made robust to delay (the safety envelope; the default): each cone's
-    barrier widened by what the sensor travels towards it over the blind time, up to
-    ``blind_guard_max_deg`` (docs/safety.md, "Delay"). With fresh inputs on time it is the paper's.
+def _barrier_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool,
+                 blind: Any) -> Any:
+    """The paper's configuration error with every cone's log barrier, each cone widened by the
+    blind time (none when blind is 0).
     """
     terms = controller.terms(R, Omega, blind)
     psi, e_R = with_cones(terms.A, terms.e_RA, terms.cones)
     return controller.moment(R, Omega, dt, adapt, terms, psi, e_R)
 
 
+def delay_robust_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool,
+                     blind: Any) -> Any:
+    """The paper's law made robust to delay (the safety envelope; the default): each cone's
+    barrier widened by what the sensor travels towards it over the blind time, up to
+    ``blind_guard_max_deg`` (docs/safety.md, "Delay"), and the approach brake
+    (``core.brake``: no cone approached faster than the derived sampled-data margin allows).
+    With fresh inputs on time and the brake off it is the paper's.
+    """
+    out = _barrier_law(controller, R, Omega, dt, adapt, blind)
+    brake = controller.brake
+    if brake is not None and out.cones.s.shape[-1]:
+        extra = brake.moment(controller.config.J, out.cones.s, out.cones.cross,
+                             controller.config.cones.theta, Omega, blind, dt)
+        if extra is not None:
+            out = out._replace(u=out.u + extra)
+    return out
+
+
 def paper_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool,
               blind: Any) -> Any:
     """The paper's law as published (Kulumani, Poole & Lee): the configuration error carries every
-    cone's log barrier, on the cones as configured (the delay-robust law never blind).
+    cone's log barrier, on the cones as configured (never blind, no brake).
     """
-    return delay_robust_law(controller, R, Omega, dt, adapt, 0.0)
+    return _barrier_law(controller, R, Omega, dt, adapt, 0.0)
 
 
 def _unconstrained(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float,

@@ -43,6 +43,9 @@ def controller_config(values: dict) -> ControllerConfig:
         unmodelled_moment_max=values['unmodelled_moment_max'],
         blind_guard_max=math.radians(values['blind_guard_max_deg']), law=values['law'],
         cbf_rate=values['cbf_rate'], cbf_moment_bound=values['cbf_moment_bound'],
+        approach_brake_rate=values['approach_brake_rate'],
+        brake_acceleration=values['brake_acceleration'],
+        attitude_noise=math.radians(values['attitude_noise_deg']),
         guidance_lookahead=math.radians(values['guidance_lookahead_deg']),
         guidance_clearance=math.radians(values['guidance_clearance_deg']))
 

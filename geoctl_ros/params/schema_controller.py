@@ -41,9 +41,22 @@ PARAMS = [
        "the cbf law: double pole lambda of h'' + 2 lambda h' + lambda^2 h >= 0 for each cone",
        CONTROLLER, check=positive, lo=0.1, hi=100.0),
     _p('cbf_moment_bound', 'double', 0.0, 'N m',
-       'the cbf law: each cone holds against an unlearnt moment up to this (a robust CBF: '
-       'a_i . u >= beta_i + bound |a_i|); 0 = the model taken as exact', CONTROLLER,
+       'the unlearnt moment the robust terms hold against: the cbf law, each cone (a robust '
+       'CBF: a_i . u >= beta_i + bound |a_i|), and the delay-robust law\'s approach brake '
+       '(its sampled-data margin); 0 = the model taken as exact', CONTROLLER,
        lo=0.0, hi=10.0),
+    _p('approach_brake_rate', 'double', 0.0, '1/s',
+       'the delay-robust law: how fast its brake takes away an approach to a cone faster than '
+       'the derived sampled-data margin allows (docs/safety.md, "The approach brake"); 0 = off',
+       CONTROLLER, lo=0.0, hi=1000.0),
+    _p('brake_acceleration', 'double', 40.0, 'rad/s^2',
+       'the angular acceleration the rotors can spare to brake an approach to a cone (their '
+       'authority less the gravity moment and the unlearnt moment, over the largest pivot '
+       'inertia; docs/safety.md, "The approach brake")', CONTROLLER, check=positive,
+       lo=0.1, hi=10000.0),
+    _p('attitude_noise_deg', 'double', 0.1, 'deg',
+       "the attitude measurement's noise (one standard deviation): the approach brake keeps 3 "
+       'of them from each cone', CONTROLLER, lo=0.0, hi=5.0),
     _p('guidance_lookahead_deg', 'double', 0.0, 'deg',
        'guidance: the law flies to set points along a path planned round the cones to the goal, '
        'each at most this far ahead of the measured attitude (also bounding the moment and the '
