@@ -11,8 +11,13 @@ from geoctl_ros.core import so3
 from geoctl_ros.core.brake import ApproachBrake, braking_distance
 from geoctl_ros.core.control import AttitudeController
 from geoctl_ros.core.errors import approach_rates
-from geoctl_ros.params import CONTROLLER, controller_config, load_parameter_file, node_overrides
-from geoctl_ros.params import resolve
+from geoctl_ros.params import (
+    CONTROLLER,
+    controller_config,
+    load_parameter_file,
+    node_overrides,
+    resolve,
+)
 
 pytestmark = pytest.mark.odroid
 

@@ -42,7 +42,7 @@ PARAMS = [
        CONTROLLER, check=positive, lo=0.1, hi=100.0),
     _p('cbf_moment_bound', 'double', 0.0, 'N m',
        'the unlearnt moment the robust terms hold against: the cbf law, each cone (a robust '
-       'CBF: a_i . u >= beta_i + bound |a_i|), and the delay-robust law\'s approach brake '
+       "CBF: a_i . u >= beta_i + bound |a_i|), and the delay-robust law's approach brake "
        '(its sampled-data margin); 0 = the model taken as exact', CONTROLLER,
        lo=0.0, hi=10.0),
     _p('approach_brake_rate', 'double', 0.0, '1/s',
