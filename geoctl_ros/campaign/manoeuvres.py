@@ -15,8 +15,7 @@ cone count without drawing them, and its second everything else):
   deg away), so the straight way crosses the cone and the controller must go round; start and goal
   are at least 5 deg clear of every cone, and the goal is one the controller accepts with
   ``unmodelled_moment_max`` set to what the errors below can add up to (``unmodelled_moment``,
-  0.40 N m for the testbed; redrawn otherwise; the robust terms' ``cbf_moment_bound`` is raised
-  to it too). About the sensor axis, start and goal attitudes
+  0.40 N m for the testbed; redrawn otherwise). About the sensor axis, start and goal attitudes
   are the most upright ones turned by up to +-15 deg, and the body's z axis is within 40 deg of
   vertical (the joint's range; redrawn otherwise);
 - the testbed (``config/testbed.yaml``): its gains, rotors, thrust curve, 40 ms motor lag and
@@ -246,9 +245,6 @@ class Manoeuvres:
         controller = {k: v for k, v in base.get('controller', {}).items()
                       if not k.startswith(('cones.', 'setpoint'))}
         controller['unmodelled_moment_max'] = self.unmodelled
-        # the robust terms hold against the same unlearnt moment (the draw's own bound)
-        controller['cbf_moment_bound'] = max(controller.get('cbf_moment_bound', 0.0),
-                                             self.unmodelled)
         controller.update(gains or {})
         names = ['c%d' % (i + 1) for i in range(len(m['cones']))]
         controller['cones.names'] = names

@@ -68,9 +68,11 @@ class ApproachBrake:
         (R^T v_i) x r per cone), theta: the cones' half-angles (rad), blind: T_b (s; a float or
         one per run), hold: h (s).
         """
-        sin_phi = np.sqrt(so3.dot(cross, cross))
-        inv = 1.0 / np.maximum(sin_phi, 1e-9)
-        w = -so3.dot(cross, Omega[..., None, :]) * inv
+        closing = -so3.dot(cross, Omega[..., None, :])       # sin(phi_i) w_i
+        if not any_flag(closing > 0.0):             # (the usual case: no cone approached)
+            return None
+        inv = 1.0 / np.maximum(np.sqrt(so3.dot(cross, cross)), 1e-9)
+        w = closing * inv
         T = (np.asarray(blind, dtype=float)[..., None] if np.ndim(blind) else blind) + hold
         gap = np.arccos(np.clip(s, -1.0, 1.0)) - theta
         excess = np.maximum(w - self.allowed_rate(gap, T), 0.0)
