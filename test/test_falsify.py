@@ -72,7 +72,7 @@ def test_a_point_of_the_envelope_is_a_campaign_manoeuvre_or_outside():
 def test_a_short_falsification_writes_its_table_and_a_worst_flight_that_replays_to_the_bit(
         dask_scheduler, tmp_path, capsys):
     out = tmp_path / 'f'
-    code = falsify_cli.main(['--budget', '50', '--duration', '11', '--out', str(out),
+    code = falsify_cli.main(['--budget', '50', '--duration', '4', '--out', str(out),
                              '--scheduler', dask_scheduler])
     printed = capsys.readouterr()
     summary = (out / 'summary.md').read_text()
