@@ -31,7 +31,7 @@ def test_the_benchmark_flies_every_law_on_a_case_and_the_same_random_runs(
         dask_scheduler, tmp_path, capsys):
     out = tmp_path / 'bench'
     code = benchmark.main(['--out', str(out), '--runs', '6', '--duration', '2',
-                           '--cases', 'testbed_yaw90', '--case-duration', '4',
+                           '--cases', 'testbed_yaw90', '--case-duration', '3',
                            '--scheduler', dask_scheduler])
     printed = capsys.readouterr()
     assert code == 0, printed.err
