@@ -53,6 +53,7 @@ def measure(seconds=10.0, rate=100.0, log_dir='/tmp/geoctl_latency'):
                                      lambda m: self._got('controller'), qos.COMMAND)
             self.pose, self.imu = PoseStamped(), Imu()
             set_quaternion(self.pose.pose.orientation, (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5)))
+            self.imu.linear_acceleration.z = 9.81            # level, at rest
             self.create_timer(1.0 / rate, self._send)
 
         def _send(self):

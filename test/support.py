@@ -4,9 +4,11 @@ operator's set points and a rival controller.
 import math
 
 from geometry_msgs.msg import PoseStamped, QuaternionStamped
+import numpy as np
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray, UInt32MultiArray
 
+from geoctl_ros.core import so3
 from geoctl_ros.core.safety import ArmedState
 from geoctl_ros.nodes import qos
 from geoctl_ros.nodes.conversions import (
@@ -16,6 +18,8 @@ from geoctl_ros.nodes.conversions import (
     set_vector,
 )
 from geoctl_ros.sil.processes import Monitor
+
+GRAVITY_REACTION = np.array([0.0, 0.0, 9.81])     # m/s^2: what an IMU at rest reads, level
 
 
 class FakeInputs(Monitor):
@@ -39,7 +43,7 @@ class FakeInputs(Monitor):
     def _feed_tick(self):
         stamp = self.get_clock().now().to_msg()
         self.publish_pose(self.feed_q, stamp)
-        self.publish_imu(self.feed_w, stamp)
+        self.publish_imu(self.feed_w, stamp, self.feed_q)
         self.fed += 1
 
     def stop_feed(self):
@@ -51,10 +55,14 @@ class FakeInputs(Monitor):
         set_quaternion(msg.pose.orientation, q)
         self.pub_pose.publish(msg)
 
-    def publish_imu(self, w, stamp=None):
+    def publish_imu(self, w, stamp=None, q=(0.0, 0.0, 0.0, 1.0)):
+        """An IMU sample: angular velocity w, and the specific force of a vehicle at rest at
+        attitude q (the reaction to gravity, R^T [0, 0, 9.81]).
+        """
         msg = Imu()
         msg.header.stamp = stamp or self.get_clock().now().to_msg()
         set_vector(msg.angular_velocity, w)
+        set_vector(msg.linear_acceleration, so3.quat_to_rot(q).T @ GRAVITY_REACTION)
         self.pub_imu.publish(msg)
 
     def publish_setpoint(self, q):

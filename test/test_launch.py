@@ -194,6 +194,7 @@ def test_testbed_launch_remaps_prefix_and_law_reach_the_controller(installed, ro
         p.header.stamp = i.header.stamp = now
         set_quaternion(p.pose.orientation, LEVEL_YAW90)
         set_vector(i.angular_velocity, (0.0, 0.0, 0.0))
+        set_vector(i.linear_acceleration, (0.0, 0.0, 9.81))    # level, at rest
         pub_pose.publish(p)
         pub_imu.publish(i)
     timer = mon.create_timer(0.01, feed)

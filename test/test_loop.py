@@ -27,6 +27,10 @@ CONE = {'cones.names': ['obstacle'], 'cones.obstacle.axis': [1.0, 1.0, 0.0],
 
 
 def make_loop(**overrides):
+    """A loop of the cone's; its sensor checks off unless asked for (they need half a second of
+    samples at rest to arm, and have their own tests: test_sensors.py).
+    """
+    overrides.setdefault('consistency_checks', False)
     return ControlLoop(controller_setup(resolve(CONTROLLER, dict(CONE, **overrides))))
 
 
@@ -51,7 +55,8 @@ def test_disarmed_until_armed_with_fresh_inputs():
 
 def test_a_loop_nobody_configured_refuses_every_arm_until_the_opt_in():
     why = 'no configuration given: started without a parameter file'
-    loop = ControlLoop(controller_setup(resolve(CONTROLLER, CONE)), unconfigured=why)
+    loop = ControlLoop(controller_setup(resolve(CONTROLLER, dict(CONE, consistency_checks=False))),
+                       unconfigured=why)
     for t in (1.0, 2.0):
         feed(loop, t)
         refused = loop.arm(t)                     # fresh inputs, and still no
@@ -61,8 +66,8 @@ def test_a_loop_nobody_configured_refuses_every_arm_until_the_opt_in():
     st = loop.status(2.0)
     assert st.level == WARN and why in st.message
     # the opt-in, set at run time
-    assert loop.reconfigure(controller_setup(resolve(
-        CONTROLLER, dict(CONE, allow_default_configuration=True)))) is None
+    assert loop.reconfigure(controller_setup(resolve(CONTROLLER, dict(
+        CONE, allow_default_configuration=True, consistency_checks=False)))) is None
     feed(loop, 3.0)
     assert loop.arm(3.0).ok and loop.tick(3.0, 0.01).motors.commands.all()
 
@@ -342,7 +347,8 @@ def test_a_batch_of_one_commands_what_the_control_loop_does_tick_for_tick():
     w = w + 0.02 * rng.standard_normal(w.shape)
     values = dict(sc.controller, **{'setpoint_schedule.times': np.zeros(0),
                                     'setpoint_schedule.quaternions': np.zeros(0),
-                                    'setpoint': list(YAW90), 'measurement_delay': 0.01})
+                                    'setpoint': list(YAW90), 'measurement_delay': 0.01,
+                                    'consistency_checks': False})
     loop = ControlLoop(controller_setup(values))
     setup = controller_setup(values)
     c = setup.config.cones

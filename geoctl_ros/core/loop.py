@@ -10,6 +10,7 @@ from typing import Any, List, Optional, Sequence
 import numpy as np
 
 from geoctl_ros.core import loop_status, preflight, so3
+from geoctl_ros.core.consistency import SensorAgreement
 from geoctl_ros.core.control import AttitudeController, SetpointRejected
 from geoctl_ros.core.diagnostics import Status, failsafe
 from geoctl_ros.core.gaps import GapBridge
@@ -23,6 +24,7 @@ from geoctl_ros.core.safety import (
     angular_velocity_problem,
     esc_problem,
     quaternion_problem,
+    specific_force_problem,
 )
 from geoctl_ros.core.so3 import Vector
 from geoctl_ros.core.stats import WindowStats
@@ -48,6 +50,8 @@ class ControlLoop:
                            s.measurement_delay)
         self.supervisor = Supervisor([self.pose, self.rate])
         self.bridge = GapBridge(s.pose_rate_window)
+        self.frames = setup.frames      # the inputs' conventions, applied as they come in
+        self.agreement = SensorAgreement(setup.agreement, setup.frames)
         self.R = None                   # last accepted measurements
         self.Omega = None
         self.setpoint_note = None       # last set-point refusal, for diagnostics
@@ -82,23 +86,29 @@ class ControlLoop:
         if problem is None:
             self._pose_stamp = stamp if stamp_as_given is None else stamp_as_given
             self._end_gap(self.pose, previous, receipt)
-            self.R = so3.quat_to_rot(q)
+            raw = so3.quat_to_rot(q)
+            self.R = self.frames.attitude(raw)
             self.bridge.pose(self.R, stamp, receipt)
+            self.agreement.pose(self.R, stamp, receipt, raw)
         return problem
 
     def offer_angular_velocity(self, w: Vector, stamp: float, receipt: float,
-                               delay: Optional[float] = None) -> Optional[str]:
-        """A body angular velocity (rad/s); None if accepted, else why it was refused (delay: as
-        offer_pose's).
+                               delay: Optional[float] = None,
+                               specific_force: Optional[Vector] = None) -> Optional[str]:
+        """An IMU sample: the gyro's angular velocity (rad/s) and, if the IMU gives it, the
+        specific force (m/s^2), both in the IMU's own axes; None if accepted, else why it was
+        refused (delay: as offer_pose's).
         """
         previous = self.rate.last_receipt
         problem = self.rate.offer(
-            stamp, receipt, angular_velocity_problem(w, self.setup.loop.max_angular_velocity),
-            self._delay(delay))
+            stamp, receipt, angular_velocity_problem(w, self.setup.loop.max_angular_velocity)
+            or specific_force_problem(specific_force), self._delay(delay))
         if problem is None:
             self._end_gap(self.rate, previous, receipt)
-            self.Omega = np.array(w, dtype=float)
+            self.Omega = self.frames.angular_velocity(w)
             self.bridge.gyro(self.Omega)
+            self.agreement.imu(self.Omega, None if specific_force is None
+                               else self.frames.imu_vector(specific_force), specific_force)
         return problem
 
     def offer_esc_health(self, command_max: int, escs: Sequence[int],
@@ -153,6 +163,7 @@ class ControlLoop:
         result = self.supervisor.arm(now, '; '.join(problems) or None)
         if result.ok:
             self._schedule_index = -1
+            self.agreement.reset_flight()
             if not was_armed:
                 self.cone_entries, self.entry, self._inside = 0, None, False
                 self.step.history.clear()
@@ -180,6 +191,7 @@ class ControlLoop:
             return str(e)
         setup.mixer.adopt_state(self.setup.mixer)
         self.setup = setup
+        self.agreement.settings = setup.agreement
         self.step.reconfigure(setup.mixer, 0.0)
         s = setup.loop
         self.pose.fallback_delay = self.rate.fallback_delay = s.measurement_delay
@@ -205,6 +217,9 @@ class ControlLoop:
             if problem:
                 self.disarm(failsafe(problem), failed=True)
                 armed = False
+        if armed and self.agreement.flight_note and self.setup.agreement.enabled:
+            self.disarm(failsafe(self.agreement.flight_note), failed=True)
+            armed = False
         schedule = self.setup.schedule
         if armed and len(schedule):
             i = schedule.index_at(now - self.supervisor.armed_since)

@@ -28,6 +28,7 @@ from geoctl_ros.core.diagnostics import failsafe
 from geoctl_ros.core.so3 import Vector
 
 QUATERNION_TOLERANCE = 1e-3
+SPECIFIC_FORCE_MAX = 2000.0     # m/s^2: beyond any IMU's range (about 200 g)
 
 
 def quaternion_problem(q: Vector) -> Optional[str]:
@@ -56,6 +57,18 @@ def motor_commands_problem(data: Vector, n: int) -> Optional[str]:
         return 'expected %d finite values, got %r' % (n, [round(x, 4) for x in list(data)[:8]])
     if min(data) < 0.0 or max(data) > 1.0:
         return 'values outside [0, 1]'
+    return None
+
+
+def specific_force_problem(f: Optional[Vector]) -> Optional[str]:
+    """Why an IMU's specific force cannot be used, or None (None: the IMU gave none)."""
+    if f is None:
+        return None
+    if len(f) != 3 or not all(math.isfinite(v) for v in f):
+        return 'specific force must be 3 finite values, got %r' % (list(f)[:6],)
+    if max(abs(v) for v in f) > SPECIFIC_FORCE_MAX:
+        return 'specific force %.3g m/s^2 beyond %g' % (max(abs(v) for v in f),
+                                                        SPECIFIC_FORCE_MAX)
     return None
 
 

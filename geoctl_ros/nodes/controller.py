@@ -65,6 +65,9 @@ class ControllerNode(ControllerConfiguration, Node):
         check = gain_condition(setup.config)
         if not check.ok:
             self.get_logger().warning(check.message())
+        if not (setup.frames.pose_identity and setup.frames.imu_identity
+                and setup.frames.bias_zero):
+            self.get_logger().info('inputs: ' + setup.frames.describe())
         for w in setup.mixer.allocator.health.warnings:
             self.get_logger().warning('airframe: ' + w)
         ros_params.watch(self, CONTROLLER, self._validate, self._apply)
@@ -148,8 +151,11 @@ class ControllerNode(ControllerConfiguration, Node):
     def _on_imu(self, msg):
         now = self._now()
         stamp = stamp_seconds(msg.header.stamp)
+        # (a covariance of -1 says the message carries no such data: sensor_msgs/Imu)
+        force = (None if msg.linear_acceleration_covariance[0] == -1.0
+                 else vector(msg.linear_acceleration))
         problem = self.loop.offer_angular_velocity(vector(msg.angular_velocity), stamp, now,
-                                                   self._stamp_delay(stamp))
+                                                   self._stamp_delay(stamp), force)
         if problem:
             self.get_logger().warning('imu refused: ' + problem, throttle_duration_sec=1.0)
         elif self.loop.settings.step_on == 'imu':

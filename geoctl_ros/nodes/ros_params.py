@@ -41,7 +41,10 @@ ROS_TYPE = {
 # Changing these needs a restart (timers, frames, links); ROS refuses them at run time. So do all
 # of the MAVLink bridge's (mavlink.*) and of the ESC node's (esc.*; its motor_test.* may change).
 READ_ONLY = {'rate_hz', 'integration_rate_hz', 'pose_rate_hz', 'imu_rate_hz', 'publish_clock',
-             'real_time_factor', 'frame_id', 'world_frame_id', 'actuation'}
+             'real_time_factor', 'frame_id', 'world_frame_id', 'actuation',
+             # the inputs' conventions: set at start (a change in flight would move the cones)
+             'pose_world_frame', 'body_frame', 'marker_rotation_deg', 'imu_rotation_deg',
+             'gyro_bias'}
 ROS_OWN = ('use_sim_time', 'start_type_description_service', 'qos_overrides.')
 
 

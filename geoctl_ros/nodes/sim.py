@@ -3,7 +3,10 @@
 A thin shell over ``geoctl_ros.sim.testbed.TestbedSim``: integrates the testbed at
 ``integration_rate_hz`` from the latest ``motor_commands`` (normalised, as the controller publishes
 them; with ``actuation: torque``, from the torque of the latest ``control_wrench``), and publishes
-``pose`` (motion capture) and ``imu`` with the configured noise, the true state on
+``pose`` (motion capture) and ``imu`` (angular velocity and specific force) with the configured
+noise, in the conventions it is given (``pose_world_frame``, ``body_frame``,
+``marker_rotation_deg``, ``imu_rotation_deg``: the sources it emulates; ``core.frames``), the true
+state on
 ``sim/true_pose``, and ``/clock`` when ``publish_clock`` is set. Simulated time follows the wall
 clock times ``real_time_factor``: one timer, at the faster of the two sensor rates, integrates as
 many steps as are due and publishes what is due.
@@ -35,6 +38,7 @@ from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg
 from geoctl_ros.nodes.runtime import RefusalLog, spin
 from geoctl_ros.params import SIM, ConfigError, settings
+from geoctl_ros.params.build import input_frames
 from geoctl_ros.records.fields import vector
 from geoctl_ros.sim.build import testbed_sim
 from geoctl_ros.sim.testbed import EscWatchdog
@@ -66,6 +70,12 @@ class SimNode(Node):
         self.pose_period = 1.0 / cfg.pose_rate_hz
         self.imu_period = 1.0 / cfg.imu_rate_hz
         self.next_pose = self.next_imu = 0.0
+        # the sources it emulates: their conventions, and the IMU's place and accelerometer
+        self.frames = input_frames(values)
+        self.imu_position = np.array(values['imu_position'], dtype=float)
+        self.force_noise = cfg.noise_specific_force
+        self.gravity = np.array(values['gravity'], dtype=float)
+        self._last_imu = None                     # (t, Omega) at the last imu sample
 
         self.esc_bus = None
         self.refusals = RefusalLog(self.get_logger())
@@ -189,8 +199,8 @@ class SimNode(Node):
             self.next_pose = t + self.pose_period
             stamp = self._stamp(t)
             self.pose_msg.header.stamp = stamp
-            set_quaternion(self.pose_msg.pose.orientation,
-                           so3.rot_to_quat(self.sim.measure_attitude()))
+            set_quaternion(self.pose_msg.pose.orientation, so3.rot_to_quat(
+                self.frames.source_attitude(self.sim.measure_attitude())))
             self.pub_pose.publish(self.pose_msg)
             self.true_msg.header.stamp = stamp
             set_quaternion(self.true_msg.pose.orientation, so3.rot_to_quat(plant.R))
@@ -198,8 +208,24 @@ class SimNode(Node):
         if t + 1e-9 >= self.next_imu:
             self.next_imu = t + self.imu_period
             self.imu_msg.header.stamp = self._stamp(t)
-            set_vector(self.imu_msg.angular_velocity, self.sim.measure_angular_velocity())
+            set_vector(self.imu_msg.angular_velocity, self.sim.measure_angular_velocity(
+                frames=self.frames))
+            set_vector(self.imu_msg.linear_acceleration, self._specific_force(t))
             self.pub_imu.publish(self.imu_msg)
+
+    def _specific_force(self, t):
+        """What the emulated accelerometer reads at t: the specific force at imu_position (the
+        angular acceleration from the last two samples), in its axes, with its noise.
+        """
+        plant = self.sim.plant
+        last, self._last_imu = self._last_imu, (t, plant.Omega.copy())
+        alpha = (np.zeros(3) if last is None or t <= last[0]
+                 else (plant.Omega - last[1]) / (t - last[0]))
+        f = self.sim.specific_force(self.gravity, self.imu_position, alpha)
+        f = self.frames.source_vector(f)
+        if self.force_noise > 0.0:
+            f = f + self.sim.rng.normal(0.0, self.force_noise, 3)
+        return f
 
 
 def main():

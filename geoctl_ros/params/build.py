@@ -13,7 +13,9 @@ from geoctl_ros.core import so3
 from geoctl_ros.core.airframe import AirframeError, RotorGeometry, effectiveness, tilted_ring
 from geoctl_ros.core.allocation import Allocator
 from geoctl_ros.core.cones import ConeSet
+from geoctl_ros.core.consistency import AgreementSettings
 from geoctl_ros.core.control import AttitudeController, ControllerConfig
+from geoctl_ros.core.frames import InputFrames
 from geoctl_ros.core.loop_types import LoopSettings
 from geoctl_ros.core.motors import Mixer, ThrustCurve
 from geoctl_ros.core.safety import SetpointSchedule, quaternion_problem
@@ -72,6 +74,24 @@ def loop_settings(values: dict) -> LoopSettings:
     return LoopSettings(**{f.name: values[f.name] for f in fields(LoopSettings)})
 
 
+def input_frames(values: dict) -> InputFrames:
+    """The inputs' conventions (core.frames) of resolved controller (or sim) parameters; the
+    sim's have no gyro_bias (its bias is the truth, noise.gyro_bias).
+    """
+    return InputFrames.of(values['pose_world_frame'], values['body_frame'],
+                          values['marker_rotation_deg'], values['imu_rotation_deg'],
+                          values.get('gyro_bias', (0.0, 0.0, 0.0)))
+
+
+def agreement_settings(values: dict) -> AgreementSettings:
+    """The sensor checks' settings (core.consistency) of resolved controller parameters."""
+    return AgreementSettings(values['consistency_checks'],
+                             math.radians(values['attitude_noise_deg']), values['gyro_noise'],
+                             values['accelerometer_noise'],
+                             math.radians(values['alignment_tolerance_deg']),
+                             np.array(values['gravity'], dtype=float))
+
+
 def setpoint_rotation(values: dict) -> np.ndarray:
     """R_d of the resolved controller parameters."""
     return so3.quat_to_rot(values['setpoint'])
@@ -86,6 +106,8 @@ class ControllerSetup:
     setpoint: np.ndarray         # R_d
     schedule: SetpointSchedule
     loop: LoopSettings           # the loop's and the node's own settings
+    frames: InputFrames          # the inputs' conventions
+    agreement: AgreementSettings   # the sensor checks
     values: dict                 # the resolved parameters it was built from (for reconfiguring)
 
 
@@ -127,7 +149,8 @@ def controller_setup(values: dict) -> 'ControllerSetup':
     if errors:
         raise ConfigError(errors)
     return ControllerSetup(config, mix, R_d, SetpointSchedule(times, rotations),
-                           loop_settings(values), values)
+                           loop_settings(values), input_frames(values),
+                           agreement_settings(values), values)
 
 
 def airframe(values: dict) -> Tuple[RotorGeometry, ThrustCurve, List[int]]:

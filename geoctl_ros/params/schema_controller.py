@@ -86,6 +86,37 @@ PARAMS = [
        'it (age_from_stamps); each tick predicts the measurements forward by their age with the '
        'model and the moments commanded since (docs/safety.md, "Delay")', CONTROLLER,
        lo=0.0, hi=0.05),
+    # The inputs' conventions (core.frames), applied once as they come in; the sim emulates
+    # the same conventions when it is given them (docs/sensors.md).
+    _p('pose_world_frame', 'string', 'enu', '-',
+       "the pose's world axes: enu (REP-103), ned (north-east-down) or y_up (x kept, y up); the "
+       'cones and set points stay in ENU (docs/sensors.md)', BOTH, choices=('enu', 'ned', 'y_up')),
+    _p('body_frame', 'string', 'flu', '-',
+       'the body axes of the pose and of the IMU: flu (forward-left-up) or frd '
+       '(forward-right-down)', BOTH, choices=('flu', 'frd')),
+    _p('marker_rotation_deg', 'double_array', [0.0, 0.0, 0.0], 'deg',
+       "the motion capture's body (its marker set) against the airframe: roll, pitch, yaw "
+       '(z-y-x) of the rotation from the marker body to the airframe; calibrate measures it; a '
+       'Y-up rigid body is [90, 0, 0]', BOTH, length=3, lo=-180.0, hi=180.0),
+    _p('imu_rotation_deg', 'double_array', [0.0, 0.0, 0.0], 'deg',
+       "the IMU's mounting: roll, pitch, yaw (z-y-x) of the rotation from its axes to the "
+       "airframe's", BOTH, length=3, lo=-180.0, hi=180.0),
+    _p('gyro_bias', 'double_array', [0.0, 0.0, 0.0], 'rad/s',
+       "the gyro's bias in its own axes, subtracted from every reading (calibrate measures it)",
+       CONTROLLER, length=3, lo=-1.0, hi=1.0),
+    _p('consistency_checks', 'bool', True, '-',
+       'arming needs the IMU and the poses to agree (gravity and rate at rest), and a sustained '
+       'rate disagreement in flight is a failsafe (docs/sensors.md, "Consistency checks"); '
+       'false: neither', CONTROLLER),
+    _p('gyro_noise', 'double', 0.005, 'rad/s',
+       "the gyro's noise per axis and sample (one standard deviation): the checks' tolerances",
+       CONTROLLER, check=positive, lo=1e-6, hi=1.0),
+    _p('accelerometer_noise', 'double', 0.05, 'm/s^2',
+       "the accelerometer's noise per axis and sample (one standard deviation): the gravity "
+       "check's tolerance", CONTROLLER, check=positive, lo=1e-6, hi=10.0),
+    _p('alignment_tolerance_deg', 'double', 2.0, 'deg',
+       "the angle between the IMU's gravity and the poses' that arming allows beyond the noise "
+       '(a calibrated installation keeps well under it)', CONTROLLER, lo=0.0, hi=30.0),
     _p('age_from_stamps', 'bool', True, '-',
        "each input's age from its header stamp against this computer's clock (the motion-capture "
        'host and the IMU driver must stamp capture time on a clock synchronised with this one, '

@@ -83,6 +83,11 @@ PARAMS = [
        'std dev of gyro noise per axis', SIM, lo=0.0, hi=1.0),
     _p('noise.gyro_bias', 'double_array', [0.0, 0.0, 0.0], 'rad/s', 'constant gyro bias', SIM,
        length=3, lo=-1.0, hi=1.0),
+    _p('noise.specific_force', 'double', 0.0, 'm/s^2',
+       "std dev of the accelerometer's noise per axis", SIM, lo=0.0, hi=10.0),
+    _p('imu_position', 'double_array', [0.0, 0.0, 0.0], 'm',
+       'where the IMU sits, from the pivot in the body frame: its specific force includes the '
+       'acceleration of that point', SIM, length=3, lo=-1.0, hi=1.0),
     _p('noise.seed', 'integer', 0, '-', 'random seed of the noise', SIM, lo=0, hi=2 ** 32 - 1),
     _p('integration_rate_hz', 'double', 1000.0, 'Hz', 'simulator integration rate (RKMK4)', SIM,
        check=positive, lo=1.0, hi=10000.0),

@@ -8,7 +8,7 @@ Composes the rigid body about the pivot (``geoctl_ros.sim.plant``), the actuatio
   moments about the pivot (``geoctl_ros.core.airframe.effectiveness``) from the true geometry;
 - actuation ``torque``: the commanded moment itself (ideal);
 - sensors: attitude R exp(hat(n)), n ~ N(0, sigma_R^2 I) (motion capture), and angular velocity
-  Omega + bias + N(0, sigma_w^2 I) (gyro).
+  Omega + bias + N(0, sigma_w^2 I) (gyro), and the specific force at the IMU (the sim node).
 
 The scenario runner and the sim node both drive this class, so the physics exists once; the
 campaign drives a batch of testbeds with the same classes (a leading batch axis on the plant's
@@ -21,6 +21,7 @@ import numpy as np
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.airframe import effectiveness
+from geoctl_ros.core.frames import InputFrames
 from geoctl_ros.core.so3 import matvec
 from geoctl_ros.sim.plant import Plant
 
@@ -102,9 +103,23 @@ class TestbedSim:
             R = R @ so3.exp(self.rng.normal(0.0, self.attitude_noise, 3))
         return R
 
-    def measure_angular_velocity(self, Omega: Optional[np.ndarray] = None) -> np.ndarray:
-        """The gyro's reading now (or of Omega, a past angular velocity)."""
-        w = (self.plant.Omega if Omega is None else Omega) + self.gyro_bias
+    def measure_angular_velocity(self, Omega: Optional[np.ndarray] = None,
+                                 frames: Optional[InputFrames] = None) -> np.ndarray:
+        """The gyro's reading now (or of Omega, a past angular velocity); with frames (an
+        InputFrames), in the axes of an IMU of those conventions (the bias is in its axes).
+        """
+        w = self.plant.Omega if Omega is None else Omega
+        if frames is not None:
+            w = frames.source_vector(w)
+        w = w + self.gyro_bias
         if self.gyro_noise > 0.0:
             w = w + self.rng.normal(0.0, self.gyro_noise, 3)
         return w
+
+    def specific_force(self, gravity: np.ndarray, position: np.ndarray,
+                       alpha: np.ndarray) -> np.ndarray:
+        """The specific force (body frame) at position (m from the pivot, body), with the angular
+        acceleration alpha: a - g of that point, R^T(-g) + alpha x r + Omega x (Omega x r).
+        """
+        R, w = self.plant.R, self.plant.Omega
+        return R.T @ -gravity + np.cross(alpha, position) + np.cross(w, np.cross(w, position))
