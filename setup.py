@@ -40,6 +40,7 @@ setup(
             'report = geoctl_ros.cli.report:main',
             'view = geoctl_ros.nodes.view:main',
             'esc_i2c = geoctl_ros.nodes.esc_i2c:main',
+            'calibrate = geoctl_ros.nodes.calibrate:main',
         ],
     },
 )
