@@ -32,6 +32,7 @@ class FakeInputs(Monitor):
         self.pub_setpoint = self.create_publisher(QuaternionStamped, 'attitude_setpoint',
                                                   qos.EVENT)
         self.fed = 0          # pose and imu pairs fed so far
+        self.feed_force_axes = np.eye(3)     # the fed IMU's axes against the body's
 
     def feed(self, q=(0.0, 0.0, 0.0, 1.0), w=(0.0, 0.0, 0.0), rate_hz=100.0):
         """Publish pose and imu at rate_hz with fresh stamps until stop_feed(); q and w can be
@@ -43,7 +44,7 @@ class FakeInputs(Monitor):
     def _feed_tick(self):
         stamp = self.get_clock().now().to_msg()
         self.publish_pose(self.feed_q, stamp)
-        self.publish_imu(self.feed_w, stamp, self.feed_q)
+        self.publish_imu(self.feed_w, stamp, self.feed_q, self.feed_force_axes)
         self.fed += 1
 
     def stop_feed(self):
@@ -55,14 +56,14 @@ class FakeInputs(Monitor):
         set_quaternion(msg.pose.orientation, q)
         self.pub_pose.publish(msg)
 
-    def publish_imu(self, w, stamp=None, q=(0.0, 0.0, 0.0, 1.0)):
+    def publish_imu(self, w, stamp=None, q=(0.0, 0.0, 0.0, 1.0), force_axes=np.eye(3)):
         """An IMU sample: angular velocity w, and the specific force of a vehicle at rest at
-        attitude q (the reaction to gravity, R^T [0, 0, 9.81]).
+        attitude q (the reaction to gravity, R^T [0, 0, 9.81]) in force_axes (body to IMU).
         """
         msg = Imu()
         msg.header.stamp = stamp or self.get_clock().now().to_msg()
         set_vector(msg.angular_velocity, w)
-        set_vector(msg.linear_acceleration, so3.quat_to_rot(q).T @ GRAVITY_REACTION)
+        set_vector(msg.linear_acceleration, force_axes @ so3.quat_to_rot(q).T @ GRAVITY_REACTION)
         self.pub_imu.publish(msg)
 
     def publish_setpoint(self, q):

@@ -47,6 +47,10 @@ LEVEL_YAW90 = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))     # the testbed's sta
 # milliseconds under load; generous timeouts keep those tests about what they test. The drop-out
 # test checks that the failsafe still comes within them.
 FED = ('-p', 'pose_timeout:=0.25', '-p', 'imu_timeout:=0.25')
+# the lab's sources, emulated by the sim and given to the controller (docs/sensors.md)
+LAB_SOURCES = ('-p', 'pose_world_frame:=ned', '-p', 'body_frame:=frd',
+               '-p', 'marker_rotation_deg:=[3.0,-2.0,30.0]',
+               '-p', 'imu_rotation_deg:=[1.0,2.0,-90.0]')
 
 
 @pytest.fixture
@@ -87,9 +91,8 @@ def fed_controller(mon, launch, arm=False):
     wait_for_controller(mon)
     mon.feed(LEVEL_YAW90)
     mon.spin_for(0.5)
-    if arm:
-        reply = mon.arm(True)
-        assert reply.success, reply.message
+    if arm:            # (once the sensor checks have half a second of samples)
+        mon.wait_for(lambda: mon.arm(True).success, 10.0, 'arming')
 
 
 def zero_commands(mon):
@@ -131,6 +134,10 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     the flight to a bag, which reads back with rosbags' own reader and whose report finds the
     closest approach the recorded true attitude has.
 
+    The sensors are the lab's (docs/sensors.md): motion capture and IMU in NED/FRD, the marker
+    set turned against the airframe, the IMU mounted turned, a gyro bias; the controller is given
+    them (the sim emulates them, the controller undoes them).
+
     The motors are driven as on the vehicle: ``esc_i2c`` writes the commands to the six ESCs,
     here a virtual I2C bus that the sim reads (the real byte encoding, the node's watchdog). The
     manoeuvre keeps the cone as its headless twin does (test_launch.py flies the topic path
@@ -141,10 +148,12 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     twin = scenario.run(scenario.load(TESTBED)).summary          # (before: it takes a second)
     headless = twin['min_cone_angle_deg']['obstacle'] - twin['cone_half_angle_deg']['obstacle']
     path = str(tmp_path / 'esc_bus')
-    launch('sim', TESTBED, '-p', 'esc.virtual_bus:=' + path)
+    launch('sim', TESTBED, '-p', 'esc.virtual_bus:=' + path, *LAB_SOURCES,
+           '-p', 'noise.gyro_bias:=[0.02,-0.01,0.0]')
     esc = launch('esc_i2c', TESTBED, '-p', 'esc.virtual_bus:=' + path,
                  '-p', 'esc.probe_timeout:=20.0')
-    controller = launch('controller')
+    controller = launch('controller', TESTBED, *LAB_SOURCES,
+                        '-p', 'gyro_bias:=[0.02,-0.01,0.0]')
     recorder = launch('record', None, '-p', 'record.path:=%s' % (tmp_path / 'flight'))
     mon.wait_for(mon.controller_has_inputs, 30.0, 'the sim and the controller')
     # (the recorder hears the controller's diagnostics before the arming: the record's armed
@@ -342,10 +351,17 @@ def test_arming_needs_fresh_inputs_and_disarming_zeroes_the_motors(ros):
     assert not reply.success and 'no pose received yet' in reply.message
     diag = mon.last_diagnostic()
     assert diag.level == WARN and 'disarmed' in diag.message
+    # an IMU that is FRD (its gravity down the body's z) where the file says FLU: refused,
+    # named, and the ground station's diagnostics say it too
+    mon.feed_force_axes = np.diag([1.0, -1.0, -1.0])
     mon.feed(LEVEL_YAW90)
-    mon.spin_for(0.5)
+    mon.wait_for(lambda: 'sensor check' in mon.last_diagnostic().message, 10.0,
+                 'the sensor check in the diagnostics')
+    assert 'the IMU looks FRD while body_frame says flu' in mon.last_diagnostic().message
     reply = mon.arm(True)
-    assert reply.success, reply.message
+    assert not reply.success and 'the IMU looks FRD while body_frame says flu' in reply.message
+    mon.feed_force_axes = np.eye(3)                          # an FLU IMU: it arms
+    mon.wait_for(lambda: mon.arm(True).success, 10.0, 'arming with the IMU that agrees')
     mon.spin_for(0.5)
     assert all(0.3 < c < 0.7 for c in mon.last('motors'))    # about hover (118/240)
     # 90 deg from R_d: the estimate grows (a condition: beside the flights at nice 19 this test's
@@ -380,7 +396,7 @@ def test_input_dropout_fails_safe_to_zero_and_disarms(ros):
     mon.feed(LEVEL_YAW90)                                     # data back: stays disarmed
     mon.spin_for(0.5)
     assert zero_commands(mon)
-    assert mon.arm(True).success                              # until armed again
+    mon.wait_for(lambda: mon.arm(True).success, 10.0, 'armed again')   # until armed again
 
 
 @pytest.mark.realtime
@@ -621,7 +637,7 @@ def test_step_on_imu_steps_on_every_sample_and_the_timer_still_fails_safe(ros):
     wait_for_controller(mon)
     mon.feed(LEVEL_YAW90, rate_hz=200.0)
     mon.spin_for(0.5)
-    assert mon.arm(True).success
+    mon.wait_for(lambda: mon.arm(True).success, 10.0, 'arming')
     sent0, t0 = mon.fed, time.monotonic()
     mon.spin_for(2.0)
     sent, commands = mon.fed - sent0, len(mon.since('motors', t0))

@@ -4,7 +4,8 @@ BAG is any rosbag2 bag of this package's topics (MCAP or sqlite3; from ``record`
 ``ros2 bag record``; one whose writer was killed too). The cones come from the bag (``record``
 writes the controller's in it) or from ``--params-file``. The sensor's path and the closest
 approach come from the sim's true attitude (``/sim/true_pose``) where the bag has it, otherwise
-from the measured one (``/pose``).
+from the controller's measured one (``/attitude``, in the package's frames whatever the sensors'
+conventions), otherwise from ``/pose`` (records from before ``/attitude``).
 
 Writes ``summary.json``, ``summary.md``, ``flight.png`` and ``sensor_path.png`` to DIR (default:
 BAG/report) and prints the Markdown summary. Topics the bag lacks are named, and what can be

@@ -20,7 +20,8 @@ per window (a chi distribution of 2 or 3 degrees of freedom beyond 5), plus, for
 ``alignment_tolerance`` a calibrated installation keeps. In flight the rate window is short and
 the vehicle accelerates, so the tolerance adds ``FLIGHT_SHARE`` of the rate and
 ``FLIGHT_FLOOR`` (the streams' clocks and their stamps' offset, the log's curvature over a turning
-window): a mismatch must reach a third of the motion, for ``FLIGHT_WINDOWS`` windows in a row.
+window): a mismatch must exceed about a third of the motion, for ``FLIGHT_WINDOWS`` windows in a
+row; the failsafe names the cause the first of them shows.
 
 ``SensorAgreement`` takes the converted samples (``core.frames.InputFrames``) as they come and
 closes a window on the pose that ends it; it allocates only then.
@@ -44,10 +45,10 @@ from geoctl_ros.core.so3 import Vector
 
 SIGMAS = 5.0              # standard deviations of the difference a check allows
 REST_WINDOW = 0.5         # s of poses per arming window
-FLIGHT_WINDOW = 0.2       # s of poses per in-flight window
+FLIGHT_WINDOW = 0.1       # s of poses per in-flight window
 FLIGHT_SHARE = 0.35       # in flight, the rate may disagree by this share of the motion,
 FLIGHT_FLOOR = 0.1        # rad/s, and this
-FLIGHT_WINDOWS = 3        # windows in a row (0.6 s) before a mismatch is a failsafe
+FLIGHT_WINDOWS = 2        # windows in a row (0.2 s) before a mismatch is a failsafe
 REST_RATE = 0.05          # rad/s: the poses turn slower than this at rest
 FORCE_SHARE = 0.25        # |f| within this share of |g| at rest (else no accelerometer data)
 LATE = 3.0                # a window older than this many windows does not count for arming
@@ -172,6 +173,7 @@ class SensorAgreement:
         self.rest = _Accumulator(REST_WINDOW, settings)
         self.flight = _Accumulator(FLIGHT_WINDOW, settings)
         self.mismatches = 0           # in-flight windows in a row that disagree
+        self._first = (0.0, 0.0, '')  # the first of them: disagreement, limit, likely cause
         self.flight_note: Optional[str] = None    # why, once FLIGHT_WINDOWS in a row did
         self.rest_problems: Optional[List[str]] = None   # the last rest window's verdict
         self.raw_pose: Optional[np.ndarray] = None    # the newest pose as the source streamed it
@@ -200,12 +202,14 @@ class SensorAgreement:
             limit = closed.rate_tolerance + FLIGHT_FLOOR + FLIGHT_SHARE * motion
             if closed.disagreement > limit:
                 self.mismatches += 1
+                if self.mismatches == 1:        # (named while the motion is still the pilot's)
+                    self._first = (closed.disagreement, limit, self._rate_cause(closed))
                 if self.mismatches >= FLIGHT_WINDOWS and self.flight_note is None:
+                    gap, allowed, cause = self._first
                     self.flight_note = (
-                        'the gyro and the poses disagree by %.2f rad/s (over %.2f rad/s, for %d '
-                        'windows of %.1f s): %s' % (closed.disagreement, limit,
-                                                    self.mismatches, FLIGHT_WINDOW,
-                                                    self._rate_cause(closed)))
+                        'the gyro and the poses disagree by %.2f rad/s (over %.2f rad/s; %d '
+                        'windows of %.1f s in a row): %s'
+                        % (gap, allowed, self.mismatches, FLIGHT_WINDOW, cause))
             else:
                 self.mismatches = 0
 

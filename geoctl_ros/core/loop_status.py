@@ -74,6 +74,9 @@ def status(loop: Any, now: float, other_commanders: Optional[str] = None) -> Sta
         escs = loop.esc_report_problem(now)
         if escs:
             warnings.append(escs)
+        # what the sensor checks would refuse now (a ground station shows it before arming)
+        warnings += ['sensor check: ' + p for p in loop.agreement.arm_problems(now)
+                     if 'no recent window' not in p]
     else:
         lost = sup.input_loss(now)
         if lost:

@@ -19,10 +19,11 @@ Boundaries (``BOUNDARIES``):
 - ``parameters``: every schema parameter of the controller set to random values and types through
   the controller node's own ``set_parameters`` (what ``ros2 param set`` calls), and MAVLink
   PARAM_SET floats through the bridge's conversion to the same call.
-- ``messages``: pose, imu, set point, motor commands, wrench, armed state and ESC health messages
-  with zero, NaN, denormal and non-unit quaternions, huge vectors, zero, past, future and
-  out-of-order stamps and wrong array lengths, into the callbacks of the controller, sim, view and
-  bridge nodes (real rclpy nodes in this process, on the loopback profile).
+- ``messages``: pose, imu (angular velocity, specific force or none), set point, motor commands,
+  wrench, armed state and ESC health messages with zero, NaN, denormal and non-unit quaternions,
+  huge vectors, zero, past, future and out-of-order stamps and wrong array lengths, into the
+  callbacks of the controller, sim, view, bridge and calibrate nodes (real rclpy nodes in this
+  process, on the loopback profile).
 - ``files``: random YAML trees, and the testbed's file with a value replaced, as parameter and
   scenario files.
 - ``bags``: a recorded bag cut or corrupted at random offsets, read as ``report`` reads it.

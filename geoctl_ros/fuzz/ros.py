@@ -22,6 +22,7 @@ from geoctl_ros.fuzz.hostile import (
     run_property,
 )
 from geoctl_ros.mavlink.params import TABLE, to_ros
+from geoctl_ros.nodes.calibrate import Listener as CalibrationListener
 from geoctl_ros.nodes.controller import ControllerNode
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg
 from geoctl_ros.nodes.mavlink_bridge import MavlinkBridge
@@ -46,7 +47,8 @@ class _Nodes:
         self.sim = SimNode()
         self.view = View()
         self.bridge = MavlinkBridge()
-        self.nodes = (self.controller, self.sim, self.view, self.bridge)
+        self.calibrate = CalibrationListener()
+        self.nodes = (self.controller, self.sim, self.view, self.bridge, self.calibrate)
 
     def callbacks(self, topic):
         out = []
@@ -164,7 +166,7 @@ EVENTS = st.lists(st.one_of(
     st.tuples(st.just('pose'), stamps(), QUATERNIONS),
     st.tuples(st.just('active_setpoint'), stamps(), QUATERNIONS),
     st.tuples(st.just('attitude_setpoint'), stamps(), QUATERNIONS),
-    st.tuples(st.just('imu'), stamps(), VECTORS),
+    st.tuples(st.just('imu'), stamps(), st.tuples(VECTORS, VECTORS, st.booleans())),
     st.tuples(st.just('control_wrench'), stamps(), VECTORS),
     st.tuples(st.sampled_from(('motor_commands', 'cone_margins', 'disturbance_estimate')),
               st.integers(0, 2 ** 32 - 1), ARRAYS),
@@ -182,8 +184,11 @@ def _message(msg_type, topic, stamp, payload):
         set_quaternion(msg.pose.orientation, payload)
     elif topic in ('active_setpoint', 'attitude_setpoint'):
         set_quaternion(msg.quaternion, payload)
-    elif topic == 'imu':
-        set_vector(msg.angular_velocity, payload)
+    elif topic == 'imu':          # (angular velocity, specific force, "no specific force")
+        set_vector(msg.angular_velocity, payload[0])
+        set_vector(msg.linear_acceleration, payload[1])
+        if payload[2]:
+            msg.linear_acceleration_covariance[0] = -1.0
     elif topic == 'control_wrench':
         set_vector(msg.wrench.torque, payload)
     elif topic == 'configuration_error':
@@ -227,6 +232,12 @@ def fuzz_messages(examples, seed):
                     raise AssertionError('a non-finite marker point in %s' % marker.ns)
         if not np.all(np.isfinite(sim.commands)):
             raise AssertionError('the sim took non-finite commands %r' % sim.commands)
+        cal = n.calibrate           # calibrate keeps only samples it can use
+        for name in ('poses', 'gyros', 'forces'):
+            kept = getattr(cal, name)
+            if kept and not np.all(np.isfinite(np.array(kept))):
+                raise AssertionError('calibrate kept non-finite %s' % name)
+            del kept[:]
         # the next valid input is answered (a future stamp is re-anchored past after three)
         accepted = ctl.loop.pose.accepted, ctl.loop.rate.accepted
         t = ctl.get_clock().now().nanoseconds * 1e-9

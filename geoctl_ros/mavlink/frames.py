@@ -13,9 +13,10 @@ MAVLink yaw 0.
 import numpy as np
 
 from geoctl_ros.core import so3
+from geoctl_ros.core.frames import BODY_FRAMES, WORLD_FRAMES
 
-T = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])   # ENU <-> NED
-F = np.diag([1.0, -1.0, -1.0])                                         # FLU <-> FRD
+T = WORLD_FRAMES['ned']       # ENU <-> NED (core.frames: the controller's inputs use the same)
+F = BODY_FRAMES['frd']        # FLU <-> FRD
 
 
 def ned_frd(R_enu_flu):

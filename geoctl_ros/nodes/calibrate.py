@@ -26,6 +26,11 @@ from sensor_msgs.msg import Imu
 
 from geoctl_ros.core import so3
 from geoctl_ros.core.calibration import CalibrationError, calibrate
+from geoctl_ros.core.safety import (
+    angular_velocity_problem,
+    quaternion_problem,
+    specific_force_problem,
+)
 from geoctl_ros.nodes import qos
 from geoctl_ros.params import (
     CONTROLLER,
@@ -37,6 +42,8 @@ from geoctl_ros.params import (
 )
 from geoctl_ros.params.build import input_frames
 from geoctl_ros.records.fields import quaternion, vector
+
+MAX_RATE = 100.0      # rad/s: a gyro reading beyond this is not a vehicle at rest
 
 
 class Listener(Node):
@@ -50,12 +57,13 @@ class Listener(Node):
 
     def _on_pose(self, msg):
         q = quaternion(msg.pose.orientation)
-        if np.all(np.isfinite(q)) and abs(np.linalg.norm(q) - 1.0) < 1e-3:
+        if quaternion_problem(q) is None:        # (the controller's own check)
             self.poses.append(so3.quat_to_rot(q))
 
     def _on_imu(self, msg):
         w, f = vector(msg.angular_velocity), vector(msg.linear_acceleration)
-        if np.all(np.isfinite(w)) and np.all(np.isfinite(f)):
+        if (angular_velocity_problem(w, MAX_RATE) is None
+                and specific_force_problem(f) is None):
             self.gyros.append(w)
             self.forces.append(f)
 

@@ -243,7 +243,7 @@ class ControllerNode(ControllerConfiguration, Node):
         self._compute_stats.add(time.perf_counter() - t0)
         if tick.armed and tick.pose_receipt is not None:
             self._latency_stats.add(self._now() - tick.pose_receipt)
-        self.telemetry.publish(tick)
+        self.telemetry.publish(tick, self.loop.R, self.loop.Omega)
         state = (tick.armed, tick.state, tick.sources)
         if state != self._last_state:
             if (self._last_state is not None and tick.failed

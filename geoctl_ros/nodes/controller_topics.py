@@ -1,6 +1,8 @@
 """The controller node's monitoring topics (what ``ros2 topic echo`` and the recorder see besides
-the motor commands): the wrench, e_R, e_Omega, Psi, the estimate, the cone margins and the set
-point being flown. Published after the motor command, from one tick's result.
+the motor commands): the measured attitude and body rate in the package's frames (the inputs
+after their conventions, ``core.frames``: what the ground station, the view and the records
+show), the wrench, e_R, e_Omega, Psi, the estimate, the cone margins and the set point being
+flown. Published after the motor command, from one tick's result.
 """
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped, WrenchStamped
 from std_msgs.msg import Float64, Float64MultiArray
@@ -23,19 +25,31 @@ class Telemetry:
         self.pub_dbar = pub(Float64MultiArray, 'disturbance_estimate', qos.TELEMETRY)
         self.pub_margins = pub(Float64MultiArray, 'cone_margins', qos.TELEMETRY)
         self.pub_setpoint = pub(QuaternionStamped, 'active_setpoint', qos.LATCHED)
+        self.pub_attitude = pub(QuaternionStamped, 'attitude', qos.TELEMETRY)
+        self.pub_rate = pub(Vector3Stamped, 'body_rate', qos.TELEMETRY)
+        self.attitude, self.rate = QuaternionStamped(), Vector3Stamped()
+        self.attitude.header.frame_id = world_frame_id
+        self.rate.header.frame_id = frame_id
         self._published_R_d = None
         self.wrench, self.eR, self.eW = WrenchStamped(), Vector3Stamped(), Vector3Stamped()
         self.psi, self.dbar, self.margins = Float64(), Float64MultiArray(), Float64MultiArray()
         for msg in (self.wrench, self.eR, self.eW):
             msg.header.frame_id = frame_id
 
-    def publish(self, tick):
-        """The monitoring topics of a LoopTick (none before the first pose and rate), and the
-        set point when a new one is flown.
+    def publish(self, tick, R, Omega):
+        """The monitoring topics of a LoopTick (none before the first pose and rate), with the
+        measured attitude R and body rate Omega it used, and the set point when a new one is
+        flown.
         """
         out = tick.control
         if out is not None:
             stamp = tick.stamp
+            self.attitude.header.stamp = stamp
+            set_quaternion(self.attitude.quaternion, so3.rot_to_quat(R))
+            self.pub_attitude.publish(self.attitude)
+            self.rate.header.stamp = stamp
+            set_vector(self.rate.vector, Omega)
+            self.pub_rate.publish(self.rate)
             w = self.wrench
             w.header.stamp = stamp
             set_vector(w.wrench.torque, out.u)

@@ -13,12 +13,11 @@ import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped, QuaternionStamped
+from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
@@ -94,9 +93,10 @@ class MavlinkBridge(ControllerCalls, GroundStationReports, Node):
                     self.refusals.warn('%s refused: ' % topic, problem)
             return callback
         for kind, topic, take, profile in (
-                (PoseStamped, 'pose',
-                 lambda m: view.take_attitude(quaternion(m.pose.orientation)), qos.SENSOR),
-                (Imu, 'imu', lambda m: view.take_rate(vector(m.angular_velocity)), qos.SENSOR),
+                (QuaternionStamped, 'attitude',      # (the controller's: the package's frames)
+                 lambda m: view.take_attitude(quaternion(m.quaternion)), qos.TELEMETRY),
+                (Vector3Stamped, 'body_rate', lambda m: view.take_rate(vector(m.vector)),
+                 qos.TELEMETRY),
                 (QuaternionStamped, 'active_setpoint',
                  lambda m: view.take_attitude(quaternion(m.quaternion), setpoint=True),
                  qos.LATCHED),

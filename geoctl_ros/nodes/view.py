@@ -7,7 +7,7 @@ pointed, the body axes, and the set point's sensor direction. The geometry is
 """
 import sys
 
-from geometry_msgs.msg import Point, PoseStamped, QuaternionStamped
+from geometry_msgs.msg import Point, QuaternionStamped
 import numpy as np
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -46,8 +46,8 @@ class View(Node):
         self.R = self.R_d = None
         self.margins = None
         self.refusals = RefusalLog(self.get_logger())
-        self.create_subscription(PoseStamped, 'pose', lambda m: self._take_attitude(
-            'R', 'pose', quaternion(m.pose.orientation)), qos.SENSOR)
+        self.create_subscription(QuaternionStamped, 'attitude', lambda m: self._take_attitude(
+            'R', 'attitude', quaternion(m.quaternion)), qos.TELEMETRY)
         self.create_subscription(QuaternionStamped, 'active_setpoint',
                                  lambda m: self._take_attitude('R_d', 'active_setpoint',
                                                                quaternion(m.quaternion)),

@@ -18,6 +18,8 @@ class Topic(NamedTuple):
 TOPICS = (
     Topic('/pose', 'geometry_msgs/msg/PoseStamped', False, depth=5),
     Topic('/imu', 'sensor_msgs/msg/Imu', False, depth=5),
+    Topic('/attitude', 'geometry_msgs/msg/QuaternionStamped', False),
+    Topic('/body_rate', 'geometry_msgs/msg/Vector3Stamped', False),
     Topic('/motor_commands', 'std_msgs/msg/Float64MultiArray', True),
     Topic('/control_wrench', 'geometry_msgs/msg/WrenchStamped', True),
     Topic('/attitude_error', 'geometry_msgs/msg/Vector3Stamped', False),

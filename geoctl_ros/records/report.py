@@ -33,7 +33,7 @@ class Flight(NamedTuple):
     """A recorded flight as time series (t in s since the bag's first message)."""
 
     cones: object                  # core.cones.ConeSet, or None
-    attitude_source: str           # '/sim/true_pose', '/pose' or ''
+    attitude_source: str           # '/sim/true_pose', '/attitude', '/pose' or ''
     attitude_t: np.ndarray
     rotations: np.ndarray          # (N, 3, 3)
     sensor_path: np.ndarray        # (N, 3): R r
@@ -81,11 +81,14 @@ def load_flight(path, params_file=None):
     first = [v[0].t for v in topics.values() if v]
     t0 = min(first) if first else 0.0
     cones = _cones_of(topics.get(CONTROLLER_PARAMETERS.name), params_file)
-    source = next((s for s in ('/sim/true_pose', '/pose') if s in present), '')
+    # the truth where the sim gives it, else the controller's measured attitude in the package's
+    # frames, else the raw pose (a record from before /attitude: its conventions the package's)
+    source = next((s for s in ('/sim/true_pose', '/attitude', '/pose') if s in present), '')
     att = topics.get(source, [])
     att_t = np.array([m.t - t0 for m in att])
-    Rs = (np.array([so3.quat_to_rot(quaternion(m.msg.pose.orientation)) for m in att])
-          if att else np.zeros((0, 3, 3)))
+    Rs = (np.array([so3.quat_to_rot(quaternion(
+        m.msg.quaternion if source == '/attitude' else m.msg.pose.orientation)) for m in att])
+        if att else np.zeros((0, 3, 3)))
     if cones is not None and att:
         path_ = Rs @ cones.r
         angles = np.array([cones.angles_deg(R) for R in Rs]).reshape(len(Rs), len(cones))
