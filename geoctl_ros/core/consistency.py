@@ -52,6 +52,7 @@ FLIGHT_WINDOWS = 2        # windows in a row (0.2 s) before a mismatch is a fail
 REST_RATE = 0.05          # rad/s: the poses turn slower than this at rest
 FORCE_SHARE = 0.25        # |f| within this share of |g| at rest (else no accelerometer data)
 LATE = 3.0                # a window older than this many windows does not count for arming
+RESOLVED_RAD = 1.0        # a window whose poses (or gyro) turn more than this is not judged
 
 
 @dataclass(frozen=True)
@@ -78,6 +79,8 @@ class Window(NamedTuple):
     tilt_tolerance: float        # rad: SIGMAS sigmas of the angle between up and force
     poses: int
     gyros: int
+    resolved: bool               # the poses turned less than RESOLVED_RAD over it (else the
+                                 # slope of the logarithm says nothing: not judged)
 
     @property
     def disagreement(self) -> float:
@@ -110,6 +113,7 @@ class _Accumulator:
         self.nw = 0
         self.f = np.zeros(3)
         self.nf = 0
+        self.turned = 0.0
 
     def imu(self, w: np.ndarray, f: Optional[np.ndarray]) -> None:
         if self.R0 is None:
@@ -133,6 +137,7 @@ class _Accumulator:
         self.sh += theta
         self.sth += tau * theta
         self.up += R.T @ self.up_world
+        self.turned = max(self.turned, float(theta @ theta))
         if tau < self.span:
             return None
         s = self.settings
@@ -146,9 +151,12 @@ class _Accumulator:
             g = float(np.linalg.norm(s.gravity))
             sigma_tilt = math.hypot(s.attitude_noise / math.sqrt(self.n),
                                     s.accelerometer_noise / (g * math.sqrt(max(self.nf, 1))))
-            out = self.last = Window(receipt, self.w / self.nw, slope, SIGMAS * sigma_rate,
+            gyro = self.w / self.nw
+            resolved = (self.turned < RESOLVED_RAD ** 2
+                        and float(np.linalg.norm(gyro)) * tau < RESOLVED_RAD)
+            out = self.last = Window(receipt, gyro, slope, SIGMAS * sigma_rate,
                                      self.up / self.n, force, SIGMAS * sigma_tilt, self.n,
-                                     self.nw)
+                                     self.nw, resolved)
         self._restart(R, stamp)
         return out
 
@@ -196,7 +204,7 @@ class SensorAgreement:
         self.raw_pose = raw
         self.rest.pose(R, stamp, receipt)
         closed = self.flight.pose(R, stamp, receipt)
-        if closed is not None:
+        if closed is not None and closed.resolved:
             motion = max(float(np.linalg.norm(closed.gyro)),
                          float(np.linalg.norm(closed.poses_rate)))
             limit = closed.rate_tolerance + FLIGHT_FLOOR + FLIGHT_SHARE * motion
@@ -233,10 +241,10 @@ class SensorAgreement:
             return ['the sensor checks have no recent window (%.1f s of poses and IMU '
                     'samples; docs/sensors.md)' % REST_WINDOW]
         turning = float(np.linalg.norm(w.poses_rate))
-        if turning > REST_RATE:
+        if turning > REST_RATE or not w.resolved:
             motion = max(turning, float(np.linalg.norm(w.gyro)))
             limit = w.rate_tolerance + FLIGHT_FLOOR + FLIGHT_SHARE * motion
-            if w.disagreement > limit:
+            if w.resolved and w.disagreement > limit:
                 return ['the gyro and the poses disagree by %.2f rad/s while turning at %.2f '
                         '(allowed %.2f): %s' % (w.disagreement, turning, limit,
                                                 self._rate_cause(w))]
