@@ -66,6 +66,16 @@ class FakeInputs(Monitor):
         set_vector(msg.linear_acceleration, force_axes @ so3.quat_to_rot(q).T @ GRAVITY_REACTION)
         self.pub_imu.publish(msg)
 
+    def publish_attitude(self, q):
+        """The controller's measured attitude (what the bridge and the view show)."""
+        if getattr(self, 'pub_attitude', None) is None:
+            self.pub_attitude = self.create_publisher(QuaternionStamped, 'attitude',
+                                                      qos.TELEMETRY)
+        msg = QuaternionStamped()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        set_quaternion(msg.quaternion, q)
+        self.pub_attitude.publish(msg)
+
     def publish_setpoint(self, q):
         msg = QuaternionStamped()
         msg.header.stamp = self.get_clock().now().to_msg()

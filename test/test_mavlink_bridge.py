@@ -521,7 +521,8 @@ def test_a_ground_stations_motor_test_spins_one_motor_through_the_esc_node(tmp_p
 def test_hostile_frames_and_messages_are_refused_and_never_end_the_bridge(tmp_path):
     """Found by hand before the fuzzer (issue: hostile input): a signed-or-not COMMAND_LONG
     REQUEST_MESSAGE with param1 NaN, a motor test with param1 inf, and a zero quaternion on
-    /pose each ended the bridge (exit 1); a NaN quaternion went out as a NaN ATTITUDE_QUATERNION;
+    /pose (now the controller's /attitude, which the bridge shows) each ended the bridge (exit
+    1); a NaN quaternion went out as a NaN ATTITUDE_QUATERNION;
     and every start printed rclpy's "number of timers ... is large" warning. Now each bad command
     is DENIED with its reason, the bad poses are refused and logged, only finite attitudes go out,
     the next valid command is answered, and the bridge is still running at the end.
@@ -536,12 +537,14 @@ def test_hostile_frames_and_messages_are_refused_and_never_end_the_bridge(tmp_pa
     try:
         gcs.wait(lambda m: m.get_type() == 'HEARTBEAT' and is_ours(m), 30.0, 'the bridge')
         level = (0.0, 0.0, 0.0, 1.0)
-        mon.wait_for(lambda: mon.count_subscribers('pose') > 0, 10.0, 'the bridge on /pose')
+        mon.wait_for(lambda: mon.count_subscribers('attitude') > 0, 10.0,
+                     'the bridge on /attitude')
         # (best effort, as a motion-capture driver's topic: sent again until the bridge shows a
         # refusal, since a pose may be lost on a busy machine)
-        mon.wait_for(lambda: [(mon.publish_pose(q), mon.spin_for(0.05)) for q in (
+        mon.wait_for(lambda: [(mon.publish_attitude(q), mon.spin_for(0.05)) for q in (
             (0.0, 0.0, 0.0, 0.0), (math.nan, 0.0, 0.0, 1.0), (1e-310, 0.0, 0.0, 0.0))] and
-            'pose refused: quaternion is not' in bridge.output(), 10.0, 'the refused poses')
+            'attitude refused: quaternion is not' in bridge.output(), 10.0,
+            'the refused attitudes')
         hostile = ((mav.MAV_CMD_REQUEST_MESSAGE, (math.nan, 0, 0, 0, 0, 0, 0), 'param1 nan'),
                    (mav.MAV_CMD_DO_MOTOR_TEST, (math.inf, mav.MOTOR_TEST_THROTTLE_PERCENT, 10, 1,
                                                 0, 0, 0), 'motor inf'),
@@ -555,13 +558,13 @@ def test_hostile_frames_and_messages_are_refused_and_never_end_the_bridge(tmp_pa
             gcs.wait(lambda m: m.get_type() == 'STATUSTEXT' and reason in m.text, 5.0,
                      'the reason %r' % reason, since=t0)
         t0 = time.monotonic()
-        mon.publish_pose(level)
+        mon.publish_attitude(level)
         gcs.conn.mav.command_long_send(SYSID, 1, mav.MAV_CMD_REQUEST_MESSAGE, 0,
                                        mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0)
         gcs.wait(lambda m: m.get_type() == 'AUTOPILOT_VERSION', 10.0, 'the next valid command',
                  since=t0)
-        # (the pose topic is best effort, as a motion-capture driver's: a pose may be lost on a
-        # busy machine, so the valid one is sent again until the bridge shows it)
+        # (the attitude topic is best effort: one may be lost on a busy machine, so the valid one
+        # is sent again until the bridge shows it)
         deadline = time.monotonic() + 10.0
         while True:
             try:
@@ -571,12 +574,12 @@ def test_hostile_frames_and_messages_are_refused_and_never_end_the_bridge(tmp_pa
             except TimeoutError:
                 if time.monotonic() > deadline:
                     raise
-                mon.publish_pose(level)
+                mon.publish_attitude(level)
         attitudes = [m for _, m in gcs.got if m.get_type() == 'ATTITUDE_QUATERNION']
         assert all(math.isfinite(v) for m in attitudes for v in (m.q1, m.q2, m.q3, m.q4))
         assert bridge.proc.poll() is None, bridge.output()
         log = bridge.output()
-        assert 'pose refused: quaternion is not' in log
+        assert 'attitude refused: quaternion is not' in log
         assert 'number of timers' not in log
     finally:
         mon.destroy_node()

@@ -282,11 +282,18 @@ class SensorAgreement:
         return problems
 
     def _gravity_cause(self, w: Window, angle: float, allowed: float) -> str:
-        """The likely cause of a gravity mismatch, in words."""
+        """The likely causes of a gravity mismatch, in words: every other convention or IMU
+        mounting that would make gravity agree (at rest, level, several may), or the tilt.
+        """
         fr = self.frames
+        fits = []
         if self.raw_force is not None and self.raw_pose is not None:
             up_world = -self.settings.gravity / np.linalg.norm(self.settings.gravity)
             raw_f = np.asarray(self.raw_force, dtype=float)
+            other = 'frd' if fr.body == 'flu' else 'flu'
+            if tilt_deg(fr.imu_rotation @ BODY_FRAMES[other].T @ raw_f, w.up) <= allowed:
+                fits.append('the IMU looks %s while body_frame says %s'
+                            % (other.upper(), fr.body))
             for words, world, body, marker in _POSE_GUESSES:
                 if (world, body) == (fr.world, fr.body) and marker == (0.0, 0.0, 0.0):
                     continue
@@ -294,17 +301,15 @@ class SensorAgreement:
                 R = T @ self.raw_pose @ B @ rpy_matrix(marker).T
                 f = fr.imu_rotation @ B.T @ raw_f
                 if R[2, 2] > 0.0 and tilt_deg(f, R.T @ up_world) <= allowed:
-                    return words + ', while the parameters say %s/%s' % (fr.world, fr.body)
-            if fr.body == 'flu' and tilt_deg(fr.imu_rotation @ BODY_FRAMES['frd'] @ raw_f,
-                                             w.up) <= allowed:
-                return 'the IMU looks FRD while body_frame says flu'
-            if fr.body == 'frd' and tilt_deg(fr.imu_rotation @ raw_f, w.up) <= allowed:
-                return 'the IMU looks FLU while body_frame says frd'
+                    fits.append(words + ', while the parameters say %s/%s'
+                                % (fr.world, fr.body))
             for yaw in (90.0, 180.0, 270.0):
                 turned = rpy_matrix((0.0, 0.0, yaw)) @ w.force
                 if tilt_deg(turned, w.up) <= allowed:
-                    return ('the IMU looks mounted about %.0f deg off in yaw (imu_rotation_deg)'
-                            % (yaw if yaw <= 180.0 else yaw - 360.0))
+                    fits.append('the IMU looks mounted about %.0f deg off in yaw '
+                                '(imu_rotation_deg)' % (yaw if yaw <= 180.0 else yaw - 360.0))
+        if fits:
+            return '; or '.join(fits)
         if angle < 30.0:
             return ('a tilted marker set or IMU mounting (about %.0f deg): run calibrate '
                     '(marker_rotation_deg, imu_rotation_deg; docs/sensors.md)' % angle)
