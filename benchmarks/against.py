@@ -69,3 +69,7 @@ def against(rev, rounds=3):
         print('%-46s %10s %10.1f %7s' % (k, '%.1f' % old if old else '-', v,
                                           '%.2f' % (v / old) if old else '-'))
     return 0
+
+
+if __name__ == '__main__':         # (bench.py --against REV [--rounds N] runs this)
+    sys.exit(against(sys.argv[1], int(sys.argv[2]) if len(sys.argv) > 2 else 3))

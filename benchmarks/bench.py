@@ -21,6 +21,7 @@ skips it).
 """
 import json
 import os
+import subprocess
 import sys
 import time
 import timeit
@@ -35,8 +36,8 @@ from sensor_msgs.msg import Imu
 
 import geoctl_ros
 from geoctl_ros.campaign import manoeuvres
-from geoctl_ros.core import so3
-from geoctl_ros.core.loop import ControlLoop
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.supervisor.loop import ControlLoop
 from geoctl_ros.nodes.controller import ControllerNode
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg
 from geoctl_ros.params import (
@@ -237,8 +238,9 @@ def main(argv):
         return 0
     if '--against' in argv:
         rounds = int(argv[argv.index('--rounds') + 1]) if '--rounds' in argv else 3
-        from against import against  # noqa: PLC0415 (it imports this module)
-        return against(argv[argv.index('--against') + 1], rounds)
+        # (a program of its own: against.py imports this module, not the other way round)
+        return subprocess.call([sys.executable, os.path.join(HERE, 'against.py'),
+                                argv[argv.index('--against') + 1], str(rounds)])
     results = measure()
     if '--update-baseline' in argv:
         with open(BASELINE, 'w') as f:

@@ -1,5 +1,5 @@
 """A plain numpy transcription of the paper's control law, the baseline the benchmarks compare
-``geoctl_ros.core.control`` against (issue 10). Written as one would from the paper, with a
+``geoctl_ros.core.law.control`` against (issue 10). Written as one would from the paper, with a
 Python loop over the cones and no precomputation; not used by the package.
 
 Notation as in the paper (Props. 1-5): A, e_RA; B_i, e_RB,i per cone; Psi = A (1 + sum (B_i - 1));

@@ -7,9 +7,14 @@ import numpy as np
 import pytest
 
 from geoctl_ros import params
-from geoctl_ros.core.airframe import AirframeError, RotorGeometry, effectiveness, tilted_ring
-from geoctl_ros.core.allocation import Allocator
-from geoctl_ros.core.motors import ThrustCurve
+from geoctl_ros.core.actuation.airframe import (
+    AirframeError,
+    RotorGeometry,
+    effectiveness,
+    tilted_ring,
+)
+from geoctl_ros.core.actuation.allocation import Allocator
+from geoctl_ros.core.actuation.motors import ThrustCurve
 from geoctl_ros.params import CONTROLLER, ConfigError, resolve
 from geoctl_ros.sim.testbed import RotorActuator
 

@@ -1,16 +1,16 @@
-"""The approach brake (geoctl_ros.core.brake): its allowed rate against the derivation's braking
-distance, the direction and size of its moment against finite differences of the approach rate,
-and where it acts.
+"""The approach brake (geoctl_ros.core.law.brake): its allowed rate against the derivation's
+braking distance, the direction and size of its moment against finite differences of the approach
+rate, and where it acts.
 """
 import math
 
 import numpy as np
 import pytest
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.brake import ApproachBrake, braking_distance
-from geoctl_ros.core.control import AttitudeController
-from geoctl_ros.core.errors import approach_rates
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.law.brake import ApproachBrake, braking_distance
+from geoctl_ros.core.law.configuration_error import approach_rates
+from geoctl_ros.core.law.control import AttitudeController
 from geoctl_ros.params import (
     CONTROLLER,
     controller_config,

@@ -8,14 +8,19 @@ import numpy as np
 from paper_law import PaperLaw
 import pytest
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.cones import ConeSet
-from geoctl_ros.core.control import AttitudeController, ControllerConfig, SetpointRejected
-from geoctl_ros.core.errors import E_matrix, attractive_error, configuration_error, linear_terms
-from geoctl_ros.core.feasibility import holding_clearance_deg, holding_moment
-from geoctl_ros.core.gains import gain_condition
-from geoctl_ros.core.laws import closest_admissible, pointing_cbf
-from geoctl_ros.core.mechanics import gravity_moment
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.law.cones import ConeSet
+from geoctl_ros.core.law.configuration_error import (
+    E_matrix,
+    attractive_error,
+    configuration_error,
+    linear_terms,
+)
+from geoctl_ros.core.law.control import AttitudeController, ControllerConfig, SetpointRejected
+from geoctl_ros.core.law.feasibility import holding_clearance_deg, holding_moment
+from geoctl_ros.core.law.gains import gain_condition
+from geoctl_ros.core.law.laws import closest_admissible, pointing_cbf
+from geoctl_ros.core.law.mechanics import gravity_moment
 from geoctl_ros.params import CONTROLLER, controller_config, resolve
 from geoctl_ros.sim import scenario
 from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig

@@ -1,6 +1,6 @@
-"""The diagnostics contracts (the controller's, geoctl_ros.core.diagnostics; the MAVLink bridge's,
-geoctl_ros.mavlink.health): what is reported comes back typed from what is published, a reader
-survives any text, and no other file spells a key.
+"""The diagnostics contracts (the controller's, geoctl_ros.core.telemetry.diagnostics; the MAVLink
+bridge's, geoctl_ros.mavlink.health): what is reported comes back typed from what is published, a
+reader survives any text, and no other file spells a key.
 """
 import dataclasses
 import math
@@ -10,9 +10,17 @@ import pathlib
 import numpy as np
 import pytest
 
-from geoctl_ros.core import diagnostics
-from geoctl_ros.core.diagnostics import Counts, Figures, Gaps, Window, from_values, key, to_values
-from geoctl_ros.core.stats import WindowStats
+from geoctl_ros.core.telemetry import diagnostics
+from geoctl_ros.core.telemetry.diagnostics import (
+    Counts,
+    Figures,
+    Gaps,
+    Window,
+    from_values,
+    key,
+    to_values,
+)
+from geoctl_ros.core.telemetry.stats import WindowStats
 from geoctl_ros.esc import health as esc_health
 from geoctl_ros.mavlink import health
 
@@ -89,7 +97,7 @@ def test_the_bridge_reader_never_fails_on_text_it_does_not_understand():
 
 
 def test_no_other_file_spells_a_diagnostics_key():
-    """Renaming a key changes one table of the one codec: core/diagnostics.py (the
+    """Renaming a key changes one table of the one codec: core/telemetry/diagnostics.py (the
     controller's), mavlink/health.py (the bridge's) or esc/health.py (the ESC node's) only: no
     other source (package, tools, tests, benchmarks) writes a key of more than one word.
     """
@@ -98,7 +106,7 @@ def test_no_other_file_spells_a_diagnostics_key():
     bridge_keys = [k for k, _ in health.to_values(BRIDGE) if ' ' in k]
     assert len(bridge_keys) > 10
     keys += bridge_keys + [k.key for k in esc_health.CODEC.table.values() if ' ' in k.key]
-    owners = {ROOT / 'geoctl_ros' / 'core' / 'diagnostics.py',
+    owners = {ROOT / 'geoctl_ros' / 'core' / 'telemetry' / 'diagnostics.py',
               ROOT / 'geoctl_ros' / 'mavlink' / 'health.py',
               ROOT / 'geoctl_ros' / 'esc' / 'health.py'}
     found = []

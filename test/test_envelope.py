@@ -8,14 +8,14 @@ import os
 import numpy as np
 import pytest
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.control import AttitudeController
-from geoctl_ros.core.diagnostics import ERROR
-from geoctl_ros.core.errors import approach_rates, blind_widening
-from geoctl_ros.core.loop import ControlLoop
-from geoctl_ros.core.mechanics import gravity_moment
-from geoctl_ros.core.prediction import CommandHistory, DelayPredictor
-from geoctl_ros.core.safety import REANCHOR_AFTER, Stream
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.law.configuration_error import approach_rates, blind_widening
+from geoctl_ros.core.law.control import AttitudeController
+from geoctl_ros.core.law.mechanics import gravity_moment
+from geoctl_ros.core.law.prediction import CommandHistory, DelayPredictor
+from geoctl_ros.core.supervisor.loop import ControlLoop
+from geoctl_ros.core.supervisor.safety import REANCHOR_AFTER, Stream
+from geoctl_ros.core.telemetry.diagnostics import ERROR
 from geoctl_ros.params import (
     CONTROLLER,
     SIM,

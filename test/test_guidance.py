@@ -1,4 +1,4 @@
-"""Guidance round the cones (geoctl_ros.core.guidance) and the m*rho estimate, against values
+"""Guidance round the cones (geoctl_ros.core.law.guidance) and the m*rho estimate, against values
 derived here: brute-force sampling of arcs, the campaign's random cones, the sim's true m*rho.
 """
 import math
@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from geoctl_ros.campaign import manoeuvres
-from geoctl_ros.core import guidance, so3
-from geoctl_ros.core.cones import ConeSet
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.law import guidance
+from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.sim import scenario
 from geoctl_ros.sim.closed_loop import fly
 

@@ -21,7 +21,7 @@ from support import FakeInputs
 from workspace import BIN, ROOT, Workspace
 import yaml
 
-from geoctl_ros.core import so3
+from geoctl_ros.core.geometry import so3
 from geoctl_ros.nodes import qos
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector
 from geoctl_ros.params import cone_set, load_parameter_file, node_overrides, resolve

@@ -8,13 +8,14 @@ import os
 import numpy as np
 import pytest
 
-from geoctl_ros.core import gaps, so3
-from geoctl_ros.core.cones import ConeSet
-from geoctl_ros.core.control import AttitudeController
-from geoctl_ros.core.diagnostics import ERROR, OK, WARN
-from geoctl_ros.core.loop import NON_FINITE, ControlLoop
-from geoctl_ros.core.loop_types import step_period
-from geoctl_ros.core.step import ControlTick
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.law.cones import ConeSet
+from geoctl_ros.core.law.control import AttitudeController
+from geoctl_ros.core.supervisor import gaps
+from geoctl_ros.core.supervisor.control_tick import ControlTick
+from geoctl_ros.core.supervisor.loop import NON_FINITE, ControlLoop
+from geoctl_ros.core.supervisor.loop_types import step_period
+from geoctl_ros.core.telemetry.diagnostics import ERROR, OK, WARN
 from geoctl_ros.params import CONTROLLER, ConfigError, controller_setup, resolve
 from geoctl_ros.sim import scenario
 
@@ -333,9 +334,9 @@ def test_a_burst_of_samples_does_not_make_the_lag_compensation_command_extreme_t
 
 
 def test_a_batch_of_one_commands_what_the_control_loop_does_tick_for_tick():
-    """The closed loop's tick exists once (geoctl_ros.core.step.ControlTick): ControlLoop (the
-    node's logic) and a batch of one as the campaign builds it (batched cone set, set point and
-    estimate), fed the same recorded inputs, command the same motors at every tick.
+    """The closed loop's tick exists once (geoctl_ros.core.supervisor.control_tick.ControlTick):
+    ControlLoop (the node's logic) and a batch of one as the campaign builds it (batched cone set,
+    set point and estimate), fed the same recorded inputs, command the same motors at every tick.
     """
     sc = scenario.load(os.path.join(ROOT, 'config', 'scenarios', 'testbed_yaw90.yaml'))
     recorded = scenario.run(sc, duration=3.0)          # the flight's true states, 100 Hz

@@ -10,8 +10,8 @@ import pytest
 os.environ['MAVLINK20'] = '1'
 from pymavlink.dialects.v20 import common as mav  # noqa: E402
 
-from geoctl_ros.core import so3  # noqa: E402
-from geoctl_ros.core.diagnostics import ERROR, OK, WARN, Figures, Status
+from geoctl_ros.core.geometry import so3  # noqa: E402
+from geoctl_ros.core.telemetry.diagnostics import ERROR, OK, WARN, Figures, Status
 from geoctl_ros.mavlink import frames  # noqa: E402
 from geoctl_ros.mavlink.actions import Arm, Ignored, MotorTest, SetParameter  # noqa: E402
 from geoctl_ros.mavlink.link import encoder  # noqa: E402

@@ -20,7 +20,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import Imu
 from support import FakeInputs, past_bounds
 
-from geoctl_ros.core import so3
+from geoctl_ros.core.geometry import so3
 from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.mavlink import frames, health
 from geoctl_ros.mavlink.params import TABLE

@@ -18,8 +18,8 @@ from std_srvs.srv import SetBool, Trigger
 from support import FakeInputs
 
 from geoctl_ros.cli import report as report_cli
-from geoctl_ros.core import so3
-from geoctl_ros.core.diagnostics import ERROR, OK, WARN, aggregate_ms
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.telemetry.diagnostics import ERROR, OK, WARN, aggregate_ms
 from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.nodes import qos
 from geoctl_ros.nodes.controller import ControllerNode

@@ -25,6 +25,9 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PKG = os.path.join(ROOT, 'geoctl_ros')
 LAYERS = ['core', 'params', 'sim', 'plots', 'records', 'esc', 'mavlink', 'campaign', 'falsify',
           'benchmark', 'nodes', 'sil', 'fuzz', 'cli']    # lowest first
+# core's rooms, lowest first: the geometry, the paper's law, actuation, the sensors, telemetry, and
+# the supervisor (the node's logic without ROS), which uses them all
+CORE_ROOMS = ['geometry', 'law', 'actuation', 'sensors', 'telemetry', 'supervisor']
 
 
 def test_core_sim_params_and_mavlink_import_without_rclpy():
@@ -39,8 +42,8 @@ def test_core_sim_params_and_mavlink_import_without_rclpy():
             'import pkgutil, importlib, geoctl_ros\n'
             'for sub in ("core", "sim", "params", "mavlink", "records", "esc", "plots"):\n'
             '    pkg = importlib.import_module("geoctl_ros." + sub)\n'
-            '    for m in pkgutil.iter_modules(pkg.__path__):\n'
-            '        importlib.import_module("geoctl_ros.%s.%s" % (sub, m.name))\n'
+            '    for m in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + "."):\n'
+            '        importlib.import_module(m.name)\n'
             'import geoctl_ros.sil.rosenv\n'
             'print("ok")\n')
     r = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, cwd=ROOT)
@@ -58,17 +61,88 @@ def _imports(path):
 
 
 def test_no_layer_imports_a_higher_one():
+    """The package's folders (LAYERS) and core's rooms (CORE_ROOMS): each module imports only
+    from its own or a lower one (TYPE_CHECKING imports too).
+    """
     rank = {name: i for i, name in enumerate(LAYERS)}
+    room_rank = {name: i for i, name in enumerate(CORE_ROOMS)}
     bad = []
-    for layer in LAYERS:
-        for f in os.listdir(os.path.join(PKG, layer)):
-            if not f.endswith('.py'):
+    for path in sorted(pathlib.Path(PKG).rglob('*.py')):
+        parts = path.relative_to(PKG).parts
+        if len(parts) < 2:
+            continue
+        layer = parts[0]
+        for mod in _imports(str(path)):
+            m = re.match(r'geoctl_ros\.(\w+)(?:\.(\w+))?', mod)
+            if not m or m.group(1) not in rank:
                 continue
-            for mod in _imports(os.path.join(PKG, layer, f)):
-                m = re.match(r'geoctl_ros\.(\w+)', mod)
-                if m and m.group(1) in rank and rank[m.group(1)] > rank[layer]:
-                    bad.append('%s/%s imports %s' % (layer, f, mod))
+            if rank[m.group(1)] > rank[layer]:
+                bad.append('%s imports %s' % ('/'.join(parts), mod))
+            elif layer == m.group(1) == 'core' and len(parts) > 2:
+                if m.group(2) not in room_rank:
+                    bad.append('%s imports %s: not a room of core' % ('/'.join(parts), mod))
+                elif room_rank[m.group(2)] > room_rank[parts[1]]:
+                    bad.append('%s imports %s' % ('/'.join(parts), mod))
     assert not bad, bad
+    assert sorted(p.name for p in pathlib.Path(PKG, 'core').iterdir()
+                  if p.suffix == '.py' and p.name != '__init__.py') == [], (
+        'core/ holds its rooms only')
+
+
+def _module_graph():
+    """{module: modules of this package and of benchmarks/ it imports} over every file, with the
+    imports under TYPE_CHECKING and inside functions (a name imported from a package that is a
+    module of it counts as that module).
+    """
+    files = {}
+    for path in pathlib.Path(PKG).rglob('*.py'):
+        rel = path.relative_to(ROOT).with_suffix('')
+        name = '.'.join(rel.parts[:-1] if rel.name == '__init__' else rel.parts)
+        files[name] = path
+    for path in pathlib.Path(ROOT, 'benchmarks').glob('*.py'):
+        files[path.stem] = path
+    graph = {}
+    for name, path in files.items():
+        deps = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                for a in node.names:
+                    sub = '%s.%s' % (node.module, a.name)
+                    deps.add(sub if sub in files else node.module)
+            elif isinstance(node, ast.Import):
+                deps.update(a.name for a in node.names)
+        graph[name] = {d for d in deps if d in files and d != name}
+    return graph
+
+
+def test_no_module_imports_itself_round_a_circle():
+    """No cycle in the import graph of the package and benchmarks/, TYPE_CHECKING imports and
+    imports inside functions included (a package's __init__ importing its own modules aside).
+    """
+    graph = _module_graph()
+    for name, deps in graph.items():      # (an __init__ re-exporting its modules is not a circle)
+        graph[name] = {d for d in deps if not d.startswith(name + '.')}
+    state, cycles = {}, []
+
+    def visit(node, stack):
+        state[node] = 1
+        stack.append(node)
+        for dep in sorted(graph[node]):
+            if state.get(dep) == 1:
+                cycles.append(' -> '.join(stack[stack.index(dep):] + [dep]))
+            elif dep not in state:
+                visit(dep, stack)
+        stack.pop()
+        state[node] = 2
+    for node in sorted(graph):
+        if node not in state:
+            visit(node, [])
+    assert not cycles, cycles
+    # and it sees one: a planted circle is found
+    graph['geoctl_ros.core.geometry.so3'] = {'geoctl_ros.core.law.control'}
+    state.clear()
+    visit('geoctl_ros.core.law.control', [])
+    assert cycles
 
 
 def _console_scripts():
@@ -288,7 +362,7 @@ def test_every_public_function_of_the_typed_layers_has_type_hints():
     """
     bare = []
     for layer in ('core', 'params', 'sim', 'esc'):
-        for path in sorted(pathlib.Path(PKG, layer).glob('*.py')):
+        for path in sorted(pathlib.Path(PKG, layer).rglob('*.py')):
             for node in ast.walk(ast.parse(path.read_text())):
                 if not isinstance(node, ast.FunctionDef) or node.name.startswith('_'):
                     continue

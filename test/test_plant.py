@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.mechanics import gravity_moment, pivot_inertia
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.law.mechanics import gravity_moment, pivot_inertia
 from geoctl_ros.params import LAB_INERTIA
 from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
 from geoctl_ros.sim.testbed import EscWatchdog

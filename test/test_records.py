@@ -19,8 +19,8 @@ from std_msgs.msg import Float64
 import yaml
 
 from geoctl_ros.cli.report import main as report_main
-from geoctl_ros.core.diagnostics import Figures, Status
-from geoctl_ros.core.view import Trail, cone_triangles, in_warning
+from geoctl_ros.core.telemetry.diagnostics import Figures, Status
+from geoctl_ros.core.telemetry.view import Trail, cone_triangles, in_warning
 from geoctl_ros.nodes.conversions import set_quaternion, status_msg
 from geoctl_ros.params.topics import BY_NAME, Topic
 from geoctl_ros.records import bag

@@ -10,10 +10,11 @@ import os
 import numpy as np
 import pytest
 
-from geoctl_ros.core import consistency, so3
-from geoctl_ros.core.calibration import CalibrationError, calibrate
-from geoctl_ros.core.frames import InputFrames, matrix_rpy, rpy_matrix
-from geoctl_ros.core.loop import ControlLoop
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.sensors import consistency
+from geoctl_ros.core.sensors.calibration import CalibrationError, calibrate
+from geoctl_ros.core.sensors.frames import InputFrames, matrix_rpy, rpy_matrix
+from geoctl_ros.core.supervisor.loop import ControlLoop
 from geoctl_ros.mavlink import frames as mavlink_frames
 from geoctl_ros.params import (
     CONTROLLER,

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from geoctl_ros.core import so3
+from geoctl_ros.core.geometry import so3
 
 pytestmark = pytest.mark.odroid
 

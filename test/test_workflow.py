@@ -14,7 +14,7 @@ import pytest
 import rclpy
 import yaml
 
-from geoctl_ros.core import so3
+from geoctl_ros.core.geometry import so3
 from geoctl_ros.sil.loads import ros2_command
 from geoctl_ros.sil.processes import NodeProcess, process_sockets
 from geoctl_ros.sil.rosenv import cli_env, config_dir

@@ -13,9 +13,9 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from geoctl_ros.benchmark.scores import RUN_COLUMNS, run_scores
-from geoctl_ros.core import so3
-from geoctl_ros.core.control import AttitudeController
-from geoctl_ros.core.laws import LAWS
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.law.control import AttitudeController
+from geoctl_ros.core.law.laws import LAWS
 from geoctl_ros.params import controller_setup
 from geoctl_ros.sim.closed_loop import fly
 from geoctl_ros.sim.scenario import from_sections

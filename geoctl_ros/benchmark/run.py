@@ -1,7 +1,7 @@
 """The benchmark of the control laws (the ``benchmark`` command: geoctl_ros.cli.benchmark).
 
-Every law of ``geoctl_ros.core.laws`` flies the standard cases (``cases.CASES``: the paper's four
-cones with and without adaptation, the authors' code variant, the dissertation's time-varying
+Every law of ``geoctl_ros.core.law.laws`` flies the standard cases (``cases.CASES``: the paper's
+four cones with and without adaptation, the authors' code variant, the dissertation's time-varying
 disturbance, the testbed's 90 deg yaw with rotors) and the same random manoeuvres of the campaign
 (``geoctl_ros.campaign.manoeuvres``: noise, model errors, latency, input stalls), all on a Dask
 cluster. The laws' steps are then timed side by side in this process, at states of the cases'

@@ -37,8 +37,8 @@ import os
 
 import numpy as np
 
-from geoctl_ros.core import so3, sphere
-from geoctl_ros.core.control import AttitudeController
+from geoctl_ros.core.geometry import so3, sphere
+from geoctl_ros.core.law.control import AttitudeController
 from geoctl_ros.params import (
     CONTROLLER,
     SIM,

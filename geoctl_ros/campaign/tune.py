@@ -31,7 +31,7 @@ from typing import Any, Dict, List, Optional, Sequence
 import numpy as np
 
 from geoctl_ros.campaign import manoeuvres, runner, study
-from geoctl_ros.core.gains import learning_gain, learning_time
+from geoctl_ros.core.law.gains import learning_gain, learning_time
 from geoctl_ros.params import load_parameter_file
 from geoctl_ros.sim import closed_loop
 from geoctl_ros.sim.scenario import from_sections
@@ -39,7 +39,7 @@ from geoctl_ros.sim.scenario import from_sections
 # The search's coordinates, name: (low, high, log scale). The adaptation is searched by what it
 # does rather than by its raw gains: c as a share of k_R / k_Omega (at 1, e_Omega + c e_R vanishes
 # along the loop's own slow decay, so the estimate learns from what the model misses, not from the
-# manoeuvre itself), and each block's learning time constant (``core.gains.learning_time``),
+# manoeuvre itself), and each block's learning time constant (``core.law.gains.learning_time``),
 # m*rho's within a few seconds (docs/control-law.md, "Learning the gravity moment").
 SPACE = {
     'k_R': (0.5, 3.0, True),

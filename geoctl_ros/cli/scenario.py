@@ -18,7 +18,7 @@ import os
 import sys
 
 from geoctl_ros.cli.args import positive_seconds
-from geoctl_ros.core.gains import gain_condition
+from geoctl_ros.core.law.gains import gain_condition
 from geoctl_ros.params import ConfigError, controller_config
 from geoctl_ros.records import scenario as scenario_files
 from geoctl_ros.sim.scenario import load, run

@@ -19,8 +19,8 @@ from typing import Any, List, Optional, Tuple
 
 import numpy as np
 
-from geoctl_ros.core.safety import motor_commands_problem
-from geoctl_ros.core.stats import WindowStats
+from geoctl_ros.core.supervisor.safety import motor_commands_problem
+from geoctl_ros.core.telemetry.stats import WindowStats
 from geoctl_ros.esc import protocol
 from geoctl_ros.esc.bus import BusError
 from geoctl_ros.params.param import MOTOR_TEST_COMMAND_MAX, MOTOR_TEST_DURATION_MAX

@@ -1,7 +1,7 @@
 """The ESC node's health as typed values, and the one place that spells its diagnostics keys:
 ``report`` judges a driver's state, ``to_values`` formats its figures for a DiagnosticStatus and
 ``from_values`` reads them back (as the tests do); the keys are a table of the one codec
-(``core.codec``).
+(``core.telemetry.codec``).
 
 Levels: ERROR for an ESC that has not answered for ``LOST`` s (or a failed start, a self-test
 error, ``esc.temperature_error``); WARN for I2C errors in the last window (retried), an ESC
@@ -12,9 +12,9 @@ from dataclasses import dataclass
 import math
 from typing import Iterable, List, NamedTuple, Optional, Tuple
 
-from geoctl_ros.core.codec import Codec, Key
-from geoctl_ros.core.diagnostics import Window, window, window_text, window_value
-from geoctl_ros.core.safety import EscHealth
+from geoctl_ros.core.supervisor.safety import EscHealth
+from geoctl_ros.core.telemetry.codec import Codec, Key
+from geoctl_ros.core.telemetry.diagnostics import Window, window, window_text, window_value
 from geoctl_ros.esc import protocol
 from geoctl_ros.esc.driver import EscDriver
 
@@ -64,7 +64,7 @@ class EscReport(NamedTuple):
     figures: EscFigures
 
 
-# The ESC node's keys, in the order published (the one codec: ``core.codec``).
+# The ESC node's keys, in the order published (the one codec: ``core.telemetry.codec``).
 CODEC = Codec(EscFigures, {
     'output': Key('output'),
     'set_points': Key('set points', lambda x: ' '.join('%.4f' % v for v in x),

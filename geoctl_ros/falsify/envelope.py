@@ -40,7 +40,7 @@ from geoctl_ros.campaign.manoeuvres import (
     angle_deg,
     upright,
 )
-from geoctl_ros.core import sphere
+from geoctl_ros.core.geometry import sphere
 
 OUTSIDE = 180.0          # the robustness of a point outside the envelope (deg: above any real)
 NOISE_SEED = 1           # every run's noise (runs with tick jitter fly together on one seed)

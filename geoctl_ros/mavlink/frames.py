@@ -12,10 +12,11 @@ MAVLink yaw 0.
 """
 import numpy as np
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.frames import BODY_FRAMES, WORLD_FRAMES
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.sensors.frames import BODY_FRAMES, WORLD_FRAMES
 
-T = WORLD_FRAMES['ned']       # ENU <-> NED (core.frames: the controller's inputs use the same)
+# (core.sensors.frames: the controller's inputs use the same)
+T = WORLD_FRAMES['ned']       # ENU <-> NED
 F = BODY_FRAMES['frd']        # FLU <-> FRD
 
 

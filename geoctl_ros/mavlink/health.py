@@ -1,6 +1,6 @@
 """The MAVLink bridge's own health as typed values, and the one place that spells its diagnostics
-keys (a table of the one codec, ``core.codec``): ``to_values`` formats a ``BridgeStatus`` for a
-DiagnosticStatus, ``from_values`` reads one back (as the tests and tools do).
+keys (a table of the one codec, ``core.telemetry.codec``): ``to_values`` formats a ``BridgeStatus``
+for a DiagnosticStatus, ``from_values`` reads one back (as the tests and tools do).
 
 Counters keep the names their owners give them (``Link.counts``: received, bad data, ...;
 ``Verifier.refused``: unsigned, bad signature, ...; the bridge's own: arm requests, ...).
@@ -8,7 +8,7 @@ Counters keep the names their owners give them (``Link.counts``: received, bad d
 from dataclasses import dataclass, field
 from typing import Dict, List, NamedTuple, Optional, Tuple
 
-from geoctl_ros.core.codec import Codec, Key
+from geoctl_ros.core.telemetry.codec import Codec, Key
 
 NAME = 'geoctl_ros: mavlink_bridge'
 
@@ -66,7 +66,7 @@ def _unsigned(s):
     return s.signing_link_id is None
 
 
-# The bridge's keys, in the order published (the one codec: ``core.codec``).
+# The bridge's keys, in the order published (the one codec: ``core.telemetry.codec``).
 CODEC = Codec(BridgeStatus, {
     'url': Key('link'),
     'gcs_age': Key('ground station', _age_text, _age),

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from geoctl_ros.core.diagnostics import ERROR
+from geoctl_ros.core.telemetry.diagnostics import ERROR
 from geoctl_ros.mavlink import frames
 from geoctl_ros.mavlink.actions import (
     MESSAGE_ID_MAX,

@@ -4,8 +4,8 @@ PSI] [--out calibration.yaml] [--ros-args -r pose:=... -r imu:=...]``.
 With the vehicle level and at rest, it listens to ``pose`` and ``imu`` for --seconds, measures
 the gyro's bias, the marker set's rotation against the level airframe (its heading PSI stated,
 or the markers' own: then only the tilt), the IMU's tilt and the sensors' noise
-(``geoctl_ros.core.calibration``), with the conventions of FILE's controller section, and writes
-a parameter file for the controller to load after FILE:
+(``geoctl_ros.core.sensors.calibration``), with the conventions of FILE's controller section, and
+writes a parameter file for the controller to load after FILE:
 
     ros2 run geoctl_ros controller --ros-args --params-file FILE --params-file calibration.yaml
 
@@ -24,9 +24,9 @@ from rclpy.node import Node
 from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import Imu
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.calibration import CalibrationError, calibrate
-from geoctl_ros.core.safety import (
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.sensors.calibration import CalibrationError, calibrate
+from geoctl_ros.core.supervisor.safety import (
     angular_velocity_problem,
     quaternion_problem,
     specific_force_problem,

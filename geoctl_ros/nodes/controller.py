@@ -1,10 +1,10 @@
 """The controller node: ``ros2 run geoctl_ros controller --ros-args --params-file FILE``.
 
-A thin shell over ``geoctl_ros.core.loop.ControlLoop``: subscriptions feed it checked measurements
-and set points, a timer at ``rate_hz`` runs one control step and publishes the results, services
-arm, disarm and reset the estimate, and parameter changes are validated by the shared schema before
-they touch the running controller. Topics, services and parameters: docs/interface.md and
-docs/parameters.md.
+A thin shell over ``geoctl_ros.core.supervisor.loop.ControlLoop``: subscriptions feed it checked
+measurements and set points, a timer at ``rate_hz`` runs one control step and publishes the
+results, services arm, disarm and reset the estimate, and parameter changes are validated by the
+shared schema before they touch the running controller. Topics, services and parameters:
+docs/interface.md and docs/parameters.md.
 """
 from dataclasses import replace
 import sys
@@ -18,13 +18,13 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray, UInt16MultiArray, UInt32MultiArray
 from std_srvs.srv import SetBool, Trigger
 
-from geoctl_ros.core.diagnostics import NAME as DIAGNOSTICS_NAME
-from geoctl_ros.core.diagnostics import failsafe
-from geoctl_ros.core.gains import gain_condition
-from geoctl_ros.core.loop import ControlLoop
-from geoctl_ros.core.loop_types import step_period
-from geoctl_ros.core.safety import ArmedState, new_session
-from geoctl_ros.core.stats import WindowStats
+from geoctl_ros.core.law.gains import gain_condition
+from geoctl_ros.core.supervisor.loop import ControlLoop
+from geoctl_ros.core.supervisor.loop_types import step_period
+from geoctl_ros.core.supervisor.safety import ArmedState, new_session
+from geoctl_ros.core.telemetry.diagnostics import NAME as DIAGNOSTICS_NAME
+from geoctl_ros.core.telemetry.diagnostics import failsafe
+from geoctl_ros.core.telemetry.stats import WindowStats
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.controller_config import ControllerConfiguration, build
 from geoctl_ros.nodes.controller_topics import Telemetry
@@ -86,7 +86,7 @@ class ControllerNode(ControllerConfiguration, Node):
                                  qos.COMMAND)
         self.pub_motors = self.create_publisher(Float64MultiArray, 'motor_commands', qos.COMMAND)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
-        # the armed state and session the ESC node follows (core.safety.ArmedState)
+        # the armed state and session the ESC node follows (core.supervisor.safety.ArmedState)
         self.session = new_session()
         self.pub_armed = self.create_publisher(UInt32MultiArray, '~/armed', qos.LATCHED)
         self._armed_sent = None

@@ -1,13 +1,13 @@
 """The controller node's monitoring topics (what ``ros2 topic echo`` and the recorder see besides
 the motor commands): the measured attitude and body rate in the package's frames (the inputs
-after their conventions, ``core.frames``: what the ground station, the view and the records
+after their conventions, ``core.sensors.frames``: what the ground station, the view and the records
 show), the wrench, e_R, e_Omega, Psi, the estimate, the cone margins and the set point being
 flown. Published after the motor command, from one tick's result.
 """
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped, WrenchStamped
 from std_msgs.msg import Float64, Float64MultiArray
 
-from geoctl_ros.core import so3
+from geoctl_ros.core.geometry import so3
 from geoctl_ros.nodes import qos
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector
 

@@ -10,8 +10,8 @@ from std_msgs.msg import (
     UInt32MultiArray,
 )
 
-from geoctl_ros.core.diagnostics import Status, from_values, to_values
-from geoctl_ros.core.safety import ArmedState
+from geoctl_ros.core.supervisor.safety import ArmedState
+from geoctl_ros.core.telemetry.diagnostics import Status, from_values, to_values
 from geoctl_ros.mavlink.health import Report as BridgeReport
 from geoctl_ros.mavlink.health import from_values as bridge_values
 

@@ -21,8 +21,8 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
-from geoctl_ros.core.diagnostics import ERROR, WARN
-from geoctl_ros.core.diagnostics import NAME as CONTROLLER_STATUS
+from geoctl_ros.core.telemetry.diagnostics import ERROR, WARN
+from geoctl_ros.core.telemetry.diagnostics import NAME as CONTROLLER_STATUS
 from geoctl_ros.mavlink import health, identity, signing
 from geoctl_ros.mavlink.actions import Arm, Ignored, MotorTest, Send, SetParameter, m_const
 from geoctl_ros.mavlink.link import Link, encoder

@@ -5,8 +5,8 @@ A thin shell over ``geoctl_ros.sim.testbed.TestbedSim``: integrates the testbed 
 them; with ``actuation: torque``, from the torque of the latest ``control_wrench``), and publishes
 ``pose`` (motion capture) and ``imu`` (angular velocity and specific force) with the configured
 noise, in the conventions it is given (``pose_world_frame``, ``body_frame``,
-``marker_rotation_deg``, ``imu_rotation_deg``: the sources it emulates; ``core.frames``), the true
-state on
+``marker_rotation_deg``, ``imu_rotation_deg``: the sources it emulates; ``core.sensors.frames``),
+the true state on
 ``sim/true_pose``, and ``/clock`` when ``publish_clock`` is set. Simulated time follows the wall
 clock times ``real_time_factor``: one timer, at the faster of the two sensor rates, integrates as
 many steps as are due and publishes what is due.
@@ -30,8 +30,8 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.safety import motor_commands_problem
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.supervisor.safety import motor_commands_problem
 from geoctl_ros.esc.protocol import current_raw, decode
 from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.nodes import qos, ros_params

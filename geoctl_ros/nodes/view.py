@@ -3,7 +3,8 @@
 (``config/rviz/geoctl.rviz``) or Foxglove: each cone as a surface at its half-angle (red while the
 sensor is within ``view.warning_deg`` of it), the sensor axis as an arrow with a trail of where it
 pointed, the body axes, and the set point's sensor direction. The geometry is
-``geoctl_ros.core.view``'s; the cones are the controller's, asked for over its parameter services.
+``geoctl_ros.core.telemetry.view``'s; the cones are the controller's, asked for over its parameter
+services.
 """
 import sys
 
@@ -14,8 +15,8 @@ from rclpy.node import Node
 from std_msgs.msg import ColorRGBA, Float64MultiArray
 from visualization_msgs.msg import Marker, MarkerArray
 
-from geoctl_ros.core.safety import attitude_of
-from geoctl_ros.core.view import Trail, cone_triangles, in_warning
+from geoctl_ros.core.supervisor.safety import attitude_of
+from geoctl_ros.core.telemetry.view import Trail, cone_triangles, in_warning
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.controller_params import ControllerParameters
 from geoctl_ros.nodes.runtime import RefusalLog, spin

@@ -9,16 +9,21 @@ from typing import Any, Dict, List, Tuple
 
 import numpy as np
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.airframe import AirframeError, RotorGeometry, effectiveness, tilted_ring
-from geoctl_ros.core.allocation import Allocator
-from geoctl_ros.core.cones import ConeSet
-from geoctl_ros.core.consistency import AgreementSettings
-from geoctl_ros.core.control import AttitudeController, ControllerConfig
-from geoctl_ros.core.frames import InputFrames
-from geoctl_ros.core.loop_types import LoopSettings
-from geoctl_ros.core.motors import Mixer, ThrustCurve
-from geoctl_ros.core.safety import SetpointSchedule, quaternion_problem
+from geoctl_ros.core.actuation.airframe import (
+    AirframeError,
+    RotorGeometry,
+    effectiveness,
+    tilted_ring,
+)
+from geoctl_ros.core.actuation.allocation import Allocator
+from geoctl_ros.core.actuation.motors import Mixer, ThrustCurve
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.law.cones import ConeSet
+from geoctl_ros.core.law.control import AttitudeController, ControllerConfig
+from geoctl_ros.core.sensors.consistency import AgreementSettings
+from geoctl_ros.core.sensors.frames import InputFrames
+from geoctl_ros.core.supervisor.loop_types import LoopSettings
+from geoctl_ros.core.supervisor.safety import SetpointSchedule, quaternion_problem
 from geoctl_ros.params.param import ConfigError
 
 
@@ -75,8 +80,8 @@ def loop_settings(values: dict) -> LoopSettings:
 
 
 def input_frames(values: dict) -> InputFrames:
-    """The inputs' conventions (core.frames) of resolved controller (or sim) parameters; the
-    sim's have no gyro_bias (its bias is the truth, noise.gyro_bias).
+    """The inputs' conventions (core.sensors.frames) of resolved controller (or sim) parameters;
+    the sim's have no gyro_bias (its bias is the truth, noise.gyro_bias).
     """
     return InputFrames.of(values['pose_world_frame'], values['body_frame'],
                           values['marker_rotation_deg'], values['imu_rotation_deg'],
@@ -84,7 +89,7 @@ def input_frames(values: dict) -> InputFrames:
 
 
 def agreement_settings(values: dict) -> AgreementSettings:
-    """The sensor checks' settings (core.consistency) of resolved controller parameters."""
+    """The sensor checks' settings (core.sensors.consistency) of resolved controller parameters."""
     return AgreementSettings(values['consistency_checks'],
                              math.radians(values['attitude_noise_deg']), values['gyro_noise'],
                              values['accelerometer_noise'],

@@ -1,7 +1,7 @@
 """The controller's own parameters: gains, law, model, envelope, set points, loop timing."""
 
-from geoctl_ros.core.control import DISTURBANCE_MODELS
-from geoctl_ros.core.laws import LAWS
+from geoctl_ros.core.law.control import DISTURBANCE_MODELS
+from geoctl_ros.core.law.laws import LAWS
 from geoctl_ros.params.param import (
     BOTH,
     CONTROLLER,
@@ -86,7 +86,7 @@ PARAMS = [
        'it (age_from_stamps); each tick predicts the measurements forward by their age with the '
        'model and the moments commanded since (docs/safety.md, "Delay")', CONTROLLER,
        lo=0.0, hi=0.05),
-    # The inputs' conventions (core.frames), applied once as they come in; the sim emulates
+    # The inputs' conventions (core.sensors.frames), applied once as they come in; the sim emulates
     # the same conventions when it is given them (docs/sensors.md).
     _p('pose_world_frame', 'string', 'enu', '-',
        "the pose's world axes: enu (REP-103), ned (north-east-down) or y_up (x kept, y up); the "

@@ -6,7 +6,7 @@ import math
 from matplotlib.figure import Figure
 import numpy as np
 
-from geoctl_ros.core import sphere
+from geoctl_ros.core.geometry import sphere
 
 
 def subplots(*grid, figsize, **kw):

@@ -4,7 +4,7 @@ import os
 from matplotlib.figure import Figure
 import numpy as np
 
-from geoctl_ros.core import so3
+from geoctl_ros.core.geometry import so3
 from geoctl_ros.params import cone_set
 from geoctl_ros.plots.common import sphere_path, subplots
 

@@ -1,10 +1,10 @@
 """The recorder's diagnostics as typed values and their keys (a table of the one codec,
-``core.codec``): messages written and dropped so far.
+``core.telemetry.codec``): messages written and dropped so far.
 """
 from dataclasses import dataclass
 from typing import List, Tuple
 
-from geoctl_ros.core.codec import Codec, Key
+from geoctl_ros.core.telemetry.codec import Codec, Key
 
 NAME = 'geoctl_ros: record'
 

@@ -10,10 +10,10 @@ from typing import NamedTuple
 import numpy as np
 import yaml
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.diagnostics import NAME as CONTROLLER_STATUS
-from geoctl_ros.core.diagnostics import from_values, state_kind
-from geoctl_ros.core.stats import settle_time
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.telemetry.diagnostics import NAME as CONTROLLER_STATUS
+from geoctl_ros.core.telemetry.diagnostics import from_values, state_kind
+from geoctl_ros.core.telemetry.stats import settle_time
 from geoctl_ros.params import (
     CONTROLLER,
     SCENARIO,
@@ -32,7 +32,7 @@ from geoctl_ros.sim import scenario
 class Flight(NamedTuple):
     """A recorded flight as time series (t in s since the bag's first message)."""
 
-    cones: object                  # core.cones.ConeSet, or None
+    cones: object                  # core.law.cones.ConeSet, or None
     attitude_source: str           # '/sim/true_pose', '/attitude', '/pose' or ''
     attitude_t: np.ndarray
     rotations: np.ndarray          # (N, 3, 3)

@@ -13,8 +13,8 @@ import time
 import numpy as np
 import rclpy
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.diagnostics import aggregate_ms
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.telemetry.diagnostics import aggregate_ms
 from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.nodes.recorder import default_path
 from geoctl_ros.params import (

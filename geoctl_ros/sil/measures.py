@@ -3,8 +3,8 @@ periods and the closest approach, from the monitor's log; and the table row of a
 """
 import numpy as np
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.diagnostics import WARN, aggregate_ms
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.telemetry.diagnostics import WARN, aggregate_ms
 from geoctl_ros.params import CONTROLLER, cone_set, load_parameter_file, node_overrides, resolve
 
 

@@ -23,7 +23,7 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
-from geoctl_ros.core.diagnostics import NAME as CONTROLLER_STATUS
+from geoctl_ros.core.telemetry.diagnostics import NAME as CONTROLLER_STATUS
 from geoctl_ros.mavlink.health import NAME as BRIDGE_STATUS
 from geoctl_ros.nodes import qos
 from geoctl_ros.nodes.conversions import (

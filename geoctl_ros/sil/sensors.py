@@ -18,7 +18,7 @@ from typing import Dict, List, NamedTuple, Optional
 import numpy as np
 import rclpy
 
-from geoctl_ros.core import so3
+from geoctl_ros.core.geometry import so3
 from geoctl_ros.params import (
     CONTROLLER,
     cone_set,

@@ -36,7 +36,7 @@ import numpy as np
 import rclpy
 from std_msgs.msg import String
 
-from geoctl_ros.core.diagnostics import to_values
+from geoctl_ros.core.telemetry.diagnostics import to_values
 from geoctl_ros.nodes.qos import EVENT
 from geoctl_ros.sil import measures
 from geoctl_ros.sil.loads import start_loads, stop_loads

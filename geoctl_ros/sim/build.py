@@ -3,7 +3,7 @@
 """
 import math
 
-from geoctl_ros.core import so3
+from geoctl_ros.core.geometry import so3
 from geoctl_ros.params import airframe
 from geoctl_ros.sim.plant import Disturbance, PlantConfig
 from geoctl_ros.sim.testbed import RotorActuator, TestbedSim

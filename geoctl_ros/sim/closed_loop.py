@@ -24,16 +24,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 import time
-from typing import TYPE_CHECKING, Callable, List, Optional
+from typing import Callable, List, Optional
 
 import numpy as np
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.cones import angle_deg
-from geoctl_ros.core.control import ControlOutput
-from geoctl_ros.core.stats import SETTLE_PSI
-from geoctl_ros.core.step import ControlTick
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.law.cones import angle_deg
+from geoctl_ros.core.law.control import ControlOutput
+from geoctl_ros.core.supervisor.control_tick import ControlTick
+from geoctl_ros.core.telemetry.stats import SETTLE_PSI
 from geoctl_ros.params import CONTROLLER, SIM
+from geoctl_ros.params.scenario import Scenario
 from geoctl_ros.sim.history import History
 from geoctl_ros.sim.runs import (
     PER_RUN,
@@ -43,9 +44,6 @@ from geoctl_ros.sim.runs import (
     shared_holds,
     stalled_steps,
 )
-
-if TYPE_CHECKING:          # (a type only: sim.scenario imports this module)
-    from geoctl_ros.sim.scenario import Scenario
 
 SETTLED_DEG = 5.0       # attitude error below which a run has converged (at the end) or settled
 FINE_DEG = 1.0          # attitude error below which a run has arrived (settle_fine_s)

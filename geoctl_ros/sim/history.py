@@ -6,10 +6,10 @@ from typing import List
 
 import numpy as np
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.control import ControlOutput
-from geoctl_ros.core.mechanics import gravity_moment
-from geoctl_ros.core.motors import MotorOutput
+from geoctl_ros.core.actuation.motors import MotorOutput
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.law.control import ControlOutput
+from geoctl_ros.core.law.mechanics import gravity_moment
 
 
 class History:

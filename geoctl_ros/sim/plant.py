@@ -5,9 +5,9 @@ Equations of motion about the pivot (body frame):
     J_p Omega' + Omega x J_p Omega = tau + M_g(R) + Delta(t),     R' = R hat(Omega)
 
 with J_p the inertia about the pivot, M_g the gravity moment of the centre of mass offset rho
-(``geoctl_ros.core.mechanics``), tau the actuation moment (held constant over a step) and Delta(t)
-the disturbance: constant + amplitude * [sin wt, cos wt, (sin wt + cos wt) / 2] (elementwise; the
-dissertation's time-varying case).
+(``geoctl_ros.core.law.mechanics``), tau the actuation moment (held constant over a step) and
+Delta(t) the disturbance: constant + amplitude * [sin wt, cos wt, (sin wt + cos wt) / 2]
+(elementwise; the dissertation's time-varying case).
 
 Integrator: RKMK4, the classical fourth-order Runge-Kutta method applied in the Lie algebra
 (Runge-Kutta-Munthe-Kaas). Over a step R(t) = R_n exp(hat(xi(t))) with xi' = dexp^{-1}_{-xi}(Omega)
@@ -26,14 +26,14 @@ import math
 
 import numpy as np
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.mechanics import (
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.so3 import cross, cross_floats, matvec, matvec_floats, vecmat
+from geoctl_ros.core.law.mechanics import (
     body_gravity_moment,
     first_moment,
     gravity_moment,
     pivot_inertia,
 )
-from geoctl_ros.core.so3 import cross, cross_floats, matvec, matvec_floats, vecmat
 
 
 @dataclass(frozen=True)

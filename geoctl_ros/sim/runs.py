@@ -6,19 +6,17 @@ from __future__ import annotations
 
 from dataclasses import replace
 import math
-from typing import TYPE_CHECKING, List, Optional, Tuple
+from typing import List, Optional, Tuple
 
 import numpy as np
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.cones import ConeSet
-from geoctl_ros.core.control import AttitudeController
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.law.cones import ConeSet
+from geoctl_ros.core.law.control import AttitudeController
 from geoctl_ros.params import CONTROLLER, SIM, airframe, cone_set, controller_setup
+from geoctl_ros.params.scenario import Scenario
 from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
 from geoctl_ros.sim.testbed import RotorActuator
-
-if TYPE_CHECKING:          # (a type only: sim.scenario imports closed_loop, which imports this)
-    from geoctl_ros.sim.scenario import Scenario
 
 # What may differ between the runs of a batch (everything else must be equal).
 PER_RUN = {
@@ -113,7 +111,7 @@ class Testbeds:
             return np.array([s.sim[key] for s in scenarios], dtype=float)
 
         # One run flies its testbed unstacked: its small products then go in floats, in the order
-        # of a stack's (geoctl_ros.core.so3), the same bits three times faster.
+        # of a stack's (geoctl_ros.core.geometry.so3), the same bits three times faster.
         def per_run(key: str) -> np.ndarray:
             return stack(key)[0] if n == 1 else stack(key)
         self.single = n == 1

@@ -11,7 +11,7 @@ from typing import Optional
 
 import numpy as np
 
-from geoctl_ros.core.gains import gain_condition
+from geoctl_ros.core.law.gains import gain_condition
 from geoctl_ros.params import (
     CONTROLLER,
     SCENARIO,
@@ -22,18 +22,11 @@ from geoctl_ros.params import (
     node_overrides,
     resolve,
 )
+from geoctl_ros.params.scenario import Scenario
 from geoctl_ros.sim.build import testbed_sim
 from geoctl_ros.sim.closed_loop import fly
 
-
-@dataclass
-class Scenario:
-    """A loaded, validated scenario."""
-
-    name: str
-    controller: dict   # resolved controller parameters
-    sim: dict          # resolved sim parameters
-    options: dict      # resolved scenario parameters (duration, title)
+__all__ = ['Result', 'Scenario', 'from_sections', 'load', 'run']   # (Scenario: params.scenario's)
 
 
 def load(path: str) -> Scenario:

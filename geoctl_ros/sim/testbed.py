@@ -5,7 +5,8 @@ Composes the rigid body about the pivot (``geoctl_ros.sim.plant``), the actuatio
 - actuation ``rotors``: integer ESC commands -> thrust through the motors' thrust curve, a
   first-order lag per rotor (time constant ``motor_time_constant``, discretised exactly and held
   over each integration step), saturation at the curve's range, and the rotors' forces and reaction
-  moments about the pivot (``geoctl_ros.core.airframe.effectiveness``) from the true geometry;
+  moments about the pivot (``geoctl_ros.core.actuation.airframe.effectiveness``) from the true
+  geometry;
 - actuation ``torque``: the commanded moment itself (ideal);
 - sensors: attitude R exp(hat(n)), n ~ N(0, sigma_R^2 I) (motion capture), and angular velocity
   Omega + bias + N(0, sigma_w^2 I) (gyro), and the specific force at the IMU (the sim node).
@@ -19,10 +20,10 @@ from typing import Optional
 
 import numpy as np
 
-from geoctl_ros.core import so3
-from geoctl_ros.core.airframe import effectiveness
-from geoctl_ros.core.frames import InputFrames
-from geoctl_ros.core.so3 import matvec
+from geoctl_ros.core.actuation.airframe import effectiveness
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.so3 import matvec
+from geoctl_ros.core.sensors.frames import InputFrames
 from geoctl_ros.sim.plant import Plant
 
 

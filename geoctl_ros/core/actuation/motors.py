@@ -1,0 +1,176 @@
+"""The motors: the thrust curve of their ESC commands, and the mixer that turns a moment into
+commands (allocation, the lag compensation, the curve).
+"""
+from dataclasses import dataclass, field
+import math
+from typing import Any
+
+import numpy as np
+
+from geoctl_ros.core.actuation.allocation import Allocation
+
+
+@dataclass(frozen=True)
+class ThrustCurve:
+    """Per-motor quadratic thrust curve f = a x^2 + b x + c, x = voltage_scale * command, with an
+    integer command in 0..command_max (the lab's BL-Ctrl 2.0 fit by default).
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    voltage_scale: float
+    command_max: int
+    # the command's constants, folded once (__post_init__)
+    _disc0: np.ndarray = field(init=False, repr=False, compare=False)
+    _four_a: np.ndarray = field(init=False, repr=False, compare=False)
+    _k: np.ndarray = field(init=False, repr=False, compare=False)
+    _k0: np.ndarray = field(init=False, repr=False, compare=False)
+    _zero_up_to: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def thrust(self, command: np.ndarray) -> np.ndarray:
+        """Thrust (N) of integer commands (n,); never negative."""
+        x = self.voltage_scale * np.asarray(command, dtype=float)
+        return np.maximum(self.a * x * x + self.b * x + self.c, 0.0)
+
+    def __post_init__(self):
+        # command(f) = ceil(x / voltage_scale) with x the root of a x^2 + b x + c = f, i.e.
+        # ceil(sqrt(b^2 - 4 a c + 4 a f) / (2 a vs) - b / (2 a vs)), constants folded once
+        k = 1.0 / (2.0 * self.a * self.voltage_scale)
+        for name, value in (('_disc0', self.b * self.b - 4.0 * self.a * self.c),
+                            ('_four_a', 4.0 * self.a), ('_k', k),
+                            ('_k0', -self.b * k - 1e-9), ('_zero_up_to', np.maximum(self.c, 0.0))):
+            object.__setattr__(self, name, value)
+
+    def command(self, thrust: np.ndarray) -> np.ndarray:
+        """Smallest integer command whose thrust is at least the requested one (the lab's ceil),
+        clipped to 0..command_max; negative thrust counts as 0, and a request that command 0
+        already meets (the curve is clipped at 0 N) gives 0.
+        """
+        f = np.maximum(np.asarray(thrust, dtype=float), 0.0)
+        x = np.sqrt(self._disc0 + self._four_a * f) * self._k + self._k0     # x / vs, less 1e-9
+        cmd = np.minimum(np.maximum(np.ceil(x), 0.0), self.command_max).astype(int)
+        cmd[f <= self._zero_up_to] = 0
+        return cmd
+
+    def max_thrust(self) -> np.ndarray:
+        """Thrust of each motor at command_max."""
+        return self.thrust(np.full(len(self.a), self.command_max))
+
+    def normalised(self, command: np.ndarray) -> np.ndarray:
+        """Command as a fraction of command_max, in [0, 1]."""
+        return np.asarray(command, dtype=float) / self.command_max
+
+
+@dataclass
+class MotorOutput:
+    """What the mixer sends to the motors for one control step."""
+
+    commands: np.ndarray     # integer ESC commands, 0..command_max
+    normalised: np.ndarray   # commands / command_max, in [0, 1]
+    allocation: Allocation
+
+
+class Mixer:
+    """Moment about the pivot -> six motor commands: allocation, then the thrust curve.
+
+    With ``lag`` (the motors' thrust time constant tau, s; 0 for none) the mixer compensates the
+    motors' first-order lag. It keeps a model of the thrust each rotor is producing, advanced
+    exactly over the time each command was really held, and commands the thrust that brings the
+    model to the allocated thrust at the end of a hold of H:
+    f_cmd = (f - a f_model) / (1 - a), a = exp(-H / tau), within the allocator's
+    thrust_min..thrust_max (the motors keep spinning, and keep their headroom).
+
+    H is the expected hold (the control period) unless the loop has been late: then it is the
+    longest recent hold, returning to the period over about ``HOLD_MEMORY`` seconds. A command
+    designed for a 10 ms hold is 4.5 times the thrust change on the testbed; held 50 ms it would
+    overshoot 3.3 times, and a loop that stays that late diverges (a live run went 9 deg into a
+    cone that way). Designed for the longest hold, every hold up to it only brings the rotors
+    part of the way, never past the allocation; one late step after a quiet spell overshoots
+    once, and the model, advanced by the real hold, corrects it at the next step.
+
+    Without it, the 40 ms lag of the lab's motors costs the attitude loop about 50 deg of phase
+    at the barrier's stiffness near a cone; in the campaign that let a sensor starting in a
+    narrow corridor between two cones bounce between them into one (docs/campaigns.md, "Safety
+    campaign").
+    A batch of moments keeps one model per run. The model starts at rest at the first armed step
+    (the rotors were stopped) and is dropped when disarmed. For ``SPOOL_LAGS`` time constants
+    after arming the rotors spool up to the allocation uncompensated: no kick (a motor starting
+    from rest need not follow the first-order lag), while the model follows them honestly, so
+    the moments it reports (the prediction's history) are those the spooling rotors make. Before,
+    the model started at the allocation: the compensation then read a spooling rotor as already
+    there, and the next change of moment was asked of the rotors 4.5 times over (a campaign run
+    yawed at -2 rad/s into a cone 90 ms after arming, unseen with 70 ms of latency).
+    """
+
+    HOLD_MEMORY = 1.0     # s: how long a late step keeps the compensation designed for its hold
+    SPOOL_LAGS = 2.0      # time constants after arming without compensation
+
+    def __init__(self, allocator, curve, collective_thrust, lag=0.0):
+        self.allocator = allocator
+        self.curve = curve
+        self.collective_thrust = float(collective_thrust)
+        self.lag = float(lag)
+        self._dead = np.array([i for i in range(allocator.count) if i not in allocator.alive],
+                              dtype=int)
+        # the lag model's thrusts at the last command (None: at rest)
+        self.modelled_thrusts = None
+        self.sent_thrusts = None         # the thrusts the last command asked for
+        self.design_hold = None          # H of the last command (s)
+        self.spool_left = 0.0            # s of spooling up left after arming
+
+    def adopt_state(self, other: 'Mixer') -> None:
+        """Carry the lag model over from the mixer this one replaces (a run-time
+        reconfiguration).
+        """
+        if other.modelled_thrusts is not None:
+            self.modelled_thrusts = other.modelled_thrusts.copy()
+            self.sent_thrusts = other.sent_thrusts.copy()
+            self.design_hold = other.design_hold
+            self.spool_left = other.spool_left
+
+    def mix(self, moment: np.ndarray, armed: Any = True, dt: Any = None,
+            held: Any = None) -> 'MotorOutput':
+        """Motor commands for the moment (or a stack of them); all zero when not armed.
+
+        dt: how long this command is expected to be held (the control period); held: how long the
+        previous command really was (the time since the last step; dt when not given). Both are
+        needed for the lag compensation only.
+        """
+        allocation = self.allocator.allocate(moment, self.collective_thrust)
+        thrusts = allocation.thrusts
+        if not armed:
+            zero = np.zeros_like(thrusts, dtype=int)
+            self.modelled_thrusts = self.sent_thrusts = self.design_hold = None
+            return MotorOutput(zero, np.zeros(zero.shape), allocation)
+        compensate = self.lag > 0.0 and dt is not None and dt > 0.0
+        if compensate:
+            model = self.modelled_thrusts
+            if model is None or model.shape != thrusts.shape:
+                # arming: the rotors are at rest, and spool up to the allocation uncompensated
+                model, hold = np.zeros_like(thrusts), dt
+                self.spool_left = self.SPOOL_LAGS * self.lag
+            else:
+                held = dt if held is None else max(held, 0.0)
+                sent = self.sent_thrusts
+                model = sent + math.exp(-held / self.lag) * (model - sent)
+                hold = max(dt, held)
+                if self.design_hold > hold:       # a late step not long ago: back to dt slowly
+                    hold = max(hold, dt + (self.design_hold - dt) * math.exp(
+                        -held / self.HOLD_MEMORY))
+                if self.spool_left > 0.0:
+                    self.spool_left -= held
+            if self.spool_left <= 0.0:
+                a = math.exp(-hold / self.lag)
+                thrusts = np.minimum(np.maximum((thrusts - a * model) / (1.0 - a),
+                                                self.allocator.lo), self.allocator.hi)
+        commands = self.curve.command(thrusts)
+        if len(self._dead):
+            commands[..., self._dead] = 0
+        if compensate:
+            self.modelled_thrusts = model
+            self.sent_thrusts = self.curve.thrust(commands)
+            self.design_hold = hold
+        elif self.modelled_thrusts is not None:     # compensation turned off: a stale model
+            self.modelled_thrusts = self.sent_thrusts = self.design_hold = None   # is not kept
+        return MotorOutput(commands, self.curve.normalised(commands), allocation)

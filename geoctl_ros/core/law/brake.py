@@ -1,0 +1,93 @@
+"""The approach brake: the barrier's sampled-data margin, derived, and enforced on the sensor's
+approach rate to each cone (docs/safety.md, "The approach brake").
+
+A command is computed from measurements the blind time T_b old and then held for the control
+period h: for T = T_b + h the loop cannot act on what the sensor does. Let phi_i be the sensor's
+angle to cone i's axis, theta_i the cone's half-angle, w_i = -d phi_i / dt its approach rate
+(``errors.approach_rates``). With the bounds
+- e: the attitude measurement's error, 3 standard deviations (``attitude_noise_deg``);
+- a_u: the angular acceleration the model does not know, the unlearnt moment over the smallest
+  pivot inertia (``cbf_moment_bound`` / J_min);
+- a_b: the angular acceleration the rotors can spare to brake (``brake_acceleration``),
+the sensor closes on the cone by at most w T + 1/2 a_u T^2 before the loop acts, and by
+w^2 / (2 a_b) more while it brakes. So it stays out of the cone when
+
+    phi_i - theta_i - e - 1/2 a_u T^2 >= w T + w^2 / (2 a_b),
+
+that is when w is at most the allowed rate w_max = a_b (sqrt(T^2 + 2 G / a_b) - T), with G the
+left-hand side (at least 0). The brake enforces it: where the approach rate w_i exceeds w_max
+it adds the moment J min(k_b (w_i - w_max), a_b) along the direction that opens phi_i, taking
+the excess away at the rate k_b (``approach_brake_rate``), and asking no more than a_b.
+
+Assumptions (what the derivation covers): the rotors make the moments commanded and can spare a_b
+(the allocation is not saturated and the rotors have spooled up after arming), what the
+prediction does not model is a moment within the bound, and the measurement errors are within e.
+What it does not cover (the loop's ringing against the barrier, the fall while the rotors spool
+up) is measured by the campaign and attacked by the falsifier.
+"""
+from dataclasses import dataclass
+from typing import Any, Optional
+
+import numpy as np
+
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.flags import any_flag
+
+SIGMAS = 3.0      # the measurement error is bounded at this many standard deviations
+
+
+@dataclass(frozen=True)
+class ApproachBrake:
+    """The brake's bounds and rate (see the module)."""
+
+    rate: float             # 1/s, k_b
+    acceleration: float     # rad/s^2, a_b
+    unmodelled: float       # rad/s^2, a_u
+    measurement: float      # rad, e
+
+    @classmethod
+    def of(cls, config: Any) -> Optional['ApproachBrake']:
+        """The brake of a ControllerConfig, or None when it is off."""
+        if config.approach_brake_rate <= 0.0:
+            return None
+        j_min = float(np.linalg.eigvalsh(config.J).min())
+        return cls(config.approach_brake_rate, config.brake_acceleration,
+                   config.cbf_moment_bound / j_min, SIGMAS * config.attitude_noise)
+
+    def allowed_rate(self, gap: Any, T: Any) -> Any:
+        """w_max (rad/s): the fastest approach that the margin gap (rad, phi - theta) allows
+        with the loop blind for T (s).
+        """
+        G = np.maximum(gap - self.measurement - 0.5 * self.unmodelled * T * T, 0.0)
+        return self.acceleration * (np.sqrt(T * T + 2.0 * G / self.acceleration) - T)
+
+    def moment(self, J: np.ndarray, s: np.ndarray, cross: np.ndarray, theta: np.ndarray,
+               Omega: np.ndarray, blind: Any, hold: float) -> Optional[np.ndarray]:
+        """The brake's moment (body frame, N m; one per run of a batch), or None where no cone
+        is approached faster than allowed. s, cross: ``ConeSet.terms`` (cos phi_i and
+        (R^T v_i) x r per cone), theta: the cones' half-angles (rad), blind: T_b (s; a float or
+        one per run), hold: h (s).
+        """
+        closing = -so3.dot(cross, Omega[..., None, :])       # sin(phi_i) w_i
+        if not any_flag(closing > 0.0):             # (the usual case: no cone approached)
+            return None
+        inv = 1.0 / np.maximum(np.sqrt(so3.dot(cross, cross)), 1e-9)
+        w = closing * inv
+        T = (np.asarray(blind, dtype=float)[..., None] if np.ndim(blind) else blind) + hold
+        gap = np.arccos(np.clip(s, -1.0, 1.0)) - theta
+        excess = np.maximum(w - self.allowed_rate(gap, T), 0.0)
+        if not any_flag(excess > 0.0):
+            return None
+        # at most a_b per cone: what the derivation takes the rotors to spare (asking more only
+        # saturates the allocation, and takes authority from the barrier)
+        decel = np.minimum(self.rate * excess, self.acceleration)
+        return so3.matvec(J, so3.vecmat(decel * inv, cross))
+
+
+def braking_distance(brake: ApproachBrake, w: float, T: float) -> float:
+    """How far (rad) the sensor closes on a cone from approach rate w, the loop blind for T,
+    under the bounds: w T + 1/2 a_u T^2 + w^2 / (2 a_b) (the derivation's left-hand side less
+    e; its inverse is ``allowed_rate``).
+    """
+    return w * T + 0.5 * brake.unmodelled * T * T + w * w / (2.0 * brake.acceleration)
+

@@ -1,0 +1,133 @@
+"""The configuration error of the paper's law (notation: ``geoctl_ros.core.law.control``): the
+attractive error A and its gradient e_RA, the cones' barrier folded in (Psi, e_R), the step's
+linear map of R, and the barrier's widening by the blind time.
+"""
+
+from typing import Any, Optional, Tuple
+
+import numpy as np
+
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.so3 import matvec, transpose, vee
+from geoctl_ros.core.law.cones import ConeEval, ConeSet
+from geoctl_ros.core.law.mechanics import gravity_moment
+
+
+def attractive_error(R: np.ndarray, R_d: np.ndarray, G: np.ndarray) -> Tuple[Any, np.ndarray]:
+    """A (eq. 13) and e_RA (eq. 15) for the diagonal weights G (3,)."""
+    RdtR = so3.matmul(transpose(R_d), R)
+    A = 0.5 * so3.dot(1.0 - np.diagonal(RdtR, 0, -2, -1), G)
+    M = G[:, None] * RdtR            # G R_d^T R; its transpose is R^T R_d G
+    return A, 0.5 * vee(M - transpose(M))
+
+
+def E_matrix(R: np.ndarray, R_d: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """E(R, R_d) of eq. (27): d/dt e_RA = E e_Omega."""
+    M = (R.T @ R_d) * G[None, :]     # R^T R_d G
+    return 0.5 * (np.trace(M) * np.eye(3) - M)
+
+
+def configuration_error(R: np.ndarray, R_d: np.ndarray, G: np.ndarray, cones: ConeSet) -> tuple:
+    """Psi, e_R, A, e_RA and the cone evaluation at R (Prop. 1 generalised to several cones)."""
+    A, e_RA = attractive_error(R, R_d, G)
+    ev = cones.evaluate(R)
+    psi, e_R = with_cones(A[..., None], e_RA, ev)
+    return psi, e_R, A, e_RA, ev
+
+
+def with_cones(A: Any, e_RA: np.ndarray, ev: ConeEval) -> Tuple[Any, np.ndarray]:
+    """Psi = A (1 + sum_i (B_i - 1)) and e_R = e_RA (1 + sum_i (B_i - 1)) + A sum_i e_RB,i from
+    A (with a trailing axis of 1), e_RA and the cones' evaluation.
+    """
+    B = ev.B
+    if B.ndim == 1:                     # one run (the node's step): its one sum as a float
+        scale = (1.0 - len(B)) + B.sum()
+        return A[0] * scale, e_RA * scale + A * ev.e_RB_sum
+    scale = (1.0 - B.shape[-1]) + B.sum(axis=-1, keepdims=True)
+    return (A * scale)[..., 0], e_RA * scale + A * ev.e_RB_sum
+
+
+_BASIS = np.eye(9).reshape(9, 3, 3)       # the unit matrices E_jk
+
+
+def linear_terms(R: np.ndarray, R_d: np.ndarray, config: Any) -> np.ndarray:
+    """The parts of the law that are affine in R, side by side (..., 5 + 4 n): A, e_RA (3), for
+    each cone s_i and (R^T v_i) x r (``ConeSet.terms``), and the gravity moment M_g (3).
+    """
+    A, e_RA = attractive_error(R, R_d, config.G)
+    sc = config.cones.terms(R)
+    M_g = gravity_moment(R, config.m_rho, config.gravity)
+    parts = [A[..., None], e_RA, sc.reshape(sc.shape[:-2] + (-1,)), M_g]
+    batch = np.broadcast_shapes(*(p.shape[:-1] for p in parts))
+    return np.concatenate([np.broadcast_to(p, batch + p.shape[-1:]) for p in parts], axis=-1)
+
+
+def approach_rates(sc: np.ndarray, Omega: np.ndarray) -> np.ndarray:
+    """Per cone, how fast the sensor's angle to the cone's axis is closing (rad/s; negative when
+    it opens), from ``ConeSet.terms`` (s_i, (R^T v_i) x r) and Omega: with s_i = cos(phi_i),
+    d/dt s_i = -Omega . ((R^T v_i) x r) and sin(phi_i) = |(R^T v_i) x r|.
+    """
+    cross = sc[..., 1:]
+    sin_phi = np.sqrt(so3.dot(cross, cross))
+    return -so3.dot(cross, Omega[..., None, :]) / np.maximum(sin_phi, 1e-9)
+
+
+WIDEN_GAP_SHARE = 0.5     # the widening takes at most this share of the gap to a cone's barrier
+
+
+def blind_widening(sc: np.ndarray, Omega: np.ndarray, blind: Any, widening_max: float,
+                   theta_b: Optional[np.ndarray] = None) -> np.ndarray:
+    """How much wider (rad) the barrier's cones are for a loop blind for ``blind`` seconds (one
+    per run of a batch): what the sensor travels towards each cone in that time at its present
+    approach rate, at most widening_max and, given the barrier's half-angles theta_b, at most
+    WIDEN_GAP_SHARE of the sensor's gap to each: the barrier is evaluated where the sensor is
+    heading, but never at or past its edge, where a widened cone suddenly round the sensor would
+    kick it with the barrier's strongest field (a 19 N m yaw command in a campaign run).
+    """
+    travel = approach_rates(sc, Omega) * np.asarray(blind)[..., None]
+    if theta_b is not None:
+        gap = np.arccos(np.clip(sc[..., 0], -1.0, 1.0)) - theta_b
+        travel = np.minimum(travel, WIDEN_GAP_SHARE * gap)
+    return np.clip(travel, 0.0, widening_max)
+
+
+class LinearMap:
+    """``linear_terms`` as one matrix product, ``L vec(R) + y0``: exact, since the terms are affine
+    in R, and built at configuration time (a new set point or configuration) by evaluating
+    ``linear_terms`` itself on the basis E_jk, so each formula still lives in one place. The hot
+    path then gets A, e_RA, every cone's terms and M_g from one small matrix-vector product
+    instead of a dozen numpy calls (docs/benchmarks.md, "Benchmarks").
+    """
+
+    def __init__(self, R_d, config):
+        lead = np.broadcast_shapes(R_d.shape[:-2], config.cones.V.shape[:-2])     # the batch
+        self.y0 = linear_terms(np.zeros((3, 3)), R_d, config)
+        basis = _BASIS.reshape((9,) + (1,) * len(lead) + (3, 3))
+        terms = linear_terms(basis, R_d, config) - self.y0
+        self.L = np.ascontiguousarray(np.moveaxis(terms, 0, -1))
+        self.n_cones = len(config.cones)
+
+    def __call__(self, R):
+        """The terms y = linear_terms(R, R_d, config), to rounding."""
+        return matvec(self.L, R.reshape(R.shape[:-2] + (9,))) + self.y0
+
+    def retargeted(self, R_d: np.ndarray, G: np.ndarray) -> 'LinearMap':
+        """This map for another set point R_d (guidance's next): only A and e_RA, its first four
+        rows, depend on the set point, so only they are evaluated again, by ``attractive_error``
+        on the same basis (the same bits as a map built anew, at a third of the cost).
+        """
+        lead = self.y0.shape[:-1]
+        new = object.__new__(LinearMap)
+        new.n_cones = self.n_cones
+        A0, e0 = attractive_error(np.zeros((3, 3)), R_d, G)
+        A, e = attractive_error(_BASIS.reshape((9,) + (1,) * len(lead) + (3, 3)), R_d, G)
+        at_zero = np.concatenate([np.broadcast_to(A0, lead)[..., None],
+                                  np.broadcast_to(e0, lead + (3,))], axis=-1)
+        rows = np.concatenate([np.broadcast_to(A, (9,) + lead)[..., None],
+                               np.broadcast_to(e, (9,) + lead + (3,))], axis=-1) - at_zero
+        new.y0 = self.y0.copy()
+        new.y0[..., 0:4] = at_zero
+        new.L = self.L.copy()
+        new.L[..., 0:4, :] = np.moveaxis(rows, 0, -1)
+        return new
+

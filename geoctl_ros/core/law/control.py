@@ -1,0 +1,333 @@
+"""Geometric adaptive attitude control on SO(3) with cone constraints (Kulumani, Poole & Lee).
+
+Notation follows the paper and ../shared/design/control-law.md:
+
+    A     = 1/2 tr(G (I - R_d^T R))                        attractive error (eq. 13)
+    e_RA  = 1/2 vee(G R_d^T R - R^T R_d G)                  its gradient (eq. 15)
+    Psi   = A (1 + sum_i (B_i - 1))                         configuration error, several cones
+    e_R   = e_RA (1 + sum_i (B_i - 1)) + A sum_i e_RB,i     its gradient
+    e_Omega = Omega - R^T R_d Omega_d                       (= Omega when stabilising)
+    u     = -k_R e_R - k_Omega e_Omega + Omega x J Omega - W Delta_bar - M_g
+            [+ the tracking feed-forward]
+    Delta_bar' = Gamma W^T (e_Omega + c e_R)                  adaptive law (eq. 39)
+
+Gamma is the adaptation gain: k_Delta for the constant moment (the paper's scalar) and, with the
+constant+cog model, k_Delta_cog for the m*rho block, whose regressor -hat(R^T g_w) is |g| (about
+10) times larger: one scalar for both would learn m*rho some 100 times faster than the moment
+(docs/control-law.md, "Gravity moment"). A positive diagonal Gamma leaves Prop. 5's argument as
+it is, with 1/2 Delta_tilde^T Gamma^-1 Delta_tilde in the Lyapunov function.
+
+J is the inertia about the pivot, M_g the gravity moment of the centre of mass offset rho (both
+from ``geoctl_ros.core.law.mechanics``). The tracking feed-forward
+-J (Omega x R^T R_d Omega_d - R^T R_d Omega_d') is the standard one of Lee's geometric tracking
+controller; the paper's stability proof covers Omega_d = 0 only.
+
+Discrete time: ``step`` computes u from the estimate Delta_bar_k and then advances the estimate by
+one explicit Euler step of the adaptive law over dt (the control period). The estimate is frozen
+while any cone's barrier is saturated (the sensor within the floor band or inside a cone, where the
+paper's assumptions do not hold) and optionally projected onto a ball so that it cannot wind up.
+
+Batches: with a batched ConeSet (one cone set per run) and stacks of set points, attitudes and
+rates (a leading batch axis), ``step`` advances every run at once with the same formulas; this is
+how the campaign (``geoctl_ros.campaign.runner``) flies a thousand manoeuvres. The gains, weights
+and model are shared by the batch. (``x.T`` on a stack of vectors puts the batch axis last, so
+``(x.T * a).T`` scales each run's vector by its own scalar and a single vector by a scalar.)
+"""
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple, Optional
+
+import numpy as np
+
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.flags import any_flag
+from geoctl_ros.core.geometry.so3 import cross, matvec, transpose
+from geoctl_ros.core.law.brake import ApproachBrake
+from geoctl_ros.core.law.cones import ConeEval, ConeSet
+from geoctl_ros.core.law.configuration_error import (
+    LinearMap,
+    blind_widening,
+)
+from geoctl_ros.core.law.feasibility import setpoint_problem
+from geoctl_ros.core.law.guidance import Guidance
+from geoctl_ros.core.law.laws import LAWS
+from geoctl_ros.core.law.mechanics import cog_regressor, first_moment, pivot_inertia
+
+# Disturbance models: name -> number of estimated parameters (the columns of W).
+#   constant:      W = I,                     Delta = a constant moment (the paper's case)
+#   constant+cog:  W = [I, -hat(R^T g_w)],    Delta = [constant moment; error of m * rho]
+DISTURBANCE_MODELS = {'constant': 3, 'constant+cog': 6}
+
+
+class SetpointRejected(ValueError):
+    """A desired attitude the controller refuses (non-finite, or inside or too close to a cone)."""
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """Everything the control law needs; built and validated by ``geoctl_ros.params``."""
+
+    k_R: float
+    k_Omega: float
+    k_Delta: float
+    c: float
+    G: np.ndarray                    # (3,) diagonal weights g1, g2, g3
+    cones: ConeSet
+    inertia: np.ndarray              # (3, 3) about the centre of mass, kg m^2
+    mass: float                      # kg
+    cog_offset: np.ndarray           # pivot -> centre of mass, body frame, m
+    gravity: np.ndarray              # world frame, m/s^2
+    adaptive: bool = True
+    gravity_compensation: bool = True
+    disturbance_model: str = 'constant'
+    delta_bar_max: float = 0.0       # bound on |constant estimate| (N m); 0 = none
+    cog_estimate_max: float = 0.0    # bound on |m rho estimate| (kg m); 0 = none
+    unmodelled_moment_max: float = 0.0   # what a set point must be held against (N m); 0 = none
+    blind_guard_max: float = 0.0     # rad, the most a blind loop widens a cone's barrier
+    law: str = 'delay_robust'        # the control law, a key of LAWS
+    cbf_rate: float = 4.0            # 1/s, the cbf law's double pole
+    cbf_moment_bound: float = 0.0    # N m, the unlearnt moment the cbf law's filter holds against
+    k_Delta_cog: float = 0.0         # adaptation gain of the m*rho block (constant+cog model)
+    guidance_lookahead: float = 0.0  # rad, guidance's set point at most this far ahead; 0 = off
+    guidance_clearance: float = 0.0  # rad, guidance's path this far outside each cone's barrier
+    approach_brake_rate: float = 0.0  # 1/s, the delay-robust law's approach brake; 0 = off
+    brake_acceleration: float = 40.0  # rad/s^2, what the rotors can spare to brake an approach
+    attitude_noise: float = 0.0       # rad, the attitude measurement's standard deviation
+    J: np.ndarray = field(init=False, repr=False)        # inertia about the pivot
+    m_rho: np.ndarray = field(init=False, repr=False)    # mass times pivot -> centre of mass
+
+    def __post_init__(self):
+        object.__setattr__(self, 'J', pivot_inertia(self.inertia, self.mass, self.cog_offset))
+        object.__setattr__(self, 'm_rho', first_moment(self.mass, self.cog_offset))
+
+    @property
+    def n_params(self) -> int:
+        """Number of estimated disturbance parameters (length of Delta_bar)."""
+        return DISTURBANCE_MODELS[self.disturbance_model]
+
+
+class ControlOutput(NamedTuple):
+    """One control step's results."""
+
+    u: np.ndarray            # control moment about the pivot, body frame, N m
+    e_R: np.ndarray
+    e_Omega: np.ndarray
+    psi: float
+    delta_bar: np.ndarray    # estimate used for this u
+    violated: bool           # sensor on or inside a cone
+    saturated: bool          # some barrier in its floor band (repulsion saturated)
+    adapting: bool           # the estimate was advanced this step
+    cones: Any = None        # the ConeEval the step used
+    half_angles_deg: Optional[np.ndarray] = None
+    # (in a batch, each field has the batch axis first: psi, violated, ... one per run)
+
+    @property
+    def margins_deg(self) -> np.ndarray:
+        """Per cone: angle between the sensor and the cone's axis minus its half-angle, degrees
+        (computed when asked: the node publishes the motor commands first).
+        """
+        return self.cones.margins_deg(self.half_angles_deg)
+
+
+class AttitudeController:
+    """The controller's state (estimate, set point) and its pure-math step."""
+
+    def __init__(self, config):
+        self._set_config(config)
+        self.delta_bar = np.zeros(config.n_params)
+        self.R_d = np.eye(3)
+        self.Omega_d = np.zeros(3)
+        self.dOmega_d = np.zeros(3)
+        self._tracking = False      # Omega_d or its derivative nonzero
+        self.gain_scale = 1.0       # of the bandwidth (k_R by its square, k_Omega by it), set by
+                                    # the tick past the delay bound
+                                    # (core.supervisor.control_tick.DegradedMode)
+
+    @property
+    def R_d(self) -> np.ndarray:
+        """The desired attitude (a stack of them for a batch); setting it rebuilds the linear
+        map.
+        """
+        return self._R_d
+
+    @R_d.setter
+    def R_d(self, R_d: np.ndarray) -> None:
+        self._R_d = R_d
+        self._linear = LinearMap(R_d, self.config)
+        self._carrot_index = None
+        if self.guidance is not None:
+            self.guidance.reset()
+
+    def replan(self) -> None:
+        """Plan guidance's way to R_d again from the attitude of the next step (at arming)."""
+        if self.guidance is not None:
+            self.guidance.reset()
+            self._linear = LinearMap(self._R_d, self.config)
+            self._carrot_index = None
+
+    # --- configuration-time operations -------------------------------------------------------
+    def setpoint_problem(self, R_d: np.ndarray, cones: Optional[ConeSet] = None) -> Optional[str]:
+        """Why R_d cannot be a set point (a sentence), or None if it can (with this
+        configuration's cones, or the given ones).
+        """
+        return setpoint_problem(self.config, self.config.cones if cones is None else cones, R_d)
+
+    def set_setpoint(self, R_d: np.ndarray, Omega_d: Optional[np.ndarray] = None,
+                     dOmega_d: Optional[np.ndarray] = None) -> None:
+        """Set the desired attitude (and optionally its angular velocity and acceleration, body
+        frame of R_d). Raises SetpointRejected with the reason; the old set point then stays.
+        """
+        R_d = np.asarray(R_d, dtype=float)
+        problem = self.setpoint_problem(R_d)
+        if problem:
+            raise SetpointRejected(problem)
+        self.R_d = R_d.copy()
+        self.Omega_d = np.zeros(3) if Omega_d is None else np.asarray(Omega_d, dtype=float).copy()
+        self.dOmega_d = (np.zeros(3) if dOmega_d is None
+                         else np.asarray(dOmega_d, dtype=float).copy())
+        self._tracking = bool(self.Omega_d.any() or self.dOmega_d.any())
+
+    def reset_adaptation(self) -> None:
+        """Zero the disturbance estimate."""
+        self.delta_bar[:] = 0.0
+
+    def reconfigure(self, config: ControllerConfig) -> None:
+        """Switch to a new configuration, keeping the estimate when its size still fits.
+
+        Raises SetpointRejected (and changes nothing) if the current set point violates the new
+        cones.
+        """
+        problem = self.setpoint_problem(self.R_d, config.cones)
+        if problem:
+            raise SetpointRejected('current ' + problem)
+        if config.n_params != len(self.delta_bar):
+            self.delta_bar = np.zeros(config.n_params)
+        self._set_config(config)
+        self.R_d = self._R_d
+        self._project()
+
+    # --- the hot path ----------------------------------------------------------------------------
+    def regressor(self, R: np.ndarray) -> Optional[np.ndarray]:
+        """W(R, Omega): 3 x n_params (a stack of them for a batch); None for the constant model,
+        where W = I.
+        """
+        if self.config.disturbance_model == 'constant':
+            return None
+        Y = cog_regressor(R, self.config.gravity)
+        return np.concatenate((np.broadcast_to(np.eye(3), Y.shape), Y), axis=-1)
+
+    def step(self, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool = True,
+             blind: Any = 0.0) -> ControlOutput:
+        """One control step at attitude R and body angular velocity Omega, by the configured law
+        (``config.law``, one of ``LAWS``).
+
+        dt is the time until the next step (the control period); adapt=False holds the estimate
+        (e.g. while disarmed). blind: the time (s; one per run of a batch) over which the loop
+        cannot see or correct what the vehicle does beyond its nominal period: a law with the
+        barrier then acts on each cone widened by how far the sensor travels towards it in that
+        time (``blind_widening``).
+        """
+        if self.guidance is not None and not self._tracking:
+            self._follow(R)
+        return self._law(self, R, Omega, dt, adapt, blind)
+
+    def _follow(self, R: np.ndarray) -> None:
+        """Move the law's set point along guidance's path (``core.law.guidance``): its linear map
+        is rebuilt only when the set point moves on.
+        """
+        guidance = self.guidance
+        assert guidance is not None
+        carrot = guidance.carrot(R, self._R_d, self.config.cones)
+        index = guidance.index
+        if self._carrot_index is None or not np.array_equal(index, self._carrot_index):
+            self._linear = self._linear.retargeted(carrot, self.config.G)
+            self._carrot_index = index.copy()
+
+    # --- the pieces every law is made of -------------------------------------------------------
+    def terms(self, R: np.ndarray, Omega: np.ndarray, blind: Any = 0.0) -> 'StepTerms':
+        """The step's terms at (R, Omega): ``StepTerms`` (the attractive error, the cones
+        evaluated, widened by the blind time when it is given, and the gravity moment).
+        """
+        cfg = self.config
+        y = self._linear(R)                     # A, e_RA, the cones' terms, M_g (linear_terms)
+        n = self._linear.n_cones
+        sc = y[..., 4:4 + 4 * n].reshape(y.shape[:-1] + (n, 4))
+        widened = None
+        if n and (blind > 0.0 if isinstance(blind, float) else any_flag(np.asarray(blind) > 0.0)):
+            extra = blind_widening(sc, Omega, blind, cfg.blind_guard_max, cfg.cones.theta_b)
+            if extra.max() > 0.0:                  # (else no cone is being approached)
+                widened = cfg.cones.widened(extra)
+        ev = cfg.cones.evaluate_terms(sc, widened)
+        return StepTerms(y[..., 0:1], y[..., 1:4], ev, y[..., -3:], self.regressor(R))
+
+    def moment(self, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool, terms: 'StepTerms',
+               psi: Any, e_R: np.ndarray, barrier: bool = True) -> ControlOutput:
+        """The geometric law's moment for the configuration error (psi, e_R), with the adaptive
+        estimate advanced: ``ControlOutput``. barrier: the error carries the cones' barrier
+        (the estimate then freezes where a barrier saturates).
+        """
+        cfg = self.config
+        ev = terms.cones
+        e_Omega = Omega
+        tracking = self._tracking
+        if tracking:
+            RtRd = so3.matmul(transpose(R), self.R_d)
+            Omega_d = matvec(RtRd, self.Omega_d)
+            e_Omega = Omega - Omega_d
+        W = terms.W
+        delta_bar = self.delta_bar.copy()
+        g = self.gain_scale                     # past the delay bound, below 1 (DegradedMode)
+        if np.ndim(g):                          # one per run of a batch
+            k_R, k_Omega = (cfg.k_R * g * g)[..., None], (cfg.k_Omega * g)[..., None]
+        else:
+            k_R, k_Omega = cfg.k_R * g * g, cfg.k_Omega * g
+        u = cross(Omega, matvec(cfg.J, Omega)) - k_R * e_R - k_Omega * e_Omega
+        u -= delta_bar if W is None else matvec(W, delta_bar)
+        if tracking:
+            u -= matvec(cfg.J, cross(Omega, Omega_d) - matvec(RtRd, self.dOmega_d))
+        if cfg.gravity_compensation:
+            u -= terms.M_g
+        saturated = ev.any_saturated if barrier else np.zeros_like(ev.any_saturated)
+        adapting = adapt and cfg.adaptive and ~saturated      # a flag per run
+        if adapting is not False and any_flag(adapting):
+            v = e_Omega + cfg.c * e_R
+            rate = (dt * cfg.k_Delta) * v if W is None else dt * (
+                self._gamma * matvec(transpose(W), v))
+            if rate.ndim > 1:                   # a batch: only the runs that adapt
+                rate *= adapting[..., None]
+            self.delta_bar += rate
+            self._project()
+        # violated implies saturated (the floor band lies outside every cone)
+        violated = (ev.violated.any(axis=-1) if any_flag(ev.any_saturated)
+                    else ev.any_saturated)
+        return ControlOutput(u, e_R, e_Omega, psi, delta_bar, violated, saturated,
+                             adapting, ev, cfg.cones.theta_deg)
+
+    def _project(self):
+        """Project each block of the estimate onto its ball (bounds of 0 mean unbounded)."""
+        for block, bound in self._balls:
+            part = self.delta_bar[..., block]
+            n2 = so3.dot(part, part)
+            if any_flag(n2 > bound * bound):
+                part *= (bound / np.maximum(np.sqrt(n2), bound))[..., None]
+
+    def _set_config(self, config):
+        self.config = config
+        self.guidance = (Guidance(config.guidance_lookahead, config.guidance_clearance)
+                         if config.guidance_lookahead > 0.0 else None)
+        self._law = LAWS[config.law]
+        self.brake = ApproachBrake.of(config)
+        self.J_inv = np.linalg.inv(config.J)     # the model's, for the prediction too
+        self._gamma = np.array([config.k_Delta] * 3 + [config.k_Delta_cog] * 3)[:config.n_params]
+        self._balls = [(block, bound) for block, bound in ((slice(0, 3), config.delta_bar_max),
+                                                           (slice(3, 6), config.cog_estimate_max))
+                       if bound > 0.0 and block.start < config.n_params]
+
+
+class StepTerms(NamedTuple):
+    """What a step computes from the attitude before any law's choice (one per run of a batch)."""
+
+    A: np.ndarray        # attractive error A, with a trailing axis of 1
+    e_RA: np.ndarray     # its gradient
+    cones: ConeEval      # the cones at R (widened by the blind time, if any)
+    M_g: np.ndarray      # the model's gravity moment
+    W: Optional[np.ndarray]   # the regressor W(R) (None for the constant model, W = I)

@@ -1,0 +1,323 @@
+"""Guidance: the way round the cones, planned on the sphere, and the set point fed along it.
+
+The paper's law is a gradient flow of Psi = A (1 + sum_i (B_i - 1)). Where the goal lies behind
+a cone, that flow has a saddle in front of it: the straight 90 deg yaw of the testbed lingers
+there for half a minute (it needs noise to fall off the ridge) and the lab stepped through
+hand-made set points round the cone. Guidance does that by itself, for any start, goal and cones:
+
+1. **The sensor's path** (``sensor_path``): the shortest way on the unit sphere from where the
+   sensor points to where the goal points it, keeping every cone's guarded half-angle plus
+   ``clearance`` away: a visibility graph of the start, the goal and points on each cone's
+   widened rim, searched by Dijkstra. (Cones near the start or the goal are widened less, down
+   to the barrier's own rim, so that a start or goal close to a cone still has a way out.)
+2. **The attitudes along it** (``attitude_path``): each step turns the body by the shortest
+   rotation that takes the sensor from one point of the path to the next (parallel transport),
+   and the turn about the sensor axis that is left at the end (the goal's twist) is spread
+   along the way in proportion to the arc; the last attitude is the goal itself.
+3. **The set point** (``Guidance.carrot``): from the path's point nearest the vehicle (by the
+   sensor's direction), the furthest attitude of the path within the lookahead of the measured
+   one that this point sees (the straight way to it keeps each cone's barrier rim plus half the
+   point's own gap to it away: no corner cut into a cone). The lookahead is ``lookahead``, and
+   near a cone LOOKAHEAD_PER_GAP times the sensor's gap to that cone's barrier rim (at least
+   LOOKAHEAD_MIN). So the law always chases a set point at most that far away: that bounds the
+   attractive error A, and with it the moment and the speed, however far away the goal is, and
+   slows the sensor as it nears a cone (where a fast approach bounced off the barrier's stiff
+   rim under latency). The last set point is the goal, held as the paper's law holds any
+   constant set point. A vehicle pushed more than twice ``lookahead`` off its set point gets a
+   new plan from where it is.
+
+The barrier of the law stays whole between the set points. The law's proof covers each constant
+set point; the switches between them are not covered by it (docs/control-law.md, "Guidance").
+A batch plans each run's path on its own (at a set point's start only) and picks
+every run's set point at once.
+"""
+import heapq
+import math
+from typing import Any, List, Optional
+
+import numpy as np
+
+from geoctl_ros.core.geometry import so3
+
+RIM_POINTS = 48             # points on each cone's widened rim (7.5 deg apart)
+RIM_SLACK = math.radians(1.0)   # the rim's points lie this far outside the widened cone, so that
+                                # the arc between two neighbours (its sag 0.15 deg) clears it
+PATH_STEP = math.radians(2.0)   # the path's attitudes at most this far apart (sensor arc)
+REPLAN_FACTOR = 2.0         # a set point this many lookaheads away from the vehicle: plan again
+LOOKAHEAD_MIN = math.radians(5.0)   # the lookahead near a cone, at least
+LOOKAHEAD_PER_GAP = 2.0     # near a cone the lookahead is at most this many times the gap to it
+
+
+def arc_clearance(a: np.ndarray, b: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """The smallest angle (rad) between each axis and the short great-circle arc from a to b:
+    a and b unit vectors (..., 3) that broadcast together, axes unit (..., C, 3) broadcasting
+    against them; returns (..., C).
+
+    The great circle through a and b has the unit normal n; its point nearest an axis v is v's
+    projection on its plane, at arcsin |v . n| from v. Where that point lies outside the arc,
+    the nearer end is the nearest point.
+    """
+    a, b = np.broadcast_arrays(a, b)
+    n = np.cross(a, b)
+    norm = np.sqrt(np.sum(n * n, axis=-1, keepdims=True))
+    n = np.where(norm > 1e-12, n / np.maximum(norm, 1e-12), 0.0)
+    a, b, n = a[..., None, :], b[..., None, :], n[..., None, :]
+    vn = np.sum(axes * n, axis=-1)                                     # (..., C)
+    p = axes - vn[..., None] * n
+    inside = ((np.sum(np.cross(a, p) * n, axis=-1) >= 0.0) &
+              (np.sum(np.cross(p, b) * n, axis=-1) >= 0.0) & (norm > 1e-12))
+    mid = np.arcsin(np.clip(np.abs(vn), 0.0, 1.0))
+    ends = np.minimum(np.arccos(np.clip(np.sum(a * axes, axis=-1), -1.0, 1.0)),
+                      np.arccos(np.clip(np.sum(b * axes, axis=-1), -1.0, 1.0)))
+    return np.where(inside, mid, ends)
+
+
+def _rim(axis: np.ndarray, radius: float, count: int) -> np.ndarray:
+    """count points at angle radius round the unit axis."""
+    e1 = np.cross(axis, np.eye(3)[int(np.argmin(np.abs(axis)))])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    phi = np.linspace(0.0, 2.0 * math.pi, count, endpoint=False)
+    return (math.cos(radius) * axis + math.sin(radius)
+            * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2))
+
+
+def sensor_path(d0: np.ndarray, d1: np.ndarray, axes: np.ndarray, rims: np.ndarray,
+                clearance: float) -> Optional[List[np.ndarray]]:
+    """The shortest way on the sphere from d0 to d1 that keeps every cone i (unit axis axes[i],
+    the barrier's half-angle rims[i]) at least rims[i] + clearance away: the corner points, d0
+    first and d1 last. Where d0 or d1 is nearer a cone than that, the cone is widened only up to
+    halfway from its rim to the nearer of them. None where no such way exists (the cones close
+    round the start or the goal).
+    """
+    axes = np.asarray(axes, dtype=float).reshape(-1, 3)
+    rims = np.asarray(rims, dtype=float).reshape(-1)
+    if not len(axes):
+        return [d0, d1]
+    ends = np.stack([d0, d1])
+    gap = np.arccos(np.clip(ends @ axes.T, -1.0, 1.0)).min(axis=0) - rims     # (C,)
+    keep = rims + np.clip(np.minimum(clearance, 0.5 * gap), 0.0, None)        # widened radii
+    nodes = [ends] + [_rim(v, k + RIM_SLACK, RIM_POINTS) for v, k in zip(axes, keep)]
+    X = np.concatenate(nodes)
+    clear = np.all(arc_clearance(X[:, None], X[None, :], axes) >= keep - 1e-9, axis=-1)  # (N, N)
+    # a point of one rim inside another widened cone is no way
+    inside = np.any(np.arccos(np.clip(X @ axes.T, -1.0, 1.0)) < keep - 1e-9, axis=-1)
+    clear &= ~inside[:, None] & ~inside[None, :]
+    length = np.arccos(np.clip(X @ X.T, -1.0, 1.0))
+    previous = _dijkstra(np.where(clear, length, np.inf), 0)
+    if previous[1] < 0:
+        return None
+    way, i = [], 1
+    while i != 0:
+        way.append(X[i])
+        i = previous[i]
+    return [X[0]] + way[::-1]
+
+
+def _dijkstra(cost: np.ndarray, start: int) -> np.ndarray:
+    """The predecessor of each node on its shortest way from start (-1: no way) on the dense
+    cost matrix (inf: no edge).
+    """
+    n = len(cost)
+    dist = np.full(n, np.inf)
+    previous = np.full(n, -1)
+    done = np.zeros(n, dtype=bool)
+    dist[start] = 0.0
+    queue = [(0.0, start)]
+    while queue:
+        d, i = heapq.heappop(queue)
+        if done[i]:
+            continue
+        done[i] = True
+        better = (d + cost[i] < dist) & ~done
+        for j in np.flatnonzero(better):
+            dist[j] = d + cost[i, j]
+            previous[j] = i
+            heapq.heappush(queue, (float(dist[j]), int(j)))
+    previous[start] = start
+    return previous
+
+
+def _shortest_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The rotation by the shortest arc that takes the unit vector a to b (not opposite)."""
+    axis = np.cross(a, b)
+    s = float(np.linalg.norm(axis))
+    if s < 1e-12:
+        return np.eye(3)
+    return so3.exp(axis / s * math.atan2(s, float(a @ b)))
+
+
+def attitude_path(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray,
+                  corners: List[np.ndarray]) -> np.ndarray:
+    """The attitudes along the sensor's path through corners (unit vectors, R0 r first and
+    R_goal r last), at most PATH_STEP apart: (K, 3, 3), R0 first (but turned as below) and
+    R_goal last. Each step is the shortest rotation that takes the sensor along the path; the
+    turn about the sensor axis that is left at the end is spread along the way by arc length.
+    """
+    points = [corners[0]]
+    for a, b in zip(corners[:-1], corners[1:]):
+        angle = math.acos(min(1.0, max(-1.0, float(a @ b))))
+        k = max(1, int(math.ceil(angle / PATH_STEP)))
+        if angle < 1e-12:
+            continue
+        axis = np.cross(a, b)
+        axis /= np.linalg.norm(axis)
+        points += [so3.exp(axis * (angle * i / k)) @ a for i in range(1, k + 1)]
+    Rs = [R0]
+    for a, b in zip(points[:-1], points[1:]):
+        Rs.append(_shortest_rotation(a, b) @ Rs[-1])
+    d = np.array(points)
+    arc = np.concatenate([[0.0], np.cumsum(np.arccos(np.clip(
+        np.einsum('ij,ij->i', d[:-1], d[1:]), -1.0, 1.0)))])
+    # what is left: a turn about the goal's sensor direction
+    left = so3.log(R_goal @ Rs[-1].T)
+    twist = float(left @ d[-1])
+    share = arc / arc[-1] if arc[-1] > 0.0 else np.linspace(0.0, 1.0, len(Rs))
+    path = np.array([so3.exp(d[i] * (twist * share[i])) @ Rs[i] for i in range(len(Rs))])
+    if len(path) == 1:               # the sensor does not move: turn about it in steps
+        k = max(1, int(math.ceil(abs(twist) / PATH_STEP)))
+        path = np.array([so3.exp(d[0] * (twist * i / k)) @ R0 for i in range(k + 1)])
+    path[-1] = R_goal
+    return path
+
+
+def plan(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray, axes: np.ndarray,
+         rims: np.ndarray, clearance: float) -> np.ndarray:
+    """The attitudes from R0 to R_goal round the cones (``sensor_path``, ``attitude_path``);
+    where no way round exists, the goal alone (the law's barrier then decides).
+    """
+    corners = sensor_path(R0 @ r, R_goal @ r, axes, rims, clearance)
+    if corners is None:
+        return R_goal[None].copy()
+    return attitude_path(R0, R_goal, r, corners)
+
+
+class Guidance:
+    """The set point fed along the planned path, for one run or a batch (see the module)."""
+
+    def __init__(self, lookahead: float, clearance: float):
+        """lookahead: rad, how far ahead of the vehicle the set point may be; clearance: rad,
+        how far outside each cone's barrier the path keeps.
+        """
+        self.lookahead = lookahead
+        self.clearance = clearance
+        self.cos_lookahead = math.cos(lookahead)
+        self.cos_replan = math.cos(min(math.pi, REPLAN_FACTOR * lookahead))
+        # the path's points within the lookahead lie at most this many places ahead (its steps
+        # turn the sensor at least PATH_STEP / 2, and the body at least as far)
+        self.window = 2 * int(math.ceil(lookahead / PATH_STEP)) + 2
+        self.paths: Optional[np.ndarray] = None   # (runs, K, 3, 3), each padded with its goal
+        self.sensor: Optional[np.ndarray] = None  # (runs, K, 3): the sensor's direction on it
+        self.last: Optional[np.ndarray] = None    # (runs,): the goal's place on each path
+        self.sight: Optional[np.ndarray] = None   # (runs, K): the furthest point each one sees
+        self.index: Optional[np.ndarray] = None   # (runs,), the set point's place on its path
+
+    def reset(self) -> None:
+        """Forget the plan: the next set point is planned from where the vehicle is then."""
+        self.paths = self.sensor = self.last = self.sight = self.index = None
+
+    def carrot(self, R: np.ndarray, R_goal: np.ndarray, cones: Any) -> np.ndarray:
+        """The set point for the measured attitude R (one (3, 3) or a stack), with the goal
+        R_goal and the ConeSet cones: from the path's point nearest the vehicle (its sensor's),
+        the furthest point within the lookahead that the path's point sees (``_sight``), so that
+        the set point never cuts a corner into a cone.
+        """
+        single = R.ndim == 2
+        Rs = R[None] if single else R
+        goals = R_goal[None] if single else R_goal
+        if self.paths is None:
+            self._plan(Rs, goals, cones, np.arange(len(Rs)))
+        assert self.paths is not None and self.index is not None
+        runs = np.arange(len(Rs))
+        P = self.paths[runs, self.index]
+        cos_now = 0.5 * (np.einsum('nij,nij->n', P, Rs) - 1.0)     # cos of the angle R to P
+        far = np.flatnonzero(cos_now < self.cos_replan)
+        if len(far):
+            self._plan(Rs, goals, cones, far)
+        moving = np.flatnonzero(self.index < self.last)        # (the others hold their goal)
+        if len(moving):
+            self._advance(Rs[moving], moving, cones)
+        P = self.paths[runs, self.index]
+        return P[0] if single else P
+
+    def _advance(self, Rs, runs, cones):
+        """Move the set points of the runs (indices) along their paths (see ``carrot``). Near a
+        cone the lookahead shrinks to LOOKAHEAD_PER_GAP times the sensor's gap to the cone's
+        barrier rim (down to LOOKAHEAD_MIN): the pull, and with it the speed, falls as the sensor
+        nears a cone.
+        """
+        assert self.paths is not None and self.sensor is not None and self.index is not None
+        assert self.sight is not None
+        K, W = self.paths.shape[1], self.window
+        m = np.arange(len(runs))
+        around = np.clip(self.index[runs, None] + np.arange(-W, W + 1)[None, :], 0, K - 1)
+        d = Rs @ cones.r
+        V, rims = _cone_rows(cones, runs)
+        gap = np.min(np.arccos(np.clip(np.einsum('nck,nk->nc', V, d), -1.0, 1.0)) - rims,
+                     axis=-1, initial=np.inf)
+        cos_lookahead = np.cos(np.clip(LOOKAHEAD_PER_GAP * gap, LOOKAHEAD_MIN, self.lookahead))
+        near = around[m, np.argmax(np.einsum('nwk,nk->nw', self.sensor[runs[:, None], around],
+                                             d), axis=1)]             # the nearest path point
+        ahead = np.minimum(near[:, None] + np.arange(W)[None, :], K - 1)
+        within = 0.5 * (np.einsum('nkij,nij->nk', self.paths[runs[:, None], ahead], Rs)
+                        - 1.0) >= cos_lookahead[:, None]
+        within[:, 0] = True
+        furthest = ahead[m, W - 1 - np.argmax(within[:, ::-1], axis=1)]
+        # (never past its own goal, into the padding up to the batch's longest path: a shorter
+        # plan of another run would leave it off the end)
+        self.index[runs] = np.minimum(np.minimum(furthest, self.sight[runs, near]),
+                                      self.last[runs])
+
+    def _plan(self, Rs, goals, cones, runs):
+        """Plan the paths of the runs (indices) from the attitudes Rs to their goals."""
+        V, rims = _cone_rows(cones, np.arange(len(Rs)))
+        new = {i: plan(Rs[i], goals[i], cones.r, V[i], rims[i], self.clearance) for i in runs}
+        old = [] if self.paths is None else [self.paths[i, :self.last[i] + 1]
+                                             for i in range(len(Rs))]
+        paths = [new[i] if i in new else old[i] for i in range(len(Rs))]
+        K = max(len(p) for p in paths)
+        self.paths = np.array([np.concatenate([p, np.repeat(p[-1:], K - len(p), axis=0)])
+                               for p in paths])
+        self.sensor = self.paths @ cones.r
+        self.last = np.array([len(p) - 1 for p in paths])
+        runs = np.asarray(runs)
+        sight = np.full((len(Rs), K), K - 1)
+        if self.sight is not None:              # (the others' as they were)
+            keep = min(K, self.sight.shape[1])
+            sight[:, :keep] = np.minimum(self.sight[:, :keep], K - 1)
+        sight[runs] = _sight(self.sensor[runs], V[runs], rims[runs], self.window,
+                             self.clearance)
+        self.sight = sight
+        index = np.zeros(len(Rs), dtype=int) if self.index is None else self.index.copy()
+        index[runs] = 0
+        self.index = index
+
+
+def _sight(D: np.ndarray, V: np.ndarray, rims: np.ndarray, window: int,
+           clearance: float) -> np.ndarray:
+    """Per run and path point k (D: the paths' sensor directions, (n, K, 3)), the furthest point
+    j of the path within window places that k sees: the straight way from k to each point up to
+    j keeps every cone (axes V (n, C, 3), barrier half-angles rims (n, C)) at its rim plus half
+    k's own gap to it (at most the clearance) away.
+    """
+    n, K = D.shape[:2]
+    ahead = np.minimum(np.arange(K)[:, None] + np.arange(1, window)[None, :], K - 1)
+    gap = np.arccos(np.clip(np.einsum('nkx,ncx->nkc', D, V), -1.0, 1.0)) - rims[:, None]
+    need = rims[:, None] + np.clip(0.5 * gap, 0.0, clearance)                  # (n, K, C)
+    clear = np.all(arc_clearance(D[:, :, None, :], D[:, ahead], V[:, None, None])
+                   >= need[:, :, None] - 1e-9, axis=-1)                         # (n, K, W-1)
+    blocked = np.cumsum(~clear, axis=-1) > 0          # from the first point it does not see
+    seen = np.sum(~blocked, axis=-1)                  # how many points ahead it sees
+    return np.minimum(np.arange(K)[None, :] + np.maximum(seen, 1), K - 1)
+
+
+def _cone_rows(cones: Any, runs: np.ndarray) -> tuple:
+    """The cones' axes (m, C, 3) and barrier half-angles (m, C) of the runs (indices) of a
+    batched ConeSet, or of its one set for each.
+    """
+    C = cones.V.shape[-2] if cones.V.ndim >= 2 else 0
+    V = cones.V.reshape(-1, C, 3) if C else np.zeros((1, 0, 3))
+    rims = np.asarray(cones.theta_b).reshape(V.shape[0], C)
+    if V.shape[0] == 1:
+        return np.repeat(V, len(runs), axis=0), np.repeat(rims, len(runs), axis=0)
+    return V[runs], rims[runs]

@@ -1,0 +1,243 @@
+"""Delay compensation: the attitude and rate at the control tick from measurements that are some
+time old, by the controller's own model of the testbed and the moments it has already commanded
+(``DelayPredictor``, after the predictor-based designs for input and measurement delay, e.g.
+Molnar, Kiss, Ames & Orosz, arXiv 2112.08445).
+
+A measurement captured ``age`` seconds before the tick shows the vehicle as it was then; since
+then the rotors have been told to produce the moments of the ticks in between, each held until
+the next. The predictor integrates the model's rigid-body dynamics about the pivot over that
+window, piece by piece, with the moment in force at each instant (``CommandHistory``):
+
+    J Omega' = M_cmd(t) + M_g(R) + W Delta_bar - Omega x J Omega - J a_slow,   R' = R hat(Omega)
+
+a_slow is the slow part of the model's own error (the low-passed model acceleration at the
+measurements: at rest the true acceleration is zero, while the model's is J^-1 times the moment
+not yet learnt). Predicting with a constant rate, or with only the last moment, is what let a
+50 ms delay tip the testbed over (docs/safety.md, "Delay").
+"""
+import math
+from typing import Any, Optional
+
+import numpy as np
+
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.so3 import cross, matvec
+from geoctl_ros.core.law.mechanics import gravity_moment
+
+PREDICT_SLOW_S = 0.25    # s, the observer's low-pass of the model's error
+OBSERVE_GAP_MAX_S = 0.05  # s, the longest interval between rate samples the observer learns from
+SUBSTEP_MAX_S = 0.01      # s, the longest piece of the prediction's integration
+
+
+class CommandHistory:
+    """The moments the rotors were told to produce, with the time each command was sent: a ring
+    of the last ``size`` ticks (one moment per run of a batch).
+
+    With a motor lag (the rotors' first-order thrust time constant ``lag``, s) a command does not
+    act at once: each entry holds the moment the rotors produced when it was sent (``start``) and
+    the one it asks for (``end``), and the moment in force a time s after sending is
+    end + exp(-s / lag) (start - end). Without one, start = end. ``at(t)`` is the moment in force
+    at t: zero before the first entry, and the oldest one's for a time older than a full ring.
+
+    Only the times move at a push (``size`` floats, kept sorted for the lookup); the moments stay
+    in their slots: the k-th oldest entry is in slot (newest + 1 + k) % size.
+    """
+
+    def __init__(self, size, lag=0.0):
+        self.size = int(size)
+        self.lag = float(lag)
+        self.times = np.full(self.size, -math.inf)    # oldest first; -inf: empty
+        self.start = self.end = None
+        self._newest = -1                             # the slot of the newest entry
+        self.count = 0                                # entries held
+
+    def clear(self) -> None:
+        """Forget every command (at arming: the rotors were off, the vehicle on its stops)."""
+        self.times[:] = -math.inf
+        self.count = 0
+        if self.end is not None:
+            self.start[:] = 0.0
+            self.end[:] = 0.0
+
+    @property
+    def first(self) -> float:
+        """When the oldest command held was sent (inf: none yet)."""
+        return self.times[-self.count] if self.count else math.inf
+
+    def push(self, t: float, end: np.ndarray, start: Optional[np.ndarray] = None) -> None:
+        end = np.asarray(end, dtype=float)
+        if self.end is None or self.end.shape[1:] != end.shape:
+            self.start = np.zeros((self.size,) + end.shape)
+            self.end = np.zeros((self.size,) + end.shape)
+            self.times[:] = -math.inf
+        self._newest = w = (self._newest + 1) % self.size
+        self.count = min(self.count + 1, self.size)
+        self.end[w] = end
+        self.start[w] = end if start is None else start
+        self.times[:-1] = self.times[1:]
+        self.times[-1] = t
+
+    def at(self, t: Any) -> np.ndarray:
+        """The moment in force at times t (a scalar, or one per run of a batch: (N,))."""
+        if self.end is None:
+            return np.zeros(3)
+        # (before the first entry: an empty slot, all zeros, of time -inf; before a full ring's
+        # oldest: i = -1, that oldest)
+        i = np.maximum(np.searchsorted(self.times, t, side='right') - 1, 0)
+        slot = (self._newest + 1 + i) % self.size
+        if np.ndim(t) == 0:
+            start, end = self.start[slot], self.end[slot]
+        else:                                                       # each run its own entry
+            runs = np.arange(len(slot))
+            start, end = self.start[slot, runs], self.end[slot, runs]
+        if self.lag <= 0.0:
+            return end
+        decay = np.exp(-np.maximum(t - self.times[i], 0.0) / self.lag)
+        return end + (decay * (start - end).T).T
+
+
+class DelayPredictor:
+    """The prediction of one run or a batch, with its state: an observer of the model's error.
+
+    The model's acceleration is wrong by what it does not know (the moment not yet learnt, a
+    wrong mass or centre of mass). The observer measures that error where it can be measured: at
+    the rate samples themselves. Between two samples, the measured mean acceleration
+    (Omega_k - Omega_{k-1}) / (t_k - t_{k-1}) is compared with the model's at the interval's
+    middle, under the moment in force then; the difference, low-passed over ``PREDICT_SLOW_S``,
+    is taken off every piece of the prediction. At rest this is the whole model acceleration (the
+    true one is zero); while manoeuvring, only the model's error, so a vehicle that really
+    accelerates is predicted to.
+    """
+
+    def __init__(self, controller):
+        """controller: the AttitudeController whose model (inertia, gravity, estimate) it uses."""
+        self.controller = controller
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the observer (at arming: what held the vehicle on its stops is not its error)."""
+        self.acc_error = 0.0          # rad/s^2: model minus measured acceleration, low-passed
+        self._last: Optional[tuple] = None    # (capture time, Omega) of the last rate sample
+
+    def acceleration(self, R: np.ndarray, Omega: np.ndarray, moment: np.ndarray) -> np.ndarray:
+        """The model's angular acceleration at (R, Omega) under the rotors' moment."""
+        c = self.controller
+        cfg = c.config
+        W = c.regressor(R)
+        return matvec(c.J_inv, moment + gravity_moment(R, cfg.m_rho, cfg.gravity)
+                      + (c.delta_bar if W is None else matvec(W, c.delta_bar))
+                      - cross(Omega, matvec(cfg.J, Omega)))
+
+    def observe(self, R: np.ndarray, Omega: np.ndarray, captured: Any,
+                history: 'CommandHistory') -> None:
+        """Learn the model's error from a rate sample captured at ``captured`` (a time on the
+        history's clock; one per run of a batch). A sample no newer than the last (a stall
+        repeats it), one more than ``OBSERVE_GAP_MAX_S`` after it, or an interval that starts
+        before the first command held teaches nothing.
+        """
+        last, self._last = self._last, (captured, Omega)
+        if last is None:
+            return
+        if np.ndim(captured) == 0:              # one run (the node's tick): plain floats
+            interval = float(captured) - float(last[0])
+            if not (1e-6 < interval <= OBSERVE_GAP_MAX_S and last[0] >= history.first):
+                return
+            modelled = self.acceleration(R, 0.5 * (Omega + last[1]),
+                                         history.at(last[0] + 0.5 * interval))
+            self.acc_error = self.acc_error + (
+                modelled - (Omega - last[1]) / interval - self.acc_error) * (
+                interval / (PREDICT_SLOW_S + interval))
+            return
+        interval = captured - last[0]
+        usable = (interval > 1e-6) & (interval <= OBSERVE_GAP_MAX_S) & (last[0] >= history.first)
+        if not np.any(usable):
+            return
+        span = np.where(usable, interval, 1.0)
+        mid_rate = 0.5 * (Omega + last[1])
+        modelled = self.acceleration(R, mid_rate, history.at(last[0] + 0.5 * span))
+        measured = ((Omega - last[1]).T / span).T
+        weight = np.where(usable, span / (PREDICT_SLOW_S + span), 0.0)
+        self.acc_error = self.acc_error + ((modelled - measured - self.acc_error).T * weight).T
+
+    def __call__(self, R, Omega, age_R, age_Omega, history, now, lead=0.0):
+        """The attitude and rate at ``now + lead`` from measurements age_R and age_Omega seconds
+        old at ``now`` (scalars, or one per run of a batch), given the moments commanded before
+        now (a CommandHistory on the same clock as now). Ages and lead of 0 return the
+        measurements unchanged.
+
+        Only the part of the window since the first command held is predicted (none at the
+        first tick after arming). The window from the older measurement to now + lead is
+        integrated in S equal pieces of at most SUBSTEP_MAX_S: in each, the moment in force at
+        its midpoint; the rate is advanced only in the part of the window after its own capture,
+        the attitude only after its own (the attitude with the mean of the rates at either end of
+        the piece).
+        """
+        captured = now - age_Omega               # when the rate sample was captured
+        self.observe(R, Omega, captured, history)
+        # nothing is predicted from before the first command held: what moved the vehicle then
+        # (its stops, a hand) is not in the model
+        known = max(now - history.first, 0.0)
+        if known <= 0.0:
+            return R, Omega
+        age_R, age_Omega = np.minimum(age_R, known), np.minimum(age_Omega, known)
+        if np.ndim(age_R) == 0 and np.ndim(age_Omega) == 0:
+            return self._scalar_ages(R, Omega, float(age_R), float(age_Omega), history, now,
+                                     lead, captured)
+        age_R = np.asarray(age_R, dtype=float)
+        age_Omega = np.asarray(age_Omega, dtype=float)
+        horizon = np.maximum(age_R, age_Omega)
+        span = horizon + lead
+        if float(np.max(span)) <= 0.0:
+            return R, Omega
+        moment_now = history.at(captured)         # (the moment then, before any clipping)
+        acc0 = self.acceleration(R, Omega, moment_now)
+        # each run in its own number of equal pieces (so a run's prediction does not depend on
+        # the other runs of its batch); a run with fewer pieces than the most idles (h = 0)
+        pieces = np.maximum(np.ceil(span / SUBSTEP_MAX_S - 1e-9), 1.0)
+        h_run = span / pieces
+        start = now - horizon
+        error = self.acc_error
+        for j in range(int(np.max(pieces))):
+            h = np.where(j < pieces, h_run, 0.0)
+            mid = start + (j + 0.5) * h_run
+            acc = self._piece_acceleration(j, R, Omega, history.at(mid), acc0, moment_now) - error
+            # each measurement moves only after its own capture time
+            hw = np.where(mid > now - age_Omega, h, 0.0)
+            hr = np.where(mid > now - age_R, h, 0.0)
+            Omega_next = Omega + (acc.T * hw).T
+            R = so3.matmul(R, so3.exp(((0.5 * (Omega + Omega_next)).T * hr).T))
+            Omega = Omega_next
+        return R, Omega
+
+    def _piece_acceleration(self, j, R, Omega, moment, acc0, moment_now):
+        """The model's acceleration in piece j under moment. The first piece starts at the
+        measured state, where it is acc0 under moment_now: under another moment it differs by
+        J^-1 times the difference (it is linear in the moment), which saves a model evaluation.
+        """
+        if j == 0:
+            return acc0 + matvec(self.controller.J_inv, moment - moment_now)
+        return self.acceleration(R, Omega, moment)
+
+    def _scalar_ages(self, R, Omega, age_R, age_Omega, history, now, lead, captured):
+        """``__call__`` for ages shared by every run (one run, or a batch on one clock): the
+        same pieces, in plain floats (the node's tick; numpy on scalars costs more than the
+        arithmetic).
+        """
+        horizon = max(age_R, age_Omega)
+        span = horizon + lead
+        if span <= 0.0:              # (nothing to predict: no model evaluated)
+            return R, Omega
+        moment_now = history.at(captured)         # (the moment then, before any clipping)
+        acc0 = self.acceleration(R, Omega, moment_now)
+        pieces = max(math.ceil(span / SUBSTEP_MAX_S - 1e-9), 1)
+        h = span / pieces
+        start = now - horizon
+        error = self.acc_error
+        for j in range(pieces):
+            mid = start + (j + 0.5) * h
+            acc = self._piece_acceleration(j, R, Omega, history.at(mid), acc0, moment_now) - error
+            Omega_next = Omega + acc * h if mid > now - age_Omega else Omega
+            if mid > now - age_R:
+                R = R @ so3.exp((0.5 * (Omega + Omega_next)) * h)
+            Omega = Omega_next
+        return R, Omega

@@ -1,0 +1,328 @@
+"""Do the sensors agree? The motion capture's attitude against the IMU's gyro and accelerometer.
+
+A wrong convention (``core.sensors.frames``), an unaligned marker set, a rotated IMU or a gyro bias
+put the cones where they are not, and the controller would fly the real sensor into the real
+obstacle with every figure saying it is clear. Two pairs of measurements see such errors:
+
+- **gravity**: at rest, the IMU's specific force is the reaction to gravity, f = -R^T g. Its
+  direction must agree with the "up" of the poses, R^T e_up: a wrong body convention (FRD for
+  FLU: 180 deg), a wrong world (NED or Y up), a tilted marker set or a tilted IMU shows as an
+  angle between them. A yaw error of the IMU's mounting or of the marker set does not show while
+  the vehicle rests level (gravity lies along the yaw axis); it shows in proportion to the tilt.
+- **rate**: the gyro's mean over a window must agree with the rate of the poses over it (the
+  least-squares slope of log(R_0^T R_k) against the poses' stamps, in the body). At rest this is
+  the gyro's bias; moving, it sees every rotation error, the yaw ones too.
+
+The tolerances are derived from the sensors' noise figures (one standard deviation per axis and
+sample: ``attitude_noise``, ``gyro_noise``, ``accelerometer_noise``) and the samples each window
+holds: ``SIGMAS`` standard deviations of the difference, so that a false refusal is about 1e-5
+per window (a chi distribution of 2 or 3 degrees of freedom beyond 5), plus, for gravity, the
+``alignment_tolerance`` a calibrated installation keeps. In flight the rate window is short and
+the vehicle accelerates, so the tolerance adds ``FLIGHT_SHARE`` of the rate and
+``FLIGHT_FLOOR`` (the streams' clocks and their stamps' offset, the log's curvature over a turning
+window): a mismatch must exceed about a third of the motion, for ``FLIGHT_WINDOWS`` windows in a
+row; the failsafe names the cause the first of them shows.
+
+``SensorAgreement`` takes the converted samples (``core.sensors.frames.InputFrames``) as they come
+and closes a window on the pose that ends it; it allocates only then.
+"""
+from dataclasses import dataclass
+import math
+from typing import List, NamedTuple, Optional
+
+import numpy as np
+
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.so3 import Vector
+from geoctl_ros.core.sensors.frames import (
+    BODY_FRAMES,
+    WORLD_FRAMES,
+    Y_UP_BODY_DEG,
+    InputFrames,
+    rpy_matrix,
+    tilt_deg,
+)
+
+SIGMAS = 5.0              # standard deviations of the difference a check allows
+REST_WINDOW = 0.5         # s of poses per arming window
+FLIGHT_WINDOW = 0.1       # s of poses per in-flight window
+FLIGHT_SHARE = 0.35       # in flight, the rate may disagree by this share of the motion,
+FLIGHT_FLOOR = 0.1        # rad/s, and this
+FLIGHT_WINDOWS = 2        # windows in a row (0.2 s) before a mismatch is a failsafe
+REST_RATE = 0.05          # rad/s: the poses turn slower than this at rest
+FORCE_SHARE = 0.25        # |f| within this share of |g| at rest (else no accelerometer data)
+LATE = 3.0                # a window older than this many windows does not count for arming
+RESOLVED_RAD = 1.0        # a window whose poses (or gyro) turn more than this is not judged
+
+
+@dataclass(frozen=True)
+class AgreementSettings:
+    """The checks' settings, typed at configuration (``params.build``)."""
+
+    enabled: bool
+    attitude_noise: float        # rad per axis and pose (1 sigma)
+    gyro_noise: float            # rad/s per axis and sample
+    accelerometer_noise: float   # m/s^2 per axis and sample
+    alignment_tolerance: float   # rad: the angle a calibrated installation keeps
+    gravity: np.ndarray          # the world's gravity (m/s^2)
+
+
+class Window(NamedTuple):
+    """One closed window: the means and what they disagree by."""
+
+    end: float                   # receipt of the pose that closed it (the loop's clock)
+    gyro: np.ndarray             # the gyro's mean (rad/s, body)
+    poses_rate: np.ndarray       # the poses' rate (rad/s, body)
+    rate_tolerance: float        # rad/s: SIGMAS sigmas of their difference
+    up: np.ndarray               # the poses' mean up, R^T e_up
+    force: Optional[np.ndarray]  # the IMU's mean specific force (None: none came)
+    tilt_tolerance: float        # rad: SIGMAS sigmas of the angle between up and force
+    poses: int
+    gyros: int
+    resolved: bool               # the poses turned less than RESOLVED_RAD over it (else the
+                                 # slope of the logarithm says nothing: not judged)
+
+    @property
+    def disagreement(self) -> float:
+        """|gyro - poses' rate| (rad/s)."""
+        return float(np.linalg.norm(self.gyro - self.poses_rate))
+
+    @property
+    def gravity_angle_deg(self) -> Optional[float]:
+        return None if self.force is None else tilt_deg(self.force, self.up)
+
+
+class _Accumulator:
+    """Sums over one window of poses (by their stamps) and of the IMU's samples."""
+
+    def __init__(self, span: float, settings: AgreementSettings):
+        self.span, self.settings = span, settings
+        self.up_world = -settings.gravity / np.linalg.norm(settings.gravity)
+        self.R0: Optional[np.ndarray] = None
+        self.t0 = 0.0
+        self.last: Optional[Window] = None
+
+    def _restart(self, R, stamp):
+        self.R0, self.t0 = R, stamp
+        self.n = 0
+        self.st = self.stt = 0.0
+        self.sth = np.zeros(3)
+        self.sh = np.zeros(3)
+        self.up = np.zeros(3)
+        self.w = np.zeros(3)
+        self.nw = 0
+        self.f = np.zeros(3)
+        self.nf = 0
+        self.turned = 0.0
+
+    def imu(self, w: np.ndarray, f: Optional[np.ndarray]) -> None:
+        if self.R0 is None:
+            return
+        self.w += w
+        self.nw += 1
+        if f is not None:
+            self.f += f
+            self.nf += 1
+
+    def pose(self, R: np.ndarray, stamp: float, receipt: float) -> Optional[Window]:
+        R0 = self.R0
+        if R0 is None or stamp < self.t0:
+            self._restart(R, stamp)
+            R0 = R
+        tau = stamp - self.t0
+        theta = so3.log(R0.T @ R)
+        self.n += 1
+        self.st += tau
+        self.stt += tau * tau
+        self.sh += theta
+        self.sth += tau * theta
+        self.up += R.T @ self.up_world
+        self.turned = max(self.turned, float(theta @ theta))
+        if tau < self.span:
+            return None
+        s = self.settings
+        spread = self.n * self.stt - self.st * self.st
+        out = None
+        if self.nw and spread > 0.0:
+            slope = (self.n * self.sth - self.st * self.sh) / spread
+            sigma_rate = math.hypot(s.attitude_noise * math.sqrt(self.n / spread),
+                                    s.gyro_noise / math.sqrt(self.nw))
+            force = self.f / self.nf if self.nf else None
+            g = float(np.linalg.norm(s.gravity))
+            sigma_tilt = math.hypot(s.attitude_noise / math.sqrt(self.n),
+                                    s.accelerometer_noise / (g * math.sqrt(max(self.nf, 1))))
+            gyro = self.w / self.nw
+            resolved = (self.turned < RESOLVED_RAD ** 2
+                        and float(np.linalg.norm(gyro)) * tau < RESOLVED_RAD)
+            out = self.last = Window(receipt, gyro, slope, SIGMAS * sigma_rate,
+                                     self.up / self.n, force, SIGMAS * sigma_tilt, self.n,
+                                     self.nw, resolved)
+        self._restart(R, stamp)
+        return out
+
+
+# the conventions a mismatch is checked against, to name its likely cause:
+# (words, pose world, body, marker set rpy deg)
+_POSE_GUESSES = [
+    ('the poses look NED/FRD and the IMU FRD (pose_world_frame ned, body_frame frd)',
+     'ned', 'frd', (0.0, 0.0, 0.0)),
+    ('the poses look Y-up (pose_world_frame y_up, and a Y-up rigid body: marker_rotation_deg '
+     '[90, 0, 0], which calibrate measures)', 'y_up', 'flu', Y_UP_BODY_DEG),
+    ('the poses look NED (pose_world_frame ned)', 'ned', 'flu', (0.0, 0.0, 0.0)),
+]
+
+
+class SensorAgreement:
+    """The two checks over the converted samples (module docstring)."""
+
+    def __init__(self, settings: AgreementSettings, frames: InputFrames):
+        self.settings = settings
+        self.frames = frames          # the InputFrames in effect (to name a likely cause)
+        self.rest = _Accumulator(REST_WINDOW, settings)
+        self.flight = _Accumulator(FLIGHT_WINDOW, settings)
+        self.mismatches = 0           # in-flight windows in a row that disagree
+        self._first = (0.0, 0.0, '')  # the first of them: disagreement, limit, likely cause
+        self.flight_note: Optional[str] = None    # why, once FLIGHT_WINDOWS in a row did
+        self.rest_problems: Optional[List[str]] = None   # the last rest window's verdict
+        self.raw_pose: Optional[np.ndarray] = None    # the newest pose as the source streamed it
+        self.raw_force: Optional[Vector] = None       # the newest specific force as given
+
+    def imu(self, w: np.ndarray, f: Optional[np.ndarray],
+            raw_force: Optional[Vector] = None) -> None:
+        """A converted gyro sample and specific force (None: the IMU gave none); raw_force: the
+        specific force as the IMU gave it (to name a likely cause).
+        """
+        self.raw_force = raw_force
+        self.rest.imu(w, f)
+        self.flight.imu(w, f)
+
+    def pose(self, R: np.ndarray, stamp: float, receipt: float,
+             raw: Optional[np.ndarray] = None) -> None:
+        """A converted pose R of stamp (s), received at receipt (the loop's clock); raw: the
+        pose as the source streamed it (to name a likely cause).
+        """
+        self.raw_pose = raw
+        self.rest.pose(R, stamp, receipt)
+        closed = self.flight.pose(R, stamp, receipt)
+        if closed is not None and closed.resolved:
+            motion = max(float(np.linalg.norm(closed.gyro)),
+                         float(np.linalg.norm(closed.poses_rate)))
+            limit = closed.rate_tolerance + FLIGHT_FLOOR + FLIGHT_SHARE * motion
+            if closed.disagreement > limit:
+                self.mismatches += 1
+                if self.mismatches == 1:        # (named while the motion is still the pilot's)
+                    self._first = (closed.disagreement, limit, self._rate_cause(closed))
+                if self.mismatches >= FLIGHT_WINDOWS and self.flight_note is None:
+                    gap, allowed, cause = self._first
+                    self.flight_note = (
+                        'the gyro and the poses disagree by %.2f rad/s (over %.2f rad/s; %d '
+                        'windows of %.1f s in a row): %s'
+                        % (gap, allowed, self.mismatches, FLIGHT_WINDOW, cause))
+            else:
+                self.mismatches = 0
+
+    def reset_flight(self) -> None:
+        """At arming: the in-flight verdict starts again."""
+        self.mismatches, self.flight_note = 0, None
+
+    # --- at arming -----------------------------------------------------------------------
+    def arm_problems(self, now: float) -> List[str]:
+        """Why the sensors' agreement forbids arming now (empty: it allows it).
+
+        At rest (the poses turn slower than REST_RATE) both checks judge the last window. A
+        turning vehicle (re-armed after a failsafe, say) is judged by the rate check with the
+        in-flight tolerance, and by the gravity and bias checks of the last window it rested in
+        (the conventions cannot change while the node runs): it must have rested once.
+        """
+        if not self.settings.enabled:
+            return []
+        w = self.rest.last
+        if w is None or now - w.end > LATE * REST_WINDOW:
+            return ['the sensor checks have no recent window (%.1f s of poses and IMU '
+                    'samples; docs/sensors.md)' % REST_WINDOW]
+        turning = float(np.linalg.norm(w.poses_rate))
+        if turning > REST_RATE or not w.resolved:
+            motion = max(turning, float(np.linalg.norm(w.gyro)))
+            limit = w.rate_tolerance + FLIGHT_FLOOR + FLIGHT_SHARE * motion
+            if w.resolved and w.disagreement > limit:
+                return ['the gyro and the poses disagree by %.2f rad/s while turning at %.2f '
+                        '(allowed %.2f): %s' % (w.disagreement, turning, limit,
+                                                self._rate_cause(w))]
+            if self.rest_problems is None:
+                return ['the vehicle turns at %.2f rad/s and has not rested since start: arm it '
+                        'at rest (the gravity check)' % turning]
+            return list(self.rest_problems)
+        self.rest_problems = self._rest_problems(w, turning)
+        return list(self.rest_problems)
+
+    def _rest_problems(self, w: Window, turning: float) -> List[str]:
+        """The checks of a window at rest: the gyro against zero, gravity against the poses."""
+        problems = []
+        if w.disagreement > w.rate_tolerance:
+            problems.append(
+                'the gyro reads %.3f rad/s at rest (the poses %.3f; allowed %.3f): a gyro '
+                "bias (run calibrate, which writes gyro_bias) or the gyro's axes wrong"
+                % (float(np.linalg.norm(w.gyro)), turning, w.rate_tolerance))
+        g = float(np.linalg.norm(self.settings.gravity))
+        if w.force is None:
+            problems.append('the IMU sends no specific force (linear_acceleration): the gravity '
+                            'check cannot run (consistency_checks false arms without it)')
+            return problems
+        size = float(np.linalg.norm(w.force))
+        if abs(size - g) > FORCE_SHARE * g:
+            problems.append("the IMU's specific force is %.2f m/s^2 at rest, not about %.2f: "
+                            'no accelerometer data in linear_acceleration, or its units wrong'
+                            % (size, g))
+            return problems
+        angle = tilt_deg(w.force, w.up)
+        allowed = math.degrees(self.settings.alignment_tolerance + w.tilt_tolerance)
+        if angle > allowed:
+            problems.append("the IMU's gravity is %.1f deg from the poses' (allowed %.1f): %s"
+                            % (angle, allowed, self._gravity_cause(w, angle, allowed)))
+        return problems
+
+    def _gravity_cause(self, w: Window, angle: float, allowed: float) -> str:
+        """The likely causes of a gravity mismatch, in words: every other convention or IMU
+        mounting that would make gravity agree (at rest, level, several may), or the tilt.
+        """
+        fr = self.frames
+        fits = []
+        if self.raw_force is not None and self.raw_pose is not None:
+            up_world = -self.settings.gravity / np.linalg.norm(self.settings.gravity)
+            raw_f = np.asarray(self.raw_force, dtype=float)
+            other = 'frd' if fr.body == 'flu' else 'flu'
+            if tilt_deg(fr.imu_rotation @ BODY_FRAMES[other].T @ raw_f, w.up) <= allowed:
+                fits.append('the IMU looks %s while body_frame says %s'
+                            % (other.upper(), fr.body))
+            for words, world, body, marker in _POSE_GUESSES:
+                if (world, body) == (fr.world, fr.body) and marker == (0.0, 0.0, 0.0):
+                    continue
+                T, B = WORLD_FRAMES[world], BODY_FRAMES[body]
+                R = T @ self.raw_pose @ B @ rpy_matrix(marker).T
+                f = fr.imu_rotation @ B.T @ raw_f
+                if R[2, 2] > 0.0 and tilt_deg(f, R.T @ up_world) <= allowed:
+                    fits.append(words + ', while the parameters say %s/%s'
+                                % (fr.world, fr.body))
+            for yaw in (90.0, 180.0, 270.0):
+                turned = rpy_matrix((0.0, 0.0, yaw)) @ w.force
+                if tilt_deg(turned, w.up) <= allowed:
+                    fits.append('the IMU looks mounted about %.0f deg off in yaw '
+                                '(imu_rotation_deg)' % (yaw if yaw <= 180.0 else yaw - 360.0))
+        if fits:
+            return '; or '.join(fits)
+        if angle < 30.0:
+            return ('a tilted marker set or IMU mounting (about %.0f deg): run calibrate '
+                    '(marker_rotation_deg, imu_rotation_deg; docs/sensors.md)' % angle)
+        return ('the frames wrong: pose_world_frame, body_frame, marker_rotation_deg or '
+                'imu_rotation_deg (docs/sensors.md)')
+
+    def _rate_cause(self, w: Window) -> str:
+        """The likely cause of a rate mismatch, in words."""
+        for yaw in (90.0, 180.0, 270.0):
+            turned = rpy_matrix((0.0, 0.0, yaw)) @ w.gyro
+            if float(np.linalg.norm(turned - w.poses_rate)) <= (
+                    w.rate_tolerance + FLIGHT_FLOOR + 0.5 * FLIGHT_SHARE
+                    * float(np.linalg.norm(w.poses_rate))):
+                return ('the IMU looks mounted about %.0f deg off in yaw (imu_rotation_deg), or '
+                        'the marker set is' % (yaw if yaw <= 180.0 else yaw - 360.0))
+        return ("the IMU's mounting, the marker set or the pose frame wrong (docs/sensors.md)")

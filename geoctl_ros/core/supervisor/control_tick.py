@@ -1,0 +1,180 @@
+"""The control tick of the closed loop, written once: prediction, control step, mixing, and the
+bookkeeping of how long each command was held.
+
+``ControlLoop.tick`` (the controller node) and ``geoctl_ros.sim.closed_loop`` (the simulated
+closed loop of the scenario runner and the campaigns) both call :class:`ControlTick`. Like the
+core's formulas it takes one run (R (3, 3), Omega (3,)) or a batch of N ((N, 3, 3), (N, 3)).
+"""
+import math
+from typing import Any, NamedTuple, Optional, Tuple
+
+import numpy as np
+
+from geoctl_ros.core.actuation.motors import Mixer
+from geoctl_ros.core.geometry.so3 import matvec
+from geoctl_ros.core.law.prediction import CommandHistory, DelayPredictor
+
+ON_TIME_S = 1e-6       # a step less late than this is on time (the clock's rounding)
+HISTORY_TICKS = 128    # the commands remembered for prediction (1.28 s at 100 Hz, 0.26 at 500)
+
+
+def blind_time(delay: float, ages: Tuple[Any, Any], dt: float, held: Optional[float]) -> Any:
+    """How long the loop is blind beyond its nominal period (s; one per run of a batch): the age
+    of its older input (measurement_delay plus the ages from capture) plus how much later than
+    the period this step comes. The barrier widens each cone by the sensor's travel towards it
+    over this time (``core.law.configuration_error.blind_widening``); it is 0 for fresh inputs on
+    time.
+    """
+    age = delay + np.maximum(ages[0], ages[1])
+    if held is None or held - dt < ON_TIME_S:
+        return age
+    return age + (held - dt)
+
+
+# The delay envelope (docs/safety.md, "The bound"): the blind time at any tick, and sustained,
+# that the safety campaign draws and the falsifier searches (tested and attacked, not derived)
+BLIND_BOUND_S = 0.10
+SUSTAINED_BLIND_BOUND_S = 0.06
+SUSTAINED_TAU_S = 0.25      # s, the low-pass that tells a sustained blindness from a stall
+PEAK_RELEASE_S = 1.0        # s, how long a blind peak past the bound keeps the gains down
+
+
+class DegradedMode:
+    """Past the delay bound, the feedback gains come down with the blindness (docs/safety.md,
+    "Past the bound"): the loop's bandwidth scales by s = min(1, SUSTAINED_BLIND_BOUND_S /
+    (blind time low-passed over SUSTAINED_TAU_S), BLIND_BOUND_S / (blind time peak-held over
+    PEAK_RELEASE_S)), k_R by s^2 and k_Omega by s, so the loop's phase lag at its crossover
+    stays what it was at the bound. Within the bound s = 1 and nothing changes. One scale per run
+    of a batch.
+    """
+
+    def __init__(self):
+        self.sustained = 0.0        # s, the low-passed blind time
+        self.peak = 0.0             # s, the blind time held from its last peak
+        self.scale_now = 1.0
+
+    def scale(self, blind: Any, held: float) -> Any:
+        """The gain scale s after a tick of blind time ``blind`` that came ``held`` s after the
+        last.
+        """
+        self.sustained = self.sustained + (blind - self.sustained) * (
+            held / (SUSTAINED_TAU_S + held))
+        if np.ndim(blind) == 0 and np.ndim(self.peak) == 0:     # one run: plain floats
+            self.peak = max(float(blind), self.peak * math.exp(-held / PEAK_RELEASE_S))
+            self.scale_now = min(1.0, SUSTAINED_BLIND_BOUND_S / max(self.sustained, 1e-9),
+                                 BLIND_BOUND_S / max(self.peak, 1e-9))
+            return self.scale_now
+        self.peak = np.maximum(blind, self.peak * np.exp(-held / PEAK_RELEASE_S))
+        self.scale_now = np.minimum(1.0, np.minimum(
+            SUSTAINED_BLIND_BOUND_S / np.maximum(self.sustained, 1e-9),
+            BLIND_BOUND_S / np.maximum(self.peak, 1e-9)))
+        return self.scale_now
+
+
+class Command(NamedTuple):
+    """What one control tick commands."""
+
+    control: object     # ControlOutput of the step, or None when its moment was not finite
+    motors: object      # MotorOutput: zero commands unless armed
+
+
+class ControlTick:
+    """One control tick, with the state that ties a tick to the one before: the moments the rotors
+    were told to produce, with when (the prediction's input), and when the last command went out
+    (the lag compensation's real hold).
+    """
+
+    def __init__(self, controller, mixer, measurement_delay):
+        """controller: AttitudeController (one run or a batch); mixer: Mixer; measurement_delay:
+        the inputs' latency (s) that the prediction makes up for, on top of their age.
+        """
+        self.controller = controller
+        self.predict = DelayPredictor(controller)
+        self.mixer = mixer
+        self.measurement_delay = measurement_delay
+        # what the rotors were told to produce, with when (the prediction's input)
+        self.history = CommandHistory(HISTORY_TICKS, mixer.lag)
+        self._last_now = None
+        self.blind = 0.0                # the last tick's blind time (blind_time)
+        self.degraded = DegradedMode()
+        self._clock = 0.0               # the tick's time: now, or (untimed) periods counted
+        self._ticked = False
+
+    def reconfigure(self, mixer: Mixer, measurement_delay: float) -> None:
+        """A new mixer (that has adopted the old one's lag model) and delay, at run time."""
+        self.mixer, self.measurement_delay = mixer, measurement_delay
+        self.history.lag = mixer.lag
+
+    def _held(self, now):
+        """How long the last command was held: the time since the last tick, or None (a period)
+        for ticks that are not timed (now None).
+        """
+        held = None if now is None or self._last_now is None else now - self._last_now
+        if now is not None:
+            self._last_now = now
+        return held
+
+    def _time(self, now, dt):
+        """The tick's time on the history's clock: now, or for untimed ticks the periods so
+        far.
+        """
+        if now is not None:
+            self._clock = now
+        elif self._ticked:
+            self._clock += dt
+        self._ticked = True
+        return self._clock
+
+    def __call__(self, R, Omega, dt, now=None, ages=(0.0, 0.0), armed=True, adapt=True,
+                 predict=True):
+        """Command the rotors from a measured attitude R and rate Omega.
+
+        dt: the control period (how long this command is expected to be held); now: the tick's
+        time on the loop's clock (None: every tick on time, as in a batch); ages: how old the
+        attitude and rate measurements are (s), besides measurement_delay; predict: bring the
+        measurements forward by their age and the delay (off for a state that is already
+        propagated, as a gap's); adapt: let the estimate learn from this step.
+
+        A step whose moment is not finite commands zero and returns control None: for one run the
+        caller then disarms; a batch raises FloatingPointError, as a diverged simulation does.
+        """
+        held = self._held(now)
+        t = self._time(now, dt)
+        if predict:
+            # with a model of the motors' lag, aimed at the middle of the command's hold
+            d = self.measurement_delay
+            R, Omega = self.predict(R, Omega, d + ages[0], d + ages[1], self.history, t,
+                                    0.5 * dt if self.mixer.lag > 0.0 else 0.0)
+        blind = self.blind = blind_time(self.measurement_delay, ages, dt, held)
+        self.controller.gain_scale = self.degraded.scale(blind, dt if held is None else held)
+        out = self.controller.step(R, Omega, dt, adapt=adapt, blind=blind)
+        if not np.isfinite(out.u).all():           # a last line of defence: never command it
+            if np.ndim(out.u) > 1:
+                raise FloatingPointError('a run of the batch produced a non-finite moment')
+            out, armed = None, False
+        motors = self.mixer.mix(np.zeros(3) if out is None else out.u, armed=armed, dt=dt,
+                                held=held)
+        self.history.push(t, *self._produced(motors, armed))
+        return Command(out, motors)
+
+    def _produced(self, motors, armed):
+        """The moments the rotors make from this tick on: the one they settle to and the one they
+        make now (by the mixer's lag model, if it keeps one: at arming, none, the rotors
+        spooling up from rest), about the pivot.
+        """
+        mixer = self.mixer
+        if not armed:
+            return np.zeros(3), None
+        if mixer.sent_thrusts is None:
+            return motors.allocation.moment, None
+        B = mixer.allocator.B_full[3:]
+        end = matvec(B, mixer.sent_thrusts)
+        return end, matvec(B, mixer.modelled_thrusts)
+
+    def idle(self, dt: float, now: Optional[float] = None) -> Command:
+        """A tick without a state to control from (before the first pose and rate): zero
+        commands, and the time noted.
+        """
+        self._held(now)
+        self.history.push(self._time(now, dt), np.zeros(3))
+        return Command(None, self.mixer.mix(np.zeros(3), armed=False, dt=dt))

@@ -1,0 +1,318 @@
+"""The controller node's logic without ROS: checked inputs, arming, set points, step, mixing.
+
+The node turns messages into calls of this class and its results into messages; every decision
+(refuse a sample, refuse to arm, ride through a gap, fail safe, adopt a set point, freeze
+adaptation, the diagnostics level and its reasons) is made here, so it is tested without rclpy.
+"""
+
+from typing import Any, List, Optional, Sequence
+
+import numpy as np
+
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.so3 import Vector
+from geoctl_ros.core.law.control import AttitudeController, SetpointRejected
+from geoctl_ros.core.sensors.consistency import SensorAgreement
+from geoctl_ros.core.supervisor import loop_status, preflight
+from geoctl_ros.core.supervisor.control_tick import ControlTick
+from geoctl_ros.core.supervisor.gaps import GapBridge
+from geoctl_ros.core.supervisor.loop_types import LoopSettings, LoopTick
+from geoctl_ros.core.supervisor.safety import (
+    ArmResult,
+    EscHealth,
+    EscStatus,
+    Stream,
+    Supervisor,
+    angular_velocity_problem,
+    esc_problem,
+    quaternion_problem,
+    specific_force_problem,
+)
+from geoctl_ros.core.telemetry.diagnostics import Status, failsafe
+from geoctl_ros.core.telemetry.stats import WindowStats
+
+NON_FINITE = failsafe('non-finite control output')
+
+
+class ControlLoop:
+    """State and decisions of the controller node."""
+
+    def __init__(self, setup, unconfigured=None):
+        """unconfigured: None, or why the node has no configuration anyone gave (it then
+        refuses every arm request with that reason).
+        """
+        self.setup = setup
+        self.unconfigured = unconfigured
+        self.controller = AttitudeController(setup.config)
+        self.controller.set_setpoint(setup.setpoint)
+        s = setup.loop
+        self.pose = Stream('pose', s.pose_timeout, s.pose_ride_through, s.measurement_delay)
+        self.rate = Stream('angular velocity', s.imu_timeout, s.imu_ride_through,
+                           s.measurement_delay)
+        self.supervisor = Supervisor([self.pose, self.rate])
+        self.bridge = GapBridge(s.pose_rate_window)
+        self.frames = setup.frames      # the inputs' conventions, applied as they come in
+        self.agreement = SensorAgreement(setup.agreement, setup.frames)
+        self.R = None                   # last accepted measurements
+        self.Omega = None
+        self.setpoint_note = None       # last set-point refusal, for diagnostics
+        self._pose_stamp = None         # the last accepted pose's stamp, as given
+        self.last_tick = None
+        # (the inputs' ages, measurement_delay included, are the streams': see tick)
+        self.step = ControlTick(self.controller, setup.mixer, 0.0)
+        self._schedule_index = -1
+        # per diagnostics window: input ages at the ticks, armed ticks saturated / bridging
+        self.pose_age = WindowStats()
+        self.rate_age = WindowStats()
+        self.window = loop_status.Window()
+        # the sensor inside a cone while armed, latched until the next arming: entries counted,
+        # the deepest (cone name, depth deg)
+        self.cone_entries = 0
+        self.entry = None
+        self._inside = False
+        self.esc = None                 # the ESC node's last EscStatus (None: no ESC node)
+        self.gaps = {'pose': [0, 0.0], 'angular velocity': [0, 0.0]}   # count, longest (s)
+
+    # --- inputs ------------------------------------------------------------------------------
+    def offer_pose(self, q: Vector, stamp: float, receipt: float,
+                   stamp_as_given: Any = None, delay: Optional[float] = None) -> Optional[str]:
+        """A motion-capture attitude (x, y, z, w) of stamp (s) received at receipt (s, the loop's
+        clock); None if accepted, else why it was refused. stamp_as_given: the stamp in the
+        caller's own form, handed back on the ticks that use this pose (default: stamp). delay:
+        the stamp's age at receipt against this computer's clock (s; None: not known, the
+        stream's ``measurement_delay`` is assumed; see ``core.supervisor.safety.Stream``).
+        """
+        previous = self.pose.last_receipt
+        problem = self.pose.offer(stamp, receipt, quaternion_problem(q), self._delay(delay))
+        if problem is None:
+            self._pose_stamp = stamp if stamp_as_given is None else stamp_as_given
+            self._end_gap(self.pose, previous, receipt)
+            raw = so3.quat_to_rot(q)
+            self.R = self.frames.attitude(raw)
+            self.bridge.pose(self.R, stamp, receipt)
+            self.agreement.pose(self.R, stamp, receipt, raw)
+        return problem
+
+    def offer_angular_velocity(self, w: Vector, stamp: float, receipt: float,
+                               delay: Optional[float] = None,
+                               specific_force: Optional[Vector] = None) -> Optional[str]:
+        """An IMU sample: the gyro's angular velocity (rad/s) and, if the IMU gives it, the
+        specific force (m/s^2), both in the IMU's own axes; None if accepted, else why it was
+        refused (delay: as offer_pose's).
+        """
+        previous = self.rate.last_receipt
+        problem = self.rate.offer(
+            stamp, receipt, angular_velocity_problem(w, self.setup.loop.max_angular_velocity)
+            or specific_force_problem(specific_force), self._delay(delay))
+        if problem is None:
+            self._end_gap(self.rate, previous, receipt)
+            self.Omega = self.frames.angular_velocity(w)
+            self.bridge.gyro(self.Omega)
+            self.agreement.imu(self.Omega, None if specific_force is None
+                               else self.frames.imu_vector(specific_force), specific_force)
+        return problem
+
+    def offer_esc_health(self, command_max: int, escs: Sequence[int],
+                         receipt: float) -> Optional[str]:
+        """The ESC node's report: its motor.command_max and each ESC's health (EscHealth values,
+        in rotor order); None if taken, else why not.
+        """
+        if len(escs) != self.rotor_count or any(e not in EscHealth._value2member_map_
+                                                 for e in escs):
+            return 'expected %d ESC health codes of 0-3, got %r' % (self.rotor_count,
+                                                                     list(escs)[:12])
+        self.esc = EscStatus(int(command_max), tuple(EscHealth(e) for e in escs), receipt)
+        return None
+
+    def esc_report_problem(self, now: float) -> Optional[str]:
+        """Why the ESC node's report forbids flight now, or None (no ESC node: None)."""
+        return esc_problem(self.esc, now, self.setup.mixer.curve.command_max)
+
+    def _delay(self, delay):
+        """The delay a sample's stamp gives, if this loop takes ages from stamps."""
+        return delay if self.setup.loop.age_from_stamps else None
+
+    def _end_gap(self, stream, previous, receipt):
+        """Count a gap (a stale spell) of stream that the sample received at receipt ends."""
+        if previous is not None:
+            age = receipt - previous
+            if age >= stream.timeout:
+                g = self.gaps[stream.name]
+                g[0] += 1
+                g[1] = max(g[1], age)
+
+    def request_setpoint(self, q: Vector) -> Optional[str]:
+        """A new desired attitude; None if adopted, else why it was refused (old one stays)."""
+        problem = quaternion_problem(q)
+        if problem is None:
+            try:
+                self.controller.set_setpoint(so3.quat_to_rot(q))
+            except SetpointRejected as e:
+                problem = str(e)
+        self.setpoint_note = None if problem is None else 'setpoint rejected: ' + problem
+        return problem
+
+    # --- commands ----------------------------------------------------------------------------
+    def arm_problems(self, now: float, extra_problem: Optional[str] = None) -> List[str]:
+        """Every reason not to arm now (``core.supervisor.preflight.arm_problems``; empty: it
+        may).
+        """
+        return preflight.arm_problems(self, now, extra_problem)
+
+    def arm(self, now: float, extra_problem: Optional[str] = None) -> ArmResult:
+        """Arm unless arm_problems names a reason; the refusal names every one."""
+        problems = self.arm_problems(now, extra_problem)
+        was_armed = self.supervisor.armed
+        result = self.supervisor.arm(now, '; '.join(problems) or None)
+        if result.ok:
+            self._schedule_index = -1
+            self.agreement.reset_flight()
+            if not was_armed:
+                self.cone_entries, self.entry, self._inside = 0, None, False
+                self.step.history.clear()
+                self.step.predict.reset()
+                self.controller.replan()        # guidance's way from where the vehicle is
+        return result
+
+    def disarm(self, reason: str = 'disarm requested', failed: bool = False) -> ArmResult:
+        """Disarm; failed: by a failsafe (reason from core.telemetry.diagnostics.failsafe)."""
+        return self.supervisor.disarm(reason, failed)
+
+    def reset_adaptation(self) -> None:
+        self.controller.reset_adaptation()
+
+    def reconfigure(self, setup: Any, setpoint_changed: bool = False,
+                    schedule_changed: bool = False) -> Optional[str]:
+        """Adopt a new setup (validated by params.controller_setup); None, or why not.
+
+        The set point parameter is applied only when it changed, so that a gain change does not
+        undo a set point that came in on the topic.
+        """
+        try:
+            self.controller.reconfigure(setup.config)
+        except SetpointRejected as e:
+            return str(e)
+        setup.mixer.adopt_state(self.setup.mixer)
+        self.setup = setup
+        self.agreement.settings = setup.agreement
+        self.step.reconfigure(setup.mixer, 0.0)
+        s = setup.loop
+        self.pose.fallback_delay = self.rate.fallback_delay = s.measurement_delay
+        self.pose.timeout, self.pose.ride_through = s.pose_timeout, s.pose_ride_through
+        self.rate.timeout, self.rate.ride_through = s.imu_timeout, s.imu_ride_through
+        self.bridge.rate_window = s.pose_rate_window
+        if setpoint_changed:
+            self.controller.set_setpoint(setup.setpoint)
+        if schedule_changed:
+            self._schedule_index = -1
+        if s.allow_default_configuration:      # the opt-in, given at run time
+            self.unconfigured = None
+        return None
+
+    # --- the control tick --------------------------------------------------------------------
+    def tick(self, now: float, dt: float) -> LoopTick:
+        """One control step at time now (the node's clock); dt is the control period (the time
+        the step's command is expected to be held).
+        """
+        armed = self.supervisor.check(now)
+        if armed and self.esc is not None:          # the documented action: fail safe
+            problem = self.esc_report_problem(now)
+            if problem:
+                self.disarm(failsafe(problem), failed=True)
+                armed = False
+        if armed and self.agreement.flight_note and self.setup.agreement.enabled:
+            self.disarm(failsafe(self.agreement.flight_note), failed=True)
+            armed = False
+        schedule = self.setup.schedule
+        if armed and len(schedule):
+            i = schedule.index_at(now - self.supervisor.armed_since)
+            if i != self._schedule_index and i >= 0:
+                self.controller.set_setpoint(schedule.rotations[i])   # checked at configuration
+                self._schedule_index = i
+        state = self.bridge.update(now, self.pose.fresh(now), self.rate.fresh(now))
+        if state is None:
+            out, motors = self.step.idle(dt, now)
+            tick = self._result(None, motors, armed, False)
+        else:
+            bridging = self.bridge.bridging
+            R, Omega = state
+            # the measurements' ages: a bridged state is already propagated (not predicted
+            # again), but the loop is as blind as its last samples are old (the barrier's
+            # blind widening and the bound's watch count it); a stream that never came counts
+            # as fresh. The estimate learns only from measurements.
+            ages = tuple(0.0 if s.last_receipt is None else s.capture_age(now)
+                         for s in (self.pose, self.rate))
+            out, motors = self.step(R, Omega, dt, now, ages, armed=armed,
+                                    adapt=armed and not bridging, predict=not bridging)
+            if out is None:
+                self.disarm(NON_FINITE, failed=True)
+                armed = False
+            elif armed and out.violated:
+                self._note_entry(out)
+            else:
+                self._inside = False
+            tick = self._result(out, motors, armed, bridging)
+        if self.pose.last_receipt is not None:
+            self.pose_age.add(self.pose.age(now))
+        if self.rate.last_receipt is not None:
+            self.rate_age.add(self.rate.age(now))
+        self.window.note(armed, tick.motors.allocation.saturated, tick.bridging, self.step.blind,
+                         self.step.degraded.scale_now)
+        self.last_tick = tick
+        return tick
+
+    def _note_entry(self, out):
+        """The sensor is inside a cone while armed: count the entry, keep the deepest (latched
+        until the next arming).
+        """
+        margins = out.margins_deg
+        i = int(np.argmin(margins))
+        depth = -float(margins[i])
+        if not self._inside:
+            self.cone_entries += 1
+            self._inside = True
+        if self.entry is None or depth > self.entry[1]:
+            self.entry = (self.setup.config.cones.names[i], depth)
+
+    def _result(self, out, motors, armed, bridging):
+        b = self.bridge
+        return LoopTick(out, motors, armed, self._pose_stamp, self.pose.last_receipt,
+                    self.supervisor.reason, self.supervisor.failed,
+                    (b.attitude_source, b.rate_source),
+                    self.controller.R_d, bridging)
+
+    @property
+    def settings(self) -> LoopSettings:
+        """The LoopSettings in effect."""
+        return self.setup.loop
+
+    @property
+    def rotor_count(self) -> int:
+        return self.setup.mixer.allocator.count
+
+    def reconfiguration_problem(self, setup: Any) -> Optional[str]:
+        """Why setup (validated on its own) cannot replace the running one, or None: the set
+        point now being flown (it may have come in on the topic) against the new cones.
+        """
+        problem = self.controller.setpoint_problem(self.controller.R_d, setup.config.cones)
+        return None if problem is None else 'the current ' + problem
+
+    # --- what the diagnostics say ------------------------------------------------------------
+    def status(self, now: float, other_commanders: Optional[str] = None) -> Status:
+        """The diagnostics: level, message and figures (``core.supervisor.loop_status.status``).
+        other_commanders is the node's sentence when another node publishes the motor commands
+        (an error while armed).
+        """
+        return loop_status.status(self, now, other_commanders)
+
+    def gap_notes(self, now: float) -> List[str]:
+        """Sentences for the gaps being ridden through
+        (``core.supervisor.loop_status.gap_notes``).
+        """
+        return loop_status.gap_notes(self, now)
+
+    def end_window(self) -> None:
+        """Start a new diagnostics window (the node calls this on its fixed period)."""
+        self.pose_age.reset()
+        self.rate_age.reset()
+        self.window = loop_status.Window()

@@ -1,0 +1,144 @@
+"""What the controller's diagnostics say, composed from the loop's state (``ControlLoop.status``):
+the level, the message's sentences and the typed figures, and the per-window counts they use.
+"""
+from dataclasses import dataclass
+import math
+from typing import Any, List, Optional
+
+import numpy as np
+
+from geoctl_ros.core.supervisor.control_tick import BLIND_BOUND_S, SUSTAINED_BLIND_BOUND_S
+from geoctl_ros.core.supervisor.gaps import GYRO, POSE
+from geoctl_ros.core.telemetry.diagnostics import ERROR, OK, WARN, Counts, Figures, Gaps, Status
+
+NEAR_CONE_DEG = 2.0           # a cone margin below this is reported (WARN)
+
+
+@dataclass
+class Window:
+    """Counts over one diagnostics window (``end_window`` starts a new one)."""
+
+    ticks: int = 0
+    saturated: int = 0            # armed ticks with the allocation saturated
+    bridging: int = 0             # armed ticks riding through a gap
+    armed_ticks: int = 0
+    blind_ms: int = 0             # the longest blind time of an armed tick
+    steady_blind_ms: int = 0      # the shortest blind time of an armed tick (a sustained latency)
+    gain_pct: int = 100           # the lowest degraded-mode gain scale of an armed tick
+
+    def note(self, armed: bool, saturated: Any, bridging: bool, blind_s: float,
+             gain_scale: Any) -> None:
+        """One tick: armed or not, its allocation saturated, riding a gap, its blind time (s)
+        and the degraded mode's gain scale.
+        """
+        self.ticks += 1
+        self.saturated += bool(armed and saturated)
+        self.bridging += bool(armed and bridging)
+        if armed:
+            blind_ms = int(1e3 * blind_s)
+            gain_pct = int(round(100.0 * float(gain_scale)))
+            first = not self.armed_ticks
+            self.blind_ms = max(self.blind_ms, blind_ms)
+            self.steady_blind_ms = blind_ms if first else min(self.steady_blind_ms, blind_ms)
+            self.gain_pct = gain_pct if first else min(self.gain_pct, gain_pct)
+            self.armed_ticks += 1
+
+
+def gap_notes(loop: Any, now: float) -> List[str]:
+    """Sentences for the gaps being ridden through (empty in normal flight)."""
+    notes = []
+    b = loop.bridge
+    if b.attitude_source is not POSE:
+        notes.append('pose gap: attitude %s (pose %.3f s old, failsafe at %.3f s)'
+                     % (b.attitude_source.value, loop.pose.age(now), loop.pose.limit))
+    if b.rate_source is not GYRO:
+        notes.append('angular velocity gap: rate %s (imu %.3f s old, failsafe at %.3f s)'
+                     % (b.rate_source.value, loop.rate.age(now), loop.rate.limit))
+    return notes
+
+
+def status(loop: Any, now: float, other_commanders: Optional[str] = None) -> Status:
+    """The diagnostics: level, message and figures. other_commanders is the node's sentence
+    when another node publishes the motor commands (an error while armed).
+    """
+    errors: List[str] = []
+    warnings: List[str] = []
+    sup = loop.supervisor
+    if not sup.armed:
+        (errors if sup.failed else warnings).append(sup.reason)
+        if loop.unconfigured:
+            warnings.append(loop.unconfigured)
+        stale = sup.input_problem(now)
+        if stale:
+            warnings.append(stale)
+        escs = loop.esc_report_problem(now)
+        if escs:
+            warnings.append(escs)
+        # what the sensor checks would refuse now (a ground station shows it before arming)
+        warnings += ['sensor check: ' + p for p in loop.agreement.arm_problems(now)
+                     if 'no recent window' not in p]
+    else:
+        lost = sup.input_loss(now)
+        if lost:
+            errors.append(lost)
+        warnings += gap_notes(loop, now)
+    for s in (loop.pose, loop.rate):
+        reasons = s.take_refusals()
+        if reasons:
+            warnings.append('%s refused: %s (%d so far)' % (s.name, ' | '.join(reasons),
+                                                             s.refused))
+    tick = loop.last_tick
+    out = tick.control if tick else None
+    if sup.armed and loop.entry is not None:
+        errors.append('sensor entered cone %r, %.2f deg deep (%d entr%s since arming)'
+                      % (loop.entry[0], loop.entry[1], loop.cone_entries,
+                         'y' if loop.cone_entries == 1 else 'ies'))
+    if out is not None and len(out.margins_deg):
+        i = int(np.argmin(out.margins_deg))
+        name = loop.setup.config.cones.names[i]
+        cones = loop.setup.config.cones
+        near = max(NEAR_CONE_DEG, math.degrees(cones.guard + cones.floor))
+        if out.violated:
+            errors.append('sensor inside cone %r (margin %.2f deg)'
+                          % (name, out.margins_deg[i]))
+        elif out.margins_deg[i] < near:
+            warnings.append('near cone %r (margin %.2f deg)' % (name, out.margins_deg[i]))
+    w = loop.window
+    if sup.armed and w.steady_blind_ms > 1e3 * SUSTAINED_BLIND_BOUND_S:
+        warnings.append('loop blind at least %d ms at every tick of the window (a sustained '
+                        'latency): beyond the %.0f ms of the envelope tested and attacked '
+                        '(docs/safety.md)'
+                        % (w.steady_blind_ms, 1e3 * SUSTAINED_BLIND_BOUND_S))
+    elif sup.armed and w.blind_ms > 1e3 * BLIND_BOUND_S:
+        warnings.append('loop blind up to %d ms (inputs up to %.0f ms old by receipt, plus '
+                        'their delay to receipt and late steps): beyond the %.0f ms of the '
+                        'envelope tested and attacked (docs/safety.md)' % (w.blind_ms, 1e3 * max(
+                            np.max(loop.pose_age.samples(), initial=0.0),
+                            np.max(loop.rate_age.samples(), initial=0.0)),
+                            1e3 * BLIND_BOUND_S))
+    if sup.armed and w.armed_ticks and w.gain_pct < 100:
+        warnings.append('degraded: feedback gains down to %d %% of their bandwidth while '
+                        'blind past the bound' % w.gain_pct)
+    if w.saturated:
+        warnings.append('allocation saturated in %d of %d ticks'
+                        % (w.saturated, w.ticks))
+    if loop.setpoint_note:
+        warnings.append(loop.setpoint_note)
+    if other_commanders:
+        (errors if sup.armed else warnings).append(other_commanders)
+    level = ERROR if errors else WARN if warnings else OK
+    margin = None
+    if out is not None and len(out.margins_deg):
+        margin = float(np.min(out.margins_deg))
+    figures = Figures(
+        armed=sup.armed, failsafe=sup.failed and not sup.armed, state=sup.reason,
+        pose_age=loop.pose.age(now), imu_age=loop.rate.age(now),
+        pose_counts=Counts(loop.pose.accepted, loop.pose.refused),
+        imu_counts=Counts(loop.rate.accepted, loop.rate.refused),
+        pose_age_at_tick=loop.pose_age.window(), imu_age_at_tick=loop.rate_age.window(),
+        pose_gaps=Gaps(*loop.gaps['pose']), imu_gaps=Gaps(*loop.gaps['angular velocity']),
+        ticks_bridging=w.bridging, ticks=w.ticks, cone_entries=loop.cone_entries,
+        psi=None if out is None else float(out.psi), min_cone_margin_deg=margin,
+        motor_commands=None if out is None else tuple(int(c) for c in tick.motors.commands))
+    message = '; '.join(errors + warnings) or 'armed, all inputs fresh'
+    return Status(level, message, figures)

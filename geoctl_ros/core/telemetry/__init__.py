@@ -1,0 +1,3 @@
+"""Telemetry: the typed diagnostics and their keys (one codec), the reporting window's statistics,
+and the live view's geometry.
+"""
