@@ -387,7 +387,9 @@ def test_with_a_key_only_the_station_holding_it_reads_sets_arms_and_disarms(tmp_
         gcs.wait(lambda m: m.get_type() == 'HEARTBEAT' and is_ours(m), 40.0, 'a signed heartbeat')
         bridge = next(iter(gcs.conn.clients))               # the bridge's address
         g.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-        mon.wait_for(mon.controller_has_inputs, 30.0, 'the controller to receive the sim')
+        # (the arm below needs the controller's sensor checks to have a window to judge)
+        mon.wait_for(mon.controller_can_judge_its_sensors, 30.0,
+                     'the controller to receive the sim')
         t0 = time.monotonic()
         g.param_request_list_send(SYSID, 1)
         gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE' and m.param_index == len(TABLE) - 1,

@@ -162,6 +162,15 @@ class Monitor(Node):
         return (d is not None and d.figures.pose_counts.accepted > 0
                 and d.figures.imu_counts.accepted > 0)
 
+    def controller_can_judge_its_sensors(self):
+        """True once the controller's diagnostics show 60 accepted samples of each input: more
+        than the half second of poses and IMU samples its sensor checks judge at arming, at the
+        rates a testbed streams (100-200 Hz).
+        """
+        d = self.last_diagnostic()
+        return (d is not None and d.figures.pose_counts.accepted >= 60
+                and d.figures.imu_counts.accepted >= 60)
+
     def since(self, key, t0):
         return [v for t, v in self.log[key] if t >= t0]
 

@@ -24,7 +24,7 @@ window): a mismatch must exceed about a third of the motion, for ``FLIGHT_WINDOW
 row; the failsafe names the cause the first of them shows.
 
 ``SensorAgreement`` takes the converted samples (``core.sensors.frames.InputFrames``) as they come
-and closes a window on the pose that ends it; it allocates only then.
+and closes a window on the pose that ends it; it computes (and allocates) only then.
 """
 from dataclasses import dataclass
 import math
@@ -32,7 +32,6 @@ from typing import List, NamedTuple, Optional
 
 import numpy as np
 
-from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.so3 import Vector
 from geoctl_ros.core.sensors.frames import (
     BODY_FRAMES,
@@ -92,31 +91,48 @@ class Window(NamedTuple):
         return None if self.force is None else tilt_deg(self.force, self.up)
 
 
+def _log_stack(M: np.ndarray) -> np.ndarray:
+    """Rotation vectors of a stack of rotations (n, 3, 3), each turned by less than pi (a
+    window's own motion: ``so3.log``'s formula away from pi, for the stack at once).
+    """
+    skew = 0.5 * np.stack([M[:, 2, 1] - M[:, 1, 2], M[:, 0, 2] - M[:, 2, 0],
+                           M[:, 1, 0] - M[:, 0, 1]], axis=1)
+    sin_t = np.linalg.norm(skew, axis=1)
+    theta = np.arctan2(sin_t, 0.5 * (M[:, 0, 0] + M[:, 1, 1] + M[:, 2, 2] - 1.0))
+    scale = np.where(sin_t > 1e-12, theta / np.where(sin_t > 1e-12, sin_t, 1.0), 1.0)
+    return skew * scale[:, None]
+
+
 class _Accumulator:
-    """Sums over one window of poses (by their stamps) and of the IMU's samples."""
+    """One window of poses (kept, by their stamps, in preallocated buffers: the hot path stores
+    a pose and adds an IMU sample, nothing more) and the sums of the IMU's samples; the window's
+    figures are computed once, when a pose closes it.
+    """
+
+    CAPACITY = 1024          # poses a window holds (a full one closes early)
 
     def __init__(self, span: float, settings: AgreementSettings):
         self.span, self.settings = span, settings
         self.up_world = -settings.gravity / np.linalg.norm(settings.gravity)
-        self.R0: Optional[np.ndarray] = None
+        self.Rs = np.zeros((self.CAPACITY, 3, 3))
+        self.ts = np.zeros(self.CAPACITY)
+        self.n = 0
         self.t0 = 0.0
+        self.w = np.zeros(3)
+        self.f = np.zeros(3)
+        self.nw = self.nf = 0
         self.last: Optional[Window] = None
 
     def _restart(self, R, stamp):
-        self.R0, self.t0 = R, stamp
-        self.n = 0
-        self.st = self.stt = 0.0
-        self.sth = np.zeros(3)
-        self.sh = np.zeros(3)
-        self.up = np.zeros(3)
-        self.w = np.zeros(3)
-        self.nw = 0
-        self.f = np.zeros(3)
-        self.nf = 0
-        self.turned = 0.0
+        self.Rs[0] = R
+        self.ts[0] = stamp
+        self.n, self.t0 = 1, stamp
+        self.w[:] = 0.0
+        self.f[:] = 0.0
+        self.nw = self.nf = 0
 
     def imu(self, w: np.ndarray, f: Optional[np.ndarray]) -> None:
-        if self.R0 is None:
+        if not self.n:
             return
         self.w += w
         self.nw += 1
@@ -125,40 +141,43 @@ class _Accumulator:
             self.nf += 1
 
     def pose(self, R: np.ndarray, stamp: float, receipt: float) -> Optional[Window]:
-        R0 = self.R0
-        if R0 is None or stamp < self.t0:
+        if not self.n or stamp < self.t0:
             self._restart(R, stamp)
-            R0 = R
-        tau = stamp - self.t0
-        theta = so3.log(R0.T @ R)
-        self.n += 1
-        self.st += tau
-        self.stt += tau * tau
-        self.sh += theta
-        self.sth += tau * theta
-        self.up += R.T @ self.up_world
-        self.turned = max(self.turned, float(theta @ theta))
-        if tau < self.span:
             return None
-        s = self.settings
-        spread = self.n * self.stt - self.st * self.st
-        out = None
-        if self.nw and spread > 0.0:
-            slope = (self.n * self.sth - self.st * self.sh) / spread
-            sigma_rate = math.hypot(s.attitude_noise * math.sqrt(self.n / spread),
-                                    s.gyro_noise / math.sqrt(self.nw))
-            force = self.f / self.nf if self.nf else None
-            g = float(np.linalg.norm(s.gravity))
-            sigma_tilt = math.hypot(s.attitude_noise / math.sqrt(self.n),
-                                    s.accelerometer_noise / (g * math.sqrt(max(self.nf, 1))))
-            gyro = self.w / self.nw
-            resolved = (self.turned < RESOLVED_RAD ** 2
-                        and float(np.linalg.norm(gyro)) * tau < RESOLVED_RAD)
-            out = self.last = Window(receipt, gyro, slope, SIGMAS * sigma_rate,
-                                     self.up / self.n, force, SIGMAS * sigma_tilt, self.n,
-                                     self.nw, resolved)
+        k = self.n
+        self.Rs[k] = R
+        self.ts[k] = stamp
+        self.n = k + 1
+        tau = stamp - self.t0
+        if tau < self.span and self.n < self.CAPACITY:
+            return None
+        out = self._close(receipt, tau)
         self._restart(R, stamp)
         return out
+
+    def _close(self, receipt: float, span: float) -> Optional[Window]:
+        n, s = self.n, self.settings
+        Rs, t = self.Rs[:n], self.ts[:n] - self.t0
+        theta = _log_stack(np.matmul(Rs[0].T, Rs))
+        st, stt = float(t.sum()), float(t @ t)
+        spread = n * stt - st * st
+        if not self.nw or spread <= 0.0:
+            return None
+        slope = (n * (t @ theta) - st * theta.sum(axis=0)) / spread
+        sigma_rate = math.hypot(s.attitude_noise * math.sqrt(n / spread),
+                                s.gyro_noise / math.sqrt(self.nw))
+        force = self.f / self.nf if self.nf else None
+        g = float(np.linalg.norm(s.gravity))
+        sigma_tilt = math.hypot(s.attitude_noise / math.sqrt(n),
+                                s.accelerometer_noise / (g * math.sqrt(max(self.nf, 1))))
+        gyro = self.w / self.nw
+        turned = float(np.max(np.einsum('ij,ij->i', theta, theta)))
+        resolved = (turned < RESOLVED_RAD ** 2
+                    and float(np.linalg.norm(gyro)) * span < RESOLVED_RAD)
+        up = (self.up_world @ Rs).mean(axis=0)           # the mean of R^T e_up
+        self.last = Window(receipt, gyro, slope, SIGMAS * sigma_rate, up, force,
+                           SIGMAS * sigma_tilt, n, self.nw, resolved)
+        return self.last
 
 
 # the conventions a mismatch is checked against, to name its likely cause:
