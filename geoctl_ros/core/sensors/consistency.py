@@ -32,7 +32,6 @@ from typing import List, NamedTuple, Optional
 
 import numpy as np
 
-from geoctl_ros.core.geometry.so3 import Vector
 from geoctl_ros.core.sensors.frames import (
     BODY_FRAMES,
     WORLD_FRAMES,
@@ -204,14 +203,9 @@ class SensorAgreement:
         self.flight_note: Optional[str] = None    # why, once FLIGHT_WINDOWS in a row did
         self.rest_problems: Optional[List[str]] = None   # the last rest window's verdict
         self.raw_pose: Optional[np.ndarray] = None    # the newest pose as the source streamed it
-        self.raw_force: Optional[Vector] = None       # the newest specific force as given
 
-    def imu(self, w: np.ndarray, f: Optional[np.ndarray],
-            raw_force: Optional[Vector] = None) -> None:
-        """A converted gyro sample and specific force (None: the IMU gave none); raw_force: the
-        specific force as the IMU gave it (to name a likely cause).
-        """
-        self.raw_force = raw_force
+    def imu(self, w: np.ndarray, f: Optional[np.ndarray]) -> None:
+        """A converted gyro sample and specific force (None: the IMU gave none)."""
         self.rest.imu(w, f)
         self.flight.imu(w, f)
 
@@ -306,9 +300,9 @@ class SensorAgreement:
         """
         fr = self.frames
         fits = []
-        if self.raw_force is not None and self.raw_pose is not None:
+        if self.raw_pose is not None and w.force is not None:
             up_world = -self.settings.gravity / np.linalg.norm(self.settings.gravity)
-            raw_f = np.asarray(self.raw_force, dtype=float)
+            raw_f = fr.source_vector(w.force)      # the window's mean, as the IMU gave it
             other = 'frd' if fr.body == 'flu' else 'flu'
             if tilt_deg(fr.imu_rotation @ BODY_FRAMES[other].T @ raw_f, w.up) <= allowed:
                 fits.append('the IMU looks %s while body_frame says %s'
