@@ -54,11 +54,28 @@ def test_the_distribution_is_what_the_readme_says():
                           manoeuvres.draw_manoeuvre(7, 3, r)['R_d'])
 
 
+@odroid
+def test_the_near_cone_stratum_starts_near_a_cone_with_a_late_loop():
+    """Its runs start 5-11 deg from their first cone with 30-60 ms of latency, and the
+    campaign's own draw is what it was without the option.
+    """
+    r = np.array([1.0, 0.0, 0.0])
+    for i in range(20):
+        m = manoeuvres.draw_manoeuvre(7, i, r, stratum='near-cone')
+        v0, th0 = np.array(m['cones'][0][0]), m['cones'][0][1]
+        clear = np.degrees(np.arccos(m['R0'] @ r @ v0)) - th0
+        assert 5.0 - 1e-9 <= clear <= 11.0 + 1e-9 and 30 <= m['latency_ms'] <= 60
+        plain = manoeuvres.draw_manoeuvre(7, i, r)
+        assert np.array_equal(plain['R_d'],
+                              manoeuvres.draw_manoeuvre(7, i, r, stratum='all')['R_d'])
+
+
 def test_a_run_written_out_replays_to_the_same_figures(tmp_path):
     """A campaign's batch (flown as a worker flies it) and one of its runs alone from its file."""
     base = load_parameter_file(TESTBED)
     indices = [i for i in range(30) if manoeuvres.cone_count(1, i) == 2][:6]
-    figures = runner.fly_batch((base, 1, 3.0, manoeuvres.DISTURBANCE_MAX, 1, {}, indices, 2))
+    figures = runner.fly_batch((base, 1, 3.0, manoeuvres.DISTURBANCE_MAX, 1, {}, indices, 2,
+                                'all'))
     assert list(figures['run']) == indices and set(figures['cones']) == {2}
     i = indices[4]
     path = tmp_path / 'run.yaml'

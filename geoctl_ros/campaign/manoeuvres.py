@@ -34,6 +34,7 @@ cone count without drawing them, and its second everything else):
 """
 import math
 import os
+from typing import NamedTuple, Tuple
 
 import numpy as np
 
@@ -63,6 +64,20 @@ MODEL_ERROR = 0.2                  # true mass, inertia stretch and centre of ma
 LATENCY_MS_MAX = 60                # measurement latency 0..this (whole ms, uniform)
 STALL_RATE = 0.5                   # input stalls per second (Poisson)
 STALL_MS = (10, 40)                # each stall's length (whole ms, uniform)
+
+
+class Stratum(NamedTuple):
+    """Where a campaign's runs are drawn from: the sensor's start outside the first cone (deg,
+    uniform) and the measurement latency (whole ms, uniform); the rest of the draw is the same.
+    """
+
+    start_clear_deg: Tuple[float, float] = (5.0, 30.0)
+    latency_ms: Tuple[int, int] = (0, LATENCY_MS_MAX)
+
+
+# 'all': the campaign's draw; 'near-cone': its hardest part, where every close approach of the
+# 10,000-run campaigns started (5-11 deg from a cone, 30-60 ms of latency; docs/campaigns.md)
+STRATA = {'all': Stratum(), 'near-cone': Stratum((5.0, 11.0), (30, LATENCY_MS_MAX))}
 
 
 def _aligning(r, d):
@@ -133,10 +148,12 @@ def _place_cones(rng, n):
             return theta[k], list(axes[k])
 
 
-def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None, duration=20.0):
+def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None, duration=20.0, stratum='all'):
     """The random part of run index of campaign seed: a dict of per-run values. goal_ok(cones,
     R_d) (cones as [(axis, half-angle deg)]), if given, must accept the goal (else redrawn).
+    stratum: the part of the draw (``STRATA``; the same random numbers, other bounds).
     """
+    part = STRATA[stratum]
     n = cone_count(seed, index)
     rng = np.random.default_rng(run_seeds(seed, index)[1])
     r = sphere.unit(np.asarray(sensor_axis, dtype=float))
@@ -144,7 +161,8 @@ def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None, duration=20.0):
         theta, axes = _place_cones(rng, n)
         v0, th0 = axes[0], math.radians(theta[0])
         azimuth = rng.uniform(0.0, 2.0 * math.pi)
-        d0 = sphere.direction(v0, th0 + math.radians(rng.uniform(5.0, 30.0)), azimuth)
+        d0 = sphere.direction(v0, th0 + math.radians(rng.uniform(*part.start_clear_deg)),
+                              azimuth)
         d1 = sphere.direction(v0, th0 + math.radians(rng.uniform(5.0, 30.0)),
                         azimuth + math.pi + math.radians(rng.uniform(-30.0, 30.0)))
         if any(angle_deg(d, v) < t + CLEAR_DEG for d in (d0, d1) for v, t in zip(axes, theta)):
@@ -159,7 +177,7 @@ def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None, duration=20.0):
     return {
         'cones': [(list(map(float, v)), float(t)) for v, t in zip(axes, theta)],
         'R0': R0, 'R_d': R_d,
-        'latency_ms': int(rng.integers(0, LATENCY_MS_MAX + 1)),
+        'latency_ms': int(rng.integers(part.latency_ms[0], part.latency_ms[1] + 1)),
         'disturbance': push * rng.uniform(0.0, 1.0),      # times --disturbance-max
         'mass_factor': rng.uniform(1.0 - MODEL_ERROR, 1.0 + MODEL_ERROR),
         'inertia_factors': rng.uniform(1.0 - MODEL_ERROR, 1.0 + MODEL_ERROR, 3),
@@ -201,8 +219,9 @@ class Manoeuvres:
     the one the testbed's own controller accepts, so every gain set of a study flies the same runs.
     """
 
-    def __init__(self, base, duration=20.0, disturbance_max=DISTURBANCE_MAX):
+    def __init__(self, base, duration=20.0, disturbance_max=DISTURBANCE_MAX, stratum='all'):
         self.base, self.duration, self.disturbance_max = base, float(duration), disturbance_max
+        self.stratum = stratum
         self.nominal_c = resolve(CONTROLLER, node_overrides(base, CONTROLLER))
         self.nominal_s = resolve(SIM, node_overrides(base, SIM))
         self.unmodelled = unmodelled_moment(self.nominal_s, disturbance_max)
@@ -234,7 +253,7 @@ class Manoeuvres:
         ``goal_refused`` tells.
         """
         m = draw_manoeuvre(seed, index, self.nominal_c['sensor_axis'], self.goal_ok,
-                           self.duration)
+                           self.duration, self.stratum)
         return self.sections_of(m, 'campaign seed %d, run %d' % (seed, index), gains)
 
     def sections_of(self, m, title, gains=None):

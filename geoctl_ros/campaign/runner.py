@@ -72,11 +72,11 @@ def _scenario(sections, name):
 def fly_batch(job):
     """Worker: fly one batch of runs of one gain set; their figures (arrays, one entry per run).
     job: (base sections, seed, duration, disturbance max, gain set number, gains, run indices,
-    how many of its worst runs to keep the series of).
+    how many of its worst runs to keep the series of, the draw's stratum).
     """
-    base, seed, duration, disturbance_max, gain_set, gains, indices, worst = job
+    base, seed, duration, disturbance_max, gain_set, gains, indices, worst, stratum = job
     t0 = time.perf_counter()
-    draw = manoeuvres.Manoeuvres(base, duration, disturbance_max)
+    draw = manoeuvres.Manoeuvres(base, duration, disturbance_max, stratum)
     sections = [draw.sections(seed, i, gains) for i in indices]
     scenarios = [_scenario(s, 'run_%d' % i) for i, s in zip(indices, sections)]
     drawn = time.perf_counter() - t0
@@ -117,7 +117,7 @@ def fly(client, base, args, gain_sets, progress=None):
     for k, gains in enumerate(gain_sets, 1):
         for indices in plan(list(groups.values()), workers, args.batch):
             jobs.append((base, args.seed, args.duration, args.disturbance_max, k, gains, indices,
-                         args.worst))
+                         args.worst, getattr(args, 'stratum', 'all')))
     parts, worst = [], []
 
     def take(i, part):               # keep the figures, and the series of the worst runs only
@@ -127,7 +127,7 @@ def fly(client, base, args, gain_sets, progress=None):
     interrupted = False
     try:
         cluster.run_tasks(client, fly_batch, jobs, take, progress,
-                          weights=[len(j[-2]) for j in jobs])
+                          weights=[len(j[6]) for j in jobs])
     except KeyboardInterrupt:
         interrupted = True
     columns = {c: np.concatenate([p[c] for p in parts]) if parts else np.array([])
@@ -164,7 +164,8 @@ def replay(paths):
 
 def worst_runs(worst, base, args, gain_sets, out_dir):
     """Write the worst runs as scenario files and draw worst_runs.png; their labels."""
-    draw = manoeuvres.Manoeuvres(base, args.duration, args.disturbance_max)
+    draw = manoeuvres.Manoeuvres(base, args.duration, args.disturbance_max,
+                                 getattr(args, 'stratum', 'all'))
     os.makedirs(os.path.join(out_dir, 'worst'), exist_ok=True)
     flown, labels = [], []
     for closest, k, i, margins, sensor, dt in worst:
@@ -196,7 +197,9 @@ def write_results(columns, worst, interrupted, timing, base, args, gain_sets):
     summary['simulated / wall time (per worker)'] = '%.0f (%.0f)' % (
         n * args.duration / wall, n * args.duration / wall / workers)
     labels = worst_runs(worst, base, args, gain_sets, args.out)
-    lines = ['| campaign seed %d%s | |' % (args.seed, ' (interrupted)' if interrupted else ''),
+    stratum = getattr(args, 'stratum', 'all')
+    lines = ['| campaign seed %d%s%s | |' % (args.seed, '' if stratum == 'all' else ', ' + stratum,
+                                           ' (interrupted)' if interrupted else ''),
              '|---|---|']
     lines += ['| %s | %s |' % (k, v) for k, v in summary.items()]
     lines += ['', 'worst runs: ' + ', '.join(labels)]
