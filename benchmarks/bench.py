@@ -143,8 +143,10 @@ def node_tick_us(samples=3000):
                                                    Parameter('consistency_checks', value=False)])
 
         pose, imu = PoseStamped(), Imu()
-        # the testbed flying its first set point: 5 deg off it, turning at 0.1 rad/s
-        R_d0 = node.loop.setup.schedule.rotations[0]
+        # the testbed near its set point (its schedule's first, if it has one): 5 deg off it,
+        # turning at 0.1 rad/s
+        setup = node.loop.setup
+        R_d0 = setup.schedule.rotations[0] if len(setup.schedule) else setup.setpoint
         set_quaternion(pose.pose.orientation,
                        so3.rot_to_quat(R_d0 @ so3.axis_angle([0.2, 0.1, 1.0], np.radians(5.0))))
         set_vector(imu.angular_velocity, (0.05, -0.05, 0.07))
