@@ -161,8 +161,8 @@ def test_the_tolerances_come_from_the_noise_and_refuse_no_true_installation():
 def test_in_flight_an_imu_90_deg_off_in_yaw_fails_safe_naming_it_and_a_true_one_never():
     """The testbed's yaw past the cone (its true states, headless), measured by an IMU mounted
     90 deg off in yaw with the defaults: the loop, armed, fails safe within the first 3 s (two
-    0.1 s windows of its motion in a row that disagree), naming the yaw; measured by a true IMU (or the mounting given): no failsafe
-    all through.
+    0.1 s windows of its motion in a row that disagree), naming the yaw; measured by a true IMU
+    (or the mounting given): no failsafe all through.
     """
     sc = scenario.load(os.path.join(ROOT, 'config', 'scenarios', 'testbed_yaw90.yaml'))
     run = scenario.run(sc, duration=8.0)
