@@ -156,14 +156,16 @@ def test_approach_rates_are_the_time_derivative_of_the_angle_to_each_cone():
 @pytest.mark.headless
 def test_testbed_yaw90_keeps_the_cone_with_50_ms_of_latency_and_10_ms_of_jitter():
     """The issue's case: config/scenarios/testbed_yaw90.yaml, its measurements 50 ms old (from
-    their capture stamps) and its steps up to 10 ms late. Before the prediction over the commands
-    sent, the sensor went 10.8 deg into the cone and the testbed fell over (162 deg error).
+    their capture stamps) and its steps up to 10 ms late: the cone's 2 deg guard kept, and the
+    goal reached (docs/safety.md, "Measured").
     """
     s = scenario.load(os.path.join(ROOT, 'config', 'scenarios', 'testbed_yaw90.yaml'))
     s.options.update(latency=0.05, tick_jitter=0.01)
     r = scenario.run(s)
-    assert not r.summary['constraint_violated'], r.summary['min_cone_angle_deg']
-    assert r.summary['final_attitude_error_deg'] < 10.0
+    margin = min(r.summary['min_cone_angle_deg'][n] - r.summary['cone_half_angle_deg'][n]
+                 for n in r.summary['min_cone_angle_deg'])
+    assert margin >= 2.0, r.summary['min_cone_angle_deg']            # the guard kept (8.75)
+    assert r.summary['final_attitude_error_deg'] < 1.0                 # and arrived (0.14)
 
 
 @odroid
