@@ -14,6 +14,7 @@ arguments or parameters.
 """
 import argparse
 import datetime
+import math
 import sys
 import time
 
@@ -35,12 +36,12 @@ from geoctl_ros.nodes import qos
 from geoctl_ros.params import (
     CONTROLLER,
     ConfigError,
+    controller_setup,
     load_parameter_file,
     node_overrides,
     resolve,
     write_parameter_file,
 )
-from geoctl_ros.params.build import input_frames
 from geoctl_ros.records.fields import quaternion, vector
 
 MAX_RATE = 100.0      # rad/s: a gyro reading beyond this is not a vehicle at rest
@@ -84,13 +85,14 @@ def main(argv=None):
     if not 0.5 <= args.seconds <= 600.0:
         parser.error('--seconds must be within 0.5 and 600')
     try:
-        values = resolve(CONTROLLER, node_overrides(load_parameter_file(args.params_file),
-                                                    CONTROLLER))
+        setup = controller_setup(resolve(CONTROLLER, node_overrides(
+            load_parameter_file(args.params_file), CONTROLLER)))
     except ConfigError as e:
         print('calibrate: %s' % e, file=sys.stderr)
         return 2
-    frames = input_frames(dict(values, gyro_bias=[0.0, 0.0, 0.0]))
-    gravity = float(np.linalg.norm(values['gravity']))
+    # (the conventions of the file; its own gyro_bias is not used: calibrate measures the raw one)
+    frames, told = setup.frames, setup.agreement
+    gravity = float(np.linalg.norm(told.gravity))
     rclpy.init()
     node = Listener()
     try:
@@ -129,7 +131,7 @@ def main(argv=None):
            args.seconds, c.spread_deg, c.heading_deg,
            'stated' if args.heading_deg is not None else "the markers' own",
            c.attitude_noise_deg, c.gyro_noise, c.accelerometer_noise, args.params_file,
-           values['attitude_noise_deg'], values['gyro_noise'], values['accelerometer_noise'],
+           math.degrees(told.attitude_noise), told.gyro_noise, told.accelerometer_noise,
            args.params_file))
     print('gyro_bias: [%s] rad/s\nmarker_rotation_deg: [%s]\nimu_rotation_deg: [%s]\n'
           'noise: attitude %.3f deg, gyro %.4f rad/s, accelerometer %.3f m/s^2\nwrote %s'

@@ -38,7 +38,7 @@ from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg
 from geoctl_ros.nodes.runtime import RefusalLog, spin
 from geoctl_ros.params import SIM, ConfigError, settings
-from geoctl_ros.params.build import input_frames
+from geoctl_ros.params.build import emulated_imu
 from geoctl_ros.records.fields import vector
 from geoctl_ros.sim.build import testbed_sim
 from geoctl_ros.sim.testbed import EscWatchdog
@@ -71,10 +71,9 @@ class SimNode(Node):
         self.imu_period = 1.0 / cfg.imu_rate_hz
         self.next_pose = self.next_imu = 0.0
         # the sources it emulates: their conventions, and the IMU's place and accelerometer
-        self.frames = input_frames(values)
-        self.imu_position = np.array(values['imu_position'], dtype=float)
-        self.force_noise = cfg.noise_specific_force
-        self.gravity = np.array(values['gravity'], dtype=float)
+        imu = emulated_imu(values)
+        self.frames, self.imu_position = imu.frames, imu.position
+        self.force_noise, self.gravity = imu.force_noise, imu.gravity
         self._last_imu = None                     # (t, Omega) at the last imu sample
 
         self.esc_bus = None

@@ -88,6 +88,25 @@ def input_frames(values: dict) -> InputFrames:
                           values.get('gyro_bias', (0.0, 0.0, 0.0)))
 
 
+@dataclass(frozen=True)
+class EmulatedImu:
+    """The IMU (and motion capture) the sim emulates: their conventions, where the IMU sits (m
+    from the pivot, body) and its accelerometer's noise (m/s^2), and the world's gravity.
+    """
+
+    frames: InputFrames
+    position: np.ndarray
+    force_noise: float
+    gravity: np.ndarray
+
+
+def emulated_imu(values: dict) -> EmulatedImu:
+    """The EmulatedImu of resolved sim parameters."""
+    return EmulatedImu(input_frames(values), np.array(values['imu_position'], dtype=float),
+                       float(values['noise.specific_force']),
+                       np.array(values['gravity'], dtype=float))
+
+
 def agreement_settings(values: dict) -> AgreementSettings:
     """The sensor checks' settings (core.sensors.consistency) of resolved controller parameters."""
     return AgreementSettings(values['consistency_checks'],
