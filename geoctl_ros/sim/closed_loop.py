@@ -40,10 +40,10 @@ from geoctl_ros.sim.runs import (
     PER_RUN,
     Testbeds,
     differing,
-    drawn_noise,
     shared_holds,
     stalled_steps,
 )
+from geoctl_ros.sim.testbed import measured_attitude, measured_rate
 
 SETTLED_DEG = 5.0       # attitude error below which a run has converged (at the end) or settled
 FINE_DEG = 1.0          # attitude error below which a run has arrived (settle_fine_s)
@@ -122,7 +122,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     steps = len(holds)
     j_at = np.cumsum(holds) - holds                   # integration steps before each step
     times = j_at / rate_sub
-    noise = drawn_noise(scenarios, sv, steps)
+    noise = bed.noise(steps)
     schedule = setup.schedule
     # latency: a ring of the last states, one per integration step
     delay = np.array([int(round(s.options['latency'] * rate_sub)) for s in scenarios])
@@ -166,8 +166,8 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
             controller.R_d = np.repeat(schedule.rotations[i][None], n, axis=0)
             scheduled = i
         seen = np.maximum(j - delay, 0) % ring
-        R_new = so3.matmul(R_past[seen, runs], so3.exp(noise[0, k]))
-        W_new = W_past[seen, runs] + bed.gyro_bias + noise[1, k]
+        R_new = measured_attitude(R_past[seen, runs], noise[0, k])
+        W_new = measured_rate(W_past[seen, runs], bed.gyro_bias, noise[1, k])
         if any_stall:
             fresh = ~stalled[k]
             R_seen = np.where(fresh[:, None, None], R_new, R_seen)

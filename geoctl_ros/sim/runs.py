@@ -5,18 +5,17 @@ own seed, the late steps and the stalls.
 from __future__ import annotations
 
 from dataclasses import replace
-import math
-from typing import List, Optional, Tuple
+from typing import Any, Callable, List, Optional, Tuple
 
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.control import AttitudeController
-from geoctl_ros.params import CONTROLLER, SIM, airframe, cone_set, controller_setup
+from geoctl_ros.params import CONTROLLER, SIM, cone_set, controller_setup
 from geoctl_ros.params.scenario import Scenario
+from geoctl_ros.sim.build import TestbedSetup, testbed_setup
 from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
-from geoctl_ros.sim.testbed import RotorActuator
 
 # What may differ between the runs of a batch (everything else must be equal).
 PER_RUN = {
@@ -84,36 +83,22 @@ def shared_holds(scenarios: List[Scenario], rate: float, n_sub: int,
     return holds[0]
 
 
-def drawn_noise(scenarios: List[Scenario], sv: dict, steps: int) -> np.ndarray:
-    """Per run, the motion-capture and gyro noise of every step, (2, steps, runs, 3), drawn from
-    the run's seed in TestbedSim's order: per step the attitude's 3, then the gyro's 3.
-    """
-    sigmas = [math.radians(sv['noise.attitude_deg']), sv['noise.angular_velocity']]
-    drawn = [i for i, sigma in enumerate(sigmas) if sigma > 0.0]
-    noise = np.zeros((2, steps, len(scenarios), 3))
-    for j, s in enumerate(scenarios):
-        z = np.random.default_rng(s.sim['noise.seed']).standard_normal((steps, len(drawn), 3))
-        for slot, i in enumerate(drawn):
-            noise[i, :, j] = sigmas[i] * z[:, slot]
-    return noise
-
-
 class Testbeds:
     """The controller and the simulated testbeds of a batch, built from its scenarios."""
 
     def __init__(self, scenarios):
-        first = scenarios[0]
-        cv, sv = first.controller, first.sim
+        cv = scenarios[0].controller
         n = len(scenarios)
         self.setup = setup = controller_setup(cv)                     # gains, model, mixer
 
-        def stack(key: str) -> np.ndarray:
-            return np.array([s.sim[key] for s in scenarios], dtype=float)
+        # each run's testbed, as the sim node builds its own (sim.build.testbed_setup)
+        self.beds = beds = [testbed_setup(s.sim) for s in scenarios]
 
         # One run flies its testbed unstacked: its small products then go in floats, in the order
         # of a stack's (geoctl_ros.core.geometry.so3), the same bits three times faster.
-        def per_run(key: str) -> np.ndarray:
-            return stack(key)[0] if n == 1 else stack(key)
+        def per_run(get: Callable[[TestbedSetup], Any]) -> np.ndarray:
+            stacked = np.array([get(b) for b in beds], dtype=float)
+            return stacked[0] if n == 1 else stacked
         self.single = n == 1
 
         shared = setup.config.cones
@@ -126,22 +111,27 @@ class Testbeds:
         self.controller.R_d = np.array([so3.quat_to_rot(s.controller['setpoint'])
                                         for s in scenarios])
         self.controller.delta_bar = np.zeros((n, setup.config.n_params))
+        first = beds[0].plant        # (what the runs share: checked by ``differing``)
+        rho = per_run(lambda b: b.plant.cog_offset)
         self.plant = Plant(
-            PlantConfig(inertia=per_run('inertia').reshape(-1, 3, 3)[0] if n == 1
-                        else per_run('inertia').reshape(n, 3, 3), mass=per_run('mass'),
-                        cog_offset=per_run('cog_offset'), gravity=sv['gravity'],
-                        disturbance=Disturbance(per_run('disturbance.constant'),
-                                                sv['disturbance.amplitude'],
-                                                sv['disturbance.frequency'])),
-            np.array([so3.quat_to_rot(s.sim['initial_attitude']) for s in scenarios]
-                     ).reshape((3, 3) if n == 1 else (n, 3, 3)),
-            per_run('initial_angular_velocity'))
-        self.actuator = None                                         # torque: the moment acts
-        if sv['actuation'] == 'rotors':
-            geometry, curve, failed = airframe(sv)
-            self.actuator = RotorActuator(geometry, per_run('cog_offset'), curve,
-                                          sv['motor_time_constant'], failed)
-        self.gyro_bias = stack('noise.gyro_bias')
+            PlantConfig(inertia=per_run(lambda b: b.plant.inertia), mass=per_run(
+                lambda b: b.plant.mass), cog_offset=rho, gravity=first.gravity,
+                disturbance=Disturbance(per_run(lambda b: b.plant.disturbance.constant),
+                                        first.disturbance.amplitude,
+                                        first.disturbance.frequency)),
+            np.array([b.R0 for b in beds]).reshape((3, 3) if n == 1 else (n, 3, 3)),
+            per_run(lambda b: b.Omega0))
+        self.actuator = beds[0].actuator(rho)           # None with torque: the moment acts
+        self.gyro_bias = np.array([b.noise.bias for b in beds])
+
+    def noise(self, steps: int) -> np.ndarray:
+        """Per run, the sensors' errors of ``steps`` control steps, (2, steps, runs, 3): each
+        run's own (``SensorNoise.drawn``, from its seed).
+        """
+        out = np.zeros((2, steps, len(self.beds), 3))
+        for j, b in enumerate(self.beds):
+            out[:, :, j] = b.noise.drawn(steps)
+        return out
 
     def state(self) -> Tuple[np.ndarray, np.ndarray]:
         """The testbeds' attitudes and rates, stacked (runs, ...) also for one run (views)."""

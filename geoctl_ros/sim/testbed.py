@@ -8,13 +8,18 @@ Composes the rigid body about the pivot (``geoctl_ros.sim.plant``), the actuatio
   moments about the pivot (``geoctl_ros.core.actuation.airframe.effectiveness``) from the true
   geometry;
 - actuation ``torque``: the commanded moment itself (ideal);
-- sensors: attitude R exp(hat(n)), n ~ N(0, sigma_R^2 I) (motion capture), and angular velocity
-  Omega + bias + N(0, sigma_w^2 I) (gyro), and the specific force at the IMU (the sim node).
+- sensors (``SensorNoise``, ``measured_attitude``, ``measured_rate``: the one place the batch's
+  closed loop takes them from too): attitude R exp(hat(n)), n ~ N(0, sigma_R^2 I) (motion
+  capture), and angular velocity Omega + bias + N(0, sigma_w^2 I) (gyro), and the specific force
+  at the IMU (the sim node).
 
-The scenario runner and the sim node both drive this class, so the physics exists once; the
-campaign drives a batch of testbeds with the same classes (a leading batch axis on the plant's
-configuration and state and on the actuator's centre-of-mass offset).
+The sim node drives ``TestbedSim``. A batch (the scenario runner's and the campaign's closed
+loop: ``geoctl_ros.sim.runs.Testbeds``) is the stack of the same set-ups
+(``geoctl_ros.sim.build.testbed_setup``), flown with the same classes (a leading batch axis on the
+plant's configuration and state and on the actuator's centre-of-mass offset) and the same
+sensors' formulas, so the testbed and its noise are written once.
 """
+from dataclasses import dataclass, field
 import math
 from typing import Optional
 
@@ -78,19 +83,57 @@ class EscWatchdog:
         return reference - self.last_command < self.timeout
 
 
+@dataclass(frozen=True)
+class SensorNoise:
+    """The sensors' errors of one testbed, written once for the sim node and a batch: the motion
+    capture measures R exp(n_R) and the gyro Omega + bias + n_w (in the IMU's axes), with n_R and
+    n_w normal, ``attitude`` (rad) and ``gyro`` (rad/s) per axis, drawn from ``seed``.
+    """
+
+    attitude: float = 0.0
+    gyro: float = 0.0
+    bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    seed: int = 0
+
+    def drawn(self, steps: int) -> np.ndarray:
+        """(n_R, n_w) of ``steps`` measurements taken together, (2, steps, 3), as a batch draws
+        them: from the seed's stream, per measurement the attitude's 3 then the gyro's 3 (only
+        those whose level is not 0; the others are 0).
+        """
+        sigmas = (self.attitude, self.gyro)
+        drawn = [i for i, sigma in enumerate(sigmas) if sigma > 0.0]
+        z = np.random.default_rng(self.seed).standard_normal((steps, len(drawn), 3))
+        out = np.zeros((2, steps, 3))
+        for slot, i in enumerate(drawn):
+            out[i] = sigmas[i] * z[:, slot]
+        return out
+
+
+def measured_attitude(R: np.ndarray, n_R: np.ndarray) -> np.ndarray:
+    """What the motion capture measures of R (one or a stack) with the error n_R."""
+    return so3.matmul(R, so3.exp(n_R))
+
+
+def measured_rate(Omega: np.ndarray, bias: np.ndarray, n_w: np.ndarray) -> np.ndarray:
+    """What the gyro reads of Omega (one or a stack) with its bias and the error n_w."""
+    return Omega + bias + n_w
+
+
 class TestbedSim:
     """Plant + actuation + sensors, integrated at a fixed step."""
 
     __test__ = False   # not a pytest test class
 
-    def __init__(self, plant_config, R0, Omega0, actuator=None, attitude_noise_rad=0.0,
-                 gyro_noise=0.0, gyro_bias=(0.0, 0.0, 0.0), seed=0):
+    def __init__(self, plant_config, R0, Omega0, actuator=None,
+                 noise: Optional[SensorNoise] = None):
         self.plant = Plant(plant_config, R0, Omega0)
         self.actuator = actuator                  # None: ideal torque actuation
-        self.attitude_noise = attitude_noise_rad
-        self.gyro_noise = gyro_noise
-        self.gyro_bias = np.asarray(gyro_bias, dtype=float)
-        self.rng = np.random.default_rng(seed)
+        self.noise = SensorNoise() if noise is None else noise
+        self.rng = np.random.default_rng(self.noise.seed)   # (one sample at a time)
+
+    def _error(self, sigma: float) -> np.ndarray:
+        """A measurement's error, per axis normal with sigma (0: none, and nothing drawn)."""
+        return sigma * self.rng.standard_normal(3) if sigma > 0.0 else np.zeros(3)
 
     def step(self, command: np.ndarray, h: float) -> None:
         """Advance by h: command is the integer ESC commands (rotors) or the moment (torque)."""
@@ -100,9 +143,7 @@ class TestbedSim:
     def measure_attitude(self, R: Optional[np.ndarray] = None) -> np.ndarray:
         """Motion capture of the attitude now (or of R, a past one, for a delayed measurement)."""
         R = self.plant.R if R is None else R
-        if self.attitude_noise > 0.0:
-            R = R @ so3.exp(self.rng.normal(0.0, self.attitude_noise, 3))
-        return R
+        return measured_attitude(R, self._error(self.noise.attitude))
 
     def measure_angular_velocity(self, Omega: Optional[np.ndarray] = None,
                                  frames: Optional[InputFrames] = None) -> np.ndarray:
@@ -112,10 +153,7 @@ class TestbedSim:
         w = self.plant.Omega if Omega is None else Omega
         if frames is not None:
             w = frames.source_vector(w)
-        w = w + self.gyro_bias
-        if self.gyro_noise > 0.0:
-            w = w + self.rng.normal(0.0, self.gyro_noise, 3)
-        return w
+        return measured_rate(w, self.noise.bias, self._error(self.noise.gyro))
 
     def specific_force(self, gravity: np.ndarray, position: np.ndarray,
                        alpha: np.ndarray) -> np.ndarray:
