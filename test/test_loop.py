@@ -388,3 +388,20 @@ def test_poses_before_any_imu_sample_are_flown_on_without_an_exception():
         tick = loop.tick(t, 0.01)
     assert tick.bridging and tick.control is not None and np.isfinite(tick.control.u).all()
     assert not tick.motors.commands.any()                       # disarmed: commands zero
+
+
+def test_a_step_flown_on_poses_alone_reports_the_rate_it_used():
+    """Poses and no gyro yet (a restarted controller hears the motion capture first): the step
+    flies on the rate from successive poses, and the tick carries that rate with the attitude,
+    which the node publishes (``attitude``, ``body_rate``); a tick before any input carries none.
+    """
+    loop = make_loop()
+    assert loop.tick(0.0, 0.01).measured is None
+    turning = [so3.rot_to_quat(so3.exp(np.array([0.0, 0.0, math.pi / 2 + 0.2 * 0.005 * k])))
+               for k in range(30)]
+    for k, q in enumerate(turning):
+        assert loop.offer_pose(q, 0.005 * k, 0.005 * k) is None
+    tick = loop.tick(0.15, 0.01)
+    assert loop.Omega is None and tick.control is not None
+    R, Omega = tick.measured
+    assert np.allclose(R, so3.quat_to_rot(turning[-1])) and abs(Omega[2] - 0.2) < 0.01

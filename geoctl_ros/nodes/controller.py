@@ -243,7 +243,11 @@ class ControllerNode(ControllerConfiguration, Node):
         self._compute_stats.add(time.perf_counter() - t0)
         if tick.armed and tick.pose_receipt is not None:
             self._latency_stats.add(self._now() - tick.pose_receipt)
-        self.telemetry.publish(tick, self.loop.R, self.loop.Omega)
+        try:
+            self.telemetry.publish(tick)
+        except Exception as e:      # (a defect in the monitoring must not end the node)
+            self.get_logger().error('monitoring topics not published: %s: %s'
+                                    % (type(e).__name__, e), throttle_duration_sec=1.0)
         state = (tick.armed, tick.state, tick.sources)
         if state != self._last_state:
             if (self._last_state is not None and tick.failed

@@ -36,14 +36,14 @@ class Telemetry:
         for msg in (self.wrench, self.eR, self.eW):
             msg.header.frame_id = frame_id
 
-    def publish(self, tick, R, Omega):
-        """The monitoring topics of a LoopTick (none before the first pose and rate), with the
-        measured attitude R and body rate Omega it used, and the set point when a new one is
-        flown.
+    def publish(self, tick):
+        """The monitoring topics of a LoopTick (none before the first pose and rate: a rate
+        from the poses counts), and the set point when a new one is flown.
         """
         out = tick.control
         if out is not None:
             stamp = tick.stamp
+            R, Omega = tick.measured
             self.attitude.header.stamp = stamp
             set_quaternion(self.attitude.quaternion, so3.rot_to_quat(R))
             self.pub_attitude.publish(self.attitude)

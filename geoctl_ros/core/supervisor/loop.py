@@ -232,7 +232,7 @@ class ControlLoop:
         state = self.bridge.update(now, self.pose.fresh(now), self.rate.fresh(now))
         if state is None:
             out, motors = self.step.idle(dt, now)
-            tick = self._result(None, motors, armed, False)
+            tick = self._result(None, motors, armed, False, None)
         else:
             bridging = self.bridge.bridging
             R, Omega = state
@@ -251,7 +251,7 @@ class ControlLoop:
                 self._note_entry(out)
             else:
                 self._inside = False
-            tick = self._result(out, motors, armed, bridging)
+            tick = self._result(out, motors, armed, bridging, state)
         if self.pose.last_receipt is not None:
             self.pose_age.add(self.pose.age(now))
         if self.rate.last_receipt is not None:
@@ -274,12 +274,12 @@ class ControlLoop:
         if self.entry is None or depth > self.entry[1]:
             self.entry = (self.setup.config.cones.names[i], depth)
 
-    def _result(self, out, motors, armed, bridging):
+    def _result(self, out, motors, armed, bridging, state):
         b = self.bridge
         return LoopTick(out, motors, armed, self._pose_stamp, self.pose.last_receipt,
                     self.supervisor.reason, self.supervisor.failed,
                     (b.attitude_source, b.rate_source),
-                    self.controller.R_d, bridging)
+                    self.controller.R_d, bridging, state)
 
     @property
     def settings(self) -> LoopSettings:

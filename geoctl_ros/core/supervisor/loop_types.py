@@ -51,4 +51,6 @@ class LoopTick:
     sources: tuple           # (attitude source, rate source): POSE/GYRO, or a gap's stand-ins
     setpoint: np.ndarray     # R_d being flown (the same object until a new one is adopted)
     bridging: bool = False   # a gap is being ridden through (see geoctl_ros.core.supervisor.gaps)
+    measured: object = None  # (R, Omega) the step flew on, in the package's frames (a gap's
+                             # stand-ins while bridging), or None before the first
 
