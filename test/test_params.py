@@ -9,7 +9,7 @@ import pytest
 from support import past_bounds
 
 from geoctl_ros import params
-from geoctl_ros.params import CONTROLLER, SIM, ConfigError, resolve
+from geoctl_ros.params import CONTROLLER, SIM, ConfigError, controller_setup, resolve
 from geoctl_ros.params import readme as readme_table
 from geoctl_ros.sim import scenario
 from geoctl_ros.sim.build import plant_config
@@ -222,3 +222,15 @@ def test_shared_values_alone_do_not_configure_a_controller():
     assert shared and not params.configuration_given(CONTROLLER, shared)
     assert params.configuration_given(CONTROLLER, shared | {'k_R'})
     assert params.configuration_given(CONTROLLER, {'cones.sun.axis'})
+
+
+def test_a_thrust_curve_whose_inverse_would_overflow_is_refused():
+    """Found by the fuzzer on the vehicle's stack: motor.a = 5e-324 passed "> 0", and the curve's
+    inverse, 1 / (2 a vs), overflowed (numpy warns). It is refused, naming the parameter.
+    """
+    for a in ([5e-324], [0.0], [-1e-5]):
+        with pytest.raises(ConfigError, match='motor.a: must be at least 1e-12'):
+            controller_setup(resolve(CONTROLLER, {'motor.a': a}))
+    with pytest.raises(ConfigError) as refused:       # (the minimum itself is no motor.a error:
+        controller_setup(resolve(CONTROLLER, {'motor.a': [1e-12]}))   # its curve lifts little)
+    assert [name for name, _ in refused.value.errors] == ['thrust_max']

@@ -26,6 +26,8 @@ from geoctl_ros.core.supervisor.loop_types import LoopSettings
 from geoctl_ros.core.supervisor.safety import SetpointSchedule, quaternion_problem
 from geoctl_ros.params.param import ConfigError
 
+MOTOR_A_MIN = 1e-12     # N: the thrust curve's a, at least (a denormal overflowed its inverse)
+
 
 def cone_set(values: dict) -> ConeSet:
     """The ConeSet described by resolved controller parameters."""
@@ -217,8 +219,9 @@ def airframe(values: dict) -> Tuple[RotorGeometry, ThrustCurve, List[int]]:
             errors.append(('motor.' + k, 'expected 1 value or %d (one per rotor), got %d'
                            % (n, arr.size)))
         coeffs[k] = np.broadcast_to(arr, (n,)).copy() if arr.size in (1, n) else None
-    if not errors and np.any(coeffs['a'] <= 0.0):
-        errors.append(('motor.a', 'must be > 0 (thrust must grow with the command)'))
+    if not errors and np.any(coeffs['a'] < MOTOR_A_MIN):
+        errors.append(('motor.a', 'must be at least %g (thrust must grow with the command; the '
+                       "curve's inverse divides by it)" % MOTOR_A_MIN))
     if errors:
         raise ConfigError(errors)
     curve = ThrustCurve(coeffs['a'], coeffs['b'], coeffs['c'], values['motor.voltage_scale'],
