@@ -96,7 +96,7 @@ class LinearMap:
     in R, and built at configuration time (a new set point or configuration) by evaluating
     ``linear_terms`` itself on the basis E_jk, so each formula still lives in one place. The hot
     path then gets A, e_RA, every cone's terms and M_g from one small matrix-vector product
-    instead of a dozen numpy calls (docs/benchmarks.md, "Benchmarks").
+    instead of a dozen numpy calls (docs/speed.md).
     """
 
     def __init__(self, R_d, config):
