@@ -9,6 +9,7 @@ from paper_law import PaperLaw
 import pytest
 
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.law.cbf_law import closest_admissible, pointing_cbf
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.configuration_error import (
     E_matrix,
@@ -19,7 +20,6 @@ from geoctl_ros.core.law.configuration_error import (
 from geoctl_ros.core.law.control import AttitudeController, ControllerConfig, SetpointRejected
 from geoctl_ros.core.law.feasibility import holding_clearance_deg, holding_moment
 from geoctl_ros.core.law.gains import gain_condition
-from geoctl_ros.core.law.laws import closest_admissible, pointing_cbf
 from geoctl_ros.core.law.mechanics import gravity_moment
 from geoctl_ros.params import CONTROLLER, controller_config, resolve
 from geoctl_ros.sim import scenario
