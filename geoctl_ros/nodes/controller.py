@@ -26,7 +26,6 @@ from geoctl_ros.core.telemetry.diagnostics import NAME as DIAGNOSTICS_NAME
 from geoctl_ros.core.telemetry.diagnostics import failsafe
 from geoctl_ros.core.telemetry.stats import WindowStats
 from geoctl_ros.nodes import qos, ros_params
-from geoctl_ros.nodes.controller_config import ControllerConfiguration, build
 from geoctl_ros.nodes.controller_topics import Telemetry
 from geoctl_ros.nodes.conversions import (
     armed_state_msg,
@@ -37,8 +36,13 @@ from geoctl_ros.nodes.conversions import (
 )
 from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.params import (
+    CHANGE_WHILE_ARMED,
     CONTROLLER,
     ConfigError,
+    change_problem,
+    configuration_given,
+    controller_setup,
+    resolve,
 )
 from geoctl_ros.records.fields import quaternion, vector
 
@@ -46,7 +50,14 @@ DIAGNOSTICS_PERIOD = 0.5      # s: the fixed statistics window
 STATUS_NAME = DIAGNOSTICS_NAME
 
 
-class ControllerNode(ControllerConfiguration, Node):
+def build(values):
+    """The controller setup of a node's parameters: cones defined but not yet in cones.names are
+    allowed (they are being added, one parameter at a time, or came from a dump).
+    """
+    return controller_setup(resolve(CONTROLLER, values, staged_cones=True))
+
+
+class ControllerNode(Node):
     """The controller node (module docstring)."""
 
     def __init__(self, **kwargs):
@@ -130,6 +141,45 @@ class ControllerNode(ControllerConfiguration, Node):
         if armed != self._armed_sent:
             self.pub_armed.publish(armed_state_msg(ArmedState(armed, self.session)))
             self._armed_sent = armed
+
+    # --- configuration: built from its parameters; run-time changes validated by the schema ---
+    def _unconfigured(self, setup):
+        """Why this node flies nothing it was given, or None: no parameter of its own reached it
+        (no file, a launch file's missing params_file, which only warns and passes none, or a
+        file whose sections name another node or namespace: its ``/**`` values alone do not
+        configure a controller).
+        """
+        if (configuration_given(CONTROLLER, ros_params.file_overrides(self))
+                or setup.loop.allow_default_configuration):
+            return None
+        return ('no configuration given for %s: no parameter file (or none addressed to this '
+                'name and namespace), so every arm request is refused (give --params-file FILE '
+                'with a section for it, or -p allow_default_configuration:=true to fly the '
+                'built-in defaults deliberately)' % self.get_fully_qualified_name())
+
+    def _validate(self, values, changed):
+        """A run-time change: only gains and goals while armed (``CHANGE_WHILE_ARMED``), the
+        whole configuration, and the set point now being flown (which may have come in on the
+        topic) against the new cones.
+        """
+        if self.loop.supervisor.armed:
+            problem = change_problem(changed, CHANGE_WHILE_ARMED, 'while disarmed')
+            if problem:
+                raise ConfigError([('armed', problem)])
+        setup = build(values)
+        problem = self.loop.reconfiguration_problem(setup)
+        if problem:
+            raise ConfigError([('cones', problem)])
+        return setup
+
+    def _apply(self, setup, changed):
+        problem = self.loop.reconfigure(
+            setup, setpoint_changed='setpoint' in changed,
+            schedule_changed=any(n.startswith('setpoint_schedule.') for n in changed))
+        if problem:       # validated before; only a set point that arrived since can do this
+            self.get_logger().error('parameters not applied: ' + problem)
+        else:
+            self.get_logger().info('parameters applied: %s' % ', '.join(sorted(changed)))
 
     # --- inputs ------------------------------------------------------------------------------
     def _on_pose(self, msg):
