@@ -255,3 +255,16 @@ def test_an_imu_without_specific_force_or_a_moving_vehicle_is_named_at_arming():
     assert 'has not rested since start' in loop.arm(t).message
     assert 'specific force must be 3 finite values' in loop.offer_angular_velocity(
         [0.0, 0.0, 0.0], t + 0.01, t + 0.01, None, [0.0, math.nan, 9.81])
+
+
+def test_a_reconfigured_noise_figure_sets_the_next_windows_tolerance():
+    """gyro_noise changed at run time (disarmed) reaches both windows: a 0.02 rad/s bias is
+    refused at the testbed's 0.005 rad/s, and allowed at 0.05 (its tolerance ten times wider).
+    """
+    loop = loop_of()
+    t = rest(loop, InputFrames(), YAW90, bias=(0.02, 0.0, 0.0))
+    assert 'the gyro reads 0.02' in loop.arm(t).message
+    assert loop.reconfigure(controller_setup(resolve(CONTROLLER, dict(BASE, gyro_noise=0.05)))) \
+        is None
+    t = rest(loop, InputFrames(), YAW90, bias=(0.02, 0.0, 0.0), t0=t + 0.005, seed=2)
+    assert loop.arm(t).ok

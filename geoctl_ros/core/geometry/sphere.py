@@ -21,3 +21,13 @@ def direction(axis: np.ndarray, angle: float, azimuth: float) -> np.ndarray:
     e2 = cross(axis, e1)
     return (math.cos(angle) * axis
             + math.sin(angle) * (math.cos(azimuth) * e1 + math.sin(azimuth) * e2))
+
+
+def angle_between_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """The angle between two vectors of any length (deg, from atan2: exact near 0 and 180); 180
+    if either is zero.
+    """
+    na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
+    if na == 0.0 or nb == 0.0:
+        return 180.0
+    return math.degrees(math.atan2(float(np.linalg.norm(np.cross(a, b))), float(a @ b)))

@@ -32,13 +32,13 @@ from typing import List, NamedTuple, Optional
 
 import numpy as np
 
+from geoctl_ros.core.geometry.sphere import angle_between_deg
 from geoctl_ros.core.sensors.frames import (
     BODY_FRAMES,
     WORLD_FRAMES,
     Y_UP_BODY_DEG,
     InputFrames,
     rpy_matrix,
-    tilt_deg,
 )
 
 SIGMAS = 5.0              # standard deviations of the difference a check allows
@@ -87,7 +87,7 @@ class Window(NamedTuple):
 
     @property
     def gravity_angle_deg(self) -> Optional[float]:
-        return None if self.force is None else tilt_deg(self.force, self.up)
+        return None if self.force is None else angle_between_deg(self.force, self.up)
 
 
 def _log_stack(M: np.ndarray) -> np.ndarray:
@@ -111,8 +111,8 @@ class _Accumulator:
     CAPACITY = 1024          # poses a window holds (a full one closes early)
 
     def __init__(self, span: float, settings: AgreementSettings):
-        self.span, self.settings = span, settings
-        self.up_world = -settings.gravity / np.linalg.norm(settings.gravity)
+        self.span = span
+        self.configure(settings)
         self.Rs = np.zeros((self.CAPACITY, 3, 3))
         self.ts = np.zeros(self.CAPACITY)
         self.n = 0
@@ -121,6 +121,11 @@ class _Accumulator:
         self.f = np.zeros(3)
         self.nw = self.nf = 0
         self.last: Optional[Window] = None
+
+    def configure(self, settings: AgreementSettings) -> None:
+        """Take new settings (a reconfiguration: the next window closes with them)."""
+        self.settings = settings
+        self.up_world = -settings.gravity / np.linalg.norm(settings.gravity)
 
     def _restart(self, R, stamp):
         self.Rs[0] = R
@@ -234,6 +239,12 @@ class SensorAgreement:
             else:
                 self.mismatches = 0
 
+    def configure(self, settings: AgreementSettings) -> None:
+        """Take new settings (``ControlLoop.reconfigure``), in both windows too."""
+        self.settings = settings
+        self.rest.configure(settings)
+        self.flight.configure(settings)
+
     def reset_flight(self) -> None:
         """At arming: the in-flight verdict starts again."""
         self.mismatches, self.flight_note = 0, None
@@ -287,7 +298,7 @@ class SensorAgreement:
                             'no accelerometer data in linear_acceleration, or its units wrong'
                             % (size, g))
             return problems
-        angle = tilt_deg(w.force, w.up)
+        angle = angle_between_deg(w.force, w.up)
         allowed = math.degrees(self.settings.alignment_tolerance + w.tilt_tolerance)
         if angle > allowed:
             problems.append("the IMU's gravity is %.1f deg from the poses' (allowed %.1f): %s"
@@ -301,10 +312,11 @@ class SensorAgreement:
         fr = self.frames
         fits = []
         if self.raw_pose is not None and w.force is not None:
-            up_world = -self.settings.gravity / np.linalg.norm(self.settings.gravity)
+            up_world = self.rest.up_world
             raw_f = fr.source_vector(w.force)      # the window's mean, as the IMU gave it
             other = 'frd' if fr.body == 'flu' else 'flu'
-            if tilt_deg(fr.imu_rotation @ BODY_FRAMES[other].T @ raw_f, w.up) <= allowed:
+            as_other = fr.imu_rotation @ BODY_FRAMES[other].T @ raw_f
+            if angle_between_deg(as_other, w.up) <= allowed:
                 fits.append('the IMU looks %s while body_frame says %s'
                             % (other.upper(), fr.body))
             for words, world, body, marker in _POSE_GUESSES:
@@ -313,12 +325,12 @@ class SensorAgreement:
                 T, B = WORLD_FRAMES[world], BODY_FRAMES[body]
                 R = T @ self.raw_pose @ B @ rpy_matrix(marker).T
                 f = fr.imu_rotation @ B.T @ raw_f
-                if R[2, 2] > 0.0 and tilt_deg(f, R.T @ up_world) <= allowed:
+                if R[2, 2] > 0.0 and angle_between_deg(f, R.T @ up_world) <= allowed:
                     fits.append(words + ', while the parameters say %s/%s'
                                 % (fr.world, fr.body))
             for yaw in (90.0, 180.0, 270.0):
                 turned = rpy_matrix((0.0, 0.0, yaw)) @ w.force
-                if tilt_deg(turned, w.up) <= allowed:
+                if angle_between_deg(turned, w.up) <= allowed:
                     fits.append('the IMU looks mounted about %.0f deg off in yaw '
                                 '(imu_rotation_deg)' % (yaw if yaw <= 180.0 else yaw - 360.0))
         if fits:

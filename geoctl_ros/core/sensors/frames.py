@@ -152,12 +152,3 @@ class InputFrames:
 
 def _deg(v):
     return '[%s]' % ', '.join('%.1f' % a for a in v)
-
-
-def tilt_deg(a: np.ndarray, b: np.ndarray) -> float:
-    """The angle between two vectors (deg); 180 if either is zero."""
-    na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
-    if na == 0.0 or nb == 0.0:
-        return 180.0
-    return math.degrees(math.atan2(float(np.linalg.norm(np.cross(a, b))), float(a @ b)))
-

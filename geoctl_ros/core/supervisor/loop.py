@@ -194,7 +194,7 @@ class ControlLoop:
             return str(e)
         setup.mixer.adopt_state(self.setup.mixer)
         self.setup = setup
-        self.agreement.settings = setup.agreement
+        self.agreement.configure(setup.agreement)
         self.step.reconfigure(setup.mixer, 0.0)
         s = setup.loop
         self.pose.fallback_delay = self.rate.fallback_delay = s.measurement_delay

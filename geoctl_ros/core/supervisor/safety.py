@@ -66,9 +66,9 @@ def specific_force_problem(f: Optional[Vector]) -> Optional[str]:
         return None
     if len(f) != 3 or not all(math.isfinite(v) for v in f):
         return 'specific force must be 3 finite values, got %r' % (list(f)[:6],)
-    if max(abs(v) for v in f) > SPECIFIC_FORCE_MAX:
-        return 'specific force %.3g m/s^2 beyond %g' % (max(abs(v) for v in f),
-                                                        SPECIFIC_FORCE_MAX)
+    largest = max(abs(v) for v in f)
+    if largest > SPECIFIC_FORCE_MAX:
+        return 'specific force %.3g m/s^2 beyond %g' % (largest, SPECIFIC_FORCE_MAX)
     return None
 
 
