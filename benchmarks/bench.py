@@ -49,8 +49,8 @@ from geoctl_ros.params import (
 )
 from geoctl_ros.sil.rosenv import use_node_env
 from geoctl_ros.sim import scenario
-from geoctl_ros.sim.build import testbed_sim
 from geoctl_ros.sim.closed_loop import fly
+from geoctl_ros.sim.testbed import testbed_sim
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 BASELINE = os.path.join(HERE, 'baseline.json')

@@ -43,8 +43,8 @@ def test_a_run_in_a_batch_flies_as_it_does_alone_with_rotors_latency_and_stalls(
     picked = [i for i in range(40) if manoeuvres.cone_count(1, i) == 1][:3]
     runs = [scenario.from_sections(manoeuvres.run_sections(base, 1, i, 2.0), 'run_%d' % i)
             for i in picked]
-    assert len({s.options['latency'] for s in runs}) > 1
-    assert any(s.options['stalls.start'].size for s in runs)
+    assert len({s.options.latency for s in runs}) > 1
+    assert any(s.options.stalls for s in runs)
     batch = fly(runs, series=True, history=True)
     for p, s in enumerate(runs):
         assert_same_bits(batch, fly([s], series=True, history=True), p)
@@ -77,7 +77,7 @@ def test_a_run_in_a_batch_flies_as_it_does_alone_with_torque_late_steps_and_a_sc
     assert np.all(jump > 10.0 * np.linalg.norm(e_R[k - 1] - e_R[k - 2], axis=-1))
     other = scenario.from_sections(load_parameter_file(path), 'other')
     other.controller.update({k: runs[0].controller[k] for k in other.controller})
-    other.options.update(runs[0].options)
+    other.option_values.update(runs[0].option_values)
     other.sim['noise.seed'] = 99
     with pytest.raises(ValueError, match='same noise.seed'):
         fly([runs[0], other])

@@ -22,8 +22,9 @@ from geoctl_ros.core.law.feasibility import holding_clearance_deg, holding_momen
 from geoctl_ros.core.law.gains import gain_condition
 from geoctl_ros.core.law.mechanics import gravity_moment
 from geoctl_ros.params import CONTROLLER, controller_config, resolve
+from geoctl_ros.params.testbed import Disturbance, PlantConfig
 from geoctl_ros.sim import scenario
-from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
+from geoctl_ros.sim.plant import Plant
 
 # on the vehicle's stack too, but for the four long closed-loop flights: the scenario and campaign
 # tests and the sim-in-the-loop flight fly the same loop there

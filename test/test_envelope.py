@@ -23,9 +23,10 @@ from geoctl_ros.params import (
     controller_setup,
     resolve,
 )
+from geoctl_ros.params.testbed import Disturbance, PlantConfig
 from geoctl_ros.sim import scenario
-from geoctl_ros.sim.build import testbed_sim as simulated_testbed
-from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
+from geoctl_ros.sim.plant import Plant
+from geoctl_ros.sim.testbed import testbed_sim as simulated_testbed
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 odroid = pytest.mark.odroid
@@ -160,7 +161,7 @@ def test_testbed_yaw90_keeps_the_cone_with_50_ms_of_latency_and_10_ms_of_jitter(
     goal reached (docs/safety.md, "Measured").
     """
     s = scenario.load(os.path.join(ROOT, 'config', 'scenarios', 'testbed_yaw90.yaml'))
-    s.options.update(latency=0.05, tick_jitter=0.01)
+    s.option_values.update(latency=0.05, tick_jitter=0.01)
     r = scenario.run(s)
     margin = min(r.summary['min_cone_angle_deg'][n] - r.summary['cone_half_angle_deg'][n]
                  for n in r.summary['min_cone_angle_deg'])

@@ -9,8 +9,9 @@ import pytest
 from geoctl_ros.core.supervisor.safety import EscHealth
 from geoctl_ros.esc import health, protocol
 from geoctl_ros.esc.bus import RecordingBus
-from geoctl_ros.esc.driver import EscConfig, EscDriver, EscStartError
+from geoctl_ros.esc.driver import EscDriver, EscStartError
 from geoctl_ros.esc.virtual import VirtualEscBus
+from geoctl_ros.params.esc import EscConfig
 
 pytestmark = pytest.mark.odroid
 

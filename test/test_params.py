@@ -11,8 +11,8 @@ from support import past_bounds
 from geoctl_ros import params
 from geoctl_ros.params import CONTROLLER, SIM, ConfigError, controller_setup, resolve
 from geoctl_ros.params import readme as readme_table
+from geoctl_ros.params.testbed import plant_config
 from geoctl_ros.sim import scenario
-from geoctl_ros.sim.build import plant_config
 
 pytestmark = pytest.mark.odroid
 

@@ -7,7 +7,8 @@ import pytest
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.law.mechanics import gravity_moment, pivot_inertia
 from geoctl_ros.params import LAB_INERTIA
-from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
+from geoctl_ros.params.testbed import Disturbance, PlantConfig
+from geoctl_ros.sim.plant import Plant
 from geoctl_ros.sim.testbed import EscWatchdog
 
 pytestmark = pytest.mark.odroid

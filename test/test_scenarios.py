@@ -222,7 +222,7 @@ def test_a_late_loop_keeps_the_lag_compensated_testbed_steady():
     """
     s = scenario.load(os.path.join(ROOT, 'config', 'testbed.yaml'))
     s.controller['motor_lag_compensation'] = 0.04
-    s.options.update(tick_jitter=0.045, duration=20.0)
+    s.option_values.update(tick_jitter=0.045, duration=20.0)
     r = scenario.run(s)
     holds = r.history[1:, 0] - r.history[:-1, 0]
     assert holds.min() < 0.012 and holds.max() > 0.05          # the loop really was late

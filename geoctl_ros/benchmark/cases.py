@@ -45,7 +45,7 @@ def fly_case(job: Tuple[str, str, dict, Optional[float]]) -> dict:
     """
     name, law, sections, duration = job
     scenario = from_sections(with_law(sections, law), name)
-    out = {'case': name, 'law': law, 'title': scenario.options['title'],
+    out = {'case': name, 'law': law, 'title': scenario.options.title,
            'controller': scenario.controller, 'diverged': ''}
     try:
         flight = fly([scenario], series=True, history=True, duration=duration)

@@ -49,6 +49,9 @@ from geoctl_ros.params import (
     resolve,
     write_parameter_file,
 )
+from geoctl_ros.params.build import cone_values
+from geoctl_ros.params.scenario import goal_check
+from geoctl_ros.params.testbed import testbed_setup
 
 CLEAR_DEG = 5.0                    # start and goal at least this far outside every cone
 GAP_DEG = 10.0                     # edge-to-edge distance between two cones, at least
@@ -201,14 +204,15 @@ def _floats(a):
     return [float(x) for x in np.ravel(a)]
 
 
-def unmodelled_moment(nominal_sim, disturbance_max=DISTURBANCE_MAX):
+def unmodelled_moment(plant, disturbance_max=DISTURBANCE_MAX):
     """The most the campaign's runs ask the controller to hold before learning it (N m): the
     largest disturbance plus the gravity moment of the largest error in m rho (mass and
-    centre-of-mass height each off by 20 %: 1.2^2 - 1 = 44 %) at the largest tilt at the goal.
+    centre-of-mass height each off by 20 %: 1.2^2 - 1 = 44 %) at the largest tilt at the goal;
+    plant: the nominal testbed's PlantConfig.
     """
-    m_rho = nominal_sim['mass'] * float(np.linalg.norm(nominal_sim['cog_offset']))
+    m_rho = plant.mass * float(np.linalg.norm(plant.cog_offset))
     return float(disturbance_max + ((1.0 + MODEL_ERROR) ** 2 - 1.0) * m_rho
-                 * float(np.linalg.norm(nominal_sim['gravity']))
+                 * float(np.linalg.norm(plant.gravity))
                  * math.sin(math.radians(TILT_DEG)))
 
 
@@ -223,8 +227,9 @@ class Manoeuvres:
         self.base, self.duration, self.disturbance_max = base, float(duration), disturbance_max
         self.stratum = stratum
         self.nominal_c = resolve(CONTROLLER, node_overrides(base, CONTROLLER))
-        self.nominal_s = resolve(SIM, node_overrides(base, SIM))
-        self.unmodelled = unmodelled_moment(self.nominal_s, disturbance_max)
+        self.nominal = testbed_setup(resolve(SIM, node_overrides(base, SIM))).plant
+        self.sensor_axis = controller_config(self.nominal_c).cones.r
+        self.unmodelled = unmodelled_moment(self.nominal, disturbance_max)
         self._probes = {}
 
     def goal_ok(self, cones, R_d, gains=None):     # the controller's own set-point check
@@ -234,15 +239,12 @@ class Manoeuvres:
                 self.nominal_c, unmodelled_moment_max=self.unmodelled, **(gains or {}))))
         # the gains too: the barrier's own parameters (alpha, the guard) shape the cones
         values = dict(self.nominal_c, **(gains or {}))
-        values['cones.names'] = ['c%d' % i for i in range(len(cones))]
-        for i, (axis, half_angle) in enumerate(cones):
-            values['cones.c%d.axis' % i] = axis
-            values['cones.c%d.half_angle_deg' % i] = half_angle
+        values.update(cone_values(cones))
         return self._probes[key].setpoint_problem(R_d, cone_set(values)) is None
 
     def goal_refused(self, sections):
         """Whether the run's goal is one its gain set's controller refuses (see ``sections``)."""
-        return self.unmodelled > 0.0 and sections['controller']['unmodelled_moment_max'] == 0.0
+        return self.unmodelled > 0.0 and not goal_check(sections)
 
     def sections(self, seed, index, gains=None):
         """The scenario file's sections ({'/**' or node: flat parameters}) of run index.
@@ -252,7 +254,7 @@ class Manoeuvres:
         flown all the same, with the check off (0), so that every gain set flies every run;
         ``goal_refused`` tells.
         """
-        m = draw_manoeuvre(seed, index, self.nominal_c['sensor_axis'], self.goal_ok,
+        m = draw_manoeuvre(seed, index, self.sensor_axis, self.goal_ok,
                            self.duration, self.stratum)
         return self.sections_of(m, 'campaign seed %d, run %d' % (seed, index), gains)
 
@@ -265,22 +267,18 @@ class Manoeuvres:
                       if not k.startswith(('cones.', 'setpoint'))}
         controller['unmodelled_moment_max'] = self.unmodelled
         controller.update(gains or {})
-        names = ['c%d' % (i + 1) for i in range(len(m['cones']))]
-        controller['cones.names'] = names
-        for name, (axis, half_angle) in zip(names, m['cones']):
-            controller['cones.%s.axis' % name] = axis
-            controller['cones.%s.half_angle_deg' % name] = half_angle
+        controller.update(cone_values(m['cones']))
         controller['setpoint'] = _floats(so3.rot_to_quat(m['R_d']))
         if gains and not self.goal_ok(m['cones'], m['R_d'], gains):
             controller['unmodelled_moment_max'] = 0.0
         S = np.diag(np.sqrt(m['inertia_factors']))
-        J = self.nominal_s['inertia'].reshape(3, 3)
+        J = self.nominal.inertia
         E = S @ (0.5 * np.trace(J) * np.eye(3) - J) @ S            # second moment of the mass
-        rho = self.nominal_s['cog_offset']
+        rho = self.nominal.cog_offset
         sim = dict(base.get('sim', {}))
         sim.update({
             'initial_attitude': _floats(so3.rot_to_quat(m['R0'])),
-            'mass': float(self.nominal_s['mass'] * m['mass_factor']),
+            'mass': float(self.nominal.mass * m['mass_factor']),
             'inertia': _floats(np.trace(E) * np.eye(3) - E),
             'cog_offset': _floats(rho * m['cog_factor']),
             'disturbance.constant': _floats(m['disturbance'] * self.disturbance_max),

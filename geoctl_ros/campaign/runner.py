@@ -25,9 +25,9 @@ import numpy as np
 
 from geoctl_ros.campaign import cluster, manoeuvres, study
 from geoctl_ros.params import ConfigError, load_parameter_file
+from geoctl_ros.params.scenario import from_sections, goal_check, turn_off_goal_check
 from geoctl_ros.plots import campaign as campaign_plots
 from geoctl_ros.sim import closed_loop
-from geoctl_ros.sim.scenario import from_sections
 
 BATCH = 1024               # runs flown together at most (docs/campaigns.md, "Campaign speed")
 # runs.csv's columns, in order (gain_set only in a gain study)
@@ -61,11 +61,9 @@ def _scenario(sections, name):
     try:
         return from_sections(sections, name)
     except ConfigError as e:
-        controller = sections['controller']
-        if not (controller['unmodelled_moment_max'] and
-                all(p.endswith('setpoint') for p, _ in e.errors)):
+        if not (goal_check(sections) and all(p.endswith('setpoint') for p, _ in e.errors)):
             raise
-        controller['unmodelled_moment_max'] = 0.0
+        turn_off_goal_check(sections)
         return from_sections(sections, name)
 
 
@@ -79,6 +77,7 @@ def fly_batch(job):
     draw = manoeuvres.Manoeuvres(base, duration, disturbance_max, stratum)
     sections = [draw.sections(seed, i, gains) for i in indices]
     scenarios = [_scenario(s, 'run_%d' % i) for i, s in zip(indices, sections)]
+    options = [s.options for s in scenarios]
     drawn = time.perf_counter() - t0
     res = closed_loop.fly(scenarios, cluster.report_progress, series=worst > 0)
     n = len(indices)
@@ -95,9 +94,9 @@ def fly_batch(job):
         'converged': res.final_error_deg < study.CONVERGED_DEG,
         'settle_s': res.settle_s, 'saturated_s': res.saturated_s, 'max_rate': res.max_rate,
         'effort_Nms': res.effort,
-        'latency_ms': np.array([int(round(1000 * s['scenario']['latency'])) for s in sections]),
-        'disturbance_Nm': np.array([float(np.linalg.norm(s['sim']['disturbance.constant']))
-                                    for s in sections]),
+        'latency_ms': np.array([int(round(1000 * o.latency)) for o in options]),
+        'disturbance_Nm': np.array([float(np.linalg.norm(s.testbed.plant.disturbance.constant))
+                                    for s in scenarios]),
         'goal_refused': np.array([draw.goal_refused(s) for s in sections]),
         'draw_s': drawn, 'fly_s': res.wall_s,
     }

@@ -28,6 +28,7 @@ from geoctl_ros.params import (
     resolve,
     write_parameter_file,
 )
+from geoctl_ros.params.build import controller_config, gain_set
 from geoctl_ros.plots.campaign import tuning_figure
 from geoctl_ros.sil.rosenv import config_dir
 
@@ -83,9 +84,10 @@ def main(argv=None):
         nominal = resolve(CONTROLLER, node_overrides(base, CONTROLLER))
     except (ConfigError, OSError) as e:
         return cannot_start('tune', e, args.out)
-    start = {k: float(nominal[k]) for k in tune.GAINS}
+    start = gain_set(nominal).overrides()
+    gravity = float(np.linalg.norm(controller_config(nominal).gravity))
     targs = tune.TuneArgs(args.runs, args.seed, args.duration, latency_path,
-                          args.latency_duration, gravity=float(np.linalg.norm(nominal['gravity'])))
+                          args.latency_duration, gravity=gravity)
     t0 = time.monotonic()
     with cluster.connect(args.scheduler, args.workers) as (client, where):
         print('tune: %d trials of %d manoeuvres (seed %d) on %s'

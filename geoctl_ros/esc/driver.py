@@ -23,23 +23,11 @@ from geoctl_ros.core.supervisor.safety import motor_commands_problem
 from geoctl_ros.core.telemetry.stats import WindowStats
 from geoctl_ros.esc import protocol
 from geoctl_ros.esc.bus import BusError
-from geoctl_ros.params.param import MOTOR_TEST_COMMAND_MAX, MOTOR_TEST_DURATION_MAX
+from geoctl_ros.params.param import MOTOR_TEST_DURATION_MAX
 
 
 class EscStartError(Exception):
     """An ESC did not answer at start-up (the message names its rotor and address)."""
-
-
-@dataclass(frozen=True)
-class EscConfig:
-    addresses: tuple                  # 7-bit address per rotor, in rotor order
-    command_max: int                  # the set point of a normalised command of 1 (one byte)
-    resolution: int = 8               # 8: one byte per write; 11: two
-    timeout: float = 0.1              # s: older commands give zero
-    ignore: frozenset = frozenset()   # rotors (1-based) whose ESC may be missing
-    retries: int = 2                  # retries of a failed write within a cycle
-    probe_timeout: float = 3.0        # s: how long start-up waits for every ESC to answer
-    test_command_max: float = MOTOR_TEST_COMMAND_MAX      # the largest motor-test command
 
 
 @dataclass
@@ -288,13 +276,3 @@ class EscDriver:
             raise
         self.last_ok[i] = self.clock()
         self.telemetry[i] = protocol.parse(data)
-
-
-def config_of(values: dict) -> 'EscConfig':
-    """The EscConfig of resolved esc_i2c parameters (``geoctl_ros.params``)."""
-    return EscConfig(addresses=tuple(int(a) for a in values['esc.addresses']),
-                     command_max=int(values['motor.command_max']),
-                     resolution=int(values['esc.resolution']), timeout=values['esc.timeout'],
-                     ignore=frozenset(int(r) for r in values['esc.ignore']),
-                     retries=int(values['esc.retries']),
-                     probe_timeout=values['esc.probe_timeout'])

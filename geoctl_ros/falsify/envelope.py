@@ -129,7 +129,7 @@ class Space:
             return None
         if not manoeuvres.crosses(d0, d1, v0, cones[0][1]):
             return None
-        r = sphere.unit(np.asarray(self.draw.nominal_c['sensor_axis'], dtype=float))
+        r = sphere.unit(np.asarray(self.draw.sensor_axis, dtype=float))
         R0 = upright(r, d0, p['start_twist_deg'])
         R_d = upright(r, d1, p['goal_twist_deg'])
         listed = [(list(map(float, v)), float(t)) for v, t in cones]

@@ -30,12 +30,13 @@ from std_srvs.srv import Trigger
 
 from geoctl_ros.esc import health
 from geoctl_ros.esc.bus import I2cBus
-from geoctl_ros.esc.driver import EscDriver, EscStartError, config_of
+from geoctl_ros.esc.driver import EscDriver, EscStartError
 from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.conversions import armed_state_of, esc_health_msg, session_of
 from geoctl_ros.nodes.runtime import RefusalLog, spin
 from geoctl_ros.params import ESC, ESC_LIVE, ConfigError, change_problem, resolve
+from geoctl_ros.params.esc import esc_setup
 
 REPORT_PERIOD = 0.5             # s between diagnostics and telemetry messages
 
@@ -44,12 +45,12 @@ class EscNode(Node):
     def __init__(self, **kwargs):
         super().__init__('esc_i2c', **kwargs)
         values = ros_params.load(self, ESC)
-        self.values = values
-        config = config_of(values)
-        path = values['esc.virtual_bus']
+        self.setup = setup = esc_setup(values)
+        config = setup.driver
+        path = setup.virtual_bus
         try:
             bus = (VirtualEscBus(path, config.addresses) if path
-                   else I2cBus(values['esc.bus']))
+                   else I2cBus(setup.bus))
         except (OSError, ValueError) as e:
             raise ConfigError([('esc.virtual_bus' if path else 'esc.bus',
                                 'cannot open the bus: %s (docs/esc.md, "ESCs on I2C")'
@@ -67,7 +68,7 @@ class EscNode(Node):
         self._wake = threading.Event()
         self.create_subscription(Float64MultiArray, 'motor_commands', self._on_commands,
                                  qos.COMMAND)
-        self.create_subscription(UInt32MultiArray, '%s/armed' % values['esc.controller'],
+        self.create_subscription(UInt32MultiArray, '%s/armed' % setup.controller,
                                  self._on_armed, qos.LATCHED)
         self.pub_telemetry = self.create_publisher(Float64MultiArray, 'esc/telemetry',
                                                    qos.TELEMETRY)
@@ -88,8 +89,8 @@ class EscNode(Node):
 
     # --- the bus thread ---------------------------------------------------------------------
     def _bus_loop(self):
-        period = 1.0 / self.values['esc.rate_hz']
-        rate = self.values['esc.telemetry_rate_hz']
+        period = 1.0 / self.setup.rate_hz
+        rate = self.setup.telemetry_rate_hz
         next_read = time.monotonic()
         while not self._stop.is_set():
             self._wake.wait(period)
@@ -152,12 +153,11 @@ class EscNode(Node):
         return resolve(ESC, values)
 
     def _on_params(self, values, changed):
-        self.values = values
+        self.setup = esc_setup(values)
 
     def _on_motor_test(self, request, response):
-        v = self.values
-        rotor, command = v['motor_test.rotor'], v['motor_test.command']
-        duration = v['motor_test.duration']
+        test = self.setup.motor_test
+        rotor, command, duration = test.rotor, test.command, test.duration
         why = self.driver.start_test(rotor, command, duration, self.armed)
         response.success = why is None
         response.message = why or ('rotor %d at %g for %g s' % (rotor, command, duration))
@@ -175,10 +175,10 @@ class EscNode(Node):
     def _report(self):
         d = self.driver
         now = time.monotonic()
-        r = health.report(d, now, self.values['esc.temperature_warn'],
-                          self.values['esc.temperature_error'], *self._report_base)
+        warn, error = self.setup.temperature_warn, self.setup.temperature_error
+        r = health.report(d, now, warn, error, *self._report_base)
         self.pub_health.publish(esc_health_msg(
-            d.config.command_max, health.esc_health(d, now, self.values['esc.temperature_error'])))
+            d.config.command_max, health.esc_health(d, now, error)))
         self._report_base = (r.figures.i2c_errors, r.figures.refused)
         d.latency.reset()
         status = DiagnosticStatus(level=bytes([r.level]), name=health.NAME,

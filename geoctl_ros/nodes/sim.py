@@ -39,9 +39,9 @@ from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg
 from geoctl_ros.nodes.runtime import RefusalLog, spin
 from geoctl_ros.params import SIM, ConfigError, settings
 from geoctl_ros.params.build import emulated_imu
+from geoctl_ros.params.esc import virtual_escs
 from geoctl_ros.records.fields import vector
-from geoctl_ros.sim.build import testbed_sim
-from geoctl_ros.sim.testbed import EscWatchdog
+from geoctl_ros.sim.testbed import EscWatchdog, testbed_sim
 
 LATE = 0.05     # s behind real time before the sim warns
 
@@ -78,13 +78,14 @@ class SimNode(Node):
 
         self.esc_bus = None
         self.refusals = RefusalLog(self.get_logger())
-        if self.n_rotors and values['esc.virtual_bus']:      # the ESCs on a virtual I2C bus
-            addresses = values['esc.addresses']
+        escs = virtual_escs(values)
+        if self.n_rotors and escs is not None:      # the ESCs on a virtual I2C bus
+            addresses = escs.addresses
             if len(addresses) != self.n_rotors:
                 raise ConfigError([('esc.addresses', 'expected %d (one per rotor), got %d'
                                     % (self.n_rotors, len(addresses)))])
             try:
-                self.esc_bus = VirtualEscBus(values['esc.virtual_bus'], addresses)
+                self.esc_bus = VirtualEscBus(escs.path, addresses)
             except (OSError, ValueError) as e:
                 raise ConfigError([('esc.virtual_bus', str(e))]) from None
             self.esc_bus.power(True)

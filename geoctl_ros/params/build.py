@@ -39,6 +39,44 @@ def cone_set(values: dict) -> ConeSet:
                    math.radians(values['cone_guard_deg']))
 
 
+def cone_values(cones: Any) -> dict:
+    """The controller parameters of cones [(axis, half-angle deg)], named c1, c2, ...: what
+    ``cone_set`` reads back.
+    """
+    names = ['c%d' % (i + 1) for i in range(len(cones))]
+    values: Dict[str, Any] = {'cones.names': names}
+    for name, (axis, half_angle) in zip(names, cones):
+        values['cones.%s.axis' % name] = axis
+        values['cones.%s.half_angle_deg' % name] = half_angle
+    return values
+
+
+@dataclass(frozen=True)
+class GainSet:
+    """The gains a tuning searches (``geoctl_ros.campaign.tune``), as controller parameters."""
+
+    k_R: float
+    k_Omega: float
+    c: float
+    k_Delta: float
+    k_Delta_cog: float
+    guidance_lookahead_deg: float
+
+    @classmethod
+    def names(cls) -> Tuple[str, ...]:
+        """Their parameters' names."""
+        return tuple(f.name for f in fields(cls))
+
+    def overrides(self) -> Dict[str, float]:
+        """The controller parameters they set."""
+        return {f.name: float(getattr(self, f.name)) for f in fields(self)}
+
+
+def gain_set(values: dict) -> GainSet:
+    """The GainSet of (resolved or overriding) controller parameters."""
+    return GainSet(*(float(values[name]) for name in GainSet.names()))
+
+
 def controller_config(values: dict) -> ControllerConfig:
     """ControllerConfig from resolved controller parameters (see ``resolve``)."""
     return ControllerConfig(

@@ -26,6 +26,7 @@ from geoctl_ros.params import (
     node_overrides,
     resolve,
 )
+from geoctl_ros.params.esc import esc_config
 from geoctl_ros.plots import flight as flight_plots
 from geoctl_ros.sil.processes import Monitor, NodeProcess
 from geoctl_ros.sil.rosenv import use_node_env
@@ -87,7 +88,7 @@ def fly(params_file, out, duration, monitor_factory=None, mavlink=None, record=T
         mon.spin_for(0.5)
         after_disarm = mon.last('motors')
         if esc:             # what the ESCs were told last, from the bus itself
-            bus = VirtualEscBus(bus_path, resolve(ESC, {})['esc.addresses'])
+            bus = VirtualEscBus(bus_path, esc_config(resolve(ESC, {})).addresses)
             after_disarm = [data[0] for data, _ in bus.setpoints()]
             bus.close()
     finally:

@@ -34,15 +34,9 @@ from geoctl_ros.core.law.control import ControlOutput
 from geoctl_ros.core.supervisor.control_tick import ControlTick
 from geoctl_ros.core.telemetry.stats import SETTLE_PSI
 from geoctl_ros.params import CONTROLLER, SIM
-from geoctl_ros.params.scenario import Scenario
+from geoctl_ros.params.scenario import PER_RUN, Scenario, differing
 from geoctl_ros.sim.history import History
-from geoctl_ros.sim.runs import (
-    PER_RUN,
-    Testbeds,
-    differing,
-    shared_holds,
-    stalled_steps,
-)
+from geoctl_ros.sim.runs import Testbeds, shared_holds
 from geoctl_ros.sim.testbed import measured_attitude, measured_rate
 
 SETTLED_DEG = 5.0       # attitude error below which a run has converged (at the end) or settled
@@ -108,24 +102,22 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     if problem:
         raise ValueError('a batch shares everything but %s; differs: %s'
                          % (', '.join(PER_RUN[CONTROLLER] + PER_RUN[SIM]), problem))
-    first = scenarios[0]
-    cv, sv = first.controller, first.sim
     bed = Testbeds(scenarios)
     setup, controller, plant, cones, actuator = (bed.setup, bed.controller, bed.plant, bed.cones,
                                                  bed.actuator)
     n = len(scenarios)
-    rate, rate_sub = cv['rate_hz'], sv['integration_rate_hz']
+    rate, rate_sub = setup.loop.rate_hz, bed.beds[0].integration_rate_hz
     n_sub = int(round(rate_sub / rate))
     dt, h = 1.0 / rate, 1.0 / (rate * n_sub)
-    span = first.options['duration'] if duration is None else duration
-    holds = shared_holds(scenarios, rate, n_sub, span)
+    span = bed.options[0].duration if duration is None else duration
+    holds = shared_holds(bed, rate, n_sub, span)
     steps = len(holds)
     j_at = np.cumsum(holds) - holds                   # integration steps before each step
     times = j_at / rate_sub
     noise = bed.noise(steps)
     schedule = setup.schedule
     # latency: a ring of the last states, one per integration step
-    delay = np.array([int(round(s.options['latency'] * rate_sub)) for s in scenarios])
+    delay = np.array([int(round(o.latency * rate_sub)) for o in bed.options])
     ring = int(delay.max()) + 1
     R_now, W_now = bed.state()
     R_past = np.repeat(R_now[None], ring, axis=0)
@@ -136,7 +128,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     # else the measurement_delay the controller assumes; stalled, older by the wait since
     stamped = setup.loop.age_from_stamps
     tick = ControlTick(controller, setup.mixer, 0.0 if stamped else setup.loop.measurement_delay)
-    stalled = np.stack([stalled_steps(s.options, times) for s in scenarios], axis=1)
+    stalled = np.stack([o.stalled(times) for o in bed.options], axis=1)
     any_stall = bool(stalled.any())
     receipt = np.zeros(n)
     ages = (delay * h,) * 2 if stamped else (0.0, 0.0)

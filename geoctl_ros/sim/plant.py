@@ -21,8 +21,6 @@ A batch of testbeds (one per run of a campaign) is one Plant whose configuration
 leading batch axis (inertia (batch, 3, 3), mass (batch,), R (batch, 3, 3), ...); ``step`` advances
 them all with the same formulas.
 """
-from dataclasses import dataclass, field
-import math
 
 import numpy as np
 
@@ -30,45 +28,8 @@ from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.so3 import cross, cross_floats, matvec, matvec_floats, vecmat
 from geoctl_ros.core.law.mechanics import (
     body_gravity_moment,
-    first_moment,
     gravity_moment,
-    pivot_inertia,
 )
-
-
-@dataclass(frozen=True)
-class Disturbance:
-    """Delta(t) = constant + amplitude * [sin wt, cos wt, (sin wt + cos wt)/2], body frame, N m."""
-
-    constant: np.ndarray
-    amplitude: np.ndarray
-    frequency: float  # rad/s
-
-    def __post_init__(self):
-        object.__setattr__(self, '_varying', bool(np.any(self.amplitude)))
-
-    def __call__(self, t):
-        if not self._varying:
-            return self.constant
-        s, c = math.sin(self.frequency * t), math.cos(self.frequency * t)
-        return self.constant + self.amplitude * np.array([s, c, 0.5 * (s + c)])  # (not batched)
-
-
-@dataclass(frozen=True)
-class PlantConfig:
-    """Physical parameters of the testbed; built and validated by ``geoctl_ros.params``."""
-
-    inertia: np.ndarray      # about the centre of mass, kg m^2
-    mass: float              # kg
-    cog_offset: np.ndarray   # pivot -> centre of mass, body frame, m
-    gravity: np.ndarray      # world frame, m/s^2
-    disturbance: Disturbance
-    J: np.ndarray = field(init=False, repr=False)        # inertia about the pivot
-    m_rho: np.ndarray = field(init=False, repr=False)    # mass times pivot -> centre of mass
-
-    def __post_init__(self):
-        object.__setattr__(self, 'J', pivot_inertia(self.inertia, self.mass, self.cog_offset))
-        object.__setattr__(self, 'm_rho', first_moment(self.mass, self.cog_offset))
 
 
 class Plant:

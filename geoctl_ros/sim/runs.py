@@ -5,45 +5,16 @@ own seed, the late steps and the stalls.
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any, Callable, List, Optional, Tuple
+from typing import Any, Callable, Tuple
 
 import numpy as np
 
-from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.control import AttitudeController
-from geoctl_ros.params import CONTROLLER, SIM, cone_set, controller_setup
-from geoctl_ros.params.scenario import Scenario
-from geoctl_ros.sim.build import TestbedSetup, testbed_setup
-from geoctl_ros.sim.plant import Disturbance, Plant, PlantConfig
-
-# What may differ between the runs of a batch (everything else must be equal).
-PER_RUN = {
-    CONTROLLER: ('setpoint', 'unmodelled_moment_max'),     # (a set-point check, not in flight)
-    SIM: ('initial_attitude', 'initial_angular_velocity', 'mass', 'inertia', 'cog_offset',
-          'disturbance.constant', 'noise.seed', 'noise.gyro_bias'),
-}
-
-
-def differing(scenarios: List[Scenario]) -> Optional[str]:
-    """The first shared parameter that differs between the scenarios, or None."""
-    first = scenarios[0]
-    for attr, node in (('controller', CONTROLLER), ('sim', SIM)):
-        ref = getattr(first, attr)
-        for s in scenarios[1:]:
-            values = getattr(s, attr)
-            for key, v in ref.items():
-                if key in PER_RUN[node] or key.startswith('cones.'):
-                    continue
-                if not np.array_equal(np.asarray(v), np.asarray(values[key])):
-                    return '%s: %s (%s and %s)' % (node, key, first.name, s.name)
-    for s in scenarios[1:]:
-        for key in ('duration', 'tick_jitter'):
-            if s.options[key] != first.options[key]:
-                return 'scenario: %s (%s and %s)' % (key, first.name, s.name)
-        if len(s.controller['cones.names']) != len(first.controller['cones.names']):
-            return 'the number of cones (%s and %s)' % (first.name, s.name)
-    return None
+from geoctl_ros.params import controller_setup
+from geoctl_ros.params.testbed import Disturbance, PlantConfig, TestbedSetup
+from geoctl_ros.sim.plant import Plant
+from geoctl_ros.sim.testbed import rotor_actuator
 
 
 def hold_steps(steps: int, n_sub: int, jitter: float, seed: int) -> np.ndarray:
@@ -60,23 +31,12 @@ def hold_steps(steps: int, n_sub: int, jitter: float, seed: int) -> np.ndarray:
     return holds[starts < steps * n_sub]
 
 
-def stalled_steps(options: dict, times: np.ndarray) -> np.ndarray:
-    """Per control step (at times), whether the inputs stall there (scenario stalls.start and
-    .duration): no new sample reaches the controller at a step within [start, start + duration).
-    """
-    out = np.zeros(len(times), dtype=bool)
-    for start, length in zip(options['stalls.start'], options['stalls.duration']):
-        out |= (times >= start) & (times < start + length)
-    return out
-
-
-def shared_holds(scenarios: List[Scenario], rate: float, n_sub: int,
-                 duration: float) -> np.ndarray:
+def shared_holds(bed: 'Testbeds', rate: float, n_sub: int, duration: float) -> np.ndarray:
     """The batch's hold sequence (integration steps per control step): the runs must share it."""
     h = 1.0 / (rate * n_sub)
     steps = int(round(duration * rate))
-    holds = [hold_steps(steps, n_sub, s.options['tick_jitter'] / h, s.sim['noise.seed'])
-             for s in scenarios]
+    holds = [hold_steps(steps, n_sub, o.tick_jitter / h, b.noise.seed)
+             for o, b in zip(bed.options, bed.beds)]
     if any(not np.array_equal(holds[0], x) for x in holds[1:]):
         raise ValueError('the runs of a batch share their late steps: with scenario.tick_jitter '
                          'they fly together only with the same noise.seed')
@@ -91,8 +51,9 @@ class Testbeds:
         n = len(scenarios)
         self.setup = setup = controller_setup(cv)                     # gains, model, mixer
 
-        # each run's testbed, as the sim node builds its own (sim.build.testbed_setup)
-        self.beds = beds = [testbed_setup(s.sim) for s in scenarios]
+        # each run's testbed, as the sim node builds its own (params.testbed.testbed_setup)
+        self.beds = beds = [s.testbed for s in scenarios]
+        self.options = [s.options for s in scenarios]
 
         # One run flies its testbed unstacked: its small products then go in floats, in the order
         # of a stack's (geoctl_ros.core.geometry.so3), the same bits three times faster.
@@ -102,14 +63,13 @@ class Testbeds:
         self.single = n == 1
 
         shared = setup.config.cones
-        sets = [cone_set(s.controller) for s in scenarios]
-        names = cv['cones.names']
+        sets = [s.cones() for s in scenarios]
+        names = shared.names
         self.cones = ConeSet(shared.r, np.array([c.V for c in sets]).reshape(n, len(names), 3),
                              np.array([c.theta for c in sets]).reshape(n, len(names)),
                              shared.alpha, shared.floor, names, shared.guard)
         self.controller = AttitudeController(replace(setup.config, cones=self.cones))
-        self.controller.R_d = np.array([so3.quat_to_rot(s.controller['setpoint'])
-                                        for s in scenarios])
+        self.controller.R_d = np.array([s.setpoint() for s in scenarios])
         self.controller.delta_bar = np.zeros((n, setup.config.n_params))
         first = beds[0].plant        # (what the runs share: checked by ``differing``)
         rho = per_run(lambda b: b.plant.cog_offset)
@@ -121,7 +81,7 @@ class Testbeds:
                                         first.disturbance.frequency)),
             np.array([b.R0 for b in beds]).reshape((3, 3) if n == 1 else (n, 3, 3)),
             per_run(lambda b: b.Omega0))
-        self.actuator = beds[0].actuator(rho)           # None with torque: the moment acts
+        self.actuator = rotor_actuator(beds[0], rho)           # None with torque: the moment acts
         self.gyro_bias = np.array([b.noise.bias for b in beds])
 
     def noise(self, steps: int) -> np.ndarray:

@@ -1,72 +1,19 @@
-"""A scenario: a scenario file's parameters, validated, and its run through the closed loop.
-
-A scenario file is a ROS 2 parameter file with ``/**`` (shared), ``controller:``, ``sim:`` and
-optionally ``scenario:`` sections; the parameters are those of ``geoctl_ros.params``. ``run``
+"""A scenario's run through the closed loop. A scenario (``geoctl_ros.params.scenario``: a
+scenario file's parameters, validated, and their typed set-ups) is loaded with ``load``; ``run``
 flies it as a batch of one through ``geoctl_ros.sim.closed_loop`` (its docstring says what the
 loop models: latency, stalls, late steps, rotors or torque) and sums the flight up.
 """
 from dataclasses import dataclass
-import os
 from typing import Optional
 
 import numpy as np
 
 from geoctl_ros.core.law.gains import gain_condition
-from geoctl_ros.params import (
-    CONTROLLER,
-    SCENARIO,
-    SIM,
-    ConfigError,
-    controller_setup,
-    load_parameter_file,
-    node_overrides,
-    resolve,
-)
-from geoctl_ros.params.scenario import Scenario
-from geoctl_ros.sim.build import testbed_sim
+from geoctl_ros.params import controller_setup
+from geoctl_ros.params.scenario import Scenario, from_sections, load
 from geoctl_ros.sim.closed_loop import fly
 
-__all__ = ['Result', 'Scenario', 'from_sections', 'load', 'run']   # (Scenario: params.scenario's)
-
-
-def load(path: str) -> Scenario:
-    """Load and validate a scenario file; raises ConfigError naming every bad parameter."""
-    name = os.path.splitext(os.path.basename(str(path)))[0]
-    return from_sections(load_parameter_file(path), name)
-
-
-def from_sections(sections: dict, name: str) -> Scenario:
-    """A validated Scenario from parameter-file sections ({'/**' or node: flat parameters}), as
-    ``load`` reads them from a file; raises ConfigError naming every bad parameter.
-    """
-    errors = []
-    resolved = {}
-    for node in (CONTROLLER, SIM, SCENARIO):
-        try:
-            resolved[node] = resolve(node, node_overrides(sections, node))
-        except ConfigError as e:
-            errors += [('%s: %s' % (node, name), reason) for name, reason in e.errors]
-    if errors:
-        raise ConfigError(errors)
-    ratio = resolved[SIM]['integration_rate_hz'] / resolved[CONTROLLER]['rate_hz']
-    if ratio < 1.0 or abs(ratio - round(ratio)) > 1e-9:
-        raise ConfigError([('sim: integration_rate_hz', 'must be an integer multiple of the '
-                            'controller rate_hz (%g / %g)' % (resolved[SIM]['integration_rate_hz'],
-                                                              resolved[CONTROLLER]['rate_hz']))])
-    if len(resolved[SCENARIO]['stalls.start']) != len(resolved[SCENARIO]['stalls.duration']):
-        raise ConfigError([('scenario: stalls.duration', 'needs one value per stalls.start')])
-    delay = resolved[SCENARIO]['latency'] * resolved[SIM]['integration_rate_hz']
-    if abs(delay - round(delay)) > 1e-6:
-        raise ConfigError([('scenario: latency', 'must be a whole number of integration steps '
-                            '(1 / %g s)' % resolved[SIM]['integration_rate_hz'])])
-    for node, build in ((CONTROLLER, controller_setup), (SIM, testbed_sim)):
-        try:
-            build(resolved[node])
-        except ConfigError as e:
-            errors += [('%s: %s' % (node, name), reason) for name, reason in e.errors]
-    if errors:
-        raise ConfigError(errors)
-    return Scenario(name, resolved[CONTROLLER], resolved[SIM], resolved[SCENARIO])
+__all__ = ['Result', 'Scenario', 'from_sections', 'load', 'run']   # (the first three: params')
 
 
 @dataclass
@@ -96,7 +43,7 @@ def run(scenario: Scenario, duration: Optional[float] = None) -> Result:
     setup = controller_setup(scenario.controller)
     summary = {
         'scenario': scenario.name,
-        'title': scenario.options['title'],
+        'title': scenario.options.title,
         'min_cone_angle_deg': {n: float(a) for n, a in zip(names, flight.min_angle_deg[0])},
         'cone_half_angle_deg': {n: float(a) for n, a in zip(names, flight.half_angle_deg[0])},
         'constraint_violated': bool(flight.violated[0]),
@@ -113,7 +60,7 @@ def run(scenario: Scenario, duration: Optional[float] = None) -> Result:
         'wall_time_s': flight.wall_s,
         'gain_check': gain_condition(setup.config).message(),
     }
-    if scenario.sim['actuation'] == 'rotors':
+    if scenario.testbed.rotors is not None:
         cmd = history.arrays['cmd'][:, 0]
         summary.update({
             'actuation': 'rotors',

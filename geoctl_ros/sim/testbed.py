@@ -14,12 +14,11 @@ Composes the rigid body about the pivot (``geoctl_ros.sim.plant``), the actuatio
   at the IMU (the sim node).
 
 The sim node drives ``TestbedSim``. A batch (the scenario runner's and the campaign's closed
-loop: ``geoctl_ros.sim.runs.Testbeds``) is the stack of the same set-ups
-(``geoctl_ros.sim.build.testbed_setup``), flown with the same classes (a leading batch axis on the
+loop: ``geoctl_ros.sim.runs.Testbeds``) is the stack of the same typed set-ups
+(``geoctl_ros.params.testbed``), flown with the same classes (a leading batch axis on the
 plant's configuration and state and on the actuator's centre-of-mass offset) and the same
 sensors' formulas, so the testbed and its noise are written once.
 """
-from dataclasses import dataclass, field
 import math
 from typing import Optional
 
@@ -29,6 +28,7 @@ from geoctl_ros.core.actuation.airframe import effectiveness
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.so3 import matvec
 from geoctl_ros.core.sensors.frames import InputFrames
+from geoctl_ros.params.testbed import SensorNoise, TestbedSetup, testbed_setup
 from geoctl_ros.sim.plant import Plant
 
 
@@ -81,32 +81,6 @@ class EscWatchdog:
         reference = self.last_tick if stalled else now
         self.last_tick = now
         return reference - self.last_command < self.timeout
-
-
-@dataclass(frozen=True)
-class SensorNoise:
-    """The sensors' errors of one testbed, written once for the sim node and a batch: the motion
-    capture measures R exp(n_R) and the gyro Omega + bias + n_w (in the IMU's axes), with n_R and
-    n_w normal, ``attitude`` (rad) and ``gyro`` (rad/s) per axis, drawn from ``seed``.
-    """
-
-    attitude: float = 0.0
-    gyro: float = 0.0
-    bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    seed: int = 0
-
-    def drawn(self, steps: int) -> np.ndarray:
-        """(n_R, n_w) of ``steps`` measurements taken together, (2, steps, 3), as a batch draws
-        them: from the seed's stream, per measurement the attitude's 3 then the gyro's 3 (only
-        those whose level is not 0; the others are 0).
-        """
-        sigmas = (self.attitude, self.gyro)
-        drawn = [i for i, sigma in enumerate(sigmas) if sigma > 0.0]
-        z = np.random.default_rng(self.seed).standard_normal((steps, len(drawn), 3))
-        out = np.zeros((2, steps, 3))
-        for slot, i in enumerate(drawn):
-            out[i] = sigmas[i] * z[:, slot]
-        return out
 
 
 def measured_attitude(R: np.ndarray, n_R: np.ndarray) -> np.ndarray:
@@ -162,3 +136,21 @@ class TestbedSim:
         """
         R, w = self.plant.R, self.plant.Omega
         return R.T @ -gravity + np.cross(alpha, position) + np.cross(w, np.cross(w, position))
+
+
+def rotor_actuator(setup: TestbedSetup,
+                   cog_offset: Optional[np.ndarray] = None) -> Optional[RotorActuator]:
+    """The rotors' actuator of a testbed's set-up (None with torque actuation), about cog_offset
+    (default: the plant's; a batch gives the stack of its runs').
+    """
+    r = setup.rotors
+    if r is None:
+        return None
+    rho = setup.plant.cog_offset if cog_offset is None else cog_offset
+    return RotorActuator(r.geometry, rho, r.curve, r.time_constant, r.failed)
+
+
+def testbed_sim(values: dict) -> TestbedSim:
+    """The TestbedSim of resolved sim parameters, at its initial state."""
+    s = testbed_setup(values)
+    return TestbedSim(s.plant, s.R0, s.Omega0, rotor_actuator(s), s.noise)
