@@ -190,7 +190,7 @@ def batched():
     pool, i = [], 0
     while len(pool) < 256:
         sections = manoeuvres.run_sections(base, 1, i, 1.0)
-        if len(sections['controller']['cones.names']) == 1:
+        if manoeuvres.cone_count(1, i) == 1:
             pool.append(scenario.from_sections(sections, 'run_%d' % i))
         i += 1
     rows = []

@@ -52,7 +52,7 @@ def per_core(duration=2.0, cones=2):
     runs, i = [], 0
     while len(runs) < n:
         sections = manoeuvres.run_sections(base, 1, i, duration)
-        if len(sections['controller']['cones.names']) == cones:
+        if manoeuvres.cone_count(1, i) == cones:
             runs.append(scenario.from_sections(sections, 'run_%d' % i))
         i += 1
     wall = fly(runs).wall_s

@@ -130,7 +130,7 @@ def test_a_law_that_diverges_is_counted_as_a_violation_and_the_benchmark_goes_on
     sections = load_parameter_file(os.path.join(SCENARIOS, name + '.yaml'))
     sections['controller'].update(cbf_rate=0.5, cbf_moment_bound=10.0)
     flights = [cases.fly_case((name, law, sections, 0.5)) for law in cases.BENCHED]
-    assert [f['law'] for f in flights if f['diverged']] == ['cbf']
+    assert [f.law for f in flights if f.diverged] == ['cbf']
     lines = run.write(str(tmp_path), flights, {}, run.time_steps(flights, rounds=1),
                       {name: 'four cones'}, [])
     rows = {r['law']: r for r in read(tmp_path / 'cases.csv')}

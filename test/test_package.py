@@ -19,6 +19,8 @@ import numpy_api
 import pytest
 from workspace import Workspace
 
+from geoctl_ros.params.schema import SCHEMA
+
 pytestmark = pytest.mark.odroid
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -346,14 +348,49 @@ def test_the_rclpy_free_layers_are_clean_under_mypy(tmp_path):
     assert r.returncode == 1 and 'Incompatible return value' in r.stdout, r.stdout
 
 
-def test_every_module_of_the_package_has_at_most_400_lines():
-    """A ceiling, not a rule for where to cut: files are cut by concept (issue 40 raised it from
-    300, where a class was being split across files to fit).
+def _parameter_read(node, names):
+    """The parameter a syntax node reads by its name (a subscript, or .get/.pop/.setdefault/
+    .get_parameter, with a literal, a '%' format or an f-string that starts with one), or None.
     """
-    paths = sorted(pathlib.Path(PKG).rglob('*.py'))
-    long = ['%s: %d' % (path.relative_to(PKG), n) for path in paths
-            if (n := len(path.read_text().splitlines())) > 400]
-    assert not long, long
+    def literal(x):
+        if isinstance(x, ast.Constant) and isinstance(x.value, str):
+            return x.value
+        if isinstance(x, ast.BinOp) and isinstance(x.op, ast.Mod):
+            return literal(x.left)
+        if isinstance(x, ast.JoinedStr) and x.values:
+            return literal(x.values[0])
+        return None
+    if isinstance(node, ast.Subscript) and isinstance(node.ctx, ast.Load):
+        key = literal(node.slice)
+    elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.args
+          and node.func.attr in ('get', 'pop', 'setdefault', 'get_parameter')):
+        key = literal(node.args[0])
+    else:
+        return None
+    return key if key is not None and (key in names or key.startswith('cones.')) else None
+
+
+def test_no_module_outside_params_reads_a_parameter_by_its_name():
+    """params/ turns parameters into typed set-ups (ControllerSetup, TestbedSetup, ScenarioOptions,
+    EscSetup, GainSet, ...); every other module of the package and of benchmarks/ reads those, not
+    the parameter dicts. Checked on the syntax tree of every module; writing a parameter (a
+    scenario file's sections, an override) is not a read. The check finds a planted read.
+    """
+    names = {p.name for p in SCHEMA}
+    planted = ast.parse("x = values['k_R'] + v.get('pose_timeout') + v['cones.%s.axis' % n]\n"
+                        "values['k_R'] = 1.0\n")
+    assert sorted(k for n in ast.walk(planted) if (k := _parameter_read(n, names))) == [
+        'cones.%s.axis', 'k_R', 'pose_timeout']
+    reads = []
+    for path in sorted(list(pathlib.Path(PKG).rglob('*.py'))
+                       + list(pathlib.Path(ROOT, 'benchmarks').rglob('*.py'))):
+        if pathlib.Path(PKG, 'params') in path.parents:
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            key = _parameter_read(node, names)
+            if key:
+                reads.append('%s:%d %s' % (path.relative_to(ROOT), node.lineno, key))
+    assert not reads, reads
 
 
 def test_every_public_function_of_the_typed_layers_has_type_hints():

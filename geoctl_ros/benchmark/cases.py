@@ -6,9 +6,10 @@ unbounded law on the ideal-torque plant) counts as diverged: its figures are NaN
 violation, and the benchmark goes on.
 """
 import copy
+from dataclasses import dataclass, field
 import math
 import time
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -37,7 +38,24 @@ def with_law(sections: dict, law: str) -> dict:
     return out
 
 
-def fly_case(job: Tuple[str, str, dict, Optional[float]]) -> dict:
+@dataclass
+class CaseFlight:
+    """One case flown by one law: what the tables and figures need of it."""
+
+    case: str
+    law: str
+    title: str
+    controller: dict                   # its resolved controller parameters
+    cones: Any                         # its ConeSet
+    diverged: str = ''                 # why the flight stopped, '' when it did not
+    scores: Dict[str, Any] = field(default_factory=dict)     # RUN_COLUMNS
+    margins: np.ndarray = field(default_factory=lambda: np.array([]))   # at each control step
+    sensor: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))   # direction, world
+    dt: float = 0.0
+    states: List[tuple] = field(default_factory=list)   # (R, Omega) the steps are timed at
+
+
+def fly_case(job: Tuple[str, str, dict, Optional[float]]) -> CaseFlight:
     """Worker: fly one case (name, law, the scenario file's sections, the simulated seconds or
     None for the file's) with its law; the run's
     figures, its series (margin and sensor direction at each control step), the states the steps
@@ -45,23 +63,22 @@ def fly_case(job: Tuple[str, str, dict, Optional[float]]) -> dict:
     """
     name, law, sections, duration = job
     scenario = from_sections(with_law(sections, law), name)
-    out = {'case': name, 'law': law, 'title': scenario.options.title,
-           'controller': scenario.controller, 'diverged': ''}
+    out = CaseFlight(name, law, scenario.options.title, scenario.controller, scenario.cones())
     try:
         flight = fly([scenario], series=True, history=True, duration=duration)
     except FloatingPointError as e:
-        out.update(diverged=str(e), scores={k: math.nan for k in RUN_COLUMNS},
-                   margins=np.array([]), sensor=np.zeros((0, 3)), dt=0.0, states=[])
-        out['scores']['violated'] = True
+        out.diverged = str(e)
+        out.scores = dict({k: math.nan for k in RUN_COLUMNS}, violated=True)
         return out
     assert flight.history is not None and flight.margin_series is not None
     assert flight.sensor_series is not None
     a = flight.history.arrays
     picked = np.linspace(0, len(flight.times) - 1, min(TIMED_STATES, len(flight.times)))
     states = [(so3.quat_to_rot(a['q'][k, 0]), a['w'][k, 0].copy()) for k in picked.astype(int)]
-    out.update(scores={k: v[0].item() for k, v in run_scores(flight).items()},
-               margins=flight.margin_series[:, 0].copy(),
-               sensor=flight.sensor_series[:, 0].astype(float), dt=flight.dt, states=states)
+    out.scores = {k: v[0].item() for k, v in run_scores(flight).items()}
+    out.margins = flight.margin_series[:, 0].copy()
+    out.sensor = flight.sensor_series[:, 0].astype(float)
+    out.dt, out.states = flight.dt, states
     return out
 
 
@@ -76,7 +93,7 @@ def step_times(controller_values: dict, laws: Sequence[str], states: List[tuple]
         setup = controller_setup(dict(controller_values, law=law))
         controllers[law] = AttitudeController(setup.config)
         controllers[law].R_d = setup.setpoint
-    dt = 1.0 / controller_values['rate_hz']
+    dt = 1.0 / setup.loop.rate_hz
     order = tuple(laws)
     times: Dict[str, list] = {law: [] for law in order}
     clock = time.perf_counter_ns

@@ -44,7 +44,7 @@ def gain_set(path: Optional[str]) -> dict:
 
 
 def fly_cases(client, sections: Dict[str, dict], say: Callable[[str], None],
-              duration: Optional[float] = None) -> List[dict]:
+              duration: Optional[float] = None) -> List[cases.CaseFlight]:
     """Fly every standard case (sections: {name: the scenario file's sections}) with every law
     on the cluster, for duration simulated seconds (None: the files'); the flights
     (``cases.fly_case``'s), in the tables' order.
@@ -54,10 +54,8 @@ def fly_cases(client, sections: Dict[str, dict], say: Callable[[str], None],
 
     def take(i, out):
         flown[i] = out
-        s = out['scores']
         say('benchmark: %s, %s: closest %+.2f deg%s' % (
-            out['case'], out['law'], s['closest_deg'],
-            ' (diverged)' if out['diverged'] else ''))
+            out.case, out.law, out.scores['closest_deg'], ' (diverged)' if out.diverged else ''))
 
     cluster.run_tasks(client, cases.fly_case, jobs, take)
     return [flown[i] for i in range(len(jobs))]
@@ -90,15 +88,16 @@ def fly_random(client, base: dict, runs: int, seed: int, duration: float, batch:
     return by_law, by_set
 
 
-def time_steps(flights: List[dict], rounds: int = 3) -> Dict[str, Dict[str, np.ndarray]]:
+def time_steps(flights: List[cases.CaseFlight],
+               rounds: int = 3) -> Dict[str, Dict[str, np.ndarray]]:
     """Each case's laws timed side by side at the states of all its laws' flights; {case: {law:
     microseconds per step}}.
     """
     out = {}
-    for name in dict.fromkeys(f['case'] for f in flights):
-        mine = [f for f in flights if f['case'] == name]
-        states = [s for f in mine for s in f['states']]
-        out[name] = cases.step_times(mine[0]['controller'], cases.BENCHED, states, rounds)
+    for name in dict.fromkeys(f.case for f in flights):
+        mine = [f for f in flights if f.case == name]
+        states = [s for f in mine for s in f.states]
+        out[name] = cases.step_times(mine[0].controller, cases.BENCHED, states, rounds)
     return out
 
 
@@ -109,15 +108,15 @@ def tables(flights, random, timed):
     """
     per_case: Dict[str, List[dict]] = {}
     for f in flights:
-        one = {c: np.array([f['scores'][c]]) for c in RUN_COLUMNS}
-        row = law_row(f['law'], one, timed[f['case']][f['law']], f['margins'])
-        per_case.setdefault(f['case'], []).append(dict(row, case=f['case']))
+        one = {c: np.array([f.scores[c]]) for c in RUN_COLUMNS}
+        row = law_row(f.law, one, timed[f.case][f.law], f.margins)
+        per_case.setdefault(f.case, []).append(dict(row, case=f.case))
     pooled = {law: np.concatenate([t[law] for t in timed.values()]) for law in cases.BENCHED}
     random_steps = timed.get('testbed_yaw90', pooled)
     random_rows, overall = [], []
     for law in cases.BENCHED:
-        mine = [f for f in flights if f['law'] == law]
-        columns = {c: np.array([f['scores'][c] for f in mine], dtype=float) for c in RUN_COLUMNS}
+        mine = [f for f in flights if f.law == law]
+        columns = {c: np.array([f.scores[c] for f in mine], dtype=float) for c in RUN_COLUMNS}
         if random:
             random_rows.append(law_row(law, random[law], random_steps[law]))
             columns = {c: np.concatenate([columns[c], np.asarray(random[law][c], dtype=float)])
@@ -134,9 +133,9 @@ def write(out_dir, flights, random, timed, titles, notes, by_set=None):
     for name, rows in per_case.items():
         lines += ['', '## %s: %s' % (name, titles[name]), ''] + markdown(rows)
         lines += ['', '![%s](%s.png)' % (name, name)]
-        mine = [f for f in flights if f['case'] == name]
-        plots.case_figure(titles[name], mine[0]['controller'],
-                          [(f['law'], f['margins'], f['sensor'], f['dt']) for f in mine],
+        mine = [f for f in flights if f.case == name]
+        plots.case_figure(titles[name], mine[0].cones,
+                          [(f.law, f.margins, f.sensor, f.dt) for f in mine],
                           os.path.join(out_dir, name + '.png'))
     if random_rows:
         n = random_rows[0]['runs']
@@ -188,5 +187,5 @@ def benchmark(client, case_sections, base, args, say, progress=None):
              'states of all its flights (%d per flight).'
              % (', '.join(cases.BENCHED), t1 - t0, args.runs, args.seed, args.duration,
                 t2 - t1, workers, 3, cases.TIMED_STATES) + shortened]
-    titles = {f['case']: f['title'] for f in flights}
+    titles = {f.case: f.title for f in flights}
     return write(args.out, flights, random, timed, titles, notes, by_set)

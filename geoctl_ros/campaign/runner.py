@@ -171,7 +171,8 @@ def worst_runs(worst, base, args, gain_sets, out_dir):
         sections = draw.sections(args.seed, i, gain_sets[k - 1])
         name = ('set_%d_run_%04d' % (k, i)) if len(gain_sets) > 1 else 'run_%04d' % i
         manoeuvres.write_scenario_file(sections, os.path.join(out_dir, 'worst', name + '.yaml'))
-        flown.append((name.replace('_', ' '), margins, sensor, dt, sections['controller']))
+        flown.append((name.replace('_', ' '), margins, sensor, dt,
+                      _scenario(sections, name).cones()))
         labels.append('%s (%.2f deg)' % (name.replace('_', ' '), closest))
     if flown:
         campaign_plots.worst_runs_figure(flown, os.path.join(out_dir, 'worst_runs.png'))

@@ -92,7 +92,7 @@ def main(argv=None):
         print('  pose-to-command        mean %.2f ms, max %.2f ms (pose receipt to publish)'
               % (lat['mean_ms'], lat['max_ms']))
     print('  commands at subscriber %.1f Hz, gap std %.2f ms, max %.1f ms'
-          % (sub['rate_hz'], sub['gap_std_ms'], sub['gap_max_ms']))
+          % (sub['frequency_hz'], sub['gap_std_ms'], sub['gap_max_ms']))
     print('  commands after disarm  %s%s' % ('all zero' if s['commands_zero_after_disarm']
                                             else 'NOT ZERO', ' (at the ESCs)' if args.esc else ''))
     print('  wrote %s/sil_summary.json, %s/sil.png' % (args.out, args.out))

@@ -21,8 +21,8 @@ import numpy as np
 
 from geoctl_ros.falsify.envelope import OUTSIDE, Space
 from geoctl_ros.falsify.requirements import monitors, series_robustness
+from geoctl_ros.params.scenario import from_sections, tick_jitter
 from geoctl_ros.sim import closed_loop
-from geoctl_ros.sim.scenario import from_sections
 
 BATCH = 256              # runs flown together at most
 POPULATION = 256         # differential evolution's population (about: a multiple of the
@@ -76,7 +76,7 @@ class Objective:
         groups: Dict[float, List[int]] = {}
         for i, s in enumerate(sections):
             if s is not None:
-                groups.setdefault(s['scenario'].get('tick_jitter', 0.0), []).append(i)
+                groups.setdefault(tick_jitter(s), []).append(i)
         jobs, where = [], []
         for members in groups.values():
             for k in range(0, len(members), BATCH):

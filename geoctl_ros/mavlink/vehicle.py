@@ -39,6 +39,7 @@ from geoctl_ros.mavlink.controller_view import (
     ControllerView,
 )
 from geoctl_ros.mavlink.params import BY_ID, TABLE, to_mavlink
+from geoctl_ros.params.build import input_timeouts
 from geoctl_ros.params.param import MOTOR_TEST_DURATION_MAX
 
 ARRAY_MARGINS, ARRAY_DBAR = 1, 2
@@ -99,10 +100,10 @@ class Vehicle:
         present = gyro | ahrs | stab | motors
         enabled = gyro | ahrs | (stab | motors if self.armed else 0)
         health = 0
-        p = self.view.params
-        if d is not None and d.figures.imu_age < float(p.get('imu_timeout', 0.05)):
+        imu_timeout, pose_timeout = input_timeouts(self.view.params)
+        if d is not None and d.figures.imu_age < imu_timeout:
             health |= gyro
-        if d is not None and d.figures.pose_age < float(p.get('pose_timeout', 0.1)):
+        if d is not None and d.figures.pose_age < pose_timeout:
             health |= ahrs
         if d is not None and d.level != ERROR:
             health |= stab | motors

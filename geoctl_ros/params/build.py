@@ -25,6 +25,7 @@ from geoctl_ros.core.sensors.frames import InputFrames
 from geoctl_ros.core.supervisor.loop_types import LoopSettings
 from geoctl_ros.core.supervisor.safety import SetpointSchedule, quaternion_problem
 from geoctl_ros.params.param import ConfigError
+from geoctl_ros.params.schema import BY_NAME
 
 MOTOR_A_MIN = 1e-12     # N: the thrust curve's a, at least (a denormal overflowed its inverse)
 
@@ -154,6 +155,14 @@ def agreement_settings(values: dict) -> AgreementSettings:
                              values['accelerometer_noise'],
                              math.radians(values['alignment_tolerance_deg']),
                              np.array(values['gravity'], dtype=float))
+
+
+def input_timeouts(values: dict) -> Tuple[float, float]:
+    """(imu_timeout, pose_timeout) (s) of controller parameters as far as they are known (a
+    ground station's view of them), the schema's defaults for the rest.
+    """
+    imu, pose = BY_NAME['imu_timeout'], BY_NAME['pose_timeout']
+    return (float(values.get(imu.name, imu.default)), float(values.get(pose.name, pose.default)))
 
 
 def setpoint_rotation(values: dict) -> np.ndarray:

@@ -16,6 +16,7 @@ from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.params.build import cone_set, controller_setup, setpoint_rotation
 from geoctl_ros.params.files import load_parameter_file, node_overrides
 from geoctl_ros.params.param import CONTROLLER, SCENARIO, SIM, ConfigError
+from geoctl_ros.params.schema import BY_NAME
 from geoctl_ros.params.testbed import TestbedSetup, testbed_setup
 from geoctl_ros.params.validate import resolve
 
@@ -132,6 +133,11 @@ def from_sections(sections: dict, name: str) -> Scenario:
     if errors:
         raise ConfigError(errors)
     return Scenario(name, resolved[CONTROLLER], resolved[SIM], resolved[SCENARIO])
+
+
+def tick_jitter(sections: dict) -> float:
+    """The tick jitter (s) of a scenario file's sections: the runs of a batch share it."""
+    return float(sections.get(SCENARIO, {}).get('tick_jitter', BY_NAME['tick_jitter'].default))
 
 
 def goal_check(sections: dict) -> bool:

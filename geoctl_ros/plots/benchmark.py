@@ -7,13 +7,13 @@ COLORS = ('tab:blue', 'tab:orange', 'tab:purple', 'tab:green', 'tab:brown', 'tab
 STYLES = ('-', '--', '-', '-', '-', '-')     # (the delay-robust law is the paper's when not blind)
 
 
-def case_figure(title, controller, flights, path):
+def case_figure(title, cones, flights, path):
     """One case flown by every law (flights: [(law, margin at each control step, sensor
     direction at each, dt)]): the sensor paths on a sky map with the cones, and the margins in
     time; a law that diverged has no series and is named in the legend.
     """
     fig, (a1, a2) = subplots(1, 2, figsize=(12, 4.5))
-    sky_cones(a1, controller, '%s: sensor paths' % title)
+    sky_cones(a1, cones, '%s: sensor paths' % title)
     for (law, margins, sensor, dt), color, style in zip(flights, COLORS, STYLES):
         if not len(margins):
             a2.plot([], [], color=color, label='%s (diverged)' % law)

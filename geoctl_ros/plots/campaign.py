@@ -21,7 +21,7 @@ def closest_approach_figure(closest_deg, path):
 
 def worst_runs_figure(flown, path):
     """A campaign's worst runs ([(name, margin at each control step, sensor direction at each,
-    dt, controller parameters)]): cone margin in time, and the worst one's sensor path.
+    dt, its ConeSet)]): cone margin in time, and the worst one's sensor path.
     """
     fig, (a1, a2) = subplots(1, 2, figsize=(11, 4))
     for name, margins, _, dt, _ in flown:
@@ -30,8 +30,8 @@ def worst_runs_figure(flown, path):
     a1.set(xlabel='t [s]', ylabel='cone margin [deg]', title='the %d worst runs' % len(flown))
     a1.legend(fontsize=7)
     a1.grid(True, alpha=0.3)
-    name, _, sensor, _, controller = flown[0]
-    sky(a2, sensor.astype(float), controller, '%s: sensor path' % name)
+    name, _, sensor, _, cones = flown[0]
+    sky(a2, sensor.astype(float), cones, '%s: sensor path' % name)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 

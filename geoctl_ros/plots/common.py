@@ -51,11 +51,9 @@ def az_el(d):
             np.degrees(np.arcsin(np.clip(d[:, 2], -1, 1))))
 
 
-def sky_cones(ax, controller, title):
-    """A sky map (azimuth / elevation) with the cones' boundaries of controller parameters."""
-    for name in controller['cones.names']:
-        v = sphere.unit(np.asarray(controller['cones.%s.axis' % name], dtype=float))
-        th = math.radians(controller['cones.%s.half_angle_deg' % name])
+def sky_cones(ax, cones, title):
+    """A sky map (azimuth / elevation) with the boundaries of the cones (a ConeSet)."""
+    for v, th in zip(cones.V, cones.theta):
         ring = np.array([sphere.direction(v, th, a)
                          for a in np.linspace(0, 2 * math.pi, 181)])
         az, el = az_el(ring)
@@ -72,9 +70,11 @@ def sky_path(ax, path, color, label=None, end_color=None):
     ax.plot(az[-1], el[-1], 's', color=end_color or color, ms=5, label=label)
 
 
-def sky(ax, path, controller, title):
-    """The sensor's world direction in azimuth / elevation, with the cones' boundaries."""
-    sky_cones(ax, controller, title)
+def sky(ax, path, cones, title):
+    """The sensor's world direction in azimuth / elevation, with the cones' (a ConeSet)
+    boundaries.
+    """
+    sky_cones(ax, cones, title)
     az, el = az_el(path)
     ax.plot(az[0], el[0], 'o', color='tab:green', label='start')
     sky_path(ax, path, 'tab:blue', label='end', end_color='k')

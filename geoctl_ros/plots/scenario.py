@@ -21,7 +21,7 @@ def scenario_figures(result, out_dir):
     """Write attitude_error.png, psi.png, cone_angles.png, disturbance.png, control_moment.png,
     motor_commands.png (rotor actuation only) and sensor_path.png; returns their paths.
     """
-    title = result.summary.get('title') or result.scenario.name
+    title = result.scenario.options.title or result.scenario.name
     t = _col(result, 't')
     paths = []
 

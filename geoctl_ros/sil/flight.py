@@ -119,7 +119,7 @@ def fly(params_file, out, duration, monitor_factory=None, mavlink=None, record=T
         'step_compute': _diag_stats(diags, 'tick_to_command'),
         'pose_to_command_latency': _diag_stats(diags, 'pose_to_command_latency'),
         'commands_seen_by_subscriber': {'count': int(len(cmd_times)),
-                                        'rate_hz': float(1e3 / gaps.mean()),
+                                        'frequency_hz': float(1e3 / gaps.mean()),
                                         'gap_std_ms': float(gaps.std()),
                                         'gap_max_ms': float(gaps.max())},
         'commands_zero_after_disarm': bool(after_disarm is not None and not any(after_disarm)),
