@@ -29,3 +29,10 @@ def dask_scheduler():
                                dashboard_address=None)
     with cluster:
         yield cluster.scheduler_address
+
+
+@pytest.fixture
+def ros(tmp_path):
+    """The node tests' monitor node and a launcher for node processes (node_support.py)."""
+    from node_support import node_processes  # noqa: PLC0415  (rclpy: only the DDS tests)
+    yield from node_processes(tmp_path)

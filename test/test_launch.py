@@ -114,7 +114,7 @@ def test_sil_launch_flies_each_law_on_loopback_and_keeps_the_cone(
     mon = ros
     # the shipped testbed with room for this machine's stalls: a sim starved past the imu's
     # 0.25 s ride-through fails safe, as it should, and that is not what this test is about
-    # (two fresh-clone runs had the sim stall 0.26 s here; test_nodes.py's FED does the same)
+    # (two fresh-clone runs had the sim stall 0.26 s here; node_support.py's FED does the same)
     with open(os.path.join(ROOT, 'config', 'testbed.yaml')) as fh:
         doc = yaml.safe_load(fh)
     controller = doc['controller']['ros__parameters']

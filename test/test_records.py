@@ -1,6 +1,6 @@
 """Flight records and the 3D view without DDS: what report says of what is not a usable bag, a
 bag with some topics missing, and the view's geometry. (A recorded flight over DDS, with the
-view's markers in it: test_nodes.py.)
+view's markers in it: test_node_flights.py.)
 """
 import json
 import math

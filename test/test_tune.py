@@ -46,7 +46,7 @@ def test_a_short_tuning_writes_its_trials_front_and_figure_and_repeats_from_its_
         assert (r['feasible'] == 'True') == (int(r['violations']) == 0 and
                                              float(r['closest_p1_deg']) >= 2.5 and
                                              float(r['saturated_runs']) <= 0.01 and
-                                             float(r['saturating_runs']) <= 0.05 and
+                                             float(r['saturating_runs']) <= 0.10 and
                                              float(r['latency_min_margin_deg']) >= 2.5)
     best = sorted(outs[0].glob('best/*.yaml'))
     feasible = [r for r in rows if r['feasible'] == 'True']

@@ -1,6 +1,6 @@
 """The lab's own workflow over real DDS: sockets stay on loopback, short input gaps are ridden
 through and long ones fail safe, and ``ros2 param dump`` round-trips through ``--params-file``.
-(The flight watched by the real ``ros2`` command is test_nodes.py's sim-in-the-loop flight.)
+(The flight watched by the real ``ros2`` command is test_node_flights.py's sim-in-the-loop flight.)
 
 Tests that need the ``ros2`` command (../shared/wheels/ros2cli, installed by ./run) are skipped,
 with the reason, where it is missing.
