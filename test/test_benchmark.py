@@ -37,7 +37,7 @@ def test_the_benchmark_flies_every_law_on_a_case_and_the_same_random_runs(
     assert code == 0, printed.err
     assert 'on scheduler %s' % dask_scheduler in printed.err
     # the case, guided round its cone (config/testbed.yaml's guidance): every law keeps it, the
-    # geometric baseline on guidance's path alone (straight it goes 12 deg deep: test_control.py)
+    # geometric baseline on guidance's path alone (straight it goes 12 deg deep: test_laws.py)
     rows = {r['law']: r for r in read(out / 'cases.csv')}
     assert list(rows) == list(cases.BENCHED)
     assert all(r['case'] == 'testbed_yaw90' and r['runs'] == '1' for r in rows.values())
