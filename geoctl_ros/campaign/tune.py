@@ -72,7 +72,10 @@ class SearchPoint(NamedTuple):
 CLOSEST_FLOOR_DEG = 2.5
 SATURATED_RUN_S = 0.1          # a run whose rotors saturate longer than this (s) in all
 SATURATED_RUNS_MAX = 0.01      # may be at most this share of the runs
-SATURATING_RUNS_MAX = 0.05     # the share of the runs whose rotors saturate at all, at most
+# the share of the runs whose rotors saturate at all, at most: of four gain sets checked on the
+# 10,000-run campaign (seed 1), the three that saturated in 20-41 % of its runs entered a cone 4
+# or 5 times, and the one at 4.5 % never (docs/campaigns.md, "Gain tuning")
+SATURATING_RUNS_MAX = 0.10
 UNSETTLED_FACTOR = 2.0         # a run that never settles counts as this many durations
 # docs/safety.md's latency table: (latency s, tick jitter s) of testbed_yaw90
 LATENCY_ROWS = ((0.0, 0.0), (0.02, 0.0), (0.05, 0.0), (0.05, 0.01), (0.08, 0.02), (0.1, 0.02),
