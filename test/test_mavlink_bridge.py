@@ -1,10 +1,9 @@
 """The MAVLink bridge over UDP on 127.0.0.1: a pymavlink ground station and a fake autopilot
-against the real sim, controller and bridge processes (the sim in the loop).
+against the real sim, controller and bridge processes (the sim in the loop); hostile parameter
+values, frames and messages (mavlink_support.py: the endpoint and helpers).
 """
-import hashlib
 import math
 import os
-import socket
 import time
 
 import numpy as np
@@ -12,7 +11,17 @@ import pytest
 import rclpy
 
 os.environ['MAVLINK20'] = '1'
-from pymavlink import mavutil
+from mavlink_support import (
+    STALL_MS,
+    SYSID,
+    TESTBED,
+    Endpoint,
+    _as_sent,
+    arm,
+    free_udp_port,
+    is_ours,
+    loop_period_max_ms,
+)
 from pymavlink.dialects.v20 import common as mav
 from rcl_interfaces.msg import Parameter as Parameter_msg
 from rcl_interfaces.srv import GetParameters
@@ -21,80 +30,13 @@ from sensor_msgs.msg import Imu
 from support import FakeInputs, past_bounds
 
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.mavlink import frames, health
 from geoctl_ros.mavlink.params import TABLE
 from geoctl_ros.nodes import qos
 from geoctl_ros.params import BY_NAME, CONTROLLER, cone_param, schema_for
 from geoctl_ros.sil.processes import NodeProcess
-from geoctl_ros.sil.rosenv import config_dir
 
 pytestmark = pytest.mark.dds
-
-TESTBED = os.path.join(config_dir(), 'testbed.yaml')
-SYSID = 7
-
-
-# A stall of the controller's loop that the vehicle would feel: a period as long as the pose
-# timeout (config/testbed.yaml: 0.1 s). Shorter ones come from the shared machine, not the link:
-# on a busy CI machine the loop period's max reached 60 ms in this test with nothing wrong.
-STALL_MS = 100.0
-
-
-def loop_period_max_ms(diagnostic):
-    """The largest loop period of the controller's last diagnostics window, ms."""
-    return 1e3 * diagnostic.figures.loop_period.max
-
-
-def free_udp_port():
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(('127.0.0.1', 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
-
-
-class Endpoint:
-    """A pymavlink endpoint on 127.0.0.1 that keeps what it receives. Every one opened is closed
-    by the rig, a failed test's too (one left open is a socket this process still holds).
-    """
-
-    opened = []
-
-    def __init__(self, url, sysid, compid):
-        self.conn = mavutil.mavlink_connection(url, source_system=sysid, source_component=compid,
-                                               dialect='common')
-        self.got = []
-        Endpoint.opened.append(self)
-
-    @classmethod
-    def close_all(cls):
-        while cls.opened:
-            cls.opened.pop().conn.close()
-
-    def poll(self, seconds):
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            m = self.conn.recv_match(blocking=True, timeout=0.02)
-            if m is not None and m.get_type() != 'BAD_DATA':
-                self.got.append((time.monotonic(), m))
-
-    def wait(self, pred, timeout, what, mon=None, since=None):
-        """The first message received at or after since (default: now) that pred accepts."""
-        since = time.monotonic() if since is None else since
-        end = time.monotonic() + timeout
-        while True:
-            for t, m in self.got:
-                if t >= since and pred(m):
-                    return m
-            if time.monotonic() > end:
-                raise TimeoutError('timed out waiting for ' + what)
-            self.poll(0.05)
-            if mon is not None:
-                mon.spin_for(0.01)
-
-    def since(self, t0, kind):
-        return [m for t, m in self.got if t >= t0 and m.get_type() == kind]
 
 
 @pytest.fixture
@@ -123,21 +65,6 @@ def rig(tmp_path):
             p.stop()
         Endpoint.close_all()
 
-
-def arm(gcs, mon):
-    """Send MAV_CMD_COMPONENT_ARM_DISARM (arm) as a ground station; the final COMMAND_ACK
-    result.
-    """
-    t0 = time.monotonic()
-    gcs.conn.mav.command_long_send(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0,
-                                   0, 0)
-    return gcs.wait(lambda m: m.get_type() == 'COMMAND_ACK' and
-                    m.result != mav.MAV_RESULT_IN_PROGRESS, 10.0, 'the arm answer', mon,
-                    since=t0).result
-
-
-def is_ours(m):
-    return m.get_srcSystem() == SYSID and m.get_srcComponent() == mav.MAV_COMP_ID_AUTOPILOT1
 
 
 @pytest.mark.realtime
@@ -272,23 +199,6 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     back.conn.close()
 
 
-PASSPHRASE = 'lab passphrase'
-KEY = hashlib.sha256(PASSPHRASE.encode()).digest()          # as ground stations derive it
-
-
-def key_file(tmp_path, mode=0o600):
-    f = tmp_path / 'mavlink.key'
-    f.write_text(PASSPHRASE + '\n')
-    f.chmod(mode)
-    return str(f)
-
-
-def _as_sent(value):
-    """A value as a ROS parameter can carry it: a list mixing ints and floats as floats."""
-    if isinstance(value, list) and any(isinstance(v, float) for v in value):
-        return [float(v) for v in value]
-    return value
-
 
 def test_every_numeric_parameter_refuses_hostile_values_through_the_service_and_mavlink(rig):
     """The issue's table: every numeric parameter of the controller (its cone's too) set to NaN,
@@ -357,167 +267,6 @@ def test_every_numeric_parameter_refuses_hostile_values_through_the_service_and_
     assert back.param_value == pytest.approx(0.1)
     assert mon.arm(False).success
 
-
-def test_a_key_file_others_can_read_stops_the_bridge(tmp_path):
-    p = NodeProcess('mavlink_bridge', None, ('-p', 'mavlink.signing_key_file:=%s'
-                                             % key_file(tmp_path, 0o644)), log_dir=tmp_path)
-    try:
-        assert p.proc.wait(30) == 2
-        assert 'readable or writable by group or others' in p.output()
-    finally:
-        p.stop()
-
-
-@pytest.mark.realtime
-def test_with_a_key_only_the_station_holding_it_reads_sets_arms_and_disarms(tmp_path):
-    gcs_port = free_udp_port()
-    gcs = Endpoint('udpin:127.0.0.1:%d' % gcs_port, 255, 190)
-    gcs.conn.setup_signing(KEY, sign_outgoing=True)         # it also refuses unsigned frames
-    procs = [NodeProcess('sim', TESTBED, log_dir=tmp_path),
-             NodeProcess('controller', TESTBED, log_dir=tmp_path),
-             NodeProcess('mavlink_bridge', None, (
-                 '-p', 'mavlink.url:=udpout:127.0.0.1:%d' % gcs_port,
-                 '-p', 'mavlink.system_id:=%d' % SYSID,
-                 '-p', 'mavlink.signing_key_file:=%s' % key_file(tmp_path)), log_dir=tmp_path)]
-    rclpy.init()
-    mon = FakeInputs()
-    stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    try:
-        g = gcs.conn.mav
-        gcs.wait(lambda m: m.get_type() == 'HEARTBEAT' and is_ours(m), 40.0, 'a signed heartbeat')
-        bridge = next(iter(gcs.conn.clients))               # the bridge's address
-        g.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-        # (the arm below needs the controller's sensor checks to have a window to judge)
-        mon.wait_for(mon.controller_can_judge_its_sensors, 30.0,
-                     'the controller to receive the sim')
-        t0 = time.monotonic()
-        g.param_request_list_send(SYSID, 1)
-        gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE' and m.param_index == len(TABLE) - 1,
-                 5.0, 'the whole parameter list')
-        assert len({p.param_id for p in gcs.since(t0, 'PARAM_VALUE')}) == len(TABLE)
-        t0 = time.monotonic()
-        g.param_set_send(SYSID, 1, b'GC_K_R', 0.5, mav.MAV_PARAM_TYPE_REAL32)
-        p = gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE' and m.param_id == 'GC_K_R', 5.0,
-                     'the new k_R', mon, since=t0)
-        assert p.param_value == pytest.approx(0.5)
-        captured = g.command_long_encode(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0,
-                                         0, 0, 0, 0).pack(g)      # an arm, as a sniffer sees it
-        t0 = time.monotonic()
-        gcs.conn.write(captured)
-        assert gcs.wait(lambda m: m.get_type() == 'COMMAND_ACK' and
-                        m.result != mav.MAV_RESULT_IN_PROGRESS, 10.0, 'the arm answer', mon,
-                        since=t0).result == mav.MAV_RESULT_ACCEPTED
-        mon.wait_for(lambda: mon.last_diagnostic().figures.armed, 3.0, 'armed')
-        t0 = time.monotonic()
-        g.command_long_send(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 0, 0, 0, 0, 0, 0)
-        mon.wait_for(lambda: mon.last_diagnostic().figures.armed is False, 5.0, 'disarmed')
-        # what a stranger on the link tries, from its own address: each must leave it disarmed
-        unsigned = mav.MAVLink(None, srcSystem=255, srcComponent=190)
-        guess = mav.MAVLink(None, srcSystem=255, srcComponent=190)
-        guess.signing.secret_key = hashlib.sha256(b'guess').digest()
-        guess.signing.sign_outgoing, guess.signing.link_id = True, g.signing.link_id
-        guess.signing.timestamp = g.signing.timestamp + 1                     # a wrong key
-        wrong_key = guess.command_long_encode(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1,
-                                              0, 0, 0, 0, 0, 0).pack(guess)
-        guess.signing.timestamp = g.signing.timestamp + 24 * 3600 * 100_000   # a day ahead
-        for frame in (unsigned.command_long_encode(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM,
-                                                   0, 1, 0, 0, 0, 0, 0, 0).pack(unsigned),
-                      wrong_key,
-                      unsigned.param_set_encode(SYSID, 1, b'GC_K_R', 0.9,
-                                                mav.MAV_PARAM_TYPE_REAL32).pack(unsigned),
-                      captured,                                          # the replay
-                      guess.command_long_encode(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM,
-                                                0, 1, 0, 0, 0, 0, 0, 0).pack(guess)):
-            stranger.sendto(frame, bridge)
-        t_sent = time.monotonic()
-
-        def refusals():
-            reports = mon.since('bridge', t_sent)
-            return reports and {k: reports[-1].status.refused[k]
-                                for k in ('unsigned', 'replayed', 'bad signature')}
-        mon.wait_for(lambda: refusals() == {'unsigned': 2, 'replayed': 1, 'bad signature': 2},
-                     5.0,
-                     "the stranger's five frames refused (2 unsigned, 1 replay, 2 bad signatures)")
-        assert mon.last_diagnostic().figures.armed is False
-        # the genuine station is not locked out by the forged frame from the future
-        t0 = time.monotonic()
-        g.param_request_read_send(SYSID, 1, b'GC_K_R', -1)
-        p = gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE', 5.0, 'a parameter read', mon,
-                     since=t0)
-        assert p.param_value == pytest.approx(0.5)                    # the stranger's 0.9 not
-        bridge_status = mon.last('bridge').status
-        assert bridge_status.signing and bridge_status.signing_link_id == 0
-        assert 'from' in bridge_status.last_refused
-    finally:
-        stranger.close()
-        mon.destroy_node()
-        rclpy.try_shutdown()
-        for p in procs:
-            p.stop()
-        gcs.conn.close()
-
-
-def test_a_ground_stations_motor_test_spins_one_motor_through_the_esc_node(tmp_path):
-    """MAV_CMD_DO_MOTOR_TEST from a ground station, through the bridge, to esc_i2c, on a virtual
-    ESC bus that this process powers (no controller: disarmed): rotor 3 gets 12 % for 1 s, as the
-    bus itself recorded, and the others zero; out of range it is denied with the ESC node's reason.
-    """
-    path = str(tmp_path / 'esc_bus')
-    addresses = (0x29, 0x2A, 0x2B, 0x2C, 0x2D, 0x2E)
-    escs = VirtualEscBus(path, addresses)
-    escs.power(True)
-    gcs_port = free_udp_port()
-    gcs = Endpoint('udpin:127.0.0.1:%d' % gcs_port, 255, 190)
-    procs = [NodeProcess('esc_i2c', TESTBED, ('-p', 'esc.virtual_bus:=' + path), log_dir=tmp_path),
-             NodeProcess('mavlink_bridge', None, (
-                 '-p', 'mavlink.url:=udpout:127.0.0.1:%d' % gcs_port,
-                 '-p', 'mavlink.system_id:=%d' % SYSID), log_dir=tmp_path)]
-    try:
-        gcs.wait(lambda m: m.get_type() == 'HEARTBEAT' and is_ours(m), 30.0, 'the bridge')
-
-        def motor_test(rotor, percent, seconds):
-            t0 = time.monotonic()
-            for _ in range(60):             # until the ESC node's services are up
-                gcs.conn.mav.command_long_send(SYSID, 1, mav.MAV_CMD_DO_MOTOR_TEST, 0, rotor,
-                                               mav.MOTOR_TEST_THROTTLE_PERCENT, percent,
-                                               seconds, 0, 0, 0)
-                ack = gcs.wait(lambda m: m.get_type() == 'COMMAND_ACK' and
-                               m.result != mav.MAV_RESULT_IN_PROGRESS, 10.0, 'the answer',
-                               since=t0)
-                if ack.result != mav.MAV_RESULT_TEMPORARILY_REJECTED:
-                    return ack.result, t0
-                t0 = time.monotonic()
-                gcs.poll(0.5)
-            return ack.result, t0
-        result, t0 = motor_test(3, 12.0, 1.0)
-        assert result == mav.MAV_RESULT_ACCEPTED
-        gcs.wait(lambda m: m.get_type() == 'STATUSTEXT' and 'rotor 3 at 0.12' in m.text, 5.0,
-                 'the ESC node saying so', since=t0)
-        deadline = time.monotonic() + 10.0
-        while time.monotonic() < deadline:  # the test ends by itself: zero again
-            log = escs.log()
-            spun = log[(log['address'] == 0x2B) & (log['b0'] > 0)]
-            if len(spun) and log['b0'][log['address'] == 0x2B][-1] == 0:
-                break
-            time.sleep(0.1)
-        assert set(spun['b0']) == {round(0.12 * 240)}                      # 29 of 240
-        # the 1 s test, as the bus saw it: its first write may come late on a busy machine (this
-        # is not a real-time test), its last within a write cycle of the end
-        assert 0.5 < spun['t'][-1] - spun['t'][0] < 1.2
-        others = log[log['address'] != 0x2B]
-        assert len(others) and not others['b0'].any()
-        n = escs.count()
-        result, t0 = motor_test(3, 50.0, 1.0)                              # beyond 0.3
-        assert result == mav.MAV_RESULT_DENIED
-        gcs.poll(0.5)
-        said = ''.join(m.text for m in gcs.since(t0, 'STATUSTEXT'))      # (in 50-char chunks)
-        assert 'motor_test.command: must be in [0, 0.3]' in said, said
-        assert not escs.log(n)['b0'].any()
-    finally:
-        for p in procs:
-            p.stop()
-        escs.close()
-        Endpoint.close_all()
 
 
 def test_hostile_frames_and_messages_are_refused_and_never_end_the_bridge(tmp_path):
