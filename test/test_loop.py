@@ -1,17 +1,18 @@
 """The controller node's decisions without ROS: input checks, arming, failsafe, set points,
-schedule, adaptation only while armed.
+schedule, adaptation only while armed, diagnostics, the tick against the batch's. (Input gaps:
+test_gaps.py.)
 """
 from dataclasses import replace
 import math
 import os
 
+from loop_support import CONE, ROOT, YAW90, feed, make_loop, spinning
 import numpy as np
 import pytest
 
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.control import AttitudeController
-from geoctl_ros.core.supervisor import gaps
 from geoctl_ros.core.supervisor.control_tick import ControlTick
 from geoctl_ros.core.supervisor.loop import NON_FINITE, ControlLoop
 from geoctl_ros.core.supervisor.loop_types import step_period
@@ -20,24 +21,6 @@ from geoctl_ros.params import CONTROLLER, ConfigError, controller_setup, resolve
 from geoctl_ros.sim import scenario
 
 pytestmark = pytest.mark.odroid
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-YAW90 = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))
-CONE = {'cones.names': ['obstacle'], 'cones.obstacle.axis': [1.0, 1.0, 0.0],
-        'cones.obstacle.half_angle_deg': 12.0}
-
-
-def make_loop(**overrides):
-    """A loop of the cone's; its sensor checks off unless asked for (they need half a second of
-    samples at rest to arm, and have their own tests: test_sensors.py).
-    """
-    overrides.setdefault('consistency_checks', False)
-    return ControlLoop(controller_setup(resolve(CONTROLLER, dict(CONE, **overrides))))
-
-
-def feed(loop, t, q=YAW90, w=(0.0, 0.0, 0.0)):
-    assert loop.offer_pose(q, t, t) is None
-    assert loop.offer_angular_velocity(w, t, t) is None
 
 
 def test_disarmed_until_armed_with_fresh_inputs():
@@ -162,111 +145,6 @@ def test_adaptation_runs_only_while_armed():
 
 # --- riding through input gaps (exact times; the defaults: pose 0.1 s stale, 0.5 s lost; imu
 # 0.05 s stale, 0.25 s lost) ------------------------------------------------------------------
-SPIN = np.array([0.1, -0.2, 0.5])          # rad/s, body frame
-R0 = so3.quat_to_rot(YAW90)
-
-
-def spinning(t):
-    """The attitude of a body turning at the constant body rate SPIN from R0."""
-    return R0 @ so3.exp(SPIN * t)
-
-
-def fly_spinning(loop, t_end, pose_until=np.inf, imu_until=np.inf, dt=0.005):
-    """Feed poses and gyro of the spinning body every dt (each stream until its cut-off) and
-    tick every 2 dt; returns the last tick.
-    """
-    tick = None
-    for k in range(int(round(t_end / dt)) + 1):
-        t = k * dt
-        if t <= pose_until:
-            assert loop.offer_pose(so3.rot_to_quat(spinning(t)), t, t) is None
-        if t <= imu_until:
-            assert loop.offer_angular_velocity(SPIN, t, t) is None
-        if k == 0:
-            assert loop.arm(t).ok
-        if k % 2 == 0:
-            tick = loop.tick(t, 2 * dt)
-    return tick
-
-
-def test_a_pose_gap_is_flown_on_the_attitude_propagated_with_the_gyro():
-    loop = make_loop()
-    tick = fly_spinning(loop, 0.6, pose_until=0.2)             # poses stop: a 0.4 s gap
-    assert tick.armed and tick.bridging
-    # constant rate: gyro propagation from the last pose is exact
-    R_true = spinning(0.6)
-    assert np.allclose(loop.bridge.R, R_true, atol=1e-12)
-    # the control step (cone margins included) ran on the propagated attitude
-    cones = loop.setup.config.cones
-    assert np.allclose(tick.control.margins_deg, cones.margins_deg(R_true), atol=1e-9)
-    st = loop.status(0.6)
-    assert st.level == WARN
-    assert 'pose gap: attitude propagated with the gyro (pose 0.400 s old, failsafe at 0.500 s)' \
-        in st.message
-
-
-def test_a_pose_gap_longer_than_the_limit_fails_safe_at_the_limit():
-    loop = make_loop()
-    fly_spinning(loop, 0.69, pose_until=0.2)                   # 0.49 s: still flying
-    assert loop.supervisor.armed
-    tick = loop.tick(0.705, 0.01)                              # 0.505 s: past the limit
-    assert not tick.armed and not tick.motors.commands.any()
-    assert loop.supervisor.reason == ('failsafe: pose lost (last 0.505 s ago, ride-through '
-                                      'limit 0.500 s)')
-    assert loop.status(0.705).level == ERROR
-
-
-def test_an_imu_gap_is_flown_on_rates_from_successive_poses():
-    loop = make_loop()
-    dbar = []
-    tick = fly_spinning(loop, 0.3, imu_until=0.1)              # gyro stops: a 0.2 s gap
-    assert tick.armed and tick.bridging
-    # constant rate: the rate from two poses 50 ms apart is exact
-    assert np.allclose(loop.bridge.Omega, SPIN, atol=1e-9)
-    assert np.allclose(tick.control.e_Omega, SPIN, atol=1e-9)      # R_d still: e_Omega = Omega
-    assert 'angular velocity gap: rate from successive poses (imu 0.200 s old, failsafe at ' \
-        '0.250 s)' in loop.status(0.3).message
-    # the estimate does not learn from a bridged state
-    dbar.append(loop.controller.delta_bar.copy())
-    loop.offer_pose(so3.rot_to_quat(spinning(0.305)), 0.305, 0.305)
-    loop.tick(0.31, 0.01)
-    assert np.array_equal(loop.controller.delta_bar, dbar[0])
-    # past the limit: failsafe
-    tick = loop.tick(0.36, 0.01)
-    assert not tick.armed
-    assert loop.supervisor.reason.startswith('failsafe: angular velocity lost (last 0.260 s')
-
-
-def test_both_gaps_hold_the_rate_and_propagate_until_the_shorter_limit():
-    loop = make_loop()
-    tick = fly_spinning(loop, 0.34, pose_until=0.2, imu_until=0.2)   # both stop: 0.14 s gap
-    assert tick.armed and tick.bridging
-    assert loop.bridge.rate_source is gaps.HELD
-    assert np.allclose(loop.bridge.R, spinning(0.34), atol=1e-12)    # held constant rate: exact
-    assert not loop.tick(0.45, 0.01).armed                           # imu lost at 0.25 s
-    # and the gyro reading it held was the last measurement
-    assert np.allclose(loop.bridge.Omega, SPIN)
-
-
-def test_arming_needs_fresh_inputs_even_within_the_ride_through():
-    loop = make_loop()
-    feed(loop, 0.0)
-    loop.tick(0.0, 0.01)
-    assert loop.offer_angular_velocity((0.0, 0.0, 0.0), 0.2, 0.2) is None   # pose 0.2 s old
-    refused = loop.arm(0.2)
-    assert not refused.ok and 'pose stale (last 0.200 s ago' in refused.message
-
-
-def test_a_gap_and_its_length_are_counted_when_it_ends():
-    loop = make_loop()
-    fly_spinning(loop, 0.45, pose_until=0.2)
-    loop.offer_pose(so3.rot_to_quat(spinning(0.45)), 0.45, 0.45)
-    tick = loop.tick(0.45, 0.01)
-    assert not tick.bridging
-    gaps = loop.status(0.45).figures.pose_gaps
-    assert gaps.ridden == 1 and gaps.longest == pytest.approx(0.25)
-
-
 def test_a_non_finite_control_output_disarms_and_publishes_zero(monkeypatch):
     loop = make_loop()
     feed(loop, 0.0)
