@@ -30,13 +30,17 @@ def command_gaps(times, t0, t1):
     return float(np.percentile(gaps, 99)), float(gaps.max())
 
 
-def figures(mon, t0, t1, cones):
-    """The figures of the flight between t0 and t1 (monotonic, as the monitor's log)."""
+def figures(mon, t0, t1, cones, armed=None):
+    """The figures of the flight between t0 and t1 (monotonic, as the monitor's log); the closest
+    approach from armed (its arming) on when given.
+    """
     diags = [d for t, d in mon.log['diagnostics'] if t0 <= t <= t1]
     failed = [d.figures.failsafe for d in diags]
     failsafes = sum(1 for a, b in zip([False] + failed, failed) if b and not a)
-    margins = [float(np.min(cones.margins_deg(so3.quat_to_rot(q))))
-               for t, (_, q) in mon.log['true_pose'] if t0 <= t <= t1] if len(cones) else [np.nan]
+    since = t0 if armed is None else armed
+    poses = [q for t, (_, q) in mon.log['true_pose'] if since <= t <= t1]
+    margins = ([float(np.min(cones.margins_deg(so3.quat_to_rot(q)))) for q in poses]
+               if len(cones) else [np.nan])
     last = diags[-1].figures if diags else None
     out = {
         'seconds': t1 - t0,

@@ -8,7 +8,8 @@ faults are injected into its inputs, and measures what matters for a vehicle on 
   set-point schedule plays from each arming and then holds R_d),
 - input age at the controller's ticks (p99 of its 0.5 s diagnostics windows, and max),
 - the gap between motor commands at a subscriber (p99, max) and the control loop period (p99,
-  max), and the sensor's closest approach to the cone (from the sim's true attitude).
+  max), and the sensor's closest approach to the cone (from the sim's true attitude, over the
+  whole armed flight: the manoeuvre after the arming too).
 
 Loads (other people's processes, in a plain ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` shell):
 ``cli`` the README's monitoring commands with the real ``ros2`` command in a loop (topic echo,
@@ -108,12 +109,13 @@ class Session:
             if relay:     # a fault command sent before the relay has matched would be lost
                 self.mon.wait_for(lambda: self._fault_pub.get_subscription_count() > 0, 40.0,
                                   'the relay')
+            # the cone is judged on the sim's true pose over the whole armed flight, the
+            # manoeuvre from the arming included: heard here before the arming
+            self.mon.wait_for(lambda: self.mon.log['true_pose'], 40.0, "the sim's true pose")
+            self.t_armed = time.monotonic()
             reply = self.mon.arm_when_ready(40.0)
             if not reply.success:
                 raise RuntimeError('could not arm: ' + reply.message)
-            # the margins are judged on the sim's true pose: heard here once discovery has
-            # matched this process with the sim, which can come after the controller flies
-            self.mon.wait_for(lambda: self.mon.log['true_pose'], 15.0, "the sim's true pose")
             self.mon.spin_for(1.0)
         except BaseException:
             self.close()
@@ -158,7 +160,7 @@ class Session:
                 if t0 <= t <= self.t_end:
                     f.write(json.dumps(dict(to_values(d.figures), level=d.level,
                                             message=d.message, t=round(t - t0, 3))) + '\n')
-        return measures.figures(mon, t0, self.t_end, self.cones)
+        return measures.figures(mon, t0, self.t_end, self.cones, self.t_armed)
 
     def command_times(self):
         """Receipt times of motor_commands at the listener (stops it)."""
