@@ -33,7 +33,7 @@ from geoctl_ros.core.geometry import so3
 from geoctl_ros.mavlink import frames, health
 from geoctl_ros.mavlink.params import TABLE
 from geoctl_ros.nodes import qos
-from geoctl_ros.params import BY_NAME, CONTROLLER, cone_param, schema_for
+from geoctl_ros.params import BY_NAME, CONTROLLER, cone_param, load_parameter_file, schema_for
 from geoctl_ros.sil.processes import NodeProcess
 
 pytestmark = pytest.mark.dds
@@ -85,7 +85,8 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     gcs.wait(lambda m: m.get_type() == 'PARAM_VALUE' and m.param_index == len(TABLE) - 1, 5.0,
              'the whole parameter list')
     values = {p.param_id: p.param_value for p in gcs.since(t0, 'PARAM_VALUE')}
-    assert len(values) == len(TABLE) and values['GC_K_R'] == pytest.approx(1.2)
+    k_R = load_parameter_file(TESTBED)['controller']['k_R']           # as the file has it
+    assert len(values) == len(TABLE) and values['GC_K_R'] == pytest.approx(k_R)
     g.mission_request_list_send(SYSID, 1)
     assert gcs.wait(lambda m: m.get_type() == 'MISSION_COUNT', 5.0, 'MISSION_COUNT').count == 0
     # telemetry at its rates, in NED/FRD
