@@ -15,10 +15,12 @@ import rclpy
 import yaml
 
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.sil import measures
 from geoctl_ros.sil.loads import ros2_command
 from geoctl_ros.sil.processes import NodeProcess, process_sockets
 from geoctl_ros.sil.rosenv import cli_env, config_dir
 from geoctl_ros.sil.soak import Session
+from geoctl_ros.sim import scenario
 
 pytestmark = pytest.mark.dds
 
@@ -96,6 +98,7 @@ def test_short_gaps_are_ridden_through_and_a_long_one_fails_safe(tmp_path):
         pause_margin = margin(t_pause, time.monotonic())
         print('150 ms sim pause: min cone margin %.1f deg' % pause_margin)
         # a 2 s pause: the failsafe at the imu's ride-through limit, motors zero
+        t_long = time.monotonic()
         s.fault('pause', 2.0)
         mon.spin_for(0.5)
         d = mon.last_diagnostic()
@@ -105,6 +108,13 @@ def test_short_gaps_are_ridden_through_and_a_long_one_fails_safe(tmp_path):
         assert d.figures.motor_commands == (0,) * 6
         times = s.command_times()
         assert len(times) > 100                  # the listener heard the flight
+        # the soak's closest approach covers the whole armed flight, the yaw past the cone
+        # right after the arming too: as close as its headless twin comes, not the hover's
+        twin = scenario.run(scenario.load(TESTBED)).summary
+        twin_margin = min(twin['min_cone_angle_deg'][n] - twin['cone_half_angle_deg'][n]
+                          for n in twin['min_cone_angle_deg'])
+        flown = measures.figures(mon, t0, t_long, s.cones, s.t_armed)   # (not the fall after)
+        assert abs(flown['closest approach [deg]'] - twin_margin) < 1.5, (flown, twin_margin)
     finally:
         s.close()
     # the sim's own pause: before the ESC watchdog judged command age by the link, the sim
