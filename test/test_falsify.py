@@ -96,6 +96,14 @@ def test_a_short_falsification_writes_its_table_and_a_worst_flight_that_replays_
     assert again == float(worst['safety'])
     assert float(worst['closest_deg']) == flight.min_margin_deg.min()
     assert math.isfinite(again)
+    # within the brake's assumptions: from the spool-up's end (2 lags of the testbed's 40 ms
+    # motors) on, and only for a run whose rotors never saturated; never closer than the run's
+    # closest approach over every integration step
+    after = flight.margin_series[flight.times >= 2 * 0.04, 0].min()
+    assumed = after if flight.saturated_steps[0] == 0 else math.inf
+    assert float(worst['closest_assumed_deg']) == assumed
+    assert all(float(r['closest_assumed_deg']) >= float(r['closest_deg']) for r in inside)
+    assert "runs within the brake's assumptions" in summary
     image = imread(str(out / 'robustness.png'))
     assert image.shape[0] > 300 and np.std(image) > 0.05
 

@@ -19,8 +19,10 @@ from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
+from geoctl_ros.core.actuation.motors import Mixer
 from geoctl_ros.falsify.envelope import OUTSIDE, Space
 from geoctl_ros.falsify.requirements import monitors, series_robustness
+from geoctl_ros.params import controller_setup
 from geoctl_ros.params.scenario import from_sections, tick_jitter
 from geoctl_ros.sim import closed_loop
 
@@ -30,15 +32,33 @@ POPULATION = 256         # differential evolution's population (about: a multipl
 
 
 def fly_batch(job):
-    """Worker: fly a batch of scenario sections; per requirement each run's robustness, and each
-    run's closest approach to a cone after any integration step (deg).
+    """Worker: fly a batch of scenario sections; per requirement each run's robustness, each
+    run's closest approach to a cone after any integration step (deg), and its closest approach
+    within the approach brake's assumptions (``closest_assumed_deg``).
     """
     sections, names = job
-    flight = closed_loop.fly([from_sections(s, 'falsify') for s in sections], series=True)
+    scenarios = [from_sections(s, 'falsify') for s in sections]
+    flight = closed_loop.fly(scenarios, series=True)
     mons = monitors(names, flight.dt)
     got = series_robustness(mons, flight.times, flight.margin_series, flight.error_series)
     got['closest_deg'] = flight.min_margin_deg.min(axis=-1)
+    got['closest_assumed_deg'] = closest_assumed(flight, controller_setup(
+        scenarios[0].controller).mixer)
     return got
+
+
+def closest_assumed(flight: Any, mixer: Any) -> np.ndarray:
+    """(runs,) each run's closest approach (deg, at its control steps) where two of the approach
+    brake's assumptions hold (core.law.brake): the rotors have spooled up after the arming
+    (``Mixer.SPOOL_LAGS`` motor lags), and they made every moment asked of them (the allocation
+    never saturated in the run); +inf for a run whose rotors saturated. (The brake's other
+    bounds, on the unlearnt moment and the measurement error, are not judged per run.)
+    """
+    assert flight.margin_series is not None
+    spooled = flight.times >= Mixer.SPOOL_LAGS * mixer.lag
+    closest = (flight.margin_series[spooled].min(axis=0) if np.any(spooled)
+               else np.full(flight.margin_series.shape[1], np.inf))
+    return np.where(flight.saturated_steps == 0, closest, np.inf)
 
 
 @dataclass
@@ -51,6 +71,7 @@ class Evaluation:
     robustness: Dict[str, float]
     closest_deg: float
     inside: bool
+    closest_assumed_deg: float = math.inf    # within the brake's assumptions (``closest_assumed``)
 
 
 @dataclass
@@ -88,7 +109,8 @@ class Objective:
         for part, res in zip(where, results):
             for j, i in enumerate(part):
                 got[i] = Evaluation(xs[i], {n: float(res[n][j]) for n in self.names},
-                                    float(res['closest_deg'][j]), True)
+                                    float(res['closest_deg'][j]), True,
+                                    float(res['closest_assumed_deg'][j]))
         for i, x in enumerate(xs):
             self.evaluations.append(got.get(i) or Evaluation(
                 x, {n: OUTSIDE for n in self.names}, math.nan, False))
