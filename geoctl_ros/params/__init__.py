@@ -6,8 +6,16 @@ Where each piece lives (the names below are this package's public API):
     validate.py  ``check_value`` (ROS-strict types and checks) and ``resolve`` (a node's values)
     files.py     ROS 2 parameter files: ``load_parameter_file``, ``node_overrides``
     build.py     objects from resolved values: ``controller_setup``, ``mixer``, ``airframe``,
-                 ``cone_set``, ... with the checks that span parameters
+                 ``cone_set``, ``GainSet``, ... with the checks that span parameters
+    testbed.py   the simulated testbed's typed set-up (``TestbedSetup``: plant, rotors, noise)
+    scenario.py  a scenario file, loaded and validated (``Scenario``, ``ScenarioOptions``), and
+                 what the runs of a batch share
+    esc.py       the ESC node's typed set-up (``EscSetup``, ``EscConfig``) and the sim's
+                 virtual ESCs
     readme.py    the parameter table (docs/parameters.md) (``python -m geoctl_ros.params.readme``)
+
+Past this package nothing reads a parameter by its name: the other layers take these typed
+set-ups (test_layers.py checks it on every module).
 
 Nothing here imports rclpy: the nodes (``geoctl_ros.nodes.ros_params``) and the headless runner
 use the same code.
