@@ -1,5 +1,11 @@
-"""What the tests that read the source share (test_layers, test_package)."""
+"""What the tests that read the source share (test_layers, test_package): where the tree and
+the package are, and what a source file imports.
+"""
 import ast
+import os
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+PKG = os.path.join(ROOT, 'geoctl_ros')
 
 
 def imported_modules(path):

@@ -3,21 +3,18 @@ itself round a circle, the ROS-free layers import without rclpy, and nothing out
 reads a parameter by its name (each checked on every module, parsed).
 """
 import ast
-import os
 import pathlib
 import re
 import subprocess
 import sys
 
 import pytest
-from source_support import imported_modules
+from source_support import PKG, ROOT, imported_modules
 
 from geoctl_ros.params.schema import SCHEMA
 
 pytestmark = pytest.mark.odroid
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-PKG = os.path.join(ROOT, 'geoctl_ros')
 LAYERS = ['core', 'params', 'sim', 'plots', 'records', 'esc', 'mavlink', 'campaign', 'falsify',
           'benchmark', 'nodes', 'sil', 'fuzz', 'cli']    # lowest first
 # core's rooms, lowest first: the geometry, the paper's law, actuation, the sensors, telemetry, and

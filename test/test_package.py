@@ -18,18 +18,11 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import numpy_api
 import pytest
-from source_support import imported_modules
+from source_support import PKG, ROOT, imported_modules
 from workspace import Workspace
 
 pytestmark = pytest.mark.odroid
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-PKG = os.path.join(ROOT, 'geoctl_ros')
-LAYERS = ['core', 'params', 'sim', 'plots', 'records', 'esc', 'mavlink', 'campaign', 'falsify',
-          'benchmark', 'nodes', 'sil', 'fuzz', 'cli']    # lowest first
-# core's rooms, lowest first: the geometry, the paper's law, actuation, the sensors, telemetry, and
-# the supervisor (the node's logic without ROS), which uses them all
-CORE_ROOMS = ['geometry', 'law', 'actuation', 'sensors', 'telemetry', 'supervisor']
 
 
 def _console_scripts():

@@ -77,11 +77,6 @@ class Scenario:
         return testbed_setup(self.sim)
 
     @property
-    def control_rate_hz(self) -> float:
-        """The controller's rate."""
-        return float(self.controller['rate_hz'])
-
-    @property
     def cone_names(self) -> List[str]:
         """Its cones' names."""
         return list(self.controller['cones.names'])
