@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.core.law.brake import ApproachBrake, braking_distance
+from geoctl_ros.core.law.brake import ApproachBrake, assumptions_held, braking_distance
 from geoctl_ros.core.law.configuration_error import approach_rates
 from geoctl_ros.core.law.control import AttitudeController
 from geoctl_ros.params import (
@@ -98,3 +98,24 @@ def test_the_brake_is_the_delay_robust_laws_alone():
     assert not np.allclose(outs['delay_robust', 0.0], outs['delay_robust', 100.0])
     assert np.array_equal(outs['paper', 0.0], outs['paper', 100.0])
     assert _testbed_controller(approach_brake_rate=0.0).brake is None
+
+
+def test_the_derivation_speaks_of_a_step_only_when_its_bounds_held_over_the_window_before():
+    """``assumptions_held``: a step counts when, over the ASSUMED_WINDOW_S (0.3 s, 30 steps at
+    100 Hz) up to it, no step saturated, the unlearnt acceleration stayed within a_u and the
+    measurement's error within e, and the rotors had spooled up (80 ms) by the window's start.
+    """
+    steps, runs, dt = 100, 4, 0.01
+    unlearnt = np.full((steps, runs), 0.5 * BRAKE.unmodelled)
+    measurement = np.full((steps, runs), 0.5 * BRAKE.measurement)
+    saturated = np.zeros((steps, runs), dtype=bool)
+    unlearnt[50, 1] = 1.01 * BRAKE.unmodelled          # run 1: one step past a_u
+    measurement[60, 2] = 1.01 * BRAKE.measurement      # run 2: one measurement past e
+    saturated[70, 3] = True                            # run 3: one saturated step
+    held = assumptions_held(BRAKE, unlearnt, measurement, saturated, dt, 0.08)
+    first = 30 + 8
+    assert not held[:first].any() and held[first:, 0].all()
+    for run, bad in ((1, 50), (2, 60), (3, 70)):
+        expected = np.arange(steps) >= first
+        expected[bad:bad + 31] = False                # the bad step and the 30 after it
+        assert np.array_equal(held[:, run], expected), run

@@ -19,6 +19,7 @@ import time
 
 from geoctl_ros.campaign import cluster, manoeuvres
 from geoctl_ros.cli.args import add_cluster_arguments, cannot_start, positive_seconds
+from geoctl_ros.core.law.brake import ASSUMED_WINDOW_S
 from geoctl_ros.falsify.envelope import OUTSIDE, Envelope, Space
 from geoctl_ros.falsify.requirements import REQUIREMENTS
 from geoctl_ros.falsify.search import OPTIMIZERS, Search, search
@@ -63,9 +64,12 @@ def summary_lines(searches, names, budget, env, wall, where):
         lines.append('| %s, %s | %d | %d | %s | %+.2f | %d | %s |' % (
             s.optimizer, s.target, len(s.evaluations), len(inside), ' | '.join(lows), closest,
             len(assumed), '%+.2f' % min(assumed) if assumed else '-'))
-    lines += ['', "Within the brake's assumptions: runs whose rotors never saturated, judged from "
-              "the end of the spool-up after the arming, at the control steps (the brake's "
-              'bounds on the unlearnt moment and the measurement error are not judged per run).',
+    lines += ['', "Within the brake's assumptions: the control steps the approach brake's "
+              'derivation speaks of (core.law.brake.assumptions_held): over the %.1f s before, '
+              'the rotors had spooled up after the arming and made every moment asked of them '
+              '(no saturation), the acceleration the model did not know stayed within a_u, and '
+              "the attitude measurement's error within e. A run counts when it has such a step; "
+              'its closest approach is over those steps.' % ASSUMED_WINDOW_S,
               '', 'wall time %.0f s' % wall]
     return lines
 

@@ -20,6 +20,7 @@ from typing import Any, Dict, List, Optional, Sequence
 import numpy as np
 
 from geoctl_ros.core.actuation.motors import Mixer
+from geoctl_ros.core.law.brake import ApproachBrake, assumptions_held
 from geoctl_ros.falsify.envelope import OUTSIDE, Space
 from geoctl_ros.falsify.requirements import monitors, series_robustness
 from geoctl_ros.params import controller_setup
@@ -38,27 +39,27 @@ def fly_batch(job):
     """
     sections, names = job
     scenarios = [from_sections(s, 'falsify') for s in sections]
-    flight = closed_loop.fly(scenarios, series=True)
+    flight = closed_loop.fly(scenarios, series=True, assumed=True)
     mons = monitors(names, flight.dt)
     got = series_robustness(mons, flight.times, flight.margin_series, flight.error_series)
     got['closest_deg'] = flight.min_margin_deg.min(axis=-1)
     got['closest_assumed_deg'] = closest_assumed(flight, controller_setup(
-        scenarios[0].controller).mixer)
+        scenarios[0].controller))
     return got
 
 
-def closest_assumed(flight: Any, mixer: Any) -> np.ndarray:
-    """(runs,) each run's closest approach (deg, at its control steps) where two of the approach
-    brake's assumptions hold (core.law.brake): the rotors have spooled up after the arming
-    (``Mixer.SPOOL_LAGS`` motor lags), and they made every moment asked of them (the allocation
-    never saturated in the run); +inf for a run whose rotors saturated. (The brake's other
-    bounds, on the unlearnt moment and the measurement error, are not judged per run.)
+def closest_assumed(flight: Any, setup: Any) -> np.ndarray:
+    """(runs,) each run's closest approach (deg, at its control steps) at the steps the approach
+    brake's derivation speaks of (``brake.assumptions_held``: over the window before, the
+    rotors had spooled up, made every moment asked (no saturation), the unlearnt acceleration
+    was within a_u and the attitude measurement's error within e); +inf for a run with no
+    such step.
     """
-    assert flight.margin_series is not None
-    spooled = flight.times >= Mixer.SPOOL_LAGS * mixer.lag
-    closest = (flight.margin_series[spooled].min(axis=0) if np.any(spooled)
-               else np.full(flight.margin_series.shape[1], np.inf))
-    return np.where(flight.saturated_steps == 0, closest, np.inf)
+    a = flight.assumed
+    assert flight.margin_series is not None and a is not None
+    held = assumptions_held(ApproachBrake.bounds_of(setup.config), a.unlearnt, a.measurement,
+                            a.saturated, flight.dt, Mixer.SPOOL_LAGS * setup.mixer.lag)
+    return np.where(held, flight.margin_series, np.inf).min(axis=0)
 
 
 @dataclass

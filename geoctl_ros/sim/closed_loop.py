@@ -70,6 +70,8 @@ class Flight:
     error_series: Optional[np.ndarray]    # (steps, runs): attitude error to the goal (deg; the
                                           # true attitude; None unless asked for)
     history: Optional[History]     # History: every step's state and output (history=True)
+    assumed: Optional['AssumedSeries']   # what the approach brake assumes, at every control
+                                         # step (None unless asked for: assumed=True)
     times: np.ndarray              # (steps,): the control steps' times
     dt: float
     wall_s: float = 0.0
@@ -90,13 +92,30 @@ class Flight:
         return np.any(self.min_margin_deg <= 0.0, axis=-1)
 
 
+@dataclass
+class AssumedSeries:
+    """What the approach brake's derivation assumes (core.law.brake), as it was at every control
+    step of a flight, per run: arrays (steps, runs).
+    """
+
+    unlearnt: np.ndarray     # the largest |a_true - a_model| over the step's hold (rad/s^2): the
+                             # plant's angular acceleration less the prediction's model's (its
+                             # inertia, gravity, estimate, observed error, and the moment in force
+                             # by the command history), both at the true state
+    measurement: np.ndarray  # the attitude measurement's error in use (rad: its noise's angle)
+    saturated: np.ndarray    # the allocation saturated (bool)
+
+
 def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] = None,
-        series: bool = False, history: bool = False, duration: Optional[float] = None) -> Flight:
+        series: bool = False, history: bool = False, duration: Optional[float] = None,
+        assumed: bool = False) -> Flight:
     """Fly the scenarios together; a Flight. progress(fraction) is called now and then.
     series: keep the margin and sensor direction at every control step (the figures of a few
     runs; a campaign's batches leave them out and fly its worst runs again for them); history:
     keep every step's state and output (the scenario runner's history.csv); duration: simulated
-    seconds (default: the scenarios').
+    seconds (default: the scenarios'); assumed: keep what the approach brake assumes at every
+    control step (``AssumedSeries``: the falsifier's judge; it costs a model evaluation per
+    integration step).
     """
     problem = differing(scenarios)
     if problem:
@@ -141,6 +160,10 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     sensor_series = np.empty((steps, n, 3), dtype=np.float32) if series else None
     error_series = np.empty((steps, n)) if series else None
     record = History(steps, bed) if history else None
+    judged = AssumedSeries(np.zeros((steps, n)), np.zeros((steps, n)),
+                           np.zeros((steps, n), dtype=bool)) if assumed else None
+    noise_angle = np.sqrt(so3.dot(noise[0], noise[0]))          # (steps, runs)
+    measurement = noise_angle[0] if steps else np.zeros(n)
     last_unsettled = np.full(n, -1)        # the last step with the error >= SETTLED_DEG
     last_coarse = np.full(n, -1)           # the last step with the error >= FINE_DEG
     last_psi_above = np.full(n, -1)        # the last step with Psi >= SETTLE_PSI
@@ -165,11 +188,13 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
             R_seen = np.where(fresh[:, None, None], R_new, R_seen)
             W_seen = np.where(fresh[:, None], W_new, W_seen)
             receipt = np.where(fresh, t, receipt)
+            measurement = np.where(fresh, noise_angle[k], measurement)
             waited = np.maximum(t - receipt, 0.0)
             age = delay * h + waited if stamped else waited
             ages = (age, age)
         else:
             R_seen, W_seen = R_new, W_new
+            measurement = noise_angle[k]
         max_rate = np.maximum(max_rate, np.sqrt(so3.dot(W_seen, W_seen)))
         out, motors = tick(R_seen, W_seen, dt, t, ages)
         saturated += motors.allocation.saturated
@@ -185,8 +210,15 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         if record is not None:
             record.add(k, t, out, motors)
         command = out.u if actuator is None else motors.commands
+        if judged is not None:
+            judged.measurement[k] = measurement
+            judged.saturated[k] = motors.allocation.saturated
         for i in range(holds[k]):
-            plant.step(bed.moment(command, h), h)
+            tau = bed.moment(command, h)
+            if judged is not None:
+                judged.unlearnt[k] = np.maximum(judged.unlearnt[k],
+                                                _unlearnt(bed, tick, j * h, tau))
+            plant.step(tau, h)
             j += 1
             R_now, W_now = bed.state()
             R_past[j % ring], W_past[j % ring] = R_now, W_now
@@ -205,8 +237,21 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         settle_fine_s=_settled(last_coarse, times),
         psi_settle_s=_settled(last_psi_above, times),
         margin_series=margin_series, sensor_series=sensor_series, error_series=error_series,
-        history=record, times=times,
+        history=record, assumed=judged, times=times,
         dt=dt, wall_s=wall)
+
+
+def _unlearnt(bed: Testbeds, tick: ControlTick, t: float, tau: np.ndarray) -> np.ndarray:
+    """(runs,) |a_true - a_model| at time t (rad/s^2): the plants' angular acceleration under the
+    moment tau less the prediction's model's (``DelayPredictor.acceleration`` under the moment
+    in force by the command history, less its observed error), both at the true state.
+    """
+    p = bed.plant
+    true = p.angular_acceleration(t, so3.vecmat(p.config.gravity, p.R), p.Omega, tau)
+    R, W = bed.state()
+    model = tick.predict.acceleration(R, W, tick.history.at(t)) - tick.predict.acc_error
+    d = true - model
+    return np.sqrt(so3.dot(d, d))
 
 
 def _error(R_d: np.ndarray, R: np.ndarray) -> np.ndarray:

@@ -51,7 +51,7 @@ class Plant:
         c = self.config
         return gravity_moment(R, c.m_rho, c.gravity) + c.disturbance(t)
 
-    def _angular_acceleration(self, t, g_b, Omega, tau):
+    def angular_acceleration(self, t, g_b, Omega, tau):
         """Omega' with gravity g_b = R^T g_w in the body frame (all the attitude it needs)."""
         c = self.config
         gyroscopic = cross(Omega, matvec(self.J, Omega))
@@ -69,7 +69,7 @@ class Plant:
             _step_one(self, tau, h)
             return
         t, R0, W0 = self.t, self.R, self.Omega
-        acc = self._angular_acceleration
+        acc = self.angular_acceleration
         g0 = vecmat(self.config.gravity, R0)                     # R0^T g_w
         # stage 1 (xi = 0)
         k1x, k1w = W0, acc(t, g0, W0, tau)
@@ -116,7 +116,7 @@ def _step_one(plant: Plant, tau: np.ndarray, h: float) -> None:
     W0, tau_ = plant.Omega.tolist(), np.asarray(tau, dtype=float).tolist()
     disturbance = plant.config.disturbance
 
-    def _acc(t, g_b, W):                # Plant._angular_acceleration
+    def _acc(t, g_b, W):                # Plant.angular_acceleration
         gyroscopic = cross_floats(W, matvec_floats(J, W))
         bgm = cross_floats(m_rho, g_b)
         d = disturbance(t).tolist()

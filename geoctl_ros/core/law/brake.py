@@ -26,6 +26,7 @@ What it does not cover (the loop's ringing against the barrier, the fall while t
 up) is measured by the campaign and attacked by the falsifier.
 """
 from dataclasses import dataclass
+import math
 from typing import Any, Optional
 
 import numpy as np
@@ -34,6 +35,10 @@ from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.flags import any_flag
 
 SIGMAS = 3.0      # the measurement error is bounded at this many standard deviations
+ASSUMED_WINDOW_S = 0.3   # s, how long before a moment the bounds must have held for the
+                         # derivation to speak of it: the longest blind time searched (150 ms of
+                         # latency, a 40 ms stall), a hold (10 ms), and braking from 3.3 rad/s at
+                         # a_b (83 ms)
 
 
 @dataclass(frozen=True)
@@ -48,8 +53,13 @@ class ApproachBrake:
     @classmethod
     def of(cls, config: Any) -> Optional['ApproachBrake']:
         """The brake of a ControllerConfig, or None when it is off."""
-        if config.approach_brake_rate <= 0.0:
-            return None
+        return cls.bounds_of(config) if config.approach_brake_rate > 0.0 else None
+
+    @classmethod
+    def bounds_of(cls, config: Any) -> 'ApproachBrake':
+        """The brake's bounds of a ControllerConfig, whether or not its law brakes (what a
+        flight is judged against: ``assumptions_held``).
+        """
         j_min = float(np.linalg.eigvalsh(config.J).min())
         return cls(config.approach_brake_rate, config.brake_acceleration,
                    config.cbf_moment_bound / j_min, SIGMAS * config.attitude_noise)
@@ -91,3 +101,22 @@ def braking_distance(brake: ApproachBrake, w: float, T: float) -> float:
     """
     return w * T + 0.5 * brake.unmodelled * T * T + w * w / (2.0 * brake.acceleration)
 
+
+
+def assumptions_held(brake: ApproachBrake, unlearnt: np.ndarray, measurement: np.ndarray,
+                     saturated: np.ndarray, dt: float, spooled_s: float) -> np.ndarray:
+    """(steps, runs) bool: whether the derivation speaks of each control step of a flight: its
+    bounds held at every step of the ``ASSUMED_WINDOW_S`` up to it, and the rotors had spooled
+    up (``spooled_s`` after the arming at step 0) by the window's start. Per step and run
+    (arrays (steps, runs)): unlearnt, the acceleration the model did not know (rad/s^2, within
+    a_u); measurement, the attitude measurement's error (rad, within e); saturated, the
+    allocation saturated (it must not be: the rotors make the moments commanded).
+    """
+    ok = (~saturated) & (unlearnt <= brake.unmodelled) & (measurement <= brake.measurement)
+    steps = ok.shape[0]
+    window = int(math.ceil(ASSUMED_WINDOW_S / dt - 1e-9))
+    first = window + int(math.ceil(spooled_s / dt - 1e-9))     # the first step judged
+    broken = np.concatenate([np.zeros((1,) + ok.shape[1:]), np.cumsum(~ok, axis=0)])
+    k = np.arange(steps)
+    in_window = broken[k + 1] - broken[np.maximum(k - window, 0)]
+    return (in_window == 0) & (k >= first)[:, None]
