@@ -69,7 +69,8 @@ def summary_lines(searches, names, budget, env, wall, where):
               'the rotors had spooled up after the arming and made every moment asked of them '
               '(no saturation), the acceleration the model did not know stayed within a_u, and '
               "the attitude measurement's error within e. A run counts when it has such a step; "
-              'its closest approach is over those steps.' % ASSUMED_WINDOW_S,
+              'its closest approach is over those steps, up to its first step inside a cone (of '
+              'a sensor already inside, the derivation says nothing).' % ASSUMED_WINDOW_S,
               '', 'wall time %.0f s' % wall]
     return lines
 

@@ -52,14 +52,20 @@ def closest_assumed(flight: Any, setup: Any) -> np.ndarray:
     """(runs,) each run's closest approach (deg, at its control steps) at the steps the approach
     brake's derivation speaks of (``brake.assumptions_held``: over the window before, the
     rotors had spooled up, made every moment asked (no saturation), the unlearnt acceleration
-    was within a_u and the attitude measurement's error within e); +inf for a run with no
-    such step.
+    was within a_u and the attitude measurement's error within e), up to the run's first
+    step inside a cone (what the derivation claims is that the sensor does not enter; of a
+    sensor already inside it says nothing); +inf for a run with no such step. So a negative
+    value is a counterexample to the derivation: the sensor entered a cone at a step it
+    speaks of.
     """
     a = flight.assumed
     assert flight.margin_series is not None and a is not None
     held = assumptions_held(ApproachBrake.bounds_of(setup.config), a.unlearnt, a.measurement,
                             a.saturated, flight.dt, Mixer.SPOOL_LAGS * setup.mixer.lag)
-    return np.where(held, flight.margin_series, np.inf).min(axis=0)
+    margin = flight.margin_series
+    inside = margin < 0.0
+    entered_before = (np.cumsum(inside, axis=0) - inside) > 0
+    return np.where(held & ~entered_before, margin, np.inf).min(axis=0)
 
 
 @dataclass

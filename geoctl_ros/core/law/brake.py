@@ -15,15 +15,28 @@ w^2 / (2 a_b) more while it brakes. So it stays out of the cone when
     phi_i - theta_i - e - 1/2 a_u T^2 >= w T + w^2 / (2 a_b),
 
 that is when w is at most the allowed rate w_max = a_b (sqrt(T^2 + 2 G / a_b) - T), with G the
-left-hand side (at least 0). The brake enforces it: where the approach rate w_i exceeds w_max
-it adds the moment J min(k_b (w_i - w_max), a_b) along the direction that opens phi_i, taking
-the excess away at the rate k_b (``approach_brake_rate``), and asking no more than a_b.
+left-hand side (at least 0). The brake keeps every approach under that curve as a control barrier
+function of its own: with h_i = w_max(G_i) - w_i it asks that dh_i/dt >= -k_b h_i
+(``approach_brake_rate``) for any unlearnt acceleration within a_u. Since dG/dt = -w, that is
 
-Assumptions (what the derivation covers): the rotors make the moments commanded and can spare a_b
-(the allocation is not saturated and the rotors have spooled up after arming), what the
-prediction does not model is a moment within the bound, and the measurement errors are within e.
-What it does not cover (the loop's ringing against the barrier, the fall while the rotors spool
-up) is measured by the campaign and attacked by the falsifier.
+    dw_i/dt <= -(dw_max/dG) w_i + k_b h_i,   dw_max/dG = a_b / (w_max + a_b T),
+
+and where the law's own moment (the model's acceleration under it, its closing part included)
+would break it by the worst a_u, the brake adds the least deceleration along the cone's opening
+direction that meets it. Then h_i >= 0 holds once it holds: the approach never outruns the
+curve, which stops the sensor e outside the cone. On the curve the deceleration asked is at most
+a_b (plus a_u, plus whatever of the law's own moment closes on the cone).
+
+Assumptions (what the derivation covers): the rotors make the moments commanded (the allocation is
+not saturated, and the rotors have spooled up after arming), what the prediction does not model
+is an acceleration within a_u, the attitude measurement's error is within e, and h_i >= 0 at the
+start (an approach already faster than the curve is taken back to it at the rate k_b, not at
+once). The condition is kept in continuous time on the predicted state; the blind time and the
+hold enter through T in w_max, not through the condition. The falsifier judges the first three
+per control step (``assumptions_held``).
+What it does not cover (the fall while the rotors spool up, a saturated allocation, model errors
+past a_u, an approach past the curve at arming) is measured by the campaign and attacked by the
+falsifier.
 """
 from dataclasses import dataclass
 import math
@@ -71,27 +84,42 @@ class ApproachBrake:
         G = np.maximum(gap - self.measurement - 0.5 * self.unmodelled * T * T, 0.0)
         return self.acceleration * (np.sqrt(T * T + 2.0 * G / self.acceleration) - T)
 
-    def moment(self, J: np.ndarray, s: np.ndarray, cross: np.ndarray, theta: np.ndarray,
-               Omega: np.ndarray, blind: Any, hold: float) -> Optional[np.ndarray]:
+    def moment(self, J: np.ndarray, b: np.ndarray, s: np.ndarray, cross: np.ndarray,
+               theta: np.ndarray, r: np.ndarray, Omega: np.ndarray, acc: np.ndarray, blind: Any,
+               hold: float) -> Optional[np.ndarray]:
         """The brake's moment (body frame, N m; one per run of a batch), or None where no cone
-        is approached faster than allowed. s, cross: ``ConeSet.terms`` (cos phi_i and
-        (R^T v_i) x r per cone), theta: the cones' half-angles (rad), blind: T_b (s; a float or
-        one per run), hold: h (s).
+        needs it. b: each cone's axis in the body frame (R^T v_i); s, cross: ``ConeSet.terms``
+        (cos phi_i and (R^T v_i) x r per cone); theta: the cones' half-angles (rad); r: the
+        sensor axis (body); acc: the model's angular acceleration under the law's moment (rad/s^2,
+        the brake's own left out); blind: T_b (s; a float or one per run); hold: h (s).
+
+        With h_i = w_max(G_i) - w_i, it asks that the model's dh_i/dt, less what the unlearnt
+        acceleration can take away (a_u), be at least -k_b h_i: along each cone's opening
+        direction n_i = cross_i / |cross_i| it adds the least deceleration d_i that makes
+
+            dw_i/dt (the law's) - d_i + a_u <= -(dw_max/dG) w_i + k_b h_i,
+
+        with dw_i/dt = -(dn_i/dt) . Omega - n_i . acc and dw_max/dG = a_b / (w_max + a_b T).
         """
-        closing = -so3.dot(cross, Omega[..., None, :])       # sin(phi_i) w_i
-        if not any_flag(closing > 0.0):             # (the usual case: no cone approached)
-            return None
         inv = 1.0 / np.maximum(np.sqrt(so3.dot(cross, cross)), 1e-9)
-        w = closing * inv
+        n = cross * inv[..., None]
+        Om = Omega[..., None, :]
+        w = -so3.dot(n, Om)
         T = (np.asarray(blind, dtype=float)[..., None] if np.ndim(blind) else blind) + hold
         gap = np.arccos(np.clip(s, -1.0, 1.0)) - theta
-        excess = np.maximum(w - self.allowed_rate(gap, T), 0.0)
-        if not any_flag(excess > 0.0):
+        w_max = self.allowed_rate(gap, T)
+        slope = self.acceleration / np.maximum(w_max + self.acceleration * T, 1e-9)
+        c_dot = so3.cross(so3.cross(b, Om), r)
+        n_dot = (c_dot - n * so3.dot(n, c_dot)[..., None]) * inv[..., None]
+        w_dot = -so3.dot(n_dot, Om) - so3.dot(n, acc[..., None, :])
+        need = w_dot + self.unmodelled + slope * w - self.rate * (w_max - w)
+        if not any_flag(need > 0.0):                # (the usual case)
             return None
-        # at most a_b per cone: what the derivation takes the rotors to spare (asking more only
-        # saturates the allocation, and takes authority from the barrier)
-        decel = np.minimum(self.rate * excess, self.acceleration)
-        return so3.matvec(J, so3.vecmat(decel * inv, cross))
+        # at most the law's own closing acceleration, a_u and a_b: what the derivation takes the
+        # rotors to spare (asking more only saturates the allocation, and takes authority from
+        # the barrier)
+        decel = np.clip(need, 0.0, np.maximum(w_dot, 0.0) + self.unmodelled + self.acceleration)
+        return so3.matvec(J, so3.vecmat(decel, n))
 
 
 def braking_distance(brake: ApproachBrake, w: float, T: float) -> float:

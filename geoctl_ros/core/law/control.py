@@ -50,7 +50,12 @@ from geoctl_ros.core.law.configuration_error import (
 from geoctl_ros.core.law.feasibility import setpoint_problem
 from geoctl_ros.core.law.guidance import Guidance
 from geoctl_ros.core.law.laws import LAWS
-from geoctl_ros.core.law.mechanics import cog_regressor, first_moment, pivot_inertia
+from geoctl_ros.core.law.mechanics import (
+    cog_regressor,
+    first_moment,
+    gravity_moment,
+    pivot_inertia,
+)
 
 # Disturbance models: name -> number of estimated parameters (the columns of W).
 #   constant:      W = I,                     Delta = a constant moment (the paper's case)
@@ -214,6 +219,19 @@ class AttitudeController:
             return None
         Y = cog_regressor(R, self.config.gravity)
         return np.concatenate((np.broadcast_to(np.eye(3), Y.shape), Y), axis=-1)
+
+    def model_acceleration(self, R: np.ndarray, Omega: np.ndarray, moment: np.ndarray,
+                           delta_bar: Optional[np.ndarray] = None) -> np.ndarray:
+        """The model's angular acceleration at (R, Omega) under the rotors' moment (about the
+        pivot): J^-1 (moment + M_g(R) + W Delta_bar - Omega x J Omega), with its inertia, centre
+        of mass and estimate (``delta_bar``: this one instead of the estimate's present value).
+        """
+        cfg = self.config
+        W = self.regressor(R)
+        d = self.delta_bar if delta_bar is None else delta_bar
+        return matvec(self.J_inv, moment + gravity_moment(R, cfg.m_rho, cfg.gravity)
+                      + (d if W is None else matvec(W, d))
+                      - cross(Omega, matvec(cfg.J, Omega)))
 
     def step(self, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool = True,
              blind: Any = 0.0) -> ControlOutput:

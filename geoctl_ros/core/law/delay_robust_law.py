@@ -5,6 +5,7 @@ from typing import Any
 
 import numpy as np
 
+from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.law.paper_law import barrier_step
 
 
@@ -19,8 +20,11 @@ def delay_robust_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: floa
     out = barrier_step(controller, R, Omega, dt, adapt, blind)
     brake = controller.brake
     if brake is not None and out.cones.s.shape[-1]:
-        extra = brake.moment(controller.config.J, out.cones.s, out.cones.cross,
-                             controller.config.cones.theta, Omega, blind, dt)
+        cones = controller.config.cones
+        extra = brake.moment(controller.config.J, so3.vecmat(cones.V, R[..., None, :, :]),
+                             out.cones.s, out.cones.cross, cones.theta, cones.r, Omega,
+                             controller.model_acceleration(R, Omega, out.u, out.delta_bar),
+                             blind, dt)
         if extra is not None:
             out = out._replace(u=out.u + extra)
     return out

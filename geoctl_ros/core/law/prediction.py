@@ -21,8 +21,7 @@ from typing import Any, Optional
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.core.geometry.so3 import cross, matvec
-from geoctl_ros.core.law.mechanics import gravity_moment
+from geoctl_ros.core.geometry.so3 import matvec
 
 PREDICT_SLOW_S = 0.25    # s, the observer's low-pass of the model's error
 OBSERVE_GAP_MAX_S = 0.05  # s, the longest interval between rate samples the observer learns from
@@ -121,12 +120,7 @@ class DelayPredictor:
 
     def acceleration(self, R: np.ndarray, Omega: np.ndarray, moment: np.ndarray) -> np.ndarray:
         """The model's angular acceleration at (R, Omega) under the rotors' moment."""
-        c = self.controller
-        cfg = c.config
-        W = c.regressor(R)
-        return matvec(c.J_inv, moment + gravity_moment(R, cfg.m_rho, cfg.gravity)
-                      + (c.delta_bar if W is None else matvec(W, c.delta_bar))
-                      - cross(Omega, matvec(cfg.J, Omega)))
+        return self.controller.model_acceleration(R, Omega, moment)
 
     def observe(self, R: np.ndarray, Omega: np.ndarray, captured: Any,
                 history: 'CommandHistory') -> None:
