@@ -135,17 +135,34 @@ def test_under_the_worst_unlearnt_acceleration_the_brake_stops_the_sensor_outsid
     assert closest >= 0.99 * brake.measurement
 
 
-def test_the_brake_is_the_delay_robust_laws_alone():
+def test_the_brake_is_the_delay_robust_laws_and_a_constraint_of_the_cbf_laws_qp():
+    """The delay-robust law adds the brake's moment, the cbf law keeps its condition as
+    constraints of its QP (the model's approach rate then meets it for every cone, to 1e-7
+    rad/s^2, where it did not without them), and the paper's law has no brake.
+    """
     R = so3.exp(np.array([0.0, 0.0, math.radians(60.0)]))
     Omega = np.array([0.0, 0.0, -6.0])
+    blind, dt = 0.05, 0.01
     outs = {}
-    for law in ('delay_robust', 'paper'):
+    for law in ('delay_robust', 'paper', 'cbf'):
         for rate in (0.0, 100.0):
             ctl = _testbed_controller(law=law, approach_brake_rate=rate)
-            outs[law, rate] = ctl.step(R, Omega, 0.01, adapt=False, blind=0.05).u
+            outs[law, rate] = ctl.step(R, Omega, dt, adapt=False, blind=blind).u
     assert not np.allclose(outs['delay_robust', 0.0], outs['delay_robust', 100.0])
     assert np.array_equal(outs['paper', 0.0], outs['paper', 100.0])
     assert _testbed_controller(approach_brake_rate=0.0).brake is None
+    ctl = _testbed_controller(law='cbf')
+    brake, cones = ctl.brake, ctl.config.cones
+    sc = cones.terms(R)
+    n, kinematic, w, w_max, slope = brake.condition(
+        so3.vecmat(cones.V, R[None]), sc[..., 0], sc[..., 1:], cones.theta, cones.r, Omega,
+        blind, dt)
+
+    def excess(u):          # the condition's excess per cone under the model (the cbf's: no
+        acc = ctl.model_acceleration(R, Omega, u, np.zeros_like(ctl.delta_bar))   # estimate)
+        return kinematic - n @ acc + brake.unmodelled + slope * w - brake.rate * (w_max - w)
+    assert np.max(excess(outs['cbf', 0.0])) > 1.0
+    assert np.max(excess(outs['cbf', 100.0])) <= 1e-7
 
 
 def test_the_derivation_speaks_of_a_step_only_when_its_bounds_held_over_the_window_before():

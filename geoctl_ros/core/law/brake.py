@@ -101,6 +101,24 @@ class ApproachBrake:
 
         with dw_i/dt = -(dn_i/dt) . Omega - n_i . acc and dw_max/dG = a_b / (w_max + a_b T).
         """
+        n, kinematic, w, w_max, slope = self.condition(b, s, cross, theta, r, Omega, blind, hold)
+        w_dot = kinematic - so3.dot(n, acc[..., None, :])
+        need = w_dot + self.unmodelled + slope * w - self.rate * (w_max - w)
+        if not any_flag(need > 0.0):                # (the usual case)
+            return None
+        # at most the law's own closing acceleration, a_u and a_b: what the derivation takes the
+        # rotors to spare (asking more only saturates the allocation, and takes authority from
+        # the barrier)
+        decel = np.clip(need, 0.0, np.maximum(w_dot, 0.0) + self.unmodelled + self.acceleration)
+        return so3.matvec(J, so3.vecmat(decel, n))
+
+    def condition(self, b: np.ndarray, s: np.ndarray, cross: np.ndarray, theta: np.ndarray,
+                  r: np.ndarray, Omega: np.ndarray, blind: Any, hold: float) -> tuple:
+        """The terms of the brake's condition per cone, dw_i/dt + a_u <= -(dw_max/dG) w_i +
+        k_b (w_max - w_i) with dw_i/dt = kinematic_i - n_i . Omega' (Omega' the angular
+        acceleration): (n, kinematic, w, w_max, dw_max/dG), n the opening directions (..., cones,
+        3), kinematic = -(dn_i/dt) . Omega (arguments as ``moment``'s).
+        """
         inv = 1.0 / np.maximum(np.sqrt(so3.dot(cross, cross)), 1e-9)
         n = cross * inv[..., None]
         Om = Omega[..., None, :]
@@ -111,15 +129,21 @@ class ApproachBrake:
         slope = self.acceleration / np.maximum(w_max + self.acceleration * T, 1e-9)
         c_dot = so3.cross(so3.cross(b, Om), r)
         n_dot = (c_dot - n * so3.dot(n, c_dot)[..., None]) * inv[..., None]
-        w_dot = -so3.dot(n_dot, Om) - so3.dot(n, acc[..., None, :])
-        need = w_dot + self.unmodelled + slope * w - self.rate * (w_max - w)
-        if not any_flag(need > 0.0):                # (the usual case)
-            return None
-        # at most the law's own closing acceleration, a_u and a_b: what the derivation takes the
-        # rotors to spare (asking more only saturates the allocation, and takes authority from
-        # the barrier)
-        decel = np.clip(need, 0.0, np.maximum(w_dot, 0.0) + self.unmodelled + self.acceleration)
-        return so3.matvec(J, so3.vecmat(decel, n))
+        return n, -so3.dot(n_dot, Om), w, w_max, slope
+
+    def rows(self, J_inv: np.ndarray, f: np.ndarray, b: np.ndarray, s: np.ndarray,
+             cross: np.ndarray, theta: np.ndarray, r: np.ndarray, Omega: np.ndarray, blind: Any,
+             hold: float) -> tuple:
+        """The brake's condition as constraints on the moment u, A u >= beta (one row per
+        cone), for a law that solves for u (the cbf law's QP): with Omega' = J^-1 (u + f), f the
+        model's moment besides u, the condition is n_i . J^-1 u >= kinematic_i - n_i . J^-1 f +
+        a_u + (dw_max/dG) w_i - k_b (w_max - w_i). Returns (A (..., cones, 3), beta (..., cones)).
+        """
+        n, kinematic, w, w_max, slope = self.condition(b, s, cross, theta, r, Omega, blind, hold)
+        A = so3.matmul(n, J_inv)                       # J symmetric: rows (J^-1 n_i)^T
+        beta = (kinematic - so3.dot(A, f[..., None, :]) + self.unmodelled + slope * w
+                - self.rate * (w_max - w))
+        return A, beta
 
 
 def braking_distance(brake: ApproachBrake, w: float, T: float) -> float:

@@ -22,7 +22,7 @@ def pointing_cbf(controller: Any, R: np.ndarray, Omega: np.ndarray, terms: Any) 
     then linear in u: a_i . u >= beta_i with a_i = J^-1 c_i. It holds for any d with
     |d| <= D = ``cbf_moment_bound`` (a robust CBF): beta_i grows by D |a_i|. (The adaptive
     estimate is no bound, and overshoots on its way: the filter does not use it.)
-    Returns (A (..., n, 3), beta (..., n), h, h').
+    Returns (A (..., n, 3), beta (..., n), h, h', b, f) (b: the rows R^T v_i; f as above).
     """
     cfg = controller.config
     cones = cfg.cones
@@ -39,7 +39,7 @@ def pointing_cbf(controller: Any, R: np.ndarray, Omega: np.ndarray, terms: Any) 
              + 2.0 * lam * h_dot + lam * lam * h)
     if cfg.cbf_moment_bound:                  # the worst unlearnt moment: a_i . d >= -D |a_i|
         beta = beta + cfg.cbf_moment_bound * np.sqrt(so3.dot(A, A))
-    return A, beta, h, h_dot
+    return A, beta, h, h_dot, b, f
 
 
 _SUBSETS: dict = {}
@@ -102,10 +102,20 @@ def cbf_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt:
     """The geometric baseline filtered by a control-barrier-function QP on SO(3): the moment
     closest to Lee's geometric controller's that keeps every cone's pointing constraint
     (``pointing_cbf``) with a double pole at -``cbf_rate``, against any unlearnt moment up to
-    ``cbf_moment_bound``. The estimate adapts as the baseline's.
+    ``cbf_moment_bound``. With the approach brake on (``approach_brake_rate``), its condition
+    for every cone is a constraint of the QP too (``ApproachBrake.rows``): the sampled-data
+    margin over the blind time and a hold, against the same unlearnt moment. The estimate adapts
+    as the baseline's.
     """
     terms, out = unconstrained(controller, R, Omega, dt, adapt)
-    if not len(controller.config.cones):
+    cones = controller.config.cones
+    if not len(cones):
         return out
-    A, beta, _, _ = pointing_cbf(controller, R, Omega, terms)
+    A, beta, _, _, b, f = pointing_cbf(controller, R, Omega, terms)
+    brake = controller.brake
+    if brake is not None:
+        A_b, beta_b = brake.rows(controller.J_inv, f, b, terms.cones.s, terms.cones.cross,
+                                 cones.theta, np.broadcast_to(cones.r, b.shape), Omega, blind, dt)
+        A = np.concatenate((A, A_b), axis=-2)
+        beta = np.concatenate((beta, beta_b), axis=-1)
     return out._replace(u=closest_admissible(out.u, A, beta))
