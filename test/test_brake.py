@@ -107,6 +107,28 @@ def test_the_brake_keeps_the_approach_under_its_curve_with_the_least_deceleratio
         assert (later - w) / dt == pytest.approx(expected, rel=1e-4, abs=1e-3)
 
 
+def test_the_approach_rates_change_is_its_finite_difference_along_any_motion():
+    """dw_i/dt = kinematic_i - n_i . Omega' (``ApproachBrake.condition``) against finite
+    differences of the approach rate, at 50 random attitudes, rates and accelerations (the yaw
+    of the test above is a great circle, where the kinematic term is 0).
+    """
+    ctl = _testbed_controller()
+    brake, cones = ctl.brake, ctl.config.cones
+    rng = np.random.default_rng(11)
+    for _ in range(50):
+        R = so3.exp(rng.normal(size=3))
+        Omega, acc = rng.normal(size=3), rng.normal(scale=5.0, size=3)
+        sc = cones.terms(R)
+        inv, w, kinematic, _, _ = brake.condition(
+            so3.vecmat(cones.V, R[None]), sc[..., 0], sc[..., 1:], cones.theta, cones.r, Omega,
+            0.02, 0.01)
+        w_dot = kinematic - (sc[..., 1:] @ acc) * inv
+        dt = 1e-6
+        later = approach_rates(cones.terms(R @ so3.exp((Omega + 0.5 * dt * acc) * dt)),
+                               Omega + dt * acc)
+        np.testing.assert_allclose((later - w) / dt, w_dot, rtol=1e-4, atol=1e-3)
+
+
 def test_under_the_worst_unlearnt_acceleration_the_brake_stops_the_sensor_outside_the_cone():
     """The derivation, flown: the sensor 10 deg outside the cone closing at 3 rad/s, the loop
     seeing at once (T_b = 0) and commanding every millisecond, the law asking nothing, and an
@@ -154,9 +176,10 @@ def test_the_brake_is_the_delay_robust_laws_and_a_constraint_of_the_cbf_laws_qp(
     ctl = _testbed_controller(law='cbf')
     brake, cones = ctl.brake, ctl.config.cones
     sc = cones.terms(R)
-    n, kinematic, w, w_max, slope = brake.condition(
+    inv, w, kinematic, w_max, slope = brake.condition(
         so3.vecmat(cones.V, R[None]), sc[..., 0], sc[..., 1:], cones.theta, cones.r, Omega,
         blind, dt)
+    n = sc[..., 1:] * inv[:, None]
 
     def excess(u):          # the condition's excess per cone under the model (the cbf's: no
         acc = ctl.model_acceleration(R, Omega, u, np.zeros_like(ctl.delta_bar))   # estimate)

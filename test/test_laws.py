@@ -1,6 +1,7 @@
 """The control laws behind the LAWS table on a case derived by hand, and the cbf law's constraint
 and QP (finite differences, KKT) and what it holds.
 """
+import itertools
 import math
 import os
 
@@ -12,11 +13,18 @@ import numpy as np
 import pytest
 
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.core.law.cbf_law import closest_admissible, pointing_cbf
+from geoctl_ros.core.law.cbf_law import closest_admissible, pointing_cbf, project
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.control import AttitudeController
 from geoctl_ros.core.law.mechanics import gravity_moment
-from geoctl_ros.params import CONTROLLER, controller_config, resolve
+from geoctl_ros.params import (
+    CONTROLLER,
+    controller_config,
+    controller_setup,
+    load_parameter_file,
+    node_overrides,
+    resolve,
+)
 from geoctl_ros.sim import scenario
 
 # on the vehicle's stack too, but for the four long closed-loop flights: the scenario and campaign
@@ -165,3 +173,42 @@ def test_the_cbf_filter_holds_the_cone_against_an_unlearnt_moment_up_to_its_boun
         return closest
     assert fly(0.0) < 0.0                  # the exact model's filter: pushed in
     assert fly(0.05) > 0.0                 # the robust one: held out
+
+
+@odroid
+def test_the_qp_solver_finds_the_kkt_point_among_the_rotors_limits_and_the_cones():
+    """``project`` (Goldfarb-Idnani) against the brute force: the testbed's 12 rotor rows and 2-4
+    random cone rows, 300 problems; the KKT point found by trying every set of at most 3
+    constraints held with equality is the one it returns, to 1e-9 N m.
+    """
+    testbed = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                           'config', 'testbed.yaml')
+    values = resolve(CONTROLLER, node_overrides(load_parameter_file(testbed), CONTROLLER))
+    A_m, beta_m = controller_setup(values).config.moment_limits
+    assert A_m.shape == (12, 3)
+    rng = np.random.default_rng(3)
+    solved = 0
+    for _ in range(300):
+        k = int(rng.integers(2, 5))
+        A = np.concatenate((rng.normal(size=(k, 3)), A_m))
+        beta = np.concatenate((rng.normal(scale=0.5, size=k), beta_m))
+        u0 = rng.normal(scale=1.5, size=3)
+        u, feasible = project(u0, A, beta)
+        best = None
+        for size in (0, 1, 2, 3):
+            for S in itertools.combinations(range(len(beta)), size):
+                A_S = A[list(S)]
+                if size and abs(np.linalg.det(A_S @ A_S.T)) < 1e-12:
+                    continue
+                lam = np.linalg.solve(A_S @ A_S.T, beta[list(S)] - A_S @ u0) if size else []
+                x = u0 + (A_S.T @ lam if size else 0.0)
+                if np.all(A @ x >= beta - 1e-9) and np.all(np.asarray(lam) >= -1e-9):
+                    best = x
+                    break
+            if best is not None:
+                break
+        assert feasible == (best is not None)
+        if feasible:
+            np.testing.assert_allclose(u, best, atol=1e-9)
+            solved += 1
+    assert solved > 100

@@ -3,7 +3,7 @@ that span several parameters (a set point against the cones, a thrust limit agai
 airframe that must produce every moment).
 """
 import collections
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 import math
 from typing import Any, Dict, List, Tuple
 
@@ -188,8 +188,9 @@ def controller_setup(values: dict) -> 'ControllerSetup':
     """Build and cross-check a controller from resolved parameters; ConfigError on any problem,
     including a set point (or scheduled one) that puts the sensor in a cone.
     """
-    config = controller_config(values)
     mix = mixer(values)
+    config = replace(controller_config(values), moment_limits=mix.allocator.moment_polytope(
+        mix.collective_thrust))
     probe = AttitudeController(config)
     errors = []
     R_d = setpoint_rotation(values)

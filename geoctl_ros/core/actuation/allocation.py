@@ -58,6 +58,19 @@ class Allocator:
         self._inv_d = 1.0 / self._d
         self._thrusts = np.zeros(n)
 
+    INSET = 1e-6      # N kept from either thrust limit in ``moment_polytope``
+
+    def moment_polytope(self, collective: float) -> tuple:
+        """The moments the rotors make unsaturated at this collective thrust, as A M >= beta:
+        thrust_min <= collective d_j + P_j M <= thrust_max for every alive rotor j (d, P the
+        minimum-norm allocation's columns), two rows per rotor, each limit INSET inside (so that
+        a moment on a face, as a QP leaves it, allocates unsaturated despite rounding). Returns
+        (A (2n, 3), beta (2n,)).
+        """
+        P, base = self._p_moment, collective * self._d
+        return (np.concatenate((P, -P)),
+                np.concatenate((self.lo + self.INSET - base, base - self.hi + self.INSET)))
+
     def allocate(self, moment: np.ndarray, collective: Any) -> Allocation:
         """Allocation for the desired moment (3,) about the pivot and collective thrust (N); a
         stack of moments (batch, 3) gives one allocation per row.

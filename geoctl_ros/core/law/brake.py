@@ -101,8 +101,9 @@ class ApproachBrake:
 
         with dw_i/dt = -(dn_i/dt) . Omega - n_i . acc and dw_max/dG = a_b / (w_max + a_b T).
         """
-        n, kinematic, w, w_max, slope = self.condition(b, s, cross, theta, r, Omega, blind, hold)
-        w_dot = kinematic - so3.dot(n, acc[..., None, :])
+        inv, w, kinematic, w_max, slope = self.condition(b, s, cross, theta, r, Omega, blind,
+                                                         hold)
+        w_dot = kinematic - so3.dot(cross, acc[..., None, :]) * inv
         need = w_dot + self.unmodelled + slope * w - self.rate * (w_max - w)
         if not any_flag(need > 0.0):                # (the usual case)
             return None
@@ -110,26 +111,29 @@ class ApproachBrake:
         # rotors to spare (asking more only saturates the allocation, and takes authority from
         # the barrier)
         decel = np.clip(need, 0.0, np.maximum(w_dot, 0.0) + self.unmodelled + self.acceleration)
-        return so3.matvec(J, so3.vecmat(decel, n))
+        return so3.matvec(J, so3.vecmat(decel * inv, cross))
 
     def condition(self, b: np.ndarray, s: np.ndarray, cross: np.ndarray, theta: np.ndarray,
                   r: np.ndarray, Omega: np.ndarray, blind: Any, hold: float) -> tuple:
         """The terms of the brake's condition per cone, dw_i/dt + a_u <= -(dw_max/dG) w_i +
         k_b (w_max - w_i) with dw_i/dt = kinematic_i - n_i . Omega' (Omega' the angular
-        acceleration): (n, kinematic, w, w_max, dw_max/dG), n the opening directions (..., cones,
-        3), kinematic = -(dn_i/dt) . Omega (arguments as ``moment``'s).
+        acceleration, n_i = cross_i / |cross_i| the opening direction): (1 / |cross_i|, w,
+        kinematic, w_max, dw_max/dG) (arguments as ``moment``'s).
+
+        kinematic = -(dn_i/dt) . Omega: with c = b x r, dc/dt = (b x Omega) x r = s Omega -
+        b (r . Omega) and n . b = 0, it is -(s (|Omega|^2 - w^2) - (b . Omega)(r . Omega)) /
+        |c| (dot products only).
         """
         inv = 1.0 / np.maximum(np.sqrt(so3.dot(cross, cross)), 1e-9)
-        n = cross * inv[..., None]
         Om = Omega[..., None, :]
-        w = -so3.dot(n, Om)
+        w = -so3.dot(cross, Om) * inv
         T = (np.asarray(blind, dtype=float)[..., None] if np.ndim(blind) else blind) + hold
         gap = np.arccos(np.clip(s, -1.0, 1.0)) - theta
         w_max = self.allowed_rate(gap, T)
         slope = self.acceleration / np.maximum(w_max + self.acceleration * T, 1e-9)
-        c_dot = so3.cross(so3.cross(b, Om), r)
-        n_dot = (c_dot - n * so3.dot(n, c_dot)[..., None]) * inv[..., None]
-        return n, -so3.dot(n_dot, Om), w, w_max, slope
+        spin = so3.dot(Omega, Omega)[..., None]
+        kinematic = (so3.dot(b, Om) * so3.dot(r, Omega)[..., None] - s * (spin - w * w)) * inv
+        return inv, w, kinematic, w_max, slope
 
     def rows(self, J_inv: np.ndarray, f: np.ndarray, b: np.ndarray, s: np.ndarray,
              cross: np.ndarray, theta: np.ndarray, r: np.ndarray, Omega: np.ndarray, blind: Any,
@@ -139,8 +143,9 @@ class ApproachBrake:
         model's moment besides u, the condition is n_i . J^-1 u >= kinematic_i - n_i . J^-1 f +
         a_u + (dw_max/dG) w_i - k_b (w_max - w_i). Returns (A (..., cones, 3), beta (..., cones)).
         """
-        n, kinematic, w, w_max, slope = self.condition(b, s, cross, theta, r, Omega, blind, hold)
-        A = so3.matmul(n, J_inv)                       # J symmetric: rows (J^-1 n_i)^T
+        inv, w, kinematic, w_max, slope = self.condition(b, s, cross, theta, r, Omega, blind,
+                                                         hold)
+        A = so3.matmul(cross * inv[..., None], J_inv)   # J symmetric: rows (J^-1 n_i)^T
         beta = (kinematic - so3.dot(A, f[..., None, :]) + self.unmodelled + slope * w
                 - self.rate * (w_max - w))
         return A, beta

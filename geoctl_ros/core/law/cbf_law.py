@@ -1,8 +1,8 @@
 """The geometric baseline filtered by a control-barrier-function QP: each cone a pointing
 constraint of relative degree 2, solved exactly by its active set every step.
 """
-import itertools
-from typing import Any
+import math
+from typing import Any, Optional
 
 import numpy as np
 
@@ -42,59 +42,88 @@ def pointing_cbf(controller: Any, R: np.ndarray, Omega: np.ndarray, terms: Any) 
     return A, beta, h, h_dot, b, f
 
 
-_SUBSETS: dict = {}
-
-
-def _active_sets(n):
-    """The nonempty sets of at most 3 of n constraints (a moment has 3 components), as index
-    tuples, smallest first.
+def project(u0: np.ndarray, A: np.ndarray, beta: np.ndarray, tol: float = 1e-9) -> tuple:
+    """The point closest to u0 with A u >= beta (min |u - u0|^2; one run: u0 (3,), A (m, 3),
+    beta (m,)), exactly, by Goldfarb and Idnani's dual active-set method (Math. Programming 27,
+    1983) with the identity for its Hessian: from u0, the most violated constraint is added at
+    a time, each step moving u along the part of its normal the active ones leave free, and
+    an active constraint whose multiplier would turn negative is dropped. Every iterate keeps
+    the multipliers of the active set nonnegative, so when no constraint is violated u is the
+    optimum. Returns (u, True), or (u0, False) when the constraints contradict each other.
     """
-    if n not in _SUBSETS:
-        _SUBSETS[n] = [S for k in (1, 2, 3) for S in itertools.combinations(range(n), k)]
-    return _SUBSETS[n]
+    u = np.array(u0, dtype=float)
+    active: list = []
+    lam = np.zeros(0)
+    for _ in range(4 * len(beta) + 8):           # (finite: each full step adds, no set recurs)
+        slack = A @ u - beta
+        p = int(np.argmin(slack))
+        if slack[p] >= -tol:
+            return u, True
+        n_p = A[p]
+        lam_p = 0.0
+        while True:
+            if active:
+                N = A[active].T                        # 3 x q
+                r = np.linalg.solve(N.T @ N, N.T @ n_p)
+                z = n_p - N @ r
+            else:
+                r, z = np.zeros(0), n_p
+            # partial step: the first active multiplier to reach zero
+            t1, k = math.inf, -1
+            for j in range(len(active)):
+                if r[j] > tol and lam[j] / r[j] < t1:
+                    t1, k = lam[j] / r[j], j
+            zz = float(z @ n_p)
+            # (a normal the active ones leave (nearly) no part of: a dual step only)
+            t2 = (-(float(n_p @ u) - beta[p]) / zz if zz > 1e-10 * float(n_p @ n_p)
+                  else math.inf)
+            t = min(t1, t2)
+            if t == math.inf:                          # the constraints contradict each other
+                return np.array(u0, dtype=float), False
+            lam = lam - t * r
+            lam_p += t
+            if t2 < math.inf:
+                u = u + t * z
+            if t == t2:                                # full step: p joins the active set
+                active.append(p)
+                lam = np.append(lam, lam_p)
+                break
+            del active[k]                              # partial step: k leaves
+            lam = np.delete(lam, k)
+    return np.array(u0, dtype=float), False
 
 
-def closest_admissible(u0: np.ndarray, A: np.ndarray, beta: np.ndarray) -> np.ndarray:
-    """The moment closest to u0 with A u >= beta (the QP min |u - u0|^2), exactly, by its active
-    set: with none active u0 if it is admissible; else the first of the sets of at most 3
-    constraints held with equality, smallest first, whose u = u0 + A_S^T lambda,
-    (A_S A_S^T) lambda = beta_S - A_S u0, is admissible with lambda >= 0 (one cone: the closed
-    form u0 + max(0, beta - a.u0) a / |a|^2). That is the KKT point, and the QP being strictly
-    convex it is the optimum: the search stops there. Where no set is admissible (constraints
-    that contradict each other), the most violated constraint alone. A batch solves each run on
-    its own (a run's answer is kept from its first admissible set, as alone).
+def closest_admissible(u0: np.ndarray, A: np.ndarray, beta: np.ndarray,
+                       limits: Optional[tuple] = None) -> np.ndarray:
+    """The moment closest to u0 with A u >= beta (the QP min |u - u0|^2; ``project``) and, given
+    limits = (A_m, beta_m), within the moments the rotors make unsaturated
+    (``Allocator.moment_polytope``). u0 itself where it is admissible. Where the cones' rows and
+    the rotors' contradict each other, the cones' alone (the allocation then saturates); where
+    the cones' rows contradict each other, the most violated one alone. A batch solves each run
+    on its own, so a run gets the same bits alone and in a batch.
     """
     tol = 1e-9
+    if limits is not None:
+        A_m, beta_m = limits
+        A = np.concatenate((A, np.broadcast_to(A_m, A.shape[:-2] + A_m.shape)), axis=-2)
+        beta = np.concatenate((beta, np.broadcast_to(beta_m, beta.shape[:-1] + beta_m.shape)),
+                              axis=-1)
     slack = so3.matvec(A, u0) - beta
     ok = np.all(slack >= -tol, axis=-1)
     if np.all(ok):
         return u0
-    n = A.shape[-2]
-    best, found = np.array(u0, dtype=float, copy=True), np.array(ok, copy=True)
-    for S in _active_sets(n):
-        A_S = A[..., S, :]
-        G = A_S @ np.swapaxes(A_S, -1, -2)
-        rhs = -slack[..., S]
-        det = np.linalg.det(G)
-        usable = np.abs(det) > 1e-12
-        G = np.where(usable[..., None, None], G, np.eye(len(S)))
-        lam = np.linalg.solve(G, rhs[..., None])[..., 0]
-        u = u0 + np.einsum('...ki,...k->...i', A_S, lam)
-        s_all = so3.matvec(A, u) - beta
-        good = usable & np.all(lam >= -tol, axis=-1) & np.all(s_all >= -1e-7, axis=-1)
-        first = good & ~found
-        best = np.where(first[..., None], u, best)
-        found = found | good
-        if np.all(found):
-            break
-    stuck = ~found
-    if np.any(stuck):                     # the most violated constraint alone
-        i = np.argmin(slack, axis=-1)
-        a = np.take_along_axis(A, i[..., None, None], axis=-2)[..., 0, :]
-        gap = -np.take_along_axis(slack, i[..., None], axis=-1)[..., 0]
-        u = u0 + (a.T * (np.maximum(gap, 0.0) / np.maximum(so3.dot(a, a), 1e-12))).T
-        best = np.where(stuck[..., None], u, best)
-    return best
+    cones = A.shape[-2] - (0 if limits is None else len(limits[1]))
+    out = np.array(u0, dtype=float, copy=True)
+    for i in zip(*np.nonzero(~np.asarray(ok))) if out.ndim > 1 else [()]:
+        u, feasible = project(u0[i], A[i], beta[i])
+        if not feasible and limits is not None:
+            u, feasible = project(u0[i], A[i][:cones], beta[i][:cones])
+        if not feasible:                        # the most violated constraint alone
+            j = int(np.argmin(slack[i][:cones]))
+            a = A[i][j]
+            u = u0[i] + a * (max(-slack[i][j], 0.0) / max(float(a @ a), 1e-12))
+        out[i] = u
+    return out
 
 
 def cbf_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool,
@@ -115,7 +144,7 @@ def cbf_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt:
     brake = controller.brake
     if brake is not None:
         A_b, beta_b = brake.rows(controller.J_inv, f, b, terms.cones.s, terms.cones.cross,
-                                 cones.theta, np.broadcast_to(cones.r, b.shape), Omega, blind, dt)
+                                 cones.theta, cones.r, Omega, blind, dt)
         A = np.concatenate((A, A_b), axis=-2)
         beta = np.concatenate((beta, beta_b), axis=-1)
-    return out._replace(u=closest_admissible(out.u, A, beta))
+    return out._replace(u=closest_admissible(out.u, A, beta, controller.config.moment_limits))

@@ -97,6 +97,9 @@ class ControllerConfig:
     approach_brake_rate: float = 0.0  # 1/s, the delay-robust law's approach brake; 0 = off
     brake_acceleration: float = 40.0  # rad/s^2, what the rotors can spare to brake an approach
     attitude_noise: float = 0.0       # rad, the attitude measurement's standard deviation
+    moment_limits: Optional[tuple] = None   # (A, beta): the moments the rotors make unsaturated,
+                                            # A u >= beta (``Allocator.moment_polytope``); the
+                                            # cbf law's QP keeps them
     J: np.ndarray = field(init=False, repr=False)        # inertia about the pivot
     m_rho: np.ndarray = field(init=False, repr=False)    # mass times pivot -> centre of mass
 
@@ -221,16 +224,20 @@ class AttitudeController:
         return np.concatenate((np.broadcast_to(np.eye(3), Y.shape), Y), axis=-1)
 
     def model_acceleration(self, R: np.ndarray, Omega: np.ndarray, moment: np.ndarray,
-                           delta_bar: Optional[np.ndarray] = None) -> np.ndarray:
+                           delta_bar: Optional[np.ndarray] = None,
+                           M_g: Optional[np.ndarray] = None, W: Any = False) -> np.ndarray:
         """The model's angular acceleration at (R, Omega) under the rotors' moment (about the
         pivot): J^-1 (moment + M_g(R) + W Delta_bar - Omega x J Omega), with its inertia, centre
         of mass and estimate (``delta_bar``: this one instead of the estimate's present value).
+        M_g, W: the gravity moment and regressor at R when the step has them (``StepTerms``).
         """
         cfg = self.config
-        W = self.regressor(R)
+        if W is False:
+            W = self.regressor(R)
+        if M_g is None:
+            M_g = gravity_moment(R, cfg.m_rho, cfg.gravity)
         d = self.delta_bar if delta_bar is None else delta_bar
-        return matvec(self.J_inv, moment + gravity_moment(R, cfg.m_rho, cfg.gravity)
-                      + (d if W is None else matvec(W, d))
+        return matvec(self.J_inv, moment + M_g + (d if W is None else matvec(W, d))
                       - cross(Omega, matvec(cfg.J, Omega)))
 
     def step(self, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool = True,

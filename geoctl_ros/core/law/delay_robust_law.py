@@ -17,13 +17,14 @@ def delay_robust_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: floa
     (``core.law.brake``: no cone approached faster than the derived sampled-data margin allows).
     With fresh inputs on time and the brake off it is the paper's.
     """
-    out = barrier_step(controller, R, Omega, dt, adapt, blind)
+    terms, out = barrier_step(controller, R, Omega, dt, adapt, blind)
     brake = controller.brake
     if brake is not None and out.cones.s.shape[-1]:
         cones = controller.config.cones
         extra = brake.moment(controller.config.J, so3.vecmat(cones.V, R[..., None, :, :]),
                              out.cones.s, out.cones.cross, cones.theta, cones.r, Omega,
-                             controller.model_acceleration(R, Omega, out.u, out.delta_bar),
+                             controller.model_acceleration(R, Omega, out.u, out.delta_bar,
+                                                            terms.M_g, terms.W),
                              blind, dt)
         if extra is not None:
             out = out._replace(u=out.u + extra)
