@@ -51,7 +51,8 @@ class Plant:
         c = self.config
         return gravity_moment(R, c.m_rho, c.gravity) + c.disturbance(t)
 
-    def angular_acceleration(self, t, g_b, Omega, tau):
+    def angular_acceleration(self, t: float, g_b: np.ndarray, Omega: np.ndarray,
+                             tau: np.ndarray) -> np.ndarray:
         """Omega' with gravity g_b = R^T g_w in the body frame (all the attitude it needs)."""
         c = self.config
         gyroscopic = cross(Omega, matvec(self.J, Omega))
