@@ -11,7 +11,10 @@ from geoctl_ros.campaign import manoeuvres
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.law import guidance
 from geoctl_ros.core.law.cones import ConeSet
+from geoctl_ros.core.law.configuration_error import LinearMap
+from geoctl_ros.core.law.control import AttitudeController
 from geoctl_ros.core.law.gains import learning_time
+from geoctl_ros.params import controller_setup, load_parameter_file
 from geoctl_ros.sim import scenario
 from geoctl_ros.sim.closed_loop import fly
 
@@ -130,6 +133,35 @@ def test_a_batch_gives_each_run_the_set_points_it_gets_alone_when_one_is_planned
         for i, g in enumerate(alone):
             assert np.array_equal(P[i], g.carrot(R[i], R_goal, cones))
         R = np.array([R[i] @ so3.exp(0.4 * so3.log(R[i].T @ P[i])) for i in range(2)])
+
+
+def test_the_law_follows_the_set_point_when_a_new_plan_puts_it_at_the_same_index():
+    """Found by the falsifier at 150 ms of latency: a vehicle pushed off its way is planned for
+    again, and the new set point can fall at the same index of the new path as the old one did
+    of the old. The law rebuilt its linear map on a change of index only, so it went on towards
+    the old set point, alone; in a batch another run's move rebuilt it, and the same run flew
+    differently alone and in a batch (26 against 32 deg into the cone). testbed_yaw90 pushed
+    60-130 deg about its yaw axis: the set point stays at index 20 and moves, and the law's
+    attractive error is the one to the new set point.
+    """
+    s = scenario.from_sections(load_parameter_file(
+        os.path.join(ROOT, 'config', 'scenarios', 'testbed_yaw90.yaml')), 'yaw90')
+    setup = controller_setup(s.controller)
+    for deg in (60.0, 90.0, 130.0):
+        ctl = AttitudeController(setup.config)
+        ctl.R_d = setup.setpoint
+        R0 = s.testbed.R0
+        ctl.step(R0, np.zeros(3), 0.01, adapt=False)
+        assert ctl.guidance is not None
+        before = ctl.guidance.index.copy()
+        P0 = ctl.guidance.paths[0, before[0]].copy()
+        pushed = so3.exp(np.array([0.0, 0.0, math.radians(deg)])) @ R0
+        ctl.step(pushed, np.zeros(3), 0.01, adapt=False)
+        index = ctl.guidance.index
+        P = ctl.guidance.paths[0, index[0]]
+        assert np.array_equal(index, before) and not np.array_equal(P, P0)
+        np.testing.assert_allclose(ctl._linear(pushed)[..., :4],
+                                   LinearMap(P, ctl.config)(pushed)[..., :4], atol=1e-12)
 
 
 def test_the_straight_yaw_arrives_round_the_cone():

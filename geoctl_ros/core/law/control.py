@@ -161,7 +161,7 @@ class AttitudeController:
     def R_d(self, R_d: np.ndarray) -> None:
         self._R_d = R_d
         self._linear = LinearMap(R_d, self.config)
-        self._carrot_index = None
+        self._carrot = None
         if self.guidance is not None:
             self.guidance.reset()
 
@@ -170,7 +170,7 @@ class AttitudeController:
         if self.guidance is not None:
             self.guidance.reset()
             self._linear = LinearMap(self._R_d, self.config)
-            self._carrot_index = None
+            self._carrot = None
 
     # --- configuration-time operations -------------------------------------------------------
     def setpoint_problem(self, R_d: np.ndarray, cones: Optional[ConeSet] = None) -> Optional[str]:
@@ -257,15 +257,15 @@ class AttitudeController:
 
     def _follow(self, R: np.ndarray) -> None:
         """Move the law's set point along guidance's path (``core.law.guidance``): its linear map
-        is rebuilt only when the set point moves on.
+        is rebuilt only when the set point moves. (By the set point itself, not its index on the
+        path: a path planned again can put another set point at the same index.)
         """
         guidance = self.guidance
         assert guidance is not None
         carrot = guidance.carrot(R, self._R_d, self.config.cones)
-        index = guidance.index
-        if self._carrot_index is None or not np.array_equal(index, self._carrot_index):
+        if self._carrot is None or not np.array_equal(carrot, self._carrot):
             self._linear = self._linear.retargeted(carrot, self.config.G)
-            self._carrot_index = index.copy()
+            self._carrot = carrot.copy()
 
     # --- the pieces every law is made of -------------------------------------------------------
     def terms(self, R: np.ndarray, Omega: np.ndarray, blind: Any = 0.0) -> 'StepTerms':
