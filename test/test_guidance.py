@@ -141,13 +141,15 @@ def test_the_law_follows_the_set_point_when_a_new_plan_puts_it_at_the_same_index
     of the old. The law rebuilt its linear map on a change of index only, so it went on towards
     the old set point, alone; in a batch another run's move rebuilt it, and the same run flew
     differently alone and in a batch (26 against 32 deg into the cone). testbed_yaw90 pushed
-    60-130 deg about its yaw axis: the set point stays at index 20 and moves, and the law's
-    attractive error is the one to the new set point.
+    40-140 deg about its yaw axis, either way: after every push the law's attractive error is the
+    one to guidance's new set point, and some pushes (5 on the development machine) leave it at
+    the same index of the new path.
     """
     s = scenario.from_sections(load_parameter_file(
         os.path.join(ROOT, 'config', 'scenarios', 'testbed_yaw90.yaml')), 'yaw90')
     setup = controller_setup(s.controller)
-    for deg in (60.0, 90.0, 130.0):
+    same_index = 0
+    for deg in [sign * d for sign in (1.0, -1.0) for d in range(40, 141, 10)]:
         ctl = AttitudeController(setup.config)
         ctl.R_d = setup.setpoint
         R0 = s.testbed.R0
@@ -159,9 +161,10 @@ def test_the_law_follows_the_set_point_when_a_new_plan_puts_it_at_the_same_index
         ctl.step(pushed, np.zeros(3), 0.01, adapt=False)
         index = ctl.guidance.index
         P = ctl.guidance.paths[0, index[0]]
-        assert np.array_equal(index, before) and not np.array_equal(P, P0)
+        same_index += bool(np.array_equal(index, before) and not np.array_equal(P, P0))
         np.testing.assert_allclose(ctl._linear(pushed)[..., :4],
                                    LinearMap(P, ctl.config)(pushed)[..., :4], atol=1e-12)
+    assert same_index >= 1
 
 
 def test_the_straight_yaw_arrives_round_the_cone():
