@@ -162,8 +162,6 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     record = History(steps, bed) if history else None
     judged = AssumedSeries(np.zeros((steps, n)), np.zeros((steps, n)),
                            np.zeros((steps, n), dtype=bool)) if assumed else None
-    noise_angle = np.sqrt(so3.dot(noise[0], noise[0]))          # (steps, runs)
-    measurement = noise_angle[0] if steps else np.zeros(n)
     last_unsettled = np.full(n, -1)        # the last step with the error >= SETTLED_DEG
     last_coarse = np.full(n, -1)           # the last step with the error >= FINE_DEG
     last_psi_above = np.full(n, -1)        # the last step with Psi >= SETTLE_PSI
@@ -188,13 +186,11 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
             R_seen = np.where(fresh[:, None, None], R_new, R_seen)
             W_seen = np.where(fresh[:, None], W_new, W_seen)
             receipt = np.where(fresh, t, receipt)
-            measurement = np.where(fresh, noise_angle[k], measurement)
             waited = np.maximum(t - receipt, 0.0)
             age = delay * h + waited if stamped else waited
             ages = (age, age)
         else:
             R_seen, W_seen = R_new, W_new
-            measurement = noise_angle[k]
         max_rate = np.maximum(max_rate, np.sqrt(so3.dot(W_seen, W_seen)))
         out, motors = tick(R_seen, W_seen, dt, t, ages)
         saturated += motors.allocation.saturated
@@ -211,7 +207,6 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
             record.add(k, t, out, motors)
         command = out.u if actuator is None else motors.commands
         if judged is not None:
-            judged.measurement[k] = measurement
             judged.saturated[k] = motors.allocation.saturated
         for i in range(holds[k]):
             tau = bed.moment(command, h)
@@ -227,6 +222,10 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         if progress is not None and (k + 1) % 100 == 0:
             progress((k + 1) / steps)
     wall = time.perf_counter() - t0
+    if judged is not None and steps:
+        # the attitude sample in use at each step: the last one that arrived (stalls repeat it)
+        used = np.maximum.accumulate(np.where(stalled, 0, np.arange(steps)[:, None]), axis=0)
+        judged.measurement[:] = np.sqrt(so3.dot(noise[0], noise[0]))[used, runs]
     final = controller.step(R_now, W_now, dt, adapt=False)
     return Flight(
         names=[s.name for s in scenarios], min_angle_deg=angle_deg(max_cos),

@@ -36,6 +36,8 @@ class Allocator:
     receives its matrix from the airframe's ActuatorEffectiveness.
     """
 
+    INSET = 1e-6      # N kept from either thrust limit in ``moment_polytope``
+
     def __init__(self, B, thrust_min, thrust_max, failed=()):
         B = np.asarray(B, dtype=float)
         n = B.shape[1]
@@ -57,8 +59,6 @@ class Allocator:
         self.lo, self.hi = float(thrust_min), float(thrust_max)
         self._inv_d = 1.0 / self._d
         self._thrusts = np.zeros(n)
-
-    INSET = 1e-6      # N kept from either thrust limit in ``moment_polytope``
 
     def moment_polytope(self, collective: float) -> tuple:
         """The moments the rotors make unsaturated at this collective thrust, as A M >= beta:

@@ -229,7 +229,8 @@ class AttitudeController:
         """The model's angular acceleration at (R, Omega) under the rotors' moment (about the
         pivot): J^-1 (moment + M_g(R) + W Delta_bar - Omega x J Omega), with its inertia, centre
         of mass and estimate (``delta_bar``: this one instead of the estimate's present value).
-        M_g, W: the gravity moment and regressor at R when the step has them (``StepTerms``).
+        M_g, W: the gravity moment and regressor at R when the step has them (``StepTerms``;
+        W False: not given, since None is the constant model's regressor).
         """
         cfg = self.config
         if W is False:
