@@ -38,7 +38,7 @@ class Plant:
     def __init__(self, config, R0=None, Omega0=None):
         self.config = config
         self.J = config.J
-        self.J_inv = np.linalg.inv(self.J)
+        self.J_inv = so3.inverse3(self.J)
         self.t = 0.0
         self.R = np.eye(3) if R0 is None else np.array(R0, dtype=float)
         self.Omega = np.zeros(3) if Omega0 is None else np.array(Omega0, dtype=float)

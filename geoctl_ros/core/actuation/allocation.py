@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from geoctl_ros.core.actuation.airframe import AirframeError, check
+from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.flags import all_flag
 from geoctl_ros.core.geometry.so3 import matvec
 
@@ -50,7 +51,7 @@ class Allocator:
             self.health.warnings.insert(0, 'rotor(s) %s marked failed: flying on %s'
                                         % (sorted(failed), self.health.alive))
         self.B4 = self.B[2:]                                  # rows F_z, M_x, M_y, M_z
-        P = np.linalg.pinv(self.B4)                           # n_alive x 4, minimum norm
+        P = so3.right_inverse(self.B4)                        # n_alive x 4, minimum norm
         self._d, self._p_rp, self._p_y = P[:, 0], P[:, 1:3], P[:, 3]
         self._p_moment = np.ascontiguousarray(P[:, 1:])
         if np.any(self._d <= 1e-9):

@@ -37,6 +37,7 @@ def rot_to_quat(R: np.ndarray) -> np.ndarray:
     else:
         s = 2.0 * math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
         q = [(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s, (R[1, 0] - R[0, 1]) / s]
-    out = np.array(q)
-    out /= np.linalg.norm(out)
+    x, y, z, w = (float(v) for v in q)
+    n = math.sqrt(x * x + y * y + z * z + w * w)       # (in floats: the same bits on any CPU)
+    out = np.array([x / n, y / n, z / n, w / n])
     return -out if out[3] < 0.0 else out

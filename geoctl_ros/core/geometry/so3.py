@@ -298,3 +298,84 @@ def axis_angle(axis: Vector, angle_rad: float) -> np.ndarray:
     """Rotation by angle_rad about a (not necessarily unit) axis."""
     a = np.asarray(axis, dtype=float)
     return exp(a * (angle_rad / np.linalg.norm(a)))
+
+
+# Small linear algebra in the same arithmetic on every CPU: LAPACK's routines (np.linalg.inv,
+# pinv, eigvalsh) call BLAS kernels chosen by the CPU (OPENBLAS_CORETYPE), which round
+# differently, and the constants they give (the model's J^-1, the allocation's pseudo-inverse)
+# would carry those bits into every flight.
+
+def inverse3(M: np.ndarray) -> np.ndarray:
+    """M^-1 for a 3x3 matrix or each of a stack, by its adjugate over its determinant (the
+    same formula entry by entry, for one in floats).
+    """
+    M = np.asarray(M, dtype=float)
+    if M.ndim == 2:
+        (a, b, c), (d, e, f), (g, h, i) = M.tolist()
+        adj = [[e * i - f * h, c * h - b * i, b * f - c * e],
+               [f * g - d * i, a * i - c * g, c * d - a * f],
+               [d * h - e * g, b * g - a * h, a * e - b * d]]
+        det1 = a * adj[0][0] + b * adj[1][0] + c * adj[2][0]
+        return np.array([[x / det1 for x in row] for row in adj])
+    a, b, c = M[..., 0, 0], M[..., 0, 1], M[..., 0, 2]
+    d, e, f = M[..., 1, 0], M[..., 1, 1], M[..., 1, 2]
+    g, h, i = M[..., 2, 0], M[..., 2, 1], M[..., 2, 2]
+    A = np.empty(M.shape)
+    A[..., 0, 0], A[..., 0, 1], A[..., 0, 2] = e * i - f * h, c * h - b * i, b * f - c * e
+    A[..., 1, 0], A[..., 1, 1], A[..., 1, 2] = f * g - d * i, a * i - c * g, c * d - a * f
+    A[..., 2, 0], A[..., 2, 1], A[..., 2, 2] = d * h - e * g, b * g - a * h, a * e - b * d
+    det = a * A[..., 0, 0] + b * A[..., 1, 0] + c * A[..., 2, 0]
+    return A / det[..., None, None]
+
+
+def symmetric_eigenvalues(M: np.ndarray) -> Tuple[float, float, float]:
+    """The eigenvalues of a symmetric 3x3 matrix, smallest first, in closed form (Smith 1961:
+    the trigonometric solution of its characteristic cubic).
+    """
+    (a, b, c), (_, d, e), (_, _, f) = np.asarray(M, dtype=float).tolist()
+    p1 = b * b + c * c + e * e
+    q = (a + d + f) / 3.0
+    if p1 == 0.0:
+        lo, mid, hi = sorted((a, d, f))
+        return lo, mid, hi
+    p2 = (a - q) ** 2 + (d - q) ** 2 + (f - q) ** 2 + 2.0 * p1
+    p = math.sqrt(p2 / 6.0)
+    B = [[(a - q) / p, b / p, c / p], [b / p, (d - q) / p, e / p], [c / p, e / p, (f - q) / p]]
+    r = 0.5 * (B[0][0] * (B[1][1] * B[2][2] - B[1][2] * B[2][1])
+               - B[0][1] * (B[1][0] * B[2][2] - B[1][2] * B[2][0])
+               + B[0][2] * (B[1][0] * B[2][1] - B[1][1] * B[2][0]))
+    phi = math.acos(min(1.0, max(-1.0, r))) / 3.0
+    hi = q + 2.0 * p * math.cos(phi)
+    lo = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
+    return lo, 3.0 * q - hi - lo, hi
+
+
+def right_inverse(A: np.ndarray) -> np.ndarray:
+    """The minimum-norm right inverse A^T (A A^T)^-1 of a matrix of full row rank (m x n, m <= n),
+    by Gauss-Jordan elimination with partial pivoting in floats: ``np.linalg.pinv`` of it, in
+    the same arithmetic on every CPU.
+    """
+    rows = np.asarray(A, dtype=float).tolist()
+    m, n = len(rows), len(rows[0])
+    G = [[sum_products(rows[i], rows[j]) for j in range(m)] + [float(i == j) for j in range(m)]
+         for i in range(m)]                                       # [A A^T | I]
+    for col in range(m):
+        pivot = max(range(col, m), key=lambda r: abs(G[r][col]))
+        G[col], G[pivot] = G[pivot], G[col]
+        p = G[col][col]
+        G[col] = [x / p for x in G[col]]
+        for r in range(m):
+            if r != col and G[r][col] != 0.0:
+                k = G[r][col]
+                G[r] = [x - k * y for x, y in zip(G[r], G[col])]
+    inv = [row[m:] for row in G]                                  # (A A^T)^-1
+    return np.array([[sum_products([rows[k][i] for k in range(m)], [inv[k][j] for k in range(m)])
+                      for j in range(m)] for i in range(n)])
+
+
+def sum_products(x: Sequence[float], y: Sequence[float]) -> float:
+    """x . y for lists of floats, summed left to right."""
+    acc = 0.0
+    for a, b in zip(x, y):
+        acc = acc + a * b
+    return acc

@@ -73,7 +73,7 @@ class ApproachBrake:
         """The brake's bounds of a ControllerConfig, whether or not its law brakes (what a
         flight is judged against: ``assumptions_held``).
         """
-        j_min = float(np.linalg.eigvalsh(config.J).min())
+        j_min = so3.symmetric_eigenvalues(config.J)[0]
         return cls(config.approach_brake_rate, config.brake_acceleration,
                    config.cbf_moment_bound / j_min, SIGMAS * config.attitude_noise)
 

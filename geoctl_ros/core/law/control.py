@@ -342,7 +342,7 @@ class AttitudeController:
                          if config.guidance_lookahead > 0.0 else None)
         self._law = LAWS[config.law]
         self.brake = ApproachBrake.of(config)
-        self.J_inv = np.linalg.inv(config.J)     # the model's, for the prediction too
+        self.J_inv = so3.inverse3(config.J)      # the model's, for the prediction too
         self._gamma = np.array([config.k_Delta] * 3 + [config.k_Delta_cog] * 3)[:config.n_params]
         self._balls = [(block, bound) for block, bound in ((slice(0, 3), config.delta_bar_max),
                                                            (slice(3, 6), config.cog_estimate_max))

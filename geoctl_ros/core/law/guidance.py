@@ -75,7 +75,7 @@ def arc_clearance(a: np.ndarray, b: np.ndarray, axes: np.ndarray) -> np.ndarray:
 def _rim(axis: np.ndarray, radius: float, count: int) -> np.ndarray:
     """count points at angle radius round the unit axis."""
     e1 = np.cross(axis, np.eye(3)[int(np.argmin(np.abs(axis)))])
-    e1 /= np.linalg.norm(e1)
+    e1 /= math.sqrt(so3.dot(e1, e1))
     e2 = np.cross(axis, e1)
     phi = np.linspace(0.0, 2.0 * math.pi, count, endpoint=False)
     return (math.cos(radius) * axis + math.sin(radius)
@@ -95,15 +95,15 @@ def sensor_path(d0: np.ndarray, d1: np.ndarray, axes: np.ndarray, rims: np.ndarr
     if not len(axes):
         return [d0, d1]
     ends = np.stack([d0, d1])
-    gap = np.arccos(np.clip(ends @ axes.T, -1.0, 1.0)).min(axis=0) - rims     # (C,)
+    gap = np.arccos(np.clip(_cosines(ends, axes), -1.0, 1.0)).min(axis=0) - rims     # (C,)
     keep = rims + np.clip(np.minimum(clearance, 0.5 * gap), 0.0, None)        # widened radii
     nodes = [ends] + [_rim(v, k + RIM_SLACK, RIM_POINTS) for v, k in zip(axes, keep)]
     X = np.concatenate(nodes)
     clear = np.all(arc_clearance(X[:, None], X[None, :], axes) >= keep - 1e-9, axis=-1)  # (N, N)
     # a point of one rim inside another widened cone is no way
-    inside = np.any(np.arccos(np.clip(X @ axes.T, -1.0, 1.0)) < keep - 1e-9, axis=-1)
+    inside = np.any(np.arccos(np.clip(_cosines(X, axes), -1.0, 1.0)) < keep - 1e-9, axis=-1)
     clear &= ~inside[:, None] & ~inside[None, :]
-    length = np.arccos(np.clip(X @ X.T, -1.0, 1.0))
+    length = np.arccos(np.clip(_cosines(X, X), -1.0, 1.0))
     previous = _dijkstra(np.where(clear, length, np.inf), 0)
     if previous[1] < 0:
         return None
@@ -112,6 +112,13 @@ def sensor_path(d0: np.ndarray, d1: np.ndarray, axes: np.ndarray, rims: np.ndarr
         way.append(X[i])
         i = previous[i]
     return [X[0]] + way[::-1]
+
+
+def _cosines(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """X Y^T for unit vectors X (N, 3) and Y (C, 3): (N, C), entry by entry (not through BLAS,
+    whose kernels round by the CPU: a plan, and every decision on it, would differ by machine).
+    """
+    return so3.dot(X[:, None, :], Y[None, :, :])
 
 
 def _dijkstra(cost: np.ndarray, start: int) -> np.ndarray:
@@ -141,10 +148,10 @@ def _dijkstra(cost: np.ndarray, start: int) -> np.ndarray:
 def _shortest_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The rotation by the shortest arc that takes the unit vector a to b (not opposite)."""
     axis = np.cross(a, b)
-    s = float(np.linalg.norm(axis))
+    s = math.sqrt(so3.dot(axis, axis))
     if s < 1e-12:
         return np.eye(3)
-    return so3.exp(axis / s * math.atan2(s, float(a @ b)))
+    return so3.exp(axis / s * math.atan2(s, float(so3.dot(a, b))))
 
 
 def attitude_path(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray,
@@ -156,27 +163,28 @@ def attitude_path(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray,
     """
     points = [corners[0]]
     for a, b in zip(corners[:-1], corners[1:]):
-        angle = math.acos(min(1.0, max(-1.0, float(a @ b))))
+        angle = math.acos(min(1.0, max(-1.0, float(so3.dot(a, b)))))
         k = max(1, int(math.ceil(angle / PATH_STEP)))
         if angle < 1e-12:
             continue
         axis = np.cross(a, b)
-        axis /= np.linalg.norm(axis)
-        points += [so3.exp(axis * (angle * i / k)) @ a for i in range(1, k + 1)]
+        axis /= math.sqrt(so3.dot(axis, axis))
+        points += [so3.matvec(so3.exp(axis * (angle * i / k)), a) for i in range(1, k + 1)]
     Rs = [R0]
     for a, b in zip(points[:-1], points[1:]):
-        Rs.append(_shortest_rotation(a, b) @ Rs[-1])
+        Rs.append(so3.matmul(_shortest_rotation(a, b), Rs[-1]))
     d = np.array(points)
     arc = np.concatenate([[0.0], np.cumsum(np.arccos(np.clip(
-        np.einsum('ij,ij->i', d[:-1], d[1:]), -1.0, 1.0)))])
+        so3.dot(d[:-1], d[1:]), -1.0, 1.0)))])
     # what is left: a turn about the goal's sensor direction
-    left = so3.log(R_goal @ Rs[-1].T)
-    twist = float(left @ d[-1])
+    left = so3.log(so3.matmul(R_goal, so3.transpose(Rs[-1])))
+    twist = float(so3.dot(left, d[-1]))
     share = arc / arc[-1] if arc[-1] > 0.0 else np.linspace(0.0, 1.0, len(Rs))
-    path = np.array([so3.exp(d[i] * (twist * share[i])) @ Rs[i] for i in range(len(Rs))])
+    path = np.array([so3.matmul(so3.exp(d[i] * (twist * share[i])), Rs[i])
+                     for i in range(len(Rs))])
     if len(path) == 1:               # the sensor does not move: turn about it in steps
         k = max(1, int(math.ceil(abs(twist) / PATH_STEP)))
-        path = np.array([so3.exp(d[0] * (twist * i / k)) @ R0 for i in range(k + 1)])
+        path = np.array([so3.matmul(so3.exp(d[0] * (twist * i / k)), R0) for i in range(k + 1)])
     path[-1] = R_goal
     return path
 
@@ -186,7 +194,7 @@ def plan(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray, axes: np.ndarray,
     """The attitudes from R0 to R_goal round the cones (``sensor_path``, ``attitude_path``);
     where no way round exists, the goal alone (the law's barrier then decides).
     """
-    corners = sensor_path(R0 @ r, R_goal @ r, axes, rims, clearance)
+    corners = sensor_path(so3.matvec(R0, r), so3.matvec(R_goal, r), axes, rims, clearance)
     if corners is None:
         return R_goal[None].copy()
     return attitude_path(R0, R_goal, r, corners)
@@ -251,7 +259,7 @@ class Guidance:
         K, W = self.paths.shape[1], self.window
         m = np.arange(len(runs))
         around = np.clip(self.index[runs, None] + np.arange(-W, W + 1)[None, :], 0, K - 1)
-        d = Rs @ cones.r
+        d = so3.matvec(Rs, cones.r)
         V, rims = _cone_rows(cones, runs)
         gap = np.min(np.arccos(np.clip(np.einsum('nck,nk->nc', V, d), -1.0, 1.0)) - rims,
                      axis=-1, initial=np.inf)
@@ -278,7 +286,7 @@ class Guidance:
         K = max(len(p) for p in paths)
         self.paths = np.array([np.concatenate([p, np.repeat(p[-1:], K - len(p), axis=0)])
                                for p in paths])
-        self.sensor = self.paths @ cones.r
+        self.sensor = so3.matvec(self.paths, cones.r)
         self.last = np.array([len(p) - 1 for p in paths])
         runs = np.asarray(runs)
         sight = np.full((len(Rs), K), K - 1)

@@ -232,6 +232,6 @@ class DelayPredictor:
             acc = self._piece_acceleration(j, R, Omega, history.at(mid), acc0, moment_now) - error
             Omega_next = Omega + acc * h if mid > now - age_Omega else Omega
             if mid > now - age_R:
-                R = R @ so3.exp((0.5 * (Omega + Omega_next)) * h)
+                R = so3.matmul(R, so3.exp((0.5 * (Omega + Omega_next)) * h))
             Omega = Omega_next
         return R, Omega

@@ -91,7 +91,7 @@ class GapBridge:
         if not ok.any():
             return None
         k = int(np.argmin(np.where(ok, np.abs(dt - self.rate_window), np.inf)))
-        return so3.log(self._R[k].T @ self._R[self._head]) / dt[k]
+        return so3.log(so3.matmul(so3.transpose(self._R[k]), self._R[self._head])) / dt[k]
 
     def update(self, now: float, pose_fresh: bool,
                gyro_fresh: bool) -> Optional[Tuple[np.ndarray, np.ndarray]]:
@@ -112,7 +112,7 @@ class GapBridge:
         if pose_fresh or self.R is None:
             self.R, self._R_time, self.attitude_source = self._R_meas, self._pose_receipt, POSE
         else:
-            self.R = self.R @ so3.exp(self.Omega * (now - self._R_time))
+            self.R = so3.matmul(self.R, so3.exp(self.Omega * (now - self._R_time)))
             self._R_time, self.attitude_source = now, PROPAGATED
         return self.R, self.Omega
 
