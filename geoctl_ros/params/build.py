@@ -18,6 +18,7 @@ from geoctl_ros.core.actuation.airframe import (
 from geoctl_ros.core.actuation.allocation import Allocator
 from geoctl_ros.core.actuation.motors import Mixer, ThrustCurve
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.law.brake import brake_authority, unmodelled_acceleration
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.control import AttitudeController, ControllerConfig
 from geoctl_ros.core.sensors.consistency import AgreementSettings
@@ -94,6 +95,7 @@ def controller_config(values: dict) -> ControllerConfig:
         approach_brake_rate=values['approach_brake_rate'],
         brake_acceleration=values['brake_acceleration'],
         attitude_noise=math.radians(values['attitude_noise_deg']),
+        gyro_noise=values['gyro_noise'], tilt_max=math.radians(values['joint_tilt_max_deg']),
         guidance_lookahead=math.radians(values['guidance_lookahead_deg']),
         guidance_clearance=math.radians(values['guidance_clearance_deg']))
 
@@ -189,10 +191,23 @@ def controller_setup(values: dict) -> 'ControllerSetup':
     including a set point (or scheduled one) that puts the sensor in a cone.
     """
     mix = mixer(values)
-    config = replace(controller_config(values), moment_limits=mix.allocator.moment_polytope(
-        mix.collective_thrust))
-    probe = AttitudeController(config)
+    config = controller_config(values)
     errors = []
+    polytope = mix.allocator.moment_polytope(mix.collective_thrust)
+    authority = brake_authority(polytope.vertices, so3.inverse3(config.J), config.m_rho,
+                                config.gravity, config.tilt_max, config.cones.r)
+    asked = values['brake_acceleration']
+    if asked > authority:
+        errors.append(('brake_acceleration', '%.1f rad/s^2 is more than the rotors can make along '
+                       "every cone's opening direction with gravity at the joint's stops "
+                       '(%.1f rad/s^2)' % (asked, authority)))
+    config = replace(config, moment_limits=polytope, brake_acceleration=asked or authority)
+    a_u = unmodelled_acceleration(config.cbf_moment_bound, config.J)
+    if config.approach_brake_rate > 0.0 and config.brake_acceleration <= a_u:
+        errors.append(('cbf_moment_bound', 'the approach brake needs the rotors to out-brake the '
+                       'unlearnt moment: a_u %.1f rad/s^2 against %.1f'
+                       % (a_u, config.brake_acceleration)))
+    probe = AttitudeController(config)
     R_d = setpoint_rotation(values)
     problem = probe.setpoint_problem(R_d)
     if problem:

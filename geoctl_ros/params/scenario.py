@@ -37,6 +37,8 @@ class ScenarioOptions:
     latency: float                        # s: how old every measurement is when it arrives
     tick_jitter: float                    # s: how late a control step may come
     stalls: Tuple[Tuple[float, float], ...]   # (start s, length s): no input reaches the loop
+    tick_jitter_seed: int = -1            # the lateness's seed (-1: noise.seed)
+    start: str = 'held'                   # held through the spool-up, or resting (free)
 
     def stalled(self, times: np.ndarray) -> np.ndarray:
         """Per control step (at times), whether the inputs stall there: no new sample reaches
@@ -52,7 +54,8 @@ def scenario_options(values: dict) -> ScenarioOptions:
     """The ScenarioOptions of resolved scenario parameters."""
     return ScenarioOptions(values['title'], values['duration'], values['latency'],
                            values['tick_jitter'],
-                           tuple(zip(values['stalls.start'], values['stalls.duration'])))
+                           tuple(zip(values['stalls.start'], values['stalls.duration'])),
+                           values['tick_jitter_seed'], values['start'])
 
 
 @dataclass
@@ -162,7 +165,8 @@ def differing(scenarios: List[Scenario]) -> Optional[str]:
     for s in scenarios[1:]:
         a, b = first.options, s.options
         for key, x, y in (('duration', a.duration, b.duration),
-                          ('tick_jitter', a.tick_jitter, b.tick_jitter)):
+                          ('tick_jitter', a.tick_jitter, b.tick_jitter),
+                          ('start', a.start, b.start)):
             if x != y:
                 return 'scenario: %s (%s and %s)' % (key, first.name, s.name)
         if len(s.cone_names) != len(first.cone_names):

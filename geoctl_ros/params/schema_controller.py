@@ -46,14 +46,14 @@ PARAMS = [
        '(its sampled-data margin); 0 = the model taken as exact', CONTROLLER,
        lo=0.0, hi=10.0),
     _p('approach_brake_rate', 'double', 0.0, '1/s',
-       'the delay-robust law: how fast its brake takes away an approach to a cone faster than '
-       'the derived sampled-data margin allows (docs/safety.md, "The approach brake"); 0 = off',
-       CONTROLLER, lo=0.0, hi=1000.0),
-    _p('brake_acceleration', 'double', 40.0, 'rad/s^2',
-       'the angular acceleration the rotors can spare to brake an approach to a cone (their '
-       'authority less the gravity moment and the unlearnt moment, over the largest pivot '
-       'inertia; docs/safety.md, "The approach brake")', CONTROLLER, check=positive,
-       lo=0.1, hi=10000.0),
+       'the approach brake (docs/safety.md, "The approach brake"): on when above 0, with the '
+       'rate at which a state past its curve (after a fall, or inside a cone) is brought back; '
+       '0 = off', CONTROLLER, lo=0.0, hi=1000.0),
+    _p('brake_acceleration', 'double', 0.0, 'rad/s^2',
+       "the deceleration the approach brake takes the rotors to make along any cone's opening "
+       "direction: 0 = all the rotors can (their moment polytope less the gravity moment up to "
+       'the joint\'s stops, computed at configuration); a value above that is refused',
+       CONTROLLER, lo=0.0, hi=10000.0),
     _p('attitude_noise_deg', 'double', 0.1, 'deg',
        "the attitude measurement's noise (one standard deviation): the approach brake keeps 3 "
        'of them from each cone', CONTROLLER, lo=0.0, hi=5.0),

@@ -26,6 +26,10 @@ PARAMS = [
        lo=-1.0, hi=1.0),
     _p('gravity', 'double_array', [0.0, 0.0, -9.81], 'm/s^2', 'gravity vector, world frame',
        BOTH, length=3, lo=-20.0, hi=20.0),
+    _p('joint_tilt_max_deg', 'double', 180.0, 'deg',
+       "the spherical joint's stops: the body's z axis tilts at most this far from upright (the "
+       'sim rests on them; the approach brake counts the gravity moment up to them); 180 = no '
+       'stops', BOTH, lo=1.0, hi=180.0),
     # Airframe: rotor geometry (controller: allocation; sim: the true rotors).
     _p('rotors.layout', 'string', 'tilted_ring', '-',
        'tilted_ring (from the five parameters below) or custom (rotors.positions/axes/spins)',

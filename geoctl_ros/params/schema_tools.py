@@ -134,4 +134,12 @@ PARAMS = [
        'random 0..tick_jitter (uniform, whole integration steps, seeded by noise.seed) more than '
        'a period after the one before, as on a busy machine; a command is held until the next',
        SCENARIO, lo=0.0, hi=0.2),
+    _p('tick_jitter_seed', 'integer', -1, '-',
+       "the seed of the control steps' lateness (tick_jitter); -1: noise.seed (runs fly "
+       'together in a batch only with the same lateness)', SCENARIO, lo=-1, hi=2 ** 31 - 1),
+    _p('start', 'string', 'held', '-',
+       'how a scenario run starts: held (the vehicle held still at its initial attitude while '
+       'the rotors spool up, and let go as the controller takes over, at t = 0) or resting '
+       '(free from the arming on: on its stops, or wherever gravity takes it, while the rotors '
+       'spool up)', SCENARIO, choices=('held', 'resting')),
 ]

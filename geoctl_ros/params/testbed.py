@@ -40,6 +40,7 @@ class PlantConfig:
     cog_offset: np.ndarray   # pivot -> centre of mass, body frame, m
     gravity: np.ndarray      # world frame, m/s^2
     disturbance: Disturbance
+    tilt_max: float = math.pi   # rad, the joint's stops: the body's z axis from upright, at most
     J: np.ndarray = field(init=False, repr=False)        # inertia about the pivot
     m_rho: np.ndarray = field(init=False, repr=False)    # mass times pivot -> centre of mass
 
@@ -123,4 +124,5 @@ def plant_config(values: dict) -> PlantConfig:
         cog_offset=values['cog_offset'], gravity=values['gravity'],
         disturbance=Disturbance(constant=values['disturbance.constant'],
                                 amplitude=values['disturbance.amplitude'],
-                                frequency=values['disturbance.frequency']))
+                                frequency=values['disturbance.frequency']),
+        tilt_max=math.radians(values['joint_tilt_max_deg']))

@@ -24,11 +24,19 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 import time
-from typing import Callable, List, Optional
+from typing import Any, Callable, List, Optional
 
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.law.brake import (
+    ApproachBrake,
+    BrakeTerms,
+    backup_margin,
+    brake_terms,
+    covered,
+    opening,
+)
 from geoctl_ros.core.law.cones import angle_deg
 from geoctl_ros.core.law.control import ControlOutput
 from geoctl_ros.core.supervisor.control_tick import ControlTick
@@ -42,6 +50,7 @@ from geoctl_ros.sim.testbed import measured_attitude, measured_rate
 SETTLED_DEG = 5.0       # attitude error below which a run has converged (at the end) or settled
 FINE_DEG = 1.0          # attitude error below which a run has arrived (settle_fine_s)
 SETTLE_WITHIN_S = 10.0  # the reports count the runs settled within this (a manoeuvre's figure)
+STALL_MAX_S = 0.04      # s, the longest input stall a scenario has (scenario: stalls.duration)
 
 
 @dataclass
@@ -70,8 +79,8 @@ class Flight:
     error_series: Optional[np.ndarray]    # (steps, runs): attitude error to the goal (deg; the
                                           # true attitude; None unless asked for)
     history: Optional[History]     # History: every step's state and output (history=True)
-    assumed: Optional['AssumedSeries']   # what the approach brake assumes, at every control
-                                         # step (None unless asked for: assumed=True)
+    assumed: Optional['AssumedSeries']   # the approach brake's assumptions judged at every
+                                         # control step (None unless asked for: assumed=True)
     times: np.ndarray              # (steps,): the control steps' times
     dt: float
     wall_s: float = 0.0
@@ -94,16 +103,26 @@ class Flight:
 
 @dataclass
 class AssumedSeries:
-    """What the approach brake's derivation assumes (core.law.brake), as it was at every control
+    """What the approach brake's derivation assumes (core.law.brake), judged at every control
     step of a flight, per run: arrays (steps, runs).
     """
 
-    unlearnt: np.ndarray     # the largest |a_true - a_model| over the step's hold (rad/s^2): the
-                             # plant's angular acceleration less the prediction's model's (its
-                             # inertia, gravity, estimate, observed error, and the moment in force
-                             # by the command history), both at the true state
-    measurement: np.ndarray  # the attitude measurement's error in use (rad: its noise's angle)
-    saturated: np.ndarray    # the allocation saturated (bool)
+    ok: np.ndarray           # every bound held over the step's hold: the allocation not
+                             # saturated nor the compensation clipped, the brake's condition met,
+                             # the hold within its design, what the brake's model (frozen at the
+                             # tick) did not know of each approach's rate of change within a_u,
+                             # and the measurements in use within e and e_w along each cone's
+                             # opening direction
+    safe: np.ndarray         # the true state on the safe set: every cone's backup margin
+                             # (core.law.brake.backup_margin, no measurement error) >= 0
+    unknown: np.ndarray      # the largest |dw/dt true - the brake's model's| over the hold, over
+                             # the cones (rad/s^2)
+    hold_margin: np.ndarray  # the closest approach over the step's hold (deg; every cone)
+    lead: int                # the steps before a safe one whose measurements it used
+
+    def covered(self) -> np.ndarray:
+        """(steps, runs): the steps the derivation speaks of (``core.law.brake.covered``)."""
+        return covered(self.ok, self.safe, self.lead)
 
 
 def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] = None,
@@ -113,9 +132,13 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     series: keep the margin and sensor direction at every control step (the figures of a few
     runs; a campaign's batches leave them out and fly its worst runs again for them); history:
     keep every step's state and output (the scenario runner's history.csv); duration: simulated
-    seconds (default: the scenarios'); assumed: keep what the approach brake assumes at every
+    seconds (default: the scenarios'); assumed: judge what the approach brake assumes at every
     control step (``AssumedSeries``: the falsifier's judge; it costs a model evaluation per
     integration step).
+
+    The runs are armed before t = 0: the rotors spool up (``Mixer.spools``) while each vehicle
+    is held at its initial attitude (``scenario.start: held``) or rests where gravity and its
+    stops take it (``resting``), and the controller takes over at t = 0.
     """
     problem = differing(scenarios)
     if problem:
@@ -135,33 +158,33 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     times = j_at / rate_sub
     noise = bed.noise(steps)
     schedule = setup.schedule
-    # latency: a ring of the last states, one per integration step
     delay = np.array([int(round(o.latency * rate_sub)) for o in bed.options])
-    ring = int(delay.max()) + 1
-    R_now, W_now = bed.state()
-    R_past = np.repeat(R_now[None], ring, axis=0)
-    W_past = np.repeat(W_now[None], ring, axis=0)
     runs = np.arange(n)
 
     # each sample received at its step: its age the latency from its stamp (age_from_stamps),
     # else the measurement_delay the controller assumes; stalled, older by the wait since
     stamped = setup.loop.age_from_stamps
     tick = ControlTick(controller, setup.mixer, 0.0 if stamped else setup.loop.measurement_delay)
+    # the closest approach: the largest cosine to each cone's axis after any integration step
+    # (arccos decreases), taken over each control step's steps at once
+    max_cos = cones.cosines(bed.state()[0])
+    max_cos = _spool_up(bed, tick, dt, n_sub, h, max_cos)
+    R_now, W_now = bed.state()
+    # latency: a ring of the last states, one per integration step
+    ring = int(delay.max()) + 1
+    R_past = np.repeat(R_now[None], ring, axis=0)
+    W_past = np.repeat(W_now[None], ring, axis=0)
     stalled = np.stack([o.stalled(times) for o in bed.options], axis=1)
     any_stall = bool(stalled.any())
     receipt = np.zeros(n)
     ages = (delay * h,) * 2 if stamped else (0.0, 0.0)
     R_seen, W_seen = R_now, W_now
-    # the closest approach: the largest cosine to each cone's axis after any integration step
-    # (arccos decreases), taken over each control step's steps at once
-    max_cos = cones.cosines(R_now)
     held = np.empty((int(holds.max()) if steps else 0,) + R_now.shape)   # a step's attitudes
     margin_series = np.empty((steps, n)) if series else None
     sensor_series = np.empty((steps, n, 3), dtype=np.float32) if series else None
     error_series = np.empty((steps, n)) if series else None
     record = History(steps, bed) if history else None
-    judged = AssumedSeries(np.zeros((steps, n)), np.zeros((steps, n)),
-                           np.zeros((steps, n), dtype=bool)) if assumed else None
+    judge = _Judge(bed, tick, steps, delay, h, dt) if assumed else None
     last_unsettled = np.full(n, -1)        # the last step with the error >= SETTLED_DEG
     last_coarse = np.full(n, -1)           # the last step with the error >= FINE_DEG
     last_psi_above = np.full(n, -1)        # the last step with Psi >= SETTLE_PSI
@@ -170,6 +193,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     max_rate = np.zeros(n)
     effort = np.zeros(n)
     scheduled = -1
+    fresh = np.ones(n, dtype=bool)
     j = 0                                                     # integration steps so far
     t0 = time.perf_counter()
     for k in range(steps):
@@ -192,7 +216,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         else:
             R_seen, W_seen = R_new, W_new
         max_rate = np.maximum(max_rate, np.sqrt(so3.dot(W_seen, W_seen)))
-        out, motors = tick(R_seen, W_seen, dt, t, ages)
+        out, motors = tick(R_seen, W_seen, dt, t, ages)[:2]
         saturated += motors.allocation.saturated
         effort += np.sqrt(so3.dot(out.u, out.u)) * (holds[k] * h)
         error = _error(controller.R_d, R_now)
@@ -206,26 +230,24 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         if record is not None:
             record.add(k, t, out, motors)
         command = out.u if actuator is None else motors.commands
-        if judged is not None:
-            judged.saturated[k] = motors.allocation.saturated
+        if judge is not None:
+            judge.tick(k, t, out, motors, fresh, noise[:, k], holds[k] * h, dt)
         for i in range(holds[k]):
             tau = bed.moment(command, h)
-            if judged is not None:
-                judged.unlearnt[k] = np.maximum(judged.unlearnt[k],
-                                                _unlearnt(bed, tick, j * h, tau))
+            if judge is not None:
+                judge.during(k, j * h, tau)
             plant.step(tau, h)
             j += 1
             R_now, W_now = bed.state()
             R_past[j % ring], W_past[j % ring] = R_now, W_now
             held[i] = R_now
-        max_cos = np.maximum(max_cos, cones.cosines(held[:holds[k]]).max(axis=0))
+        hold_cos = cones.cosines(held[:holds[k]]).max(axis=0)
+        max_cos = np.maximum(max_cos, hold_cos)
+        if judge is not None:
+            judge.hold_margin[k] = (angle_deg(hold_cos) - cones.theta_deg).min(axis=-1)
         if progress is not None and (k + 1) % 100 == 0:
             progress((k + 1) / steps)
     wall = time.perf_counter() - t0
-    if judged is not None and steps:
-        # the attitude sample in use at each step: the last one that arrived (stalls repeat it)
-        used = np.maximum.accumulate(np.where(stalled, 0, np.arange(steps)[:, None]), axis=0)
-        judged.measurement[:] = np.sqrt(so3.dot(noise[0], noise[0]))[used, runs]
     final = controller.step(R_now, W_now, dt, adapt=False)
     return Flight(
         names=[s.name for s in scenarios], min_angle_deg=angle_deg(max_cos),
@@ -236,21 +258,94 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         settle_fine_s=_settled(last_coarse, times),
         psi_settle_s=_settled(last_psi_above, times),
         margin_series=margin_series, sensor_series=sensor_series, error_series=error_series,
-        history=record, assumed=judged, times=times,
+        history=record, assumed=None if judge is None else judge.series(), times=times,
         dt=dt, wall_s=wall)
 
 
-def _unlearnt(bed: Testbeds, tick: ControlTick, t: float, tau: np.ndarray) -> np.ndarray:
-    """(runs,) |a_true - a_model| at time t (rad/s^2): the plants' angular acceleration under the
-    moment tau less the prediction's model's (``DelayPredictor.acceleration`` under the moment
-    in force by the command history, less its observed error), both at the true state.
+def _spool_up(bed: Testbeds, tick: ControlTick, dt: float, n_sub: int, h: float,
+              max_cos: np.ndarray) -> np.ndarray:
+    """Arm the runs and spool their rotors up before t = 0 (``Mixer.spool_ticks`` ticks on
+    time, each vehicle seen as it is): held still (``start: held``), or resting where gravity
+    and the stops take it (``resting``). Returns the closest approach's cosines so far.
     """
-    p = bed.plant
-    true = p.angular_acceleration(t, so3.vecmat(p.config.gravity, p.R), p.Omega, tau)
-    R, W = bed.state()
-    model = tick.predict.acceleration(R, W, tick.history.at(t)) - tick.predict.acc_error
-    d = true - model
-    return np.sqrt(so3.dot(d, d))
+    ticks = tick.mixer.spool_ticks(dt)
+    plant = bed.plant
+    plant.held = bed.options[0].start == 'held'
+    plant.t = -ticks * dt
+    for _ in range(ticks):
+        R, W = bed.state()
+        out, motors = tick(R, W, dt)[:2]
+        command = out.u if bed.actuator is None else motors.commands
+        for _ in range(n_sub):
+            plant.step(bed.moment(command, h), h)
+        max_cos = np.maximum(max_cos, bed.cones.cosines(bed.state()[0]))
+    plant.held = False
+    plant.t = 0.0
+    return max_cos
+
+
+class _Judge:
+    """The falsifier's judge of the approach brake's assumptions, flown along (``AssumedSeries``):
+    at each tick the brake's view of the true state (``core.law.brake.brake_terms``), and over
+    its hold the true rate of change of each approach against that view's.
+    """
+
+    def __init__(self, bed: Testbeds, tick: ControlTick, steps: int, delay: np.ndarray,
+                 h: float, dt: float):
+        self.bed, self.tick = bed, tick
+        n = len(bed.beds)
+        config = tick.controller.config
+        self.brake = ApproachBrake.bounds_of(config)
+        self.ok = np.zeros((steps, n), dtype=bool)
+        self.safe = np.zeros((steps, n), dtype=bool)
+        self.unknown = np.zeros((steps, n))
+        self.hold_margin = np.full((steps, n), np.inf)
+        # the measurements a step uses are at most the latency and the longest stall old
+        self.lead = int(math.ceil((float(delay.max()) * h + STALL_MAX_S) / dt - 1e-9)) + 1
+        self.noise = np.zeros((2, n, 3))       # the errors of the samples in use
+        self.terms: Optional[BrakeTerms] = None
+
+    def tick(self, k: int, t: float, out: Any, motors: Any, fresh: np.ndarray,
+             noise: np.ndarray, held: float, dt: float) -> None:
+        """Judge step k at its tick (after the controller's step): the true state's margin and
+        the measurements in use, the allocation, the brake, the hold; keep the brake's view
+        for the hold.
+        """
+        tick, bed = self.tick, self.bed
+        R, W = bed.state()
+        hold = dt if tick.mixer.design_hold is None else tick.mixer.design_hold
+        x = tick.brake_inputs(R, W, 0.0, hold, t)
+        terms = self.terms = brake_terms(self.brake, bed.cones, tick.controller.J_inv, x)
+        self.safe[k] = np.all(backup_margin(self.brake, terms.gap, terms.w, terms.D_s,
+                                            terms.authority, hold) >= 0.0, axis=-1)
+        self.noise = np.where(fresh[None, :, None], noise, self.noise)
+        n_i = terms.n
+        attitude = np.abs(so3.dot(n_i, self.noise[0][:, None, :]))
+        rate = np.abs(so3.dot(n_i, (bed.gyro_bias + self.noise[1])[:, None, :]))
+        within = (np.all(attitude <= self.brake.measurement, axis=-1)
+                  & np.all(rate <= self.brake.rate_error, axis=-1))
+        self.ok[k] = (within & ~np.asarray(motors.saturated) & ~np.asarray(out.brake_unmet)
+                      & (held <= hold + 1e-9))
+
+    def during(self, k: int, t: float, tau: np.ndarray) -> None:
+        """Within step k's hold at time t (the rotors' true moment tau): how far each approach's
+        true rate of change is from the brake's model of it at the tick, under the moment in
+        force by the command history; the hold's bound is judged at its end (``series``).
+        """
+        bed, terms = self.bed, self.terms
+        assert terms is not None
+        p = bed.plant
+        R, W = bed.state()
+        true = p.angular_acceleration(t, so3.vecmat(p.config.gravity, p.R), p.Omega, tau)
+        true = true[None] if bed.single else true
+        _, n_i, _, kin = opening(bed.cones, R, W)
+        w_dot = kin - so3.dot(n_i, true[..., None, :])
+        model = terms.model_rate_change(self.tick.history.at(t))
+        self.unknown[k] = np.maximum(self.unknown[k], np.abs(w_dot - model).max(axis=-1))
+
+    def series(self) -> AssumedSeries:
+        self.ok &= self.unknown <= self.brake.unmodelled
+        return AssumedSeries(self.ok, self.safe, self.unknown, self.hold_margin, self.lead)
 
 
 def _error(R_d: np.ndarray, R: np.ndarray) -> np.ndarray:

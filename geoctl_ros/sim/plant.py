@@ -22,6 +22,8 @@ leading batch axis (inertia (batch, 3, 3), mass (batch,), R (batch, 3, 3), ...);
 them all with the same formulas.
 """
 
+import math
+
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
@@ -30,6 +32,10 @@ from geoctl_ros.core.law.mechanics import (
     body_gravity_moment,
     gravity_moment,
 )
+
+
+STOP_HZ = 25.0        # the joint's stops: a contact of this natural frequency
+STOP_DAMPING = 0.7    # and damping ratio, about the pivot's mean principal inertia
 
 
 class Plant:
@@ -42,9 +48,16 @@ class Plant:
         self.t = 0.0
         self.R = np.eye(3) if R0 is None else np.array(R0, dtype=float)
         self.Omega = np.zeros(3) if Omega0 is None else np.array(Omega0, dtype=float)
+        self.held = False              # held still (by hand: it neither moves nor integrates)
+        # the stops (none at a tilt limit of pi): a spring-damper on the tilt past the limit
+        self.stops = config.tilt_max < math.pi - 1e-9
+        omega = 2.0 * math.pi * STOP_HZ
+        J_mean = (self.J[..., 0, 0] + self.J[..., 1, 1] + self.J[..., 2, 2]) / 3.0
+        self._stop = (omega * omega * J_mean, 2.0 * STOP_DAMPING * omega * J_mean)
         # one testbed: its constants as floats for _step_one, once
         self._floats = None if self.R.ndim != 2 else (
-            self.J.tolist(), self.J_inv.tolist(), config.m_rho.tolist(), config.gravity.tolist())
+            self.J.tolist(), self.J_inv.tolist(), config.m_rho.tolist(), config.gravity.tolist(),
+            float(self._stop[0]), float(self._stop[1]))
 
     def external_moment(self, t: float, R: np.ndarray) -> np.ndarray:
         """Gravity moment plus disturbance about the pivot, body frame."""
@@ -56,8 +69,28 @@ class Plant:
         """Omega' with gravity g_b = R^T g_w in the body frame (all the attitude it needs)."""
         c = self.config
         gyroscopic = cross(Omega, matvec(self.J, Omega))
-        return matvec(self.J_inv, tau + body_gravity_moment(c.m_rho, g_b) + c.disturbance(t)
-                      - gyroscopic)
+        moment = tau + body_gravity_moment(c.m_rho, g_b) + c.disturbance(t) - gyroscopic
+        if self.stops:
+            moment = moment + self.stop_moment(g_b, Omega)
+        return matvec(self.J_inv, moment)
+
+    def stop_moment(self, g_b: np.ndarray, Omega: np.ndarray) -> np.ndarray:
+        """The stops' moment (body frame): where the body's z axis is tilted beta past the limit
+        from upright (up_b = -g_b / |g|, cos beta = up_b . e3), a push K (beta - limit) +
+        C dbeta/dt (never a pull) about k = e3 x up_b / |e3 x up_b|, the axis that rights it
+        (dbeta/dt = -Omega . k); 0 within the limit.
+        """
+        K, C = self._stop
+        g = math.sqrt(so3.dot(self.config.gravity, self.config.gravity))
+        ux, uy, uz = -g_b[..., 0] / g, -g_b[..., 1] / g, -g_b[..., 2] / g
+        sin_b = np.sqrt(ux * ux + uy * uy)
+        beta = np.arctan2(sin_b, uz)
+        inv = 1.0 / np.maximum(sin_b, 1e-12)
+        kx, ky = -uy * inv, ux * inv
+        push = np.maximum(K * (beta - self.config.tilt_max)
+                          - C * (Omega[..., 0] * kx + Omega[..., 1] * ky), 0.0)
+        push = np.where(beta > self.config.tilt_max, push, 0.0)
+        return np.stack([push * kx, push * ky, 0.0 * push], axis=-1)
 
     def step(self, tau: np.ndarray, h: float) -> None:
         """Advance by h seconds with the actuation moment tau held constant (RKMK4).
@@ -66,6 +99,10 @@ class Plant:
         that is exp(-hat(xi)) R0^T g_w, so the stages rotate a vector; only the step's end forms
         its rotation matrix. One testbed (not a batch) steps in floats (``_step_one``).
         """
+        if self.held:
+            self.Omega = np.zeros_like(self.Omega)
+            self.t += h
+            return
         if self._floats is not None:
             _step_one(self, tau, h)
             return
@@ -112,16 +149,28 @@ def _step_one(plant: Plant, tau: np.ndarray, h: float) -> None:
     products and Rodrigues coefficients), so a run alone steps to the same bits as in a batch,
     about four times faster than through 3-vector arrays.
     """
-    J, J_inv, m_rho, g = plant._floats
+    J, J_inv, m_rho, g, K, C = plant._floats
     t, R0 = plant.t, plant.R.tolist()
     W0, tau_ = plant.Omega.tolist(), np.asarray(tau, dtype=float).tolist()
     disturbance = plant.config.disturbance
+    stops, limit = plant.stops, plant.config.tilt_max
+    g_norm = math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
 
     def _acc(t, g_b, W):                # Plant.angular_acceleration
         gyroscopic = cross_floats(W, matvec_floats(J, W))
         bgm = cross_floats(m_rho, g_b)
         d = disturbance(t).tolist()
-        return matvec_floats(J_inv, [tau_[i] + bgm[i] + d[i] - gyroscopic[i] for i in range(3)])
+        m = [tau_[i] + bgm[i] + d[i] - gyroscopic[i] for i in range(3)]
+        if stops:                       # Plant.stop_moment
+            ux, uy, uz = -g_b[0] / g_norm, -g_b[1] / g_norm, -g_b[2] / g_norm
+            sin_b = math.sqrt(ux * ux + uy * uy)
+            beta = float(np.arctan2(sin_b, uz))
+            inv = 1.0 / max(sin_b, 1e-12)
+            kx, ky = -uy * inv, ux * inv
+            push = max(K * (beta - limit) - C * (W[0] * kx + W[1] * ky), 0.0)
+            push = push if beta > limit else 0.0
+            m = [m[0] + push * kx, m[1] + push * ky, m[2] + 0.0 * push]
+        return matvec_floats(J_inv, m)
 
     g0 = [R0[0][j] * g[0] + R0[1][j] * g[1] + R0[2][j] * g[2] for j in range(3)]   # R0^T g_w
     half = 0.5 * h

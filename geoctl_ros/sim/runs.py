@@ -35,11 +35,12 @@ def shared_holds(bed: 'Testbeds', rate: float, n_sub: int, duration: float) -> n
     """The batch's hold sequence (integration steps per control step): the runs must share it."""
     h = 1.0 / (rate * n_sub)
     steps = int(round(duration * rate))
-    holds = [hold_steps(steps, n_sub, o.tick_jitter / h, b.noise.seed)
+    holds = [hold_steps(steps, n_sub, o.tick_jitter / h,
+                        b.noise.seed if o.tick_jitter_seed < 0 else o.tick_jitter_seed)
              for o, b in zip(bed.options, bed.beds)]
     if any(not np.array_equal(holds[0], x) for x in holds[1:]):
         raise ValueError('the runs of a batch share their late steps: with scenario.tick_jitter '
-                         'they fly together only with the same noise.seed')
+                         'they fly together only with the same tick_jitter_seed (or noise.seed)')
     return holds[0]
 
 
@@ -78,7 +79,8 @@ class Testbeds:
                 lambda b: b.plant.mass), cog_offset=rho, gravity=first.gravity,
                 disturbance=Disturbance(per_run(lambda b: b.plant.disturbance.constant),
                                         first.disturbance.amplitude,
-                                        first.disturbance.frequency)),
+                                        first.disturbance.frequency),
+                tilt_max=first.tilt_max),
             np.array([b.R0 for b in beds]).reshape((3, 3) if n == 1 else (n, 3, 3)),
             per_run(lambda b: b.Omega0))
         self.actuator = rotor_actuator(beds[0], rho)           # None with torque: the moment acts

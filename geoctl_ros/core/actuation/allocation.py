@@ -7,7 +7,7 @@ down only as far as needed, and the moment not delivered is reported.
 """
 from dataclasses import dataclass
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -15,6 +15,35 @@ from geoctl_ros.core.actuation.airframe import AirframeError, check
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.flags import all_flag
 from geoctl_ros.core.geometry.so3 import matvec
+
+
+class MomentPolytope(NamedTuple):
+    """The moments the rotors make unsaturated (``Allocator.moment_polytope``): A M >= beta
+    (A (m, 3), beta (m,)), and its vertices (k, 3).
+    """
+
+    A: np.ndarray
+    beta: np.ndarray
+    vertices: np.ndarray
+
+
+def polytope_vertices(A: np.ndarray, beta: np.ndarray) -> np.ndarray:
+    """The vertices of the bounded polytope A x >= beta in 3-D: every point where three of its
+    planes meet and that keeps the others (to rounding), each once.
+    """
+    found: list = []
+    m = len(beta)
+    for i in range(m):
+        for j in range(i + 1, m):
+            for k in range(j + 1, m):
+                M = A[[i, j, k]]
+                if abs(float(np.linalg.det(M))) < 1e-12:
+                    continue
+                x = so3.matvec(so3.inverse3(M), beta[[i, j, k]])
+                if np.all(so3.matvec(A, x) >= beta - 1e-9 * (1.0 + np.abs(beta))) and not any(
+                        np.allclose(x, y, rtol=0.0, atol=1e-12) for y in found):
+                    found.append(x)
+    return np.array(found).reshape(-1, 3)
 
 
 @dataclass
@@ -61,16 +90,17 @@ class Allocator:
         self._inv_d = 1.0 / self._d
         self._thrusts = np.zeros(n)
 
-    def moment_polytope(self, collective: float) -> tuple:
+    def moment_polytope(self, collective: float) -> 'MomentPolytope':
         """The moments the rotors make unsaturated at this collective thrust, as A M >= beta:
         thrust_min <= collective d_j + P_j M <= thrust_max for every alive rotor j (d, P the
         minimum-norm allocation's columns), two rows per rotor, each limit INSET inside (so that
-        a moment on a face, as a QP leaves it, allocates unsaturated despite rounding). Returns
-        (A (2n, 3), beta (2n,)).
+        a moment on a face, as a QP leaves it, allocates unsaturated despite rounding), with its
+        vertices.
         """
         P, base = self._p_moment, collective * self._d
-        return (np.concatenate((P, -P)),
-                np.concatenate((self.lo + self.INSET - base, base - self.hi + self.INSET)))
+        A = np.concatenate((P, -P))
+        beta = np.concatenate((self.lo + self.INSET - base, base - self.hi + self.INSET))
+        return MomentPolytope(A, beta, polytope_vertices(A, beta))
 
     def allocate(self, moment: np.ndarray, collective: Any) -> Allocation:
         """Allocation for the desired moment (3,) about the pivot and collective thrust (N); a

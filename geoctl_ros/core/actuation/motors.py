@@ -3,11 +3,12 @@ commands (allocation, the lag compensation, the curve).
 """
 from dataclasses import dataclass, field
 import math
-from typing import Any
+from typing import Any, Optional
 
 import numpy as np
 
 from geoctl_ros.core.actuation.allocation import Allocation
+from geoctl_ros.core.geometry.so3 import matvec
 
 
 @dataclass(frozen=True)
@@ -69,6 +70,15 @@ class MotorOutput:
     commands: np.ndarray     # integer ESC commands, 0..command_max
     normalised: np.ndarray   # commands / command_max, in [0, 1]
     allocation: Allocation
+    clipped: Any = False     # the lag compensation was cut at a thrust limit (the rotors do not
+                             # reach the allocation by the end of the hold: a saturation too)
+
+    @property
+    def saturated(self) -> Any:
+        """The rotors do not make the moment asked by the end of the hold: the allocation
+        saturated, or the lag compensation was clipped (one flag per run of a batch).
+        """
+        return self.allocation.saturated | self.clipped
 
 
 class Mixer:
@@ -144,26 +154,25 @@ class Mixer:
             self.modelled_thrusts = self.sent_thrusts = self.design_hold = None
             return MotorOutput(zero, np.zeros(zero.shape), allocation)
         compensate = self.lag > 0.0 and dt is not None and dt > 0.0
+        clipped: Any = False
         if compensate:
             model = self.modelled_thrusts
             if model is None or model.shape != thrusts.shape:
                 # arming: the rotors are at rest, and spool up to the allocation uncompensated
-                model, hold = np.zeros_like(thrusts), dt
+                model = np.zeros_like(thrusts)
                 self.spool_left = self.SPOOL_LAGS * self.lag
             else:
                 held = dt if held is None else max(held, 0.0)
                 sent = self.sent_thrusts
                 model = sent + math.exp(-held / self.lag) * (model - sent)
-                hold = max(dt, held)
-                if self.design_hold > hold:       # a late step not long ago: back to dt slowly
-                    hold = max(hold, dt + (self.design_hold - dt) * math.exp(
-                        -held / self.HOLD_MEMORY))
                 if self.spool_left > 0.0:
                     self.spool_left -= held
+            hold = self.design_hold_for(dt, held)
             if self.spool_left <= 0.0:
                 a = math.exp(-hold / self.lag)
-                thrusts = np.minimum(np.maximum((thrusts - a * model) / (1.0 - a),
-                                                self.allocator.lo), self.allocator.hi)
+                wanted = (thrusts - a * model) / (1.0 - a)
+                thrusts = np.minimum(np.maximum(wanted, self.allocator.lo), self.allocator.hi)
+                clipped = np.any(thrusts != wanted, axis=-1)
         commands = self.curve.command(thrusts)
         if len(self._dead):
             commands[..., self._dead] = 0
@@ -173,4 +182,53 @@ class Mixer:
             self.design_hold = hold
         elif self.modelled_thrusts is not None:     # compensation turned off: a stale model
             self.modelled_thrusts = self.sent_thrusts = self.design_hold = None   # is not kept
-        return MotorOutput(commands, self.curve.normalised(commands), allocation)
+        return MotorOutput(commands, self.curve.normalised(commands), allocation, clipped)
+
+    def design_hold_for(self, dt: float, held: Optional[float]) -> float:
+        """The hold H (s) the next command's lag compensation is designed for: the control
+        period, or the previous command's real hold when that was longer, and after a late
+        step the longest recent hold, back to the period over about HOLD_MEMORY (the approach
+        brake takes the same H for the hold its command is reached in).
+        """
+        if self.modelled_thrusts is None or self.design_hold is None:
+            return dt                          # arming
+        held = dt if held is None else max(held, 0.0)
+        hold = max(dt, held)
+        if self.design_hold > hold:               # a late step not long ago: back to dt slowly
+            hold = max(hold, dt + (self.design_hold - dt) * math.exp(-held / self.HOLD_MEMORY))
+        return hold
+
+    def moments(self, held: float = 0.0) -> Optional[tuple]:
+        """The moments about the pivot the rotors make by the lag model (None: no model kept, at
+        rest or uncompensated): (the one they settle to under the last command, the one they
+        make ``held`` s after it).
+        """
+        if self.sent_thrusts is None:
+            return None
+        B = self.allocator.B_full[3:]
+        sent, model = self.sent_thrusts, self.modelled_thrusts
+        now = model if held <= 0.0 else sent + math.exp(-held / self.lag) * (model - sent)
+        return matvec(B, sent), matvec(B, now)
+
+    def spool_ticks(self, dt: float) -> int:
+        """How many on-time ticks of period dt the spool-up takes (``spools``), the arming's
+        included; 0 without a lag model.
+        """
+        if self.lag <= 0.0 or dt <= 0.0:
+            return 0
+        ticks, left = 1, self.SPOOL_LAGS * self.lag
+        while left - dt > 0.0:
+            left -= dt
+            ticks += 1
+        return ticks
+
+    def spools(self, held: Optional[float], dt: float) -> bool:
+        """Whether the next armed command is still part of the spool-up (the rotors at rest
+        before it, or within SPOOL_LAGS time constants of the arming): sent uncompensated, while
+        the vehicle rests on its stops or is held and the controller does not yet fly it.
+        """
+        if self.lag <= 0.0 or dt <= 0.0:
+            return False
+        if self.modelled_thrusts is None:
+            return True
+        return self.spool_left - (dt if held is None else max(held, 0.0)) > 0.0

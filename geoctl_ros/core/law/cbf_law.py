@@ -1,14 +1,15 @@
 """The geometric baseline filtered by a control-barrier-function QP: each cone a pointing
 constraint of relative degree 2, solved exactly by its active set every step.
 """
-import math
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.so3 import cross, matvec
+from geoctl_ros.core.law.brake import braked
 from geoctl_ros.core.law.geometric_law import unconstrained
+from geoctl_ros.core.law.projection import closest_admissible
 
 
 def pointing_cbf(controller: Any, R: np.ndarray, Omega: np.ndarray, terms: Any) -> tuple:
@@ -42,109 +43,22 @@ def pointing_cbf(controller: Any, R: np.ndarray, Omega: np.ndarray, terms: Any) 
     return A, beta, h, h_dot, b, f
 
 
-def project(u0: np.ndarray, A: np.ndarray, beta: np.ndarray, tol: float = 1e-9) -> tuple:
-    """The point closest to u0 with A u >= beta (min |u - u0|^2; one run: u0 (3,), A (m, 3),
-    beta (m,)), exactly, by Goldfarb and Idnani's dual active-set method (Math. Programming 27,
-    1983) with the identity for its Hessian: from u0, the most violated constraint is added at
-    a time, each step moving u along the part of its normal the active ones leave free, and
-    an active constraint whose multiplier would turn negative is dropped. Every iterate keeps
-    the multipliers of the active set nonnegative, so when no constraint is violated u is the
-    optimum. Returns (u, True), or (u0, False) when the constraints contradict each other.
-    """
-    u = np.array(u0, dtype=float)
-    active: list = []
-    lam = np.zeros(0)
-    for _ in range(4 * len(beta) + 8):           # (finite: each full step adds, no set recurs)
-        slack = A @ u - beta
-        p = int(np.argmin(slack))
-        if slack[p] >= -tol:
-            return u, True
-        n_p = A[p]
-        lam_p = 0.0
-        while True:
-            if active:
-                N = A[active].T                        # 3 x q
-                r = np.linalg.solve(N.T @ N, N.T @ n_p)
-                z = n_p - N @ r
-            else:
-                r, z = np.zeros(0), n_p
-            # partial step: the first active multiplier to reach zero
-            t1, k = math.inf, -1
-            for j in range(len(active)):
-                if r[j] > tol and lam[j] / r[j] < t1:
-                    t1, k = lam[j] / r[j], j
-            zz = float(z @ n_p)
-            # (a normal the active ones leave (nearly) no part of: a dual step only)
-            t2 = (-(float(n_p @ u) - beta[p]) / zz if zz > 1e-10 * float(n_p @ n_p)
-                  else math.inf)
-            t = min(t1, t2)
-            if t == math.inf:                          # the constraints contradict each other
-                return np.array(u0, dtype=float), False
-            lam = lam - t * r
-            lam_p += t
-            if t2 < math.inf:
-                u = u + t * z
-            if t == t2:                                # full step: p joins the active set
-                active.append(p)
-                lam = np.append(lam, lam_p)
-                break
-            del active[k]                              # partial step: k leaves
-            lam = np.delete(lam, k)
-    return np.array(u0, dtype=float), False
-
-
-def closest_admissible(u0: np.ndarray, A: np.ndarray, beta: np.ndarray,
-                       limits: Optional[tuple] = None) -> np.ndarray:
-    """The moment closest to u0 with A u >= beta (the QP min |u - u0|^2; ``project``) and, given
-    limits = (A_m, beta_m), within the moments the rotors make unsaturated
-    (``Allocator.moment_polytope``). u0 itself where it is admissible. Where the cones' rows and
-    the rotors' contradict each other, the cones' alone (the allocation then saturates); where
-    the cones' rows contradict each other, the most violated one alone. A batch solves each run
-    on its own, so a run gets the same bits alone and in a batch.
-    """
-    tol = 1e-9
-    if limits is not None:
-        A_m, beta_m = limits
-        A = np.concatenate((A, np.broadcast_to(A_m, A.shape[:-2] + A_m.shape)), axis=-2)
-        beta = np.concatenate((beta, np.broadcast_to(beta_m, beta.shape[:-1] + beta_m.shape)),
-                              axis=-1)
-    slack = so3.matvec(A, u0) - beta
-    ok = np.all(slack >= -tol, axis=-1)
-    if np.all(ok):
-        return u0
-    cones = A.shape[-2] - (0 if limits is None else len(limits[1]))
-    out = np.array(u0, dtype=float, copy=True)
-    for i in zip(*np.nonzero(~np.asarray(ok))) if out.ndim > 1 else [()]:
-        u, feasible = project(u0[i], A[i], beta[i])
-        if not feasible and limits is not None:
-            u, feasible = project(u0[i], A[i][:cones], beta[i][:cones])
-        if not feasible:                        # the most violated constraint alone
-            j = int(np.argmin(slack[i][:cones]))
-            a = A[i][j]
-            u = u0[i] + a * (max(-slack[i][j], 0.0) / max(float(a @ a), 1e-12))
-        out[i] = u
-    return out
-
-
 def cbf_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool,
-            blind: Any) -> Any:
+            blind: Any, brake: Any) -> Any:
     """The geometric baseline filtered by a control-barrier-function QP on SO(3): the moment
     closest to Lee's geometric controller's that keeps every cone's pointing constraint
     (``pointing_cbf``) with a double pole at -``cbf_rate``, against any unlearnt moment up to
-    ``cbf_moment_bound``. With the approach brake on (``approach_brake_rate``), its condition
-    for every cone is a constraint of the QP too (``ApproachBrake.rows``): the sampled-data
-    margin over the blind time and a hold, against the same unlearnt moment. The estimate adapts
-    as the baseline's.
+    ``cbf_moment_bound``, within the rotors' limits. With the approach brake on
+    (``approach_brake_rate``), its condition for every cone joins the QP
+    (``core.law.brake.braked``). The estimate adapts as the baseline's.
     """
     terms, out = unconstrained(controller, R, Omega, dt, adapt)
-    cones = controller.config.cones
-    if not len(cones):
+    cfg = controller.config
+    if not len(cfg.cones):
         return out
-    A, beta, _, _, b, f = pointing_cbf(controller, R, Omega, terms)
-    brake = controller.brake
-    if brake is not None:
-        A_b, beta_b = brake.rows(controller.J_inv, f, b, terms.cones.s, terms.cones.cross,
-                                 cones.theta, cones.r, Omega, blind, dt)
-        A = np.concatenate((A, A_b), axis=-2)
-        beta = np.concatenate((beta, beta_b), axis=-1)
-    return out._replace(u=closest_admissible(out.u, A, beta, controller.config.moment_limits))
+    A, beta = pointing_cbf(controller, R, Omega, terms)[:2]
+    if brake is None:
+        return out._replace(u=closest_admissible(out.u, A, beta, cfg.moment_limits))
+    b = braked(controller.brake, cfg.cones, controller.J_inv, cfg.moment_limits, brake, out.u,
+               (A, beta))
+    return out._replace(u=b.u, braking=b.braking, brake_unmet=b.unmet)

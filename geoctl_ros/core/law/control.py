@@ -34,6 +34,7 @@ and model are shared by the batch. (``x.T`` on a stack of vectors puts the batch
 ``(x.T * a).T`` scales each run's vector by its own scalar and a single vector by a scalar.)
 """
 from dataclasses import dataclass, field
+import math
 from typing import Any, NamedTuple, Optional
 
 import numpy as np
@@ -94,12 +95,16 @@ class ControllerConfig:
     k_Delta_cog: float = 0.0         # adaptation gain of the m*rho block (constant+cog model)
     guidance_lookahead: float = 0.0  # rad, guidance's set point at most this far ahead; 0 = off
     guidance_clearance: float = 0.0  # rad, guidance's path this far outside each cone's barrier
-    approach_brake_rate: float = 0.0  # 1/s, the delay-robust law's approach brake; 0 = off
-    brake_acceleration: float = 40.0  # rad/s^2, what the rotors can spare to brake an approach
+    approach_brake_rate: float = 0.0  # 1/s, the approach brake's recovery rate k_b; 0 = off
+    brake_acceleration: float = 0.0   # rad/s^2, a_b: the deceleration the rotors can always
+                                      # make (``core.law.brake.brake_authority``; set with the
+                                      # rotors by ``params.controller_setup``)
     attitude_noise: float = 0.0       # rad, the attitude measurement's standard deviation
-    moment_limits: Optional[tuple] = None   # (A, beta): the moments the rotors make unsaturated,
-                                            # A u >= beta (``Allocator.moment_polytope``); the
-                                            # cbf law's QP keeps them
+    gyro_noise: float = 0.0           # rad/s, the gyro's standard deviation
+    tilt_max: float = math.pi         # rad, the joint's tilt limit (its stops)
+    moment_limits: Optional[Any] = None   # MomentPolytope: the moments the rotors make
+                                          # unsaturated (``Allocator.moment_polytope``); the
+                                          # brake and the cbf law's QP keep them
     J: np.ndarray = field(init=False, repr=False)        # inertia about the pivot
     m_rho: np.ndarray = field(init=False, repr=False)    # mass times pivot -> centre of mass
 
@@ -126,6 +131,8 @@ class ControlOutput(NamedTuple):
     adapting: bool           # the estimate was advanced this step
     cones: Any = None        # the ConeEval the step used
     half_angles_deg: Optional[np.ndarray] = None
+    braking: Any = False     # the approach brake changed the law's moment
+    brake_unmet: Any = False  # no moment within the rotors' limits met the brake's condition
     # (in a batch, each field has the batch axis first: psi, violated, ... one per run)
 
     @property
@@ -223,26 +230,46 @@ class AttitudeController:
         Y = cog_regressor(R, self.config.gravity)
         return np.concatenate((np.broadcast_to(np.eye(3), Y.shape), Y), axis=-1)
 
-    def model_acceleration(self, R: np.ndarray, Omega: np.ndarray, moment: np.ndarray,
-                           delta_bar: Optional[np.ndarray] = None,
-                           M_g: Optional[np.ndarray] = None, W: Any = False) -> np.ndarray:
-        """The model's angular acceleration at (R, Omega) under the rotors' moment (about the
-        pivot): J^-1 (moment + M_g(R) + W Delta_bar - Omega x J Omega), with its inertia, centre
-        of mass and estimate (``delta_bar``: this one instead of the estimate's present value).
-        M_g, W: the gravity moment and regressor at R when the step has them (``StepTerms``;
-        W False: not given, since None is the constant model's regressor).
+    def gravity_moment(self, R: np.ndarray) -> np.ndarray:
+        """The model's gravity moment at R (about the pivot, body frame)."""
+        return gravity_moment(R, self.config.m_rho, self.config.gravity)
+
+    def model_moment(self, R: np.ndarray, Omega: np.ndarray, M_g: Optional[np.ndarray] = None,
+                     W: Any = False, delta_bar: Optional[np.ndarray] = None) -> np.ndarray:
+        """The model's moment about the pivot besides the rotors': M_g(R) + W Delta_bar -
+        Omega x J Omega, with its inertia, centre of mass and estimate (``delta_bar``: this one
+        instead of the estimate's present value). M_g, W: the gravity moment and regressor at R
+        when the step has them (``StepTerms``; W False: not given, since None is the constant
+        model's regressor).
         """
         cfg = self.config
         if W is False:
             W = self.regressor(R)
         if M_g is None:
-            M_g = gravity_moment(R, cfg.m_rho, cfg.gravity)
+            M_g = self.gravity_moment(R)
         d = self.delta_bar if delta_bar is None else delta_bar
-        return matvec(self.J_inv, moment + M_g + (d if W is None else matvec(W, d))
-                      - cross(Omega, matvec(cfg.J, Omega)))
+        return M_g + (d if W is None else matvec(W, d)) - cross(Omega, matvec(cfg.J, Omega))
+
+    def model_acceleration(self, R: np.ndarray, Omega: np.ndarray, moment: np.ndarray,
+                           delta_bar: Optional[np.ndarray] = None,
+                           M_g: Optional[np.ndarray] = None, W: Any = False) -> np.ndarray:
+        """The model's angular acceleration at (R, Omega) under the rotors' moment (about the
+        pivot): J^-1 (moment + ``model_moment``).
+        """
+        return matvec(self.J_inv, moment + self.model_moment(R, Omega, M_g, W, delta_bar))
+
+    def feedforward(self, R: np.ndarray) -> np.ndarray:
+        """The moment that holds the model at rest at R: -(M_g(R) + W Delta_bar) (the law's
+        feed-forward; the rotors spool up to it while the vehicle is held).
+        """
+        W = self.regressor(R)
+        held = self.delta_bar if W is None else matvec(W, self.delta_bar)
+        if self.config.gravity_compensation:
+            held = held + self.gravity_moment(R)
+        return -held
 
     def step(self, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool = True,
-             blind: Any = 0.0) -> ControlOutput:
+             blind: Any = 0.0, brake: Any = None) -> ControlOutput:
         """One control step at attitude R and body angular velocity Omega, by the configured law
         (``config.law``, one of ``LAWS``).
 
@@ -250,11 +277,13 @@ class AttitudeController:
         (e.g. while disarmed). blind: the time (s; one per run of a batch) over which the loop
         cannot see or correct what the vehicle does beyond its nominal period: a law with the
         barrier then acts on each cone widened by how far the sensor travels towards it in that
-        time (``blind_widening``).
+        time (``blind_widening``). brake: the approach brake's inputs of the tick
+        (``core.law.brake.BrakeInputs``), or None (no brake this step: disarmed, spooling).
         """
         if self.guidance is not None and not self._tracking:
             self._follow(R)
-        return self._law(self, R, Omega, dt, adapt, blind)
+        return self._law(self, R, Omega, dt, adapt, blind,
+                         brake if self.brake is not None else None)
 
     def _follow(self, R: np.ndarray) -> None:
         """Move the law's set point along guidance's path (``core.law.guidance``): its linear map
@@ -338,10 +367,13 @@ class AttitudeController:
 
     def _set_config(self, config):
         self.config = config
-        self.guidance = (Guidance(config.guidance_lookahead, config.guidance_clearance)
+        g = math.sqrt(so3.dot(config.gravity, config.gravity))
+        self.guidance = (Guidance(config.guidance_lookahead, config.guidance_clearance,
+                                  -config.gravity / g, config.tilt_max)
                          if config.guidance_lookahead > 0.0 else None)
         self._law = LAWS[config.law]
-        self.brake = ApproachBrake.of(config)
+        # (the brake needs the rotors' limits: a configuration built without them has none)
+        self.brake = ApproachBrake.of(config) if config.moment_limits is not None else None
         self.J_inv = so3.inverse3(config.J)      # the model's, for the prediction too
         self._gamma = np.array([config.k_Delta] * 3 + [config.k_Delta_cog] * 3)[:config.n_params]
         self._balls = [(block, bound) for block, bound in ((slice(0, 3), config.delta_bar_max),

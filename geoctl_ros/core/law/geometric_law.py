@@ -13,7 +13,7 @@ def unconstrained(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float,
 
 
 def geometric_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool,
-                  blind: Any) -> Any:
+                  blind: Any, brake: Any) -> Any:
     """Lee's geometric controller on SO(3) with the same gains and no barrier: the attractive
     error alone (the baseline that shows what the barrier buys). The cones are still evaluated,
     so margins and violations are reported.

@@ -46,6 +46,7 @@ PATH_STEP = math.radians(2.0)   # the path's attitudes at most this far apart (s
 REPLAN_FACTOR = 2.0         # a set point this many lookaheads away from the vehicle: plan again
 LOOKAHEAD_MIN = math.radians(5.0)   # the lookahead near a cone, at least
 LOOKAHEAD_PER_GAP = 2.0     # near a cone the lookahead is at most this many times the gap to it
+CAP_SLACK = math.radians(0.5)   # a joint cap keeps this far from a path's end inside it
 
 
 def arc_clearance(a: np.ndarray, b: np.ndarray, axes: np.ndarray) -> np.ndarray:
@@ -154,12 +155,43 @@ def _shortest_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return so3.exp(axis / s * math.atan2(s, float(so3.dot(a, b))))
 
 
+def upright(d: np.ndarray, r: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """The attitude that points the body-fixed r along the unit d with the body's z axis as
+    near up as it can be (R r = d, R e3 on the cone of half-angle angle(r, e3) round d, on the
+    side of up): its tilt is |elevation of d - elevation of r in the body|, the least any
+    attitude pointing r along d has.
+    """
+    e3 = np.array([0.0, 0.0, 1.0])
+    z_b = e3 - so3.dot(e3, r) * r                      # body z, less its part along r
+    z_w = up - so3.dot(up, d) * d                      # towards up, across d
+    nb, nw = math.sqrt(so3.dot(z_b, z_b)), math.sqrt(so3.dot(z_w, z_w))
+    if nb < 1e-9:                                      # r along the body's z: any turn will do
+        z_b = np.cross(r, np.eye(3)[int(np.argmin(np.abs(r)))])
+        nb = math.sqrt(so3.dot(z_b, z_b))
+    if nw < 1e-9:                                      # d straight up or down
+        z_w = np.cross(d, np.eye(3)[int(np.argmin(np.abs(d)))])
+        nw = math.sqrt(so3.dot(z_w, z_w))
+    z_b, z_w = z_b / nb, z_w / nw
+    B = np.column_stack((r, z_b, np.cross(r, z_b)))
+    W = np.column_stack((d, z_w, np.cross(d, z_w)))
+    return so3.matmul(W, so3.transpose(B))
+
+
+def _turn_about(d: np.ndarray, R: np.ndarray, base: np.ndarray) -> float:
+    """The angle psi (rad, in (-pi, pi]) with R = exp(psi d) base, for attitudes R and base that
+    both point the sensor along d (their difference is a turn about d).
+    """
+    w = so3.log(so3.matmul(R, so3.transpose(base)))
+    return float(so3.dot(w, d))
+
+
 def attitude_path(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray,
-                  corners: List[np.ndarray]) -> np.ndarray:
+                  corners: List[np.ndarray], up: np.ndarray) -> np.ndarray:
     """The attitudes along the sensor's path through corners (unit vectors, R0 r first and
-    R_goal r last), at most PATH_STEP apart: (K, 3, 3), R0 first (but turned as below) and
-    R_goal last. Each step is the shortest rotation that takes the sensor along the path; the
-    turn about the sensor axis that is left at the end is spread along the way by arc length.
+    R_goal r last), at most PATH_STEP apart: (K, 3, 3), R0 first and R_goal last. At each point
+    the most upright attitude (``upright``), turned about the sensor by the start's turn from
+    its own upright one blended into the goal's by arc length: the body stays as upright as the
+    path lets it (within the joint's stops where the path keeps out of their caps).
     """
     points = [corners[0]]
     for a, b in zip(corners[:-1], corners[1:]):
@@ -170,45 +202,75 @@ def attitude_path(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray,
         axis = np.cross(a, b)
         axis /= math.sqrt(so3.dot(axis, axis))
         points += [so3.matvec(so3.exp(axis * (angle * i / k)), a) for i in range(1, k + 1)]
-    Rs = [R0]
-    for a, b in zip(points[:-1], points[1:]):
-        Rs.append(so3.matmul(_shortest_rotation(a, b), Rs[-1]))
     d = np.array(points)
     arc = np.concatenate([[0.0], np.cumsum(np.arccos(np.clip(
         so3.dot(d[:-1], d[1:]), -1.0, 1.0)))])
-    # what is left: a turn about the goal's sensor direction
-    left = so3.log(so3.matmul(R_goal, so3.transpose(Rs[-1])))
-    twist = float(so3.dot(left, d[-1]))
-    share = arc / arc[-1] if arc[-1] > 0.0 else np.linspace(0.0, 1.0, len(Rs))
-    path = np.array([so3.matmul(so3.exp(d[i] * (twist * share[i])), Rs[i])
-                     for i in range(len(Rs))])
-    if len(path) == 1:               # the sensor does not move: turn about it in steps
+    bases = [upright(p, r, up) for p in points]
+    first, last = _turn_about(d[0], R0, bases[0]), _turn_about(d[-1], R_goal, bases[-1])
+    if len(points) == 1:               # the sensor does not move: turn about it in steps
+        twist = last - first
         k = max(1, int(math.ceil(abs(twist) / PATH_STEP)))
-        path = np.array([so3.matmul(so3.exp(d[0] * (twist * i / k)), R0) for i in range(k + 1)])
-    path[-1] = R_goal
+        path = np.array([so3.matmul(so3.exp(d[0] * (first + twist * i / k)), bases[0])
+                         for i in range(k + 1)])
+    else:
+        share = arc / arc[-1] if arc[-1] > 0.0 else np.linspace(0.0, 1.0, len(points))
+        path = np.array([so3.matmul(so3.exp(d[i] * (first + (last - first) * share[i])),
+                                    bases[i]) for i in range(len(points))])
+    path[0], path[-1] = R0, R_goal
     return path
 
 
-def plan(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray, axes: np.ndarray,
-         rims: np.ndarray, clearance: float) -> np.ndarray:
-    """The attitudes from R0 to R_goal round the cones (``sensor_path``, ``attitude_path``);
-    where no way round exists, the goal alone (the law's barrier then decides).
+def joint_caps(up: np.ndarray, r: np.ndarray, tilt_max: float, ends: np.ndarray) -> tuple:
+    """The sensor directions the joint's stops keep the body from (its z axis at most tilt_max
+    from up): above the elevation of r in the body plus tilt_max and below it less tilt_max, as
+    two cones round up and down for the planner ((axes (k, 3), half-angles (k,)); none where the
+    stops allow every direction). Each is narrowed to keep the path's ends (a vehicle resting on
+    its stops) just outside it.
     """
-    corners = sensor_path(so3.matvec(R0, r), so3.matvec(R_goal, r), axes, rims, clearance)
+    if tilt_max >= math.pi - 1e-9:
+        return np.zeros((0, 3)), np.zeros(0)
+    rise = math.asin(max(-1.0, min(1.0, float(r[2]))))    # r's elevation in the body
+    axes, rims = [], []
+    for axis, half in ((up, 0.5 * math.pi - rise - tilt_max),
+                       (-up, 0.5 * math.pi + rise - tilt_max)):
+        nearest = float(np.arccos(np.clip(so3.dot(ends, axis[None, :]), -1.0, 1.0)).min())
+        half = min(half, nearest - CAP_SLACK)
+        if half > 0.0:
+            axes.append(axis)
+            rims.append(half)
+    return np.array(axes).reshape(-1, 3), np.array(rims)
+
+
+def plan(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray, axes: np.ndarray,
+         rims: np.ndarray, clearance: float, up: Optional[np.ndarray] = None,
+         tilt_max: float = math.pi) -> np.ndarray:
+    """The attitudes from R0 to R_goal round the cones (``sensor_path``, ``attitude_path``) and
+    within the joint's stops (``joint_caps``: up, the world's up; tilt_max, rad); where no way
+    round exists, the goal alone (the law's barrier then decides).
+    """
+    up = np.array([0.0, 0.0, 1.0]) if up is None else up
+    d0, d1 = so3.matvec(R0, r), so3.matvec(R_goal, r)
+    cap_axes, cap_rims = joint_caps(up, r, tilt_max, np.stack([d0, d1]))
+    corners = sensor_path(d0, d1, np.concatenate((np.asarray(axes).reshape(-1, 3), cap_axes)),
+                          np.concatenate((np.asarray(rims).reshape(-1), cap_rims)), clearance)
     if corners is None:
         return R_goal[None].copy()
-    return attitude_path(R0, R_goal, r, corners)
+    return attitude_path(R0, R_goal, r, corners, up)
 
 
 class Guidance:
     """The set point fed along the planned path, for one run or a batch (see the module)."""
 
-    def __init__(self, lookahead: float, clearance: float):
+    def __init__(self, lookahead: float, clearance: float, up: Optional[np.ndarray] = None,
+                 tilt_max: float = math.pi):
         """lookahead: rad, how far ahead of the vehicle the set point may be; clearance: rad,
-        how far outside each cone's barrier the path keeps.
+        how far outside each cone's barrier the path keeps; up: the world's up (unit); tilt_max:
+        rad, the joint's stops (the body's z axis from up), which the path keeps within.
         """
         self.lookahead = lookahead
         self.clearance = clearance
+        self.up = np.array([0.0, 0.0, 1.0]) if up is None else np.asarray(up, dtype=float)
+        self.tilt_max = tilt_max
         self.cos_lookahead = math.cos(lookahead)
         self.cos_replan = math.cos(min(math.pi, REPLAN_FACTOR * lookahead))
         # the path's points within the lookahead lie at most this many places ahead (its steps
@@ -279,7 +341,8 @@ class Guidance:
     def _plan(self, Rs, goals, cones, runs):
         """Plan the paths of the runs (indices) from the attitudes Rs to their goals."""
         V, rims = _cone_rows(cones, np.arange(len(Rs)))
-        new = {i: plan(Rs[i], goals[i], cones.r, V[i], rims[i], self.clearance) for i in runs}
+        new = {i: plan(Rs[i], goals[i], cones.r, V[i], rims[i], self.clearance, self.up,
+                       self.tilt_max) for i in runs}
         old = [] if self.paths is None else [self.paths[i, :self.last[i] + 1]
                                              for i in range(len(Rs))]
         paths = [new[i] if i in new else old[i] for i in range(len(Rs))]

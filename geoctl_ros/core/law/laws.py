@@ -1,4 +1,4 @@
-"""The control laws, one signature: ``law(controller, R, Omega, dt, adapt, blind) ->
+"""The control laws, one signature: ``law(controller, R, Omega, dt, adapt, blind, brake) ->
 ControlOutput`` (``geoctl_ros.core.law.control``); the ``law`` parameter names a row of ``LAWS``.
 
 - ``delay_robust`` (the default): the paper's law with each cone widened by the blind time;
@@ -12,7 +12,8 @@ from geoctl_ros.core.law.delay_robust_law import delay_robust_law
 from geoctl_ros.core.law.geometric_law import geometric_law
 from geoctl_ros.core.law.paper_law import paper_law
 
-# The control laws, one signature: law(controller, R, Omega, dt, adapt, blind) -> ControlOutput.
+# The control laws, one signature: law(controller, R, Omega, dt, adapt, blind, brake) ->
+# ControlOutput (brake: the approach brake's inputs of the tick, or None).
 # The ``law`` parameter names one; a new law is a file of its own and a row here, not a new loop.
 LAWS = {'delay_robust': delay_robust_law, 'paper': paper_law, 'geometric': geometric_law,
         'cbf': cbf_law}

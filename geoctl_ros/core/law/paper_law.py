@@ -19,7 +19,7 @@ def barrier_step(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, a
 
 
 def paper_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool,
-              blind: Any) -> Any:
+              blind: Any, brake: Any) -> Any:
     """The paper's law as published (Kulumani, Poole & Lee): the configuration error carries every
     cone's log barrier, on the cones as configured (never blind, no brake).
     """

@@ -153,18 +153,18 @@ class DelayPredictor:
         weight = np.where(usable, span / (PREDICT_SLOW_S + span), 0.0)
         self.acc_error = self.acc_error + ((modelled - measured - self.acc_error).T * weight).T
 
-    def __call__(self, R, Omega, age_R, age_Omega, history, now, lead=0.0):
-        """The attitude and rate at ``now + lead`` from measurements age_R and age_Omega seconds
-        old at ``now`` (scalars, or one per run of a batch), given the moments commanded before
-        now (a CommandHistory on the same clock as now). Ages and lead of 0 return the
-        measurements unchanged.
+    def __call__(self, R, Omega, age_R, age_Omega, history, now, lead=0.0) -> tuple:
+        """The attitude and rate at ``now`` and at ``now + lead``, ((R, Omega) at now, (R, Omega)
+        at now + lead), from measurements age_R and age_Omega seconds old at ``now`` (scalars,
+        or one per run of a batch), given the moments commanded before now (a CommandHistory on
+        the same clock as now). Ages and lead of 0 return the measurements unchanged.
 
         Only the part of the window since the first command held is predicted (none at the
-        first tick after arming). The window from the older measurement to now + lead is
-        integrated in S equal pieces of at most SUBSTEP_MAX_S: in each, the moment in force at
-        its midpoint; the rate is advanced only in the part of the window after its own capture,
-        the attitude only after its own (the attitude with the mean of the rates at either end of
-        the piece).
+        first tick after the take-over). The window from the older measurement to now is
+        integrated in S equal pieces of at most SUBSTEP_MAX_S (each with the moment in force at
+        its midpoint; the rate is advanced only in the part of the window after its own
+        capture, the attitude only after its own, with the mean of the rates at either end of
+        the piece), and the lead after it in pieces of its own.
         """
         captured = now - age_Omega               # when the rate sample was captured
         self.observe(R, Omega, captured, history)
@@ -172,66 +172,68 @@ class DelayPredictor:
         # (its stops, a hand) is not in the model
         known = max(now - history.first, 0.0)
         if known <= 0.0:
-            return R, Omega
+            return (R, Omega), (R, Omega)
         age_R, age_Omega = np.minimum(age_R, known), np.minimum(age_Omega, known)
-        if np.ndim(age_R) == 0 and np.ndim(age_Omega) == 0:
-            return self._scalar_ages(R, Omega, float(age_R), float(age_Omega), history, now,
-                                     lead, captured)
-        age_R = np.asarray(age_R, dtype=float)
-        age_Omega = np.asarray(age_Omega, dtype=float)
-        horizon = np.maximum(age_R, age_Omega)
-        span = horizon + lead
-        if float(np.max(span)) <= 0.0:
+        scalar = np.ndim(age_R) == 0 and np.ndim(age_Omega) == 0
+        if scalar:
+            age_R, age_Omega = float(age_R), float(age_Omega)
+            horizon = max(age_R, age_Omega)
+        else:
+            age_R = np.asarray(age_R, dtype=float)
+            age_Omega = np.asarray(age_Omega, dtype=float)
+            horizon = np.maximum(age_R, age_Omega)
+        if float(np.max(horizon)) > 0.0:
+            moment_now = history.at(captured)     # (the moment then, before any clipping)
+            acc0 = self.acceleration(R, Omega, moment_now)
+            R, Omega = self._integrate(R, Omega, now - age_R, now - age_Omega, history,
+                                       now - horizon, horizon, (acc0, moment_now), scalar)
+        at_now = (R, Omega)
+        if lead > 0.0:
+            R, Omega = self._integrate(R, Omega, now, now, history, now, lead, None, True)
+        return at_now, (R, Omega)
+
+    def _integrate(self, R, Omega, moved_R, moved_Omega, history, start, span, first, scalar):
+        """Integrate the model from ``start`` over ``span`` (s; one per run of a batch unless
+        scalar) in equal pieces of at most SUBSTEP_MAX_S, each under the moment in force at its
+        midpoint, less the observed error: the rate only after moved_Omega, the attitude only
+        after moved_R (their capture times). first: (the model's acceleration at the start,
+        the moment then) to save the first piece's evaluation, or None.
+        """
+        error = self.acc_error
+        if scalar:
+            pieces = max(math.ceil(span / SUBSTEP_MAX_S - 1e-9), 1)
+            h = span / pieces
+            for j in range(pieces):
+                mid = start + (j + 0.5) * h
+                acc = self._piece_acceleration(j, R, Omega, history.at(mid), first) - error
+                Omega_next = Omega + acc * h if mid > moved_Omega else Omega
+                if mid > moved_R:
+                    R = so3.matmul(R, so3.exp((0.5 * (Omega + Omega_next)) * h))
+                Omega = Omega_next
             return R, Omega
-        moment_now = history.at(captured)         # (the moment then, before any clipping)
-        acc0 = self.acceleration(R, Omega, moment_now)
         # each run in its own number of equal pieces (so a run's prediction does not depend on
         # the other runs of its batch); a run with fewer pieces than the most idles (h = 0)
         pieces = np.maximum(np.ceil(span / SUBSTEP_MAX_S - 1e-9), 1.0)
         h_run = span / pieces
-        start = now - horizon
-        error = self.acc_error
         for j in range(int(np.max(pieces))):
             h = np.where(j < pieces, h_run, 0.0)
             mid = start + (j + 0.5) * h_run
-            acc = self._piece_acceleration(j, R, Omega, history.at(mid), acc0, moment_now) - error
+            acc = self._piece_acceleration(j, R, Omega, history.at(mid), first) - error
             # each measurement moves only after its own capture time
-            hw = np.where(mid > now - age_Omega, h, 0.0)
-            hr = np.where(mid > now - age_R, h, 0.0)
+            hw = np.where(mid > moved_Omega, h, 0.0)
+            hr = np.where(mid > moved_R, h, 0.0)
             Omega_next = Omega + (acc.T * hw).T
             R = so3.matmul(R, so3.exp(((0.5 * (Omega + Omega_next)).T * hr).T))
             Omega = Omega_next
         return R, Omega
 
-    def _piece_acceleration(self, j, R, Omega, moment, acc0, moment_now):
+    def _piece_acceleration(self, j, R, Omega, moment, first):
         """The model's acceleration in piece j under moment. The first piece starts at the
-        measured state, where it is acc0 under moment_now: under another moment it differs by
-        J^-1 times the difference (it is linear in the moment), which saves a model evaluation.
+        measured state, where it is acc0 under moment_now (``first``): under another moment it
+        differs by J^-1 times the difference (it is linear in the moment), which saves a model
+        evaluation.
         """
-        if j == 0:
+        if j == 0 and first is not None:
+            acc0, moment_now = first
             return acc0 + matvec(self.controller.J_inv, moment - moment_now)
         return self.acceleration(R, Omega, moment)
-
-    def _scalar_ages(self, R, Omega, age_R, age_Omega, history, now, lead, captured):
-        """``__call__`` for ages shared by every run (one run, or a batch on one clock): the
-        same pieces, in plain floats (the node's tick; numpy on scalars costs more than the
-        arithmetic).
-        """
-        horizon = max(age_R, age_Omega)
-        span = horizon + lead
-        if span <= 0.0:              # (nothing to predict: no model evaluated)
-            return R, Omega
-        moment_now = history.at(captured)         # (the moment then, before any clipping)
-        acc0 = self.acceleration(R, Omega, moment_now)
-        pieces = max(math.ceil(span / SUBSTEP_MAX_S - 1e-9), 1)
-        h = span / pieces
-        start = now - horizon
-        error = self.acc_error
-        for j in range(pieces):
-            mid = start + (j + 0.5) * h
-            acc = self._piece_acceleration(j, R, Omega, history.at(mid), acc0, moment_now) - error
-            Omega_next = Omega + acc * h if mid > now - age_Omega else Omega
-            if mid > now - age_R:
-                R = so3.matmul(R, so3.exp((0.5 * (Omega + Omega_next)) * h))
-            Omega = Omega_next
-        return R, Omega

@@ -12,6 +12,7 @@ import numpy as np
 
 from geoctl_ros.core.actuation.motors import Mixer
 from geoctl_ros.core.geometry.so3 import matvec
+from geoctl_ros.core.law.brake import BrakeInputs
 from geoctl_ros.core.law.prediction import CommandHistory, DelayPredictor
 
 ON_TIME_S = 1e-6       # a step less late than this is on time (the clock's rounding)
@@ -76,6 +77,8 @@ class Command(NamedTuple):
 
     control: object     # ControlOutput of the step, or None when its moment was not finite
     motors: object      # MotorOutput: zero commands unless armed
+    spooling: bool = False   # armed, the rotors spooling up (the vehicle held, not yet flown)
+    took_over: bool = False  # the first tick the controller flies after the spool-up
 
 
 class ControlTick:
@@ -99,6 +102,7 @@ class ControlTick:
         self.degraded = DegradedMode()
         self._clock = 0.0               # the tick's time: now, or (untimed) periods counted
         self._ticked = False
+        self.flying = False             # armed and past the spool-up
 
     def reconfigure(self, mixer: Mixer, measurement_delay: float) -> None:
         """A new mixer (that has adopted the old one's lag model) and delay, at run time."""
@@ -135,46 +139,87 @@ class ControlTick:
         measurements forward by their age and the delay (off for a state that is already
         propagated, as a gap's); adapt: let the estimate learn from this step.
 
+        Armed, the rotors first spool up (``Mixer.spools``: SPOOL_LAGS motor time constants)
+        to the model's feed-forward, the gravity moment and the estimate, while the vehicle
+        rests on its stops or is held: the controller does not fly it yet, and nothing of that
+        time is predicted or learnt. At the take-over the command history and the observer
+        start afresh, and the approach brake keeps the cones from then on.
+
         A step whose moment is not finite commands zero and returns control None: for one run the
         caller then disarms; a batch raises FloatingPointError, as a diverged simulation does.
         """
         held = self._held(now)
         t = self._time(now, dt)
+        mixer = self.mixer
+        spooling = bool(armed) and mixer.spools(held, dt)
+        took_over = bool(armed) and not spooling and not self.flying
+        self.flying = bool(armed) and not spooling
+        if took_over:
+            # nothing of the spool-up is predicted or learnt (the vehicle was held): the history
+            # starts with the moment the spooled rotors make now
+            self.history.clear()
+            made = mixer.moments(dt if held is None else held)
+            if made is not None:
+                self.history.push(t, made[0], made[1])
+            self.predict.reset()
+            self.controller.replan()           # guidance's way from where the vehicle is
+        d = self.measurement_delay
+        R_b, W_b = R, Omega
         if predict:
-            # with a model of the motors' lag, aimed at the middle of the command's hold
-            d = self.measurement_delay
-            R, Omega = self.predict(R, Omega, d + ages[0], d + ages[1], self.history, t,
-                                    0.5 * dt if self.mixer.lag > 0.0 else 0.0)
-        blind = self.blind = blind_time(self.measurement_delay, ages, dt, held)
-        self.controller.gain_scale = self.degraded.scale(blind, dt if held is None else held)
-        out = self.controller.step(R, Omega, dt, adapt=adapt, blind=blind)
+            # with a model of the motors' lag, the law aims at the middle of the command's hold
+            (R_b, W_b), (R, Omega) = self.predict(R, Omega, d + ages[0], d + ages[1],
+                                                  self.history, t,
+                                                  0.5 * dt if mixer.lag > 0.0 else 0.0)
+        blind = self.blind = blind_time(d, ages, dt, held)
+        controller = self.controller
+        controller.gain_scale = self.degraded.scale(blind, dt if held is None else held)
+        brake = None
+        if controller.brake is not None and self.flying:
+            brake = self.brake_inputs(R_b, W_b, d + np.maximum(ages[0], ages[1]),
+                                      mixer.design_hold_for(dt, held), t)
+        out = controller.step(R, Omega, dt, adapt=adapt and self.flying, blind=blind,
+                              brake=brake)
+        if spooling:                        # the feed-forward alone, the vehicle held
+            out = out._replace(u=controller.feedforward(R))
         if not np.isfinite(out.u).all():           # a last line of defence: never command it
             if np.ndim(out.u) > 1:
                 raise FloatingPointError('a run of the batch produced a non-finite moment')
             out, armed = None, False
-        motors = self.mixer.mix(np.zeros(3) if out is None else out.u, armed=armed, dt=dt,
-                                held=held)
+        motors = mixer.mix(np.zeros(3) if out is None else out.u, armed=armed, dt=dt,
+                           held=held)
         self.history.push(t, *self._produced(motors, armed))
-        return Command(out, motors)
+        return Command(out, motors, spooling, took_over)
+
+    def brake_inputs(self, R: np.ndarray, Omega: np.ndarray, age: Any, hold: float,
+                     t: float) -> BrakeInputs:
+        """The approach brake's inputs at the tick (``core.law.brake.BrakeInputs``): the state
+        predicted at the tick, the measurements' age, the hold, the moment the rotors make now
+        (the command history's lag model) and the model's other moments there, its observed
+        error included (the prediction's model is the brake's).
+        """
+        controller = self.controller
+        M_g = controller.gravity_moment(R)
+        f = controller.model_moment(R, Omega, M_g)
+        error = self.predict.acc_error          # (0.0 until the observer has learnt)
+        if np.ndim(error):
+            f = f - matvec(controller.config.J, error)
+        return BrakeInputs(R, Omega, age, hold, self.history.at(t), f, M_g)
 
     def _produced(self, motors, armed):
         """The moments the rotors make from this tick on: the one they settle to and the one they
         make now (by the mixer's lag model, if it keeps one: at arming, none, the rotors
         spooling up from rest), about the pivot.
         """
-        mixer = self.mixer
         if not armed:
             return np.zeros(3), None
-        if mixer.sent_thrusts is None:
-            return motors.allocation.moment, None
-        B = mixer.allocator.B_full[3:]
-        end = matvec(B, mixer.sent_thrusts)
-        return end, matvec(B, mixer.modelled_thrusts)
+        made = self.mixer.moments()
+        return (motors.allocation.moment, None) if made is None else made
 
     def idle(self, dt: float, now: Optional[float] = None) -> Command:
         """A tick without a state to control from (before the first pose and rate): zero
         commands, and the time noted.
         """
+        self.flying = False
         self._held(now)
         self.history.push(self._time(now, dt), np.zeros(3))
         return Command(None, self.mixer.mix(np.zeros(3), armed=False, dt=dt))
