@@ -47,6 +47,7 @@ REPLAN_FACTOR = 2.0         # a set point this many lookaheads away from the veh
 LOOKAHEAD_MIN = math.radians(5.0)   # the lookahead near a cone, at least
 LOOKAHEAD_PER_GAP = 2.0     # near a cone the lookahead is at most this many times the gap to it
 CAP_SLACK = math.radians(0.5)   # a joint cap keeps this far from a path's end inside it
+CAP_CLEARANCE = math.radians(2.0)   # the path keeps this far from the joint's caps
 
 
 def arc_clearance(a: np.ndarray, b: np.ndarray, axes: np.ndarray) -> np.ndarray:
@@ -84,9 +85,10 @@ def _rim(axis: np.ndarray, radius: float, count: int) -> np.ndarray:
 
 
 def sensor_path(d0: np.ndarray, d1: np.ndarray, axes: np.ndarray, rims: np.ndarray,
-                clearance: float) -> Optional[List[np.ndarray]]:
+                clearance: Any) -> Optional[List[np.ndarray]]:
     """The shortest way on the sphere from d0 to d1 that keeps every cone i (unit axis axes[i],
-    the barrier's half-angle rims[i]) at least rims[i] + clearance away: the corner points, d0
+    the barrier's half-angle rims[i]) at least rims[i] + clearance away (one clearance, or one
+    per cone): the corner points, d0
     first and d1 last. Where d0 or d1 is nearer a cone than that, the cone is widened only up to
     halfway from its rim to the nearer of them. None where no such way exists (the cones close
     round the start or the goal).
@@ -251,8 +253,11 @@ def plan(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray, axes: np.ndarray,
     up = np.array([0.0, 0.0, 1.0]) if up is None else up
     d0, d1 = so3.matvec(R0, r), so3.matvec(R_goal, r)
     cap_axes, cap_rims = joint_caps(up, r, tilt_max, np.stack([d0, d1]))
+    rims = np.asarray(rims).reshape(-1)
     corners = sensor_path(d0, d1, np.concatenate((np.asarray(axes).reshape(-1, 3), cap_axes)),
-                          np.concatenate((np.asarray(rims).reshape(-1), cap_rims)), clearance)
+                          np.concatenate((rims, cap_rims)),
+                          np.concatenate((np.full(len(rims), clearance),
+                                          np.full(len(cap_rims), CAP_CLEARANCE))))
     if corners is None:
         return R_goal[None].copy()
     return attitude_path(R0, R_goal, r, corners, up)
