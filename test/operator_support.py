@@ -12,14 +12,15 @@ A message is collected where it leaves the program (the **sinks**, looked for in
   ``self._text(m, ...)`` (the bridge's STATUSTEXT to the ground station);
 - /diagnostics: ``DiagnosticStatus(message=m)``, ``Status(level, m, ...)``, ``EscReport(level, m,
   ...)``;
-- a failsafe: ``failsafe(m)``; an exception whose text is shown: ``EscStartError(m)``,
+- a failsafe's reason: ``failsafe(m)``; an exception whose text is shown: ``EscStartError(m)``,
   ``SigningKeyError(m)``, ``ConfigError([(name, m), ...])`` (a node that stops at start, or a
   parameter change refused);
 
 and in the **producers** (``PRODUCERS``: the functions whose sentences those sinks pass on, the
 ``*_problem`` functions, the arming checks, the diagnostics' composers): every string they return
-(a list's or a tuple's elements too), append, insert or add to a list, or assign to a name that
-holds a message (``MESSAGE_NAMES``), and the default of a ``reason`` parameter.
+(a list's or a tuple's elements too), append, insert or add to a list, assign to a name that
+holds a message (``MESSAGE_NAMES``) or give an exception (``super().__init__(m)``), and the
+default of a ``reason`` parameter.
 
 Each becomes a template: %-fields, f-string and str.format fields, and whatever is not a string
 the collector can follow (a variable, a call) become wildcards; names are followed to their local
@@ -52,7 +53,7 @@ SOURCES = {
         'core/supervisor/loop_status.py', 'core/supervisor/preflight.py',
         'core/supervisor/safety.py', 'core/sensors/consistency.py', 'core/law/feasibility.py',
         'core/law/gains.py', 'core/actuation/airframe.py', 'core/actuation/allocation.py',
-        'core/telemetry/diagnostics.py', 'params/validate.py'],
+        'core/telemetry/diagnostics.py', 'params/validate.py', 'params/param.py'],
     'esc_i2c': ['nodes/esc_i2c.py', 'esc/driver.py', 'esc/health.py', 'esc/protocol.py'],
     'mavlink_bridge': [
         'nodes/mavlink_bridge.py', 'nodes/mavlink_calls.py', 'nodes/autopilot_imu.py',
@@ -75,10 +76,12 @@ PRODUCERS = {
         'SensorAgreement._rest_problems', 'SensorAgreement._gravity_cause',
         'SensorAgreement._rate_cause'),
     'core/law/feasibility.py': ('setpoint_problem',),
+    'core/telemetry/diagnostics.py': ('failsafe',),
     'core/law/gains.py': ('GainCheck.message',),
     'core/actuation/airframe.py': ('check',),
     'core/actuation/allocation.py': ('Allocator.__init__',),
     'params/validate.py': ('change_problem',),
+    'params/param.py': ('ConfigError.__init__',),
     'esc/driver.py': ('EscDriver.__init__', 'EscDriver.offer', 'EscDriver.targets',
                       'EscDriver.start_test', 'EscDriver.stop'),
     'esc/health.py': ('report',),
@@ -156,6 +159,9 @@ FORWARDED = {
     ('mavlink/signing.py', "'%s: %s' % (path, e.strerror)"): "the key file's path and the "
         "system's reason (No such file or directory, ...)",
     ('nodes/esc_i2c.py', 'r.message'): 'esc.health.report',
+    ('core/supervisor/loop.py', 'problem'): 'esc_problem',
+    ('core/supervisor/loop.py', 'self.agreement.flight_note'): 'SensorAgreement.pose',
+    ('core/supervisor/safety.py', 'problem'): 'Stream.loss',
 }
 
 
@@ -337,9 +343,15 @@ class Collector:
 
     def _call(self, m, node, bound, d):
         f = node.func
-        if isinstance(f, ast.Attribute) and f.attr == 'join' and node.args and isinstance(
-                node.args[0], (ast.GeneratorExp, ast.ListComp)):
-            return self.texts(m, node.args[0].elt, bound, d)     # one element's
+        if isinstance(f, ast.Attribute) and f.attr == 'join' and node.args:
+            items = node.args[0]                  # a comprehension's (or a local one's) element
+            if isinstance(items, ast.Name) and m.parent_function.get(items) is not None:
+                items = next((a.value for a in ast.walk(m.parent_function[items])
+                              if isinstance(a, ast.Assign) and isinstance(a.value, ast.ListComp)
+                              and any(isinstance(t, ast.Name) and t.id == items.id
+                                      for t in a.targets)), items)
+            if isinstance(items, (ast.GeneratorExp, ast.ListComp)):
+                return self.texts(m, items.elt, bound, d)
         if isinstance(f, ast.Attribute) and f.attr == 'format':
             return {_collapse(_BRACES.sub(W, t)) for t in self.texts(m, f.value, bound, d)}
         if isinstance(f, ast.Name) and f.id in self.inline:
@@ -354,7 +366,8 @@ class Collector:
         """The templates of node, made at this site; an all-wildcard sink must be FORWARDED."""
         texts = {t for t in self.texts(m, node) if re.search(r'[A-Za-z]', t.replace(W, ''))}
         for t in texts:
-            self.found.setdefault(t.strip(), []).append(Site(m.path, node.lineno, kind))
+            t = re.sub(r'\s+', ' ', t).strip()
+            self.found.setdefault(t, []).append(Site(m.path, node.lineno, kind))
         if not texts and not explained:
             self._forwarded(m, node, kind)
 
@@ -413,7 +426,7 @@ class Collector:
                         if k.arg == 'message':
                             self.add(m, k.value, 'diagnostics')
                 elif name == 'failsafe' and node.args:
-                    self.add(m, node, 'failsafe')
+                    self.add(m, node.args[0], 'failsafe')
                 elif name in EXCEPTIONS and node.args:
                     self.add(m, node.args[0], name)
                 elif name == 'ConfigError' and node.args:
@@ -441,7 +454,9 @@ class Collector:
             if isinstance(node, ast.Return) and node.value is not None:
                 self._strings(m, node.value, kind)
             elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
-                if node.func.attr == 'append' and node.args:
+                if m.source(node.func) == 'super().__init__' and node.args:   # an exception's
+                    self._strings(m, node.args[0], kind)
+                elif node.func.attr == 'append' and node.args:
                     self._strings(m, node.args[0], kind)
                 elif node.func.attr == 'insert' and len(node.args) == 2:
                     self._strings(m, node.args[1], kind)
@@ -489,12 +504,14 @@ def collect(modules: Optional[List[Module]] = None, producers=None) -> Collector
 # --- docs/operator.md ----------------------------------------------------------------------------
 class Row(NamedTuple):
     """A table row of the reference: its first cell's code spans (as templates), whether it has
-    an action (and a level, where its table has that column), its table's first header.
+    an action (and a level, where its table has that column), its table's first header, its
+    level (empty without that column) and its line.
     """
 
     spans: Tuple[str, ...]
     complete: bool
     first_header: str
+    level: str
     line: int
 
 
@@ -522,9 +539,10 @@ def rows(text: str) -> List[Row]:
             continue
         level = header.index('level') if 'level' in header else None
         complete = all(k < len(cells) and cells[k] for k in (action, level) if k is not None)
-        spans = tuple(_collapse(s.strip().replace('...', W))
+        spans = tuple(_collapse(re.sub(r'\s+', ' ', s).strip().replace('...', W))
                       for s in re.findall(r'`([^`]+)`', cells[0]))
-        out.append(Row(spans, complete, header[0], i + 1))
+        out.append(Row(spans, complete, header[0],
+                       cells[level] if level is not None and level < len(cells) else '', i + 1))
     return out
 
 
@@ -565,16 +583,43 @@ def compatible(a: str, b: str) -> bool:
     return False
 
 
+def shows(span: str, template: str) -> bool:
+    """Whether a row's span shows the template: some text matches both, and, when the
+    template begins with a field, its first words stand in the span as written, not inside one
+    of its ``...`` (else a span that ends in ``...`` would show every template that begins with a
+    field: ``... refused: ...``). (A span that begins with ``...`` does not count: ``missing``.)
+    """
+    if template.startswith(W):
+        first = next(part for part in template.split(W) if re.search('[A-Za-z]', part))
+        if not any(first.strip() in part for part in span.split(W)):
+            return False
+    return compatible(template, span)
+
+
 def shown(template: str) -> str:
     """A template as the reference would show it (``...`` for each wildcard)."""
     return template.replace(W, '...')
 
 
 def missing(templates: Iterable[str], reference: List[Row], keys: bool = False) -> List[str]:
-    """The templates no complete row of the reference shows (in the key tables, for keys)."""
+    """The templates no complete row of the reference shows (in the key tables, for keys). A
+    span that begins with ``...`` does not count: it would match any template that ends in a
+    field.
+    """
     spans = [s for r in reference if r.complete and (r.first_header == 'key') == keys
-             for s in r.spans if s.replace(W, '').strip()]
-    return sorted(t for t in templates if not any(compatible(t, s) for s in spans))
+             for s in r.spans if s.replace(W, '').strip() and not s.startswith(W)]
+    return sorted(t for t in templates if not any(shows(s, t) for s in spans))
+
+
+def unknown_spans(templates: Iterable[str], keys: Iterable[str],
+                  reference: List[Row]) -> List[str]:
+    """The spans of the reference's rows that show no template of the code (a message renamed
+    or gone), but for the rows at INFO (the start-up lines, which the collector does not read).
+    """
+    templates, keys = list(templates), list(keys)
+    return ['line %d: %s' % (r.line, shown(s)) for r in reference if r.level != 'INFO'
+            for s in r.spans
+            if not any(shows(s, t) for t in (keys if r.first_header == 'key' else templates))]
 
 
 def diagnostics_keys() -> List[str]:

@@ -40,6 +40,15 @@ def test_every_diagnostics_key_has_a_row_that_says_what_to_do(reference):
                          'docs/operator.md:\n%s' % (len(missing), _listed(missing)))
 
 
+def test_every_row_shows_a_message_or_key_of_the_code(collector, reference):
+    """The other way round: a row's message that the code no longer says (renamed, gone) is
+    reported, so the reference does not keep what the nodes stopped saying.
+    """
+    unknown = ref.unknown_spans(collector.found, ref.diagnostics_keys(), reference)
+    assert not unknown, ('rows of docs/operator.md that show nothing the code says:\n  '
+                         + '\n  '.join(unknown))
+
+
 def test_every_sink_that_passes_a_sentence_on_is_accounted_for(collector):
     """A log line, reply or status whose text is made elsewhere names where (FORWARDED); a new
     one fails here until its origin is a sink or a producer the collector reads.
@@ -58,7 +67,8 @@ def test_the_collector_finds_what_the_nodes_are_known_to_say(collector):
               'angular velocity refused: %s (%s so far)' % (W, W),       # a stream's name
               'pose refused: ' + W,                                      # a log line
               'stamp %s is not newer than the last accepted %s' % (W, W),   # Stream.offer
-              'failsafe: non-finite control output',                     # failsafe(), a constant
+              'non-finite control output',                      # failsafe(m), a constant
+              'failsafe: ' + W,                                 # failsafe's own format
               "the IMU's specific force is %s m/s^2 at rest, not about %s: no accelerometer "
               'data in linear_acceleration, or its units wrong' % (W, W),
               'parameters not applied: ' + W, 'esc_health refused: empty',
@@ -113,7 +123,7 @@ def test_a_planted_message_is_reported_missing(reference):
     c.collect()
     missing = [ref.shown(t) for t in ref.missing(c.found, reference)]
     assert missing == ['a planted constant alarm', 'a planted log line at ... Hz',
-                       'failsafe: planted failsafe', 'planted note', 'planted problem ...',
+                       'planted failsafe', 'planted note', 'planted problem ...',
                        'planted reply ...'], missing
     assert c.unexplained == ['nodes/planted.py:26 log: self.loop.unexplained_text']
 
@@ -144,3 +154,9 @@ def test_templates_and_spans_match_where_some_text_matches_both():
     assert not ref.compatible('armed', 'armed, all inputs fresh')
     assert ref.compatible('sensor entered cone %s, %s deg deep' % (W, W),
                           "sensor entered cone 'obstacle', " + W)
+    # a template that begins with a field: its first words must stand in the span as written
+    assert ref.compatible(W + ' refused: ' + W, 'pose stale ' + W)
+    assert not ref.shows('pose stale ' + W, W + ' refused: ' + W)
+    assert ref.shows('GC_K_R refused: ' + W, W + ' refused: ' + W)
+    assert ref.shows('no configuration given for ' + W,
+                     'no configuration given for %s: no parameter file (...)' % W)
