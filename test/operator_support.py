@@ -28,12 +28,16 @@ assignments, to module constants, through ``failsafe``'s one-line body, and, whe
 takes a few known texts (a stream's name, a loop over a table: ``EXPANSIONS``), to each of them. A
 sink whose text is all wildcard passes on a sentence made elsewhere: its site must be listed in
 ``FORWARDED`` (with where the sentence is made), so that a new one is not missed, and every entry
-there must still be such a site.
+there must still be such a site. So must whatever the composers (``COMPOSERS``: the functions that
+build a status's or the arming checks' list of messages) add to their lists without a template.
 
 In docs/operator.md, a message is found in a table that has a "what to do" column, as a code span
 of the row's first cell (```...``` there stands for text that varies) that some text matches as
 well as the template, in a row whose "what to do" (and "level", where the table has one) is not
-empty. The diagnostics keys are found the same way in the tables whose first column is "key".
+empty. A span must begin with words (not ```...```), and a template that begins with a field is
+found only in a span that has its first words as written. The diagnostics keys are found the same
+way in the tables whose first column is "key" (the keys of the three codecs). The other way round,
+every span of a row (but the INFO rows) must show a message or a key of the code.
 """
 import ast
 from collections import deque
@@ -92,6 +96,14 @@ PRODUCERS = {
                                    'ControllerView.take_commands', 'ControllerView.take_psi',
                                    'ControllerView.take_array'),
 }
+# The producers that compose a list of messages (a status's, the arming checks'): whatever they
+# add to a list must give a template or be FORWARDED, so that a sentence made in a file the
+# collector does not read cannot pass unseen.
+COMPOSERS = {('core/supervisor/loop_status.py', 'status'),
+             ('core/supervisor/loop_status.py', 'gap_notes'),
+             ('core/supervisor/preflight.py', 'arm_problems'),
+             ('esc/health.py', 'report'),
+             ('nodes/mavlink_calls.py', 'GroundStationReports._publish_diagnostics')}
 # In a producer, a string assigned to one of these (a variable or an attribute) is a message.
 MESSAGE_NAMES = {'problem', 'message', 'why', 'reason', 'flight_note', 'foreign_refusal',
                  'refusal', 'setpoint_note'}
@@ -162,6 +174,22 @@ FORWARDED = {
     ('core/supervisor/loop.py', 'problem'): 'esc_problem',
     ('core/supervisor/loop.py', 'self.agreement.flight_note'): 'SensorAgreement.pose',
     ('core/supervisor/safety.py', 'problem'): 'Stream.loss',
+    # what the composers add that is made elsewhere
+    ('core/supervisor/loop_status.py', 'sup.reason'): 'Supervisor (its states), failsafe(...)',
+    ('core/supervisor/loop_status.py', 'loop.unconfigured'): 'ControllerNode._unconfigured',
+    ('core/supervisor/loop_status.py', 'stale'): 'Stream.staleness',
+    ('core/supervisor/loop_status.py', 'escs'): 'esc_problem',
+    ('core/supervisor/loop_status.py', 'lost'): 'Stream.loss',
+    ('core/supervisor/loop_status.py', 'gap_notes(loop, now)'): 'loop_status.gap_notes',
+    ('core/supervisor/loop_status.py', 'loop.setpoint_note'): 'ControlLoop.request_setpoint',
+    ('core/supervisor/loop_status.py', 'other_commanders'): 'ControllerNode._other_commanders',
+    ('core/supervisor/preflight.py', 'p'): 'ControllerNode._unconfigured and '
+        '_other_commanders, esc_problem, Stream.staleness',
+    ('core/supervisor/preflight.py', 'loop.agreement.arm_problems(now)'):
+        'SensorAgreement.arm_problems',
+    ('esc/health.py', '_esc_line(address, tel, driver.errors[i], missing, age)'):
+        "the esc N keys' values, not messages",
+    ('nodes/mavlink_calls.py', 'ap_warning'): 'AutopilotImu.health',
 }
 
 
@@ -240,9 +268,10 @@ class Collector:
     """The message templates of a set of modules (module docstring)."""
 
     def __init__(self, modules: Iterable[Module], producers: Dict[str, Iterable[str]],
-                 expansions=None, forwarded=None):
+                 expansions=None, forwarded=None, composers=None):
         self.modules = list(modules)
         self.producers = producers
+        self.composers = COMPOSERS if composers is None else composers
         self.expansions = EXPANSIONS if expansions is None else expansions
         self.forwarded = FORWARDED if forwarded is None else forwarded
         self.constants: Dict[str, Tuple[Module, ast.AST]] = {}
@@ -362,14 +391,17 @@ class Collector:
         return {W}
 
     # --- sinks and producers ------------------------------------------------------------------
-    def add(self, m: Module, node: ast.AST, kind: str, explained: bool = False) -> None:
-        """The templates of node, made at this site; an all-wildcard sink must be FORWARDED."""
+    def add(self, m: Module, node: ast.AST, kind: str, explained: bool = False) -> bool:
+        """The templates of node, made at this site (whether there are any); an all-wildcard
+        sink must be FORWARDED.
+        """
         texts = {t for t in self.texts(m, node) if re.search(r'[A-Za-z]', t.replace(W, ''))}
         for t in texts:
             t = re.sub(r'\s+', ' ', t).strip()
             self.found.setdefault(t, []).append(Site(m.path, node.lineno, kind))
         if not texts and not explained:
             self._forwarded(m, node, kind)
+        return bool(texts)
 
     def _forwarded(self, m, node, kind):
         site = (m.path, m.source(node))
@@ -378,15 +410,22 @@ class Collector:
         else:
             self.unexplained.append('%s:%d %s: %s' % (m.path, node.lineno, kind, site[1]))
 
-    def _strings(self, m, node, kind):
-        """A producer's value: a string, or a list, tuple or comprehension of them."""
-        if isinstance(node, (ast.Tuple, ast.List)):
-            for e in node.elts:
-                self._strings(m, e, kind)
-        elif isinstance(node, ast.ListComp):
-            self._strings(m, node.elt, kind)
+    def _strings(self, m, node, kind, composed=False):
+        """A producer's value: a string, or a list, tuple or comprehension of them (whether it
+        gave a template). composed: an item a composer adds to its list of messages, which
+        must give one or be FORWARDED (a list's elements one by one; a tuple as a whole).
+        """
+        if isinstance(node, ast.List):
+            return any([self._strings(m, e, kind, composed) for e in node.elts])
+        if isinstance(node, ast.ListComp):
+            return self._strings(m, node.elt, kind, composed)
+        if isinstance(node, ast.Tuple):
+            found = any([self._strings(m, e, kind) for e in node.elts])
         else:
-            self.add(m, node, kind, explained=True)
+            found = self.add(m, node, kind, explained=True)
+        if composed and not found:
+            self._forwarded(m, node, kind)
+        return found
 
     def _logger(self, m, call):
         """Whether call is a log at WARN or above (or an alias of one)."""
@@ -446,6 +485,7 @@ class Collector:
     def scan_producer(self, m: Module, qualname: str) -> None:
         function = m.functions[qualname]
         kind = 'producer ' + qualname
+        composer = (m.path, qualname) in self.composers
         args = function.args
         for a, default in zip(reversed(args.args), reversed(args.defaults)):
             if a.arg == 'reason':
@@ -457,18 +497,20 @@ class Collector:
                 if m.source(node.func) == 'super().__init__' and node.args:   # an exception's
                     self._strings(m, node.args[0], kind)
                 elif node.func.attr == 'append' and node.args:
-                    self._strings(m, node.args[0], kind)
+                    self._strings(m, node.args[0], kind, composer)
                 elif node.func.attr == 'insert' and len(node.args) == 2:
-                    self._strings(m, node.args[1], kind)
+                    self._strings(m, node.args[1], kind, composer)
             elif isinstance(node, ast.AugAssign) and isinstance(node.op, ast.Add):
-                if isinstance(node.value, (ast.List, ast.ListComp)):
-                    self._strings(m, node.value, kind)
+                if composer or isinstance(node.value, (ast.List, ast.ListComp)):
+                    self._strings(m, node.value, kind, composer)
             elif isinstance(node, ast.Assign):
                 for target, value in _pairs(node):
                     name = (target.id if isinstance(target, ast.Name) else target.attr
                             if isinstance(target, ast.Attribute) else None)
                     if name in MESSAGE_NAMES:
                         self._strings(m, value, kind)
+                    elif composer and isinstance(value, (ast.List, ast.ListComp)):
+                        self._strings(m, value, kind, composer)
 
     def collect(self) -> Dict[str, List[Site]]:
         for m in self.modules:

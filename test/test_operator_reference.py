@@ -105,6 +105,7 @@ class Node:
             return 'planted problem %d' % x
         notes = []
         notes.append('planted note')
+        notes.append(self.made_in_a_file_not_read)
         self.disarm(failsafe('planted failsafe'))
         self.get_logger().warning(self.loop.unexplained_text)
         return None
@@ -113,19 +114,23 @@ class Node:
 
 def test_a_planted_message_is_reported_missing(reference):
     """The same collector over a planted module: each undocumented message is reported, at once;
-    a documented one, an INFO line and a sink that passes text on are not reported as missing.
+    a documented one and an INFO line are not; a log line, and a composer's item, whose text is
+    made elsewhere are reported as unexplained.
     """
     module = ref.Module('nodes/planted.py', PLANTED)
     diagnostics = 'core/telemetry/diagnostics.py'        # (failsafe's body)
     c = ref.Collector(
         [module, ref.Module(diagnostics, open(ref.package_path(diagnostics)).read())],
-        {'nodes/planted.py': ('Node.planted_problem',)})
+        {'nodes/planted.py': ('Node.planted_problem',)},
+        composers={('nodes/planted.py', 'Node.planted_problem')})
     c.collect()
     missing = [ref.shown(t) for t in ref.missing(c.found, reference)]
     assert missing == ['a planted constant alarm', 'a planted log line at ... Hz',
                        'planted failsafe', 'planted note', 'planted problem ...',
                        'planted reply ...'], missing
-    assert c.unexplained == ['nodes/planted.py:26 log: self.loop.unexplained_text']
+    assert sorted(c.unexplained) == [
+        'nodes/planted.py:25 producer Node.planted_problem: self.made_in_a_file_not_read',
+        'nodes/planted.py:27 log: self.loop.unexplained_text'], c.unexplained
 
 
 def test_a_row_without_an_action_does_not_count():
