@@ -53,8 +53,12 @@ def test_every_sink_that_passes_a_sentence_on_is_accounted_for(collector):
     """A log line, reply or status whose text is made elsewhere names where (FORWARDED); a new
     one fails here until its origin is a sink or a producer the collector reads.
     """
-    assert not collector.unexplained, '\n'.join(collector.unexplained)
-    assert not collector.stale_forwarded, collector.stale_forwarded
+    assert not collector.unexplained, (
+        'text made where the collector does not look: add the function that makes it to '
+        'PRODUCERS (its file to SOURCES), or the site to FORWARDED (operator_support.py):\n  '
+        + '\n  '.join(collector.unexplained))
+    assert not collector.stale_forwarded, ('FORWARDED entries that name no site any more: %s'
+                                           % collector.stale_forwarded)
 
 
 def test_the_collector_finds_what_the_nodes_are_known_to_say(collector):
