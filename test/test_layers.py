@@ -71,6 +71,28 @@ def test_no_layer_imports_a_higher_one():
         'core/ holds its rooms only')
 
 
+def test_the_esc_layer_does_not_import_the_controllers_supervisor():
+    """esc/ (the ESC node's driver, health and buses) may import core, but not core.supervisor,
+    the controller's decisions: what the two exchange (the armed state, the ESCs' health, the
+    motor_commands check) is core.actuation.esc_wire's, which both import.
+    """
+    def supervisor_imports(source):
+        for node in ast.walk(ast.parse(source)):
+            names = []
+            if isinstance(node, ast.ImportFrom) and node.module:
+                # (the names too: `from geoctl_ros.core import supervisor`)
+                names = [node.module] + ['%s.%s' % (node.module, a.name) for a in node.names]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            yield from (n for n in names if re.match(r'geoctl_ros\.core\.supervisor(\.|$)', n))
+
+    assert list(supervisor_imports('from geoctl_ros.core import supervisor\n'))   # it sees one
+    bad = ['esc/%s imports %s' % (path.name, mod)
+           for path in sorted(pathlib.Path(PKG, 'esc').rglob('*.py'))
+           for mod in supervisor_imports(path.read_text())]
+    assert not bad, bad
+
+
 def _module_graph():
     """{module: modules of this package and of benchmarks/ it imports} over every file, with the
     imports under TYPE_CHECKING and inside functions (a name imported from a package that is a
