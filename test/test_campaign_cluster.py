@@ -154,7 +154,7 @@ def test_a_gain_study_flies_every_set_on_the_same_runs_and_writes_files_the_cont
         sections = load_parameter_file(str(out / 'best' / name))
         setup = controller_setup(resolve(CONTROLLER, node_overrides(sections, CONTROLLER)))
         k = int(name.split('_')[-1].split('.')[0])
-        assert setup.values['k_R'] == float(sets[k - 1]['k_R'])
+        assert setup.config.k_R == float(sets[k - 1]['k_R'])
         assert setup.config.cones.names == ['obstacle']       # the testbed's own cone
     assert '| gain set |' in printed.out
 
