@@ -19,14 +19,16 @@ def imported_modules(path):
                 yield a.name
 
 
-def module_level_imports(path):
+def module_level_imports(path, functions=False):
     """The modules a source file imports when it is imported: every import statement but those
-    inside a function (a class body or an ``if``/``try`` at the top runs on import too). A name
-    imported from a module is given as that module's (``from a import b``: ``a`` and ``a.b``).
+    inside a function (a class body or an ``if``/``try`` at the top runs on import too); with
+    functions, those too. A name imported from a module is given as that module's too (``from a
+    import b``: ``a`` and ``a.b``, which may be a module).
     """
     def walk(node):
         for child in ast.iter_child_nodes(node):
-            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+            if not functions and isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef,
+                                                    ast.Lambda)):
                 continue
             if isinstance(child, ast.ImportFrom) and child.module:
                 yield child.module
