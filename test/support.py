@@ -8,8 +8,8 @@ import numpy as np
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray, UInt32MultiArray
 
+from geoctl_ros.core.actuation.esc_wire import ArmedState
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.core.supervisor.safety import ArmedState
 from geoctl_ros.nodes import qos
 from geoctl_ros.nodes.conversions import (
     armed_state_msg,

@@ -6,9 +6,14 @@ import csv
 import math
 import os
 
+import pytest
+from tools_support import NO_EXTRA
+
+pytest.importorskip('matplotlib', reason=NO_EXTRA)
+pytest.importorskip('distributed', reason=NO_EXTRA)
+
 from matplotlib.image import imread
 import numpy as np
-import pytest
 
 from geoctl_ros.benchmark import cases, run
 from geoctl_ros.cli import benchmark

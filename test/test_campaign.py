@@ -5,8 +5,9 @@ import os
 
 import numpy as np
 import pytest
+from tools_support import NO_EXTRA
 
-from geoctl_ros.campaign import manoeuvres, runner
+from geoctl_ros.campaign import manoeuvres
 from geoctl_ros.params import load_parameter_file
 from geoctl_ros.sim import scenario
 from geoctl_ros.sim.closed_loop import fly
@@ -74,6 +75,7 @@ def test_a_run_written_out_replays_to_the_same_figures(tmp_path):
     """A campaign's batch (flown as a worker flies it) and one of its runs alone from its file."""
     base = load_parameter_file(TESTBED)
     indices = [i for i in range(30) if manoeuvres.cone_count(1, i) == 2][:6]
+    runner = pytest.importorskip('geoctl_ros.campaign.runner', reason=NO_EXTRA)
     figures = runner.fly_batch((base, 1, 3.0, manoeuvres.DISTURBANCE_MAX, 1, {}, indices, 2,
                                 'all'))
     assert list(figures['run']) == indices and set(figures['cones']) == {2}

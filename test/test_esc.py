@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from geoctl_ros.core.supervisor.safety import EscHealth
+from geoctl_ros.core.actuation.esc_wire import EscHealth
 from geoctl_ros.esc import health, protocol
 from geoctl_ros.esc.bus import RecordingBus
 from geoctl_ros.esc.driver import EscDriver, EscStartError

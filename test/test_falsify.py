@@ -6,9 +6,16 @@ the bit.
 import csv
 import math
 
+import pytest
+from tools_support import NO_EXTRA
+
+pytest.importorskip('matplotlib', reason=NO_EXTRA)
+pytest.importorskip('distributed', reason=NO_EXTRA)
+pytest.importorskip('rtamt', reason=NO_EXTRA)
+pytest.importorskip('staliro', reason=NO_EXTRA)
+
 from matplotlib.image import imread
 import numpy as np
-import pytest
 
 from geoctl_ros.campaign.manoeuvres import CLEAR_DEG, angle_deg
 from geoctl_ros.cli import falsify as falsify_cli
@@ -19,15 +26,7 @@ from geoctl_ros.params import controller_setup, load_parameter_file
 from geoctl_ros.sim import closed_loop
 from geoctl_ros.sim.scenario import from_sections
 
-try:                      # development tools: on the development stack only (requirements.txt)
-    import rtamt  # noqa: F401
-    import staliro  # noqa: F401
-    FALSIFIER = True
-except ImportError:
-    FALSIFIER = False
-pytestmark = [pytest.mark.headless,
-              pytest.mark.skipif(not FALSIFIER, reason='needs psy-taliro and rtamt '
-                                 '(development stack)')]
+pytestmark = pytest.mark.headless
 
 
 def test_the_monitors_robustness_is_the_formulas():

@@ -4,13 +4,16 @@ escapes, nothing non-finite comes out, no motor moves, the next valid input is a
 refusal has a reason. Each boundary must both refuse and accept some of what it is given, so that
 a strategy that stopped reaching the code under test fails here.
 """
-from hypothesis import strategies as st
 import pytest
+from tools_support import NO_EXTRA
+
+pytest.importorskip('hypothesis', reason=NO_EXTRA)
+
+from hypothesis import strategies as st
 
 from geoctl_ros.fuzz.boundaries import BOUNDARIES, close_nodes
 from geoctl_ros.fuzz.hostile import Tally, run_property
 
-pytestmark = pytest.mark.odroid
 EXAMPLES = 100
 
 

@@ -32,7 +32,10 @@ def test_core_sim_params_and_mavlink_import_without_rclpy():
             '            raise ImportError("blocked: " + name)\n'
             'sys.meta_path.insert(0, Block())\n'
             'import pkgutil, importlib, geoctl_ros\n'
-            'for sub in ("core", "sim", "params", "mavlink", "records", "esc", "plots"):\n'
+            'import importlib.util\n'
+            '# plots: where matplotlib is (the extra tools; not on the vehicle stack)\n'
+            'for sub in ("core", "sim", "params", "mavlink", "records", "esc") + (\n'
+            '        ("plots",) if importlib.util.find_spec("matplotlib") else ()):\n'
             '    pkg = importlib.import_module("geoctl_ros." + sub)\n'
             '    for m in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + "."):\n'
             '        importlib.import_module(m.name)\n'
@@ -69,6 +72,28 @@ def test_no_layer_imports_a_higher_one():
     assert sorted(p.name for p in pathlib.Path(PKG, 'core').iterdir()
                   if p.suffix == '.py' and p.name != '__init__.py') == [], (
         'core/ holds its rooms only')
+
+
+def test_the_esc_layer_does_not_import_the_controllers_supervisor():
+    """esc/ (the ESC node's driver, health and buses) may import core, but not core.supervisor,
+    the controller's decisions: what the two exchange (the armed state, the ESCs' health, the
+    motor_commands check) is core.actuation.esc_wire's, which both import.
+    """
+    def supervisor_imports(source):
+        for node in ast.walk(ast.parse(source)):
+            names = []
+            if isinstance(node, ast.ImportFrom) and node.module:
+                # (the names too: `from geoctl_ros.core import supervisor`)
+                names = [node.module] + ['%s.%s' % (node.module, a.name) for a in node.names]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            yield from (n for n in names if re.match(r'geoctl_ros\.core\.supervisor(\.|$)', n))
+
+    assert list(supervisor_imports('from geoctl_ros.core import supervisor\n'))   # it sees one
+    bad = ['esc/%s imports %s' % (path.name, mod)
+           for path in sorted(pathlib.Path(PKG, 'esc').rglob('*.py'))
+           for mod in supervisor_imports(path.read_text())]
+    assert not bad, bad
 
 
 def _module_graph():

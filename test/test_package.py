@@ -7,6 +7,7 @@ parameter file and remapping they name exists); ``test_launch.py`` runs them wit
 """
 import ast
 import importlib.util
+import json
 import os
 import pathlib
 import re
@@ -18,7 +19,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import numpy_api
 import pytest
-from source_support import PKG, ROOT, imported_modules
+from source_support import PKG, ROOT, imported_modules, module_level_imports, package_modules
 from workspace import Workspace
 
 pytestmark = pytest.mark.odroid
@@ -27,7 +28,7 @@ pytestmark = pytest.mark.odroid
 
 def _console_scripts():
     text = open(os.path.join(ROOT, 'setup.py')).read()
-    return set(re.findall(r"'(\w+) = geoctl_ros\.[\w.]+:main'", text))
+    return set(re.findall(r"'(\w+) = geoctl_ros\.[\w.]+:\w+'", text))
 
 
 @pytest.mark.parametrize('name', ['testbed.launch.xml', 'sil.launch.xml'])
@@ -59,50 +60,295 @@ def test_launch_files_name_only_what_exists(name):
     assert "('share/' + PACKAGE + '/launch'" in open(os.path.join(ROOT, 'setup.py')).read()
 
 
-# what `rosdep install` resolves for each import that is not a ROS package of the same name
-# (keys from rosdistro's rosdep/python.yaml; pymavlink has no Ubuntu package, its key is pip's)
-ROSDEP_KEYS = {'numpy': 'python3-numpy', 'yaml': 'python3-yaml',
-               'matplotlib': 'python3-matplotlib', 'pymavlink': 'python3-pymavlink-pip',
-               'pytest': 'python3-pytest', 'rosbags': 'python3-rosbags-pip',
-               'dask': 'python3-dask', 'distributed': 'python3-distributed',
-               'smbus2': 'python3-smbus2', 'hypothesis': 'python3-hypothesis'}
-# imported by development tools only, never on the vehicle: not in package.xml, pinned in
-# requirements.txt (`./run tune` and `./run falsify`: the gains are tuned, and the envelope
-# attacked, on a development machine or a cluster)
-DEVELOPMENT_ONLY = {'optuna', 'rtamt', 'staliro', 'scipy'}
-ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python', 'std_msgs',
-                'geometry_msgs', 'sensor_msgs', 'std_srvs', 'diagnostic_msgs', 'rosgraph_msgs',
-                'launch_ros', 'visualization_msgs'}
+# --- the flight package and the tools: what each depends on -------------------------------------
+# The flight package's run-time dependencies, the vehicle's: the Python modules it imports, each
+# with the rosdep key package.xml declares it by (rosdistro's rosdep/python.yaml; pymavlink and
+# rosbags have no Ubuntu package: their keys are pip's) and its name on the package index
+# (setup.py's INSTALL_REQUIRES). rosbags is the recorder's (``record``, a node of the flight chain
+# that the runbook starts before arming).
+FLIGHT_MODULES = {'numpy': ('python3-numpy', 'numpy'), 'yaml': ('python3-yaml', 'pyyaml'),
+                  'pymavlink': ('python3-pymavlink-pip', 'pymavlink'),
+                  'smbus2': ('python3-smbus2', 'smbus2'),
+                  'rosbags': ('python3-rosbags-pip', 'rosbags')}
+# ROS 2's packages the flight package uses (from ROS 2, apt or the Jazzy wheels; not setup.py's):
+# rclpy with its own interfaces, common_interfaces' messages, and ros2launch for the launch files
+FLIGHT_ROS = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'rosgraph_msgs', 'std_msgs',
+              'geometry_msgs', 'sensor_msgs', 'std_srvs', 'diagnostic_msgs', 'visualization_msgs'}
+LAUNCH = 'ros2launch'
+# the development tools' modules beyond those: setup.py's extra `tools` (by index name), which is
+# never on the vehicle
+TOOL_MODULES = {'matplotlib': 'matplotlib', 'dask': 'dask', 'distributed': 'distributed',
+                'optuna': 'optuna', 'staliro': 'psy-taliro', 'rtamt': 'rtamt', 'scipy': 'scipy',
+                'hypothesis': 'hypothesis'}
+# ROS 2 packages that come with rclpy and the `ros2` command, which the tools and tests use too
+ROS_BESIDE = {'ament_index_python', 'launch_ros'}
+# the flight package's modules: the layers the flight chain is made of (the nodes and what they
+# import), and the commands that check a parameter file and a recorded flight on the vehicle
+# (scenario, report: their figures are the extra's) with the tools' front door
+FLIGHT_LAYERS = ('core', 'params', 'sim', 'esc', 'mavlink', 'nodes', 'records')
+FLIGHT_CLI = ('cli', 'cli.args', 'cli.scenario', 'cli.report', 'cli.tools')
 
 
-def _third_party_imports(top):
-    found = set()
-    for dirpath, _, files in os.walk(os.path.join(ROOT, top)):
-        for f in files:
-            if f.endswith('.py'):
-                found |= {m.split('.')[0] for m in imported_modules(os.path.join(dirpath, f))}
-    local = {f[:-3] for d in ('test', 'benchmarks') for f in os.listdir(os.path.join(ROOT, d))
-             if f.endswith('.py')}                      # the tests' own helpers
-    return found - set(sys.stdlib_module_names) - local - {'geoctl_ros'}
+def _setup_lists():
+    """setup.py's INSTALL_REQUIRES, the extras and the console scripts {name: target}."""
+    tree = ast.parse(open(os.path.join(ROOT, 'setup.py')).read())
+    consts = {t.id: ast.literal_eval(n.value) for n in tree.body if isinstance(n, ast.Assign)
+              for t in n.targets if isinstance(t, ast.Name) and t.id.isupper()
+              and isinstance(n.value, (ast.List, ast.Dict, ast.Constant))}
+    call = next(n for n in ast.walk(tree) if isinstance(n, ast.Call)
+                and getattr(n.func, 'id', None) == 'setup')
+    kw = {k.arg: k.value for k in call.keywords}
+    install = consts[kw['install_requires'].id]
+    extras = {ast.literal_eval(k): (consts[v.id] if isinstance(v, ast.Name)
+                                    else ast.literal_eval(v))
+              for k, v in zip(kw['extras_require'].keys, kw['extras_require'].values)}
+    scripts = dict(re.fullmatch(r'(\w+) = ([\w.]+:\w+)', e).groups()
+                   for e in ast.literal_eval(kw['entry_points'])['console_scripts'])
+    return install, extras, scripts
 
 
-def test_package_xml_declares_what_the_code_imports():
-    """Every import of the package (exec_depend) and of its tests (test_depend) is declared
-    with the key a lab's `rosdep install` resolves on Ubuntu 24.04.
-    """
+def _name(requirement):
+    """A requirement's distribution name, normalised (PEP 503)."""
+    return re.sub(r'[-_.]+', '-', re.match(r'[A-Za-z0-9_.-]+', requirement).group(0)).lower()
+
+
+def _pins(path):
+    """{normalised name: version} of a requirements file's ``name==version`` lines."""
+    pins = {}
+    for line in open(path):
+        m = re.match(r'([A-Za-z0-9_.-]+)(?:\[[\w,]+\])?==(\S+)', line.strip())
+        if m:
+            pins[_name(m.group(1))] = m.group(2)
+    return pins
+
+
+def _exec_depends():
     xml = open(os.path.join(ROOT, 'package.xml')).read()
-    exec_deps = set(re.findall(r'<exec_depend>([\w-]+)</exec_depend>', xml))
-    test_deps = set(re.findall(r'<test_depend>([\w-]+)</test_depend>', xml)) | exec_deps
-    for top, declared in (('geoctl_ros', exec_deps), ('test', test_deps)):
-        imported = _third_party_imports(top)
-        imported -= DEVELOPMENT_ONLY
-        unknown = imported - ROS_PACKAGES - set(ROSDEP_KEYS)
-        assert not unknown, '%s imports %s: add its rosdep key here and to package.xml' % (
-            top, sorted(unknown))
-        keys = {ROSDEP_KEYS.get(m, m) for m in imported}
-        assert keys <= declared, '%s: package.xml lacks %s' % (top, sorted(keys - declared))
+    return (set(re.findall(r'<exec_depend>([\w-]+)</exec_depend>', xml)),
+            set(re.findall(r'<test_depend>([\w-]+)</test_depend>', xml)))
+
+
+def _third_party(modules):
+    return {m.split('.')[0] for m in modules} - set(sys.stdlib_module_names) - {'geoctl_ros'}
+
+
+def _flight_modules():
+    return {name: path for name, path in package_modules().items()
+            if name.count('.') and (name.split('.')[1] in FLIGHT_LAYERS
+                                    or name.split('.', 1)[1] in FLIGHT_CLI)}
+
+
+def _on_import(name, files, lazy=False):
+    """The third-party modules that importing the package's module NAME imports, through every
+    module of the package it imports on the way (and their packages' __init__s); with lazy, the
+    imports inside functions too (what running it may import).
+    """
+    def scan(path):
+        return module_level_imports(path, functions=lazy)
+    parts = name.split('.')
+    stack, seen, found = ['.'.join(parts[:i]) for i in range(1, len(parts) + 1)], set(), set()
+    while stack:
+        m = stack.pop()
+        if m in seen:
+            continue
+        seen.add(m)
+        for mod in scan(files[m]):
+            parts = mod.split('.')
+            if parts[0] != 'geoctl_ros':
+                found |= _third_party([mod])
+                continue
+            while parts and '.'.join(parts) not in files:
+                parts.pop()
+            stack += ['.'.join(parts[:i]) for i in range(1, len(parts) + 1)]
+    return found
+
+
+def test_the_flight_packages_run_time_dependencies_are_the_vehicles_and_nothing_else():
+    """package.xml's exec_depends are the flight package's (FLIGHT_MODULES' keys, FLIGHT_ROS and
+    ros2launch) and setup.py's INSTALL_REQUIRES their index names: exactly what the flight
+    modules import, nothing more, nothing less; and requirements-odroid.txt, the vehicle's
+    stack, pins each of them and none of the tools' (so that a fresh venv of it with this
+    package holds no Dask, matplotlib, ...: the README's ODROID quick start has none either).
+    """
+    exec_deps, _ = _exec_depends()
+    install, _, _ = _setup_lists()
+    imported = set()
+    for path in _flight_modules().values():
+        imported |= _third_party(imported_modules(path))
+    unknown = imported - set(FLIGHT_MODULES) - FLIGHT_ROS
+    assert not unknown, 'the flight package imports %s: not a flight dependency' % sorted(unknown)
+    assert imported == set(FLIGHT_MODULES) | FLIGHT_ROS, 'declared but not imported: %s' % sorted(
+        set(FLIGHT_MODULES) | FLIGHT_ROS - imported)
+    assert exec_deps == {key for key, _ in FLIGHT_MODULES.values()} | FLIGHT_ROS | {LAUNCH}
+    assert {_name(r) for r in install} == {pip for _, pip in FLIGHT_MODULES.values()}
+    vehicle = _pins(os.path.join(ROOT, 'requirements-odroid.txt'))
+    assert {pip for _, pip in FLIGHT_MODULES.values()} <= set(vehicle)
+    tools = {_name(n) for n in TOOL_MODULES.values()}
+    assert not tools & set(vehicle), sorted(tools & set(vehicle))
     assert os.path.isfile(os.path.join(ROOT, 'LICENSE'))
     assert 'BSD 3-Clause' in open(os.path.join(ROOT, 'LICENSE')).read()
+
+
+def test_no_flight_module_imports_a_tool_dependency_on_import():
+    """No module of the flight package imports matplotlib, Dask, Optuna, ... when it is imported,
+    directly or through the package's modules it imports (parsed; imports inside functions are
+    the figures' of scenario and report, drawn with the extra only); the console scripts of the
+    flight package are its modules', and the tools' go through their front door
+    (geoctl_ros.cli.tools), which says in one line where they run. The check sees a planted one.
+    """
+    files = package_modules()
+    flight = _flight_modules()
+    assert {'geoctl_ros.nodes.controller', 'geoctl_ros.records.bag',
+            'geoctl_ros.cli.scenario'} <= set(flight)
+    bad = {name: sorted(_on_import(name, files) & set(TOOL_MODULES)) for name in sorted(flight)}
+    bad = {name: mods for name, mods in bad.items() if mods}
+    assert not bad, bad
+    assert _on_import('geoctl_ros.plots.scenario', files) & set(TOOL_MODULES)    # it sees one
+    _, _, scripts = _setup_lists()
+    from geoctl_ros.cli import tools  # noqa: PLC0415  (as the test reads it, after the above)
+    for name, target in scripts.items():
+        module, func = target.split(':')
+        if name in tools.TOOLS:
+            assert target == 'geoctl_ros.cli.tools:%s' % name, (name, target)
+            assert getattr(tools, func)
+        else:
+            assert module in flight, (name, target)
+
+
+# what a command's modules import inside a function that the command never calls (the check above
+# parses by module): the benchmark reads campaign.tune's GAINS; only tune's study imports optuna
+NEVER_CALLED = {'benchmark': {'optuna'}}
+
+
+def test_the_tools_dependencies_are_the_extra_tools_pinned_as_requirements_txt():
+    """setup.py's extra ``tools`` is exactly the tools' modules, each pinned to requirements.txt's
+    version (the development stack gets it); every other import of the package is a flight or a
+    ROS package; and each tool command's front door knows every tool module the command may
+    import (geoctl_ros.cli.tools.TOOLS), so that it refuses before a traceback would.
+    """
+    from geoctl_ros.cli import tools  # noqa: PLC0415
+    _, extras, _ = _setup_lists()
+    pins = _pins(os.path.join(ROOT, 'requirements.txt'))
+    extra = {_name(r): r.split('==', 1)[1] for r in extras[tools.EXTRA] if '==' in r}
+    assert len(extra) == len(extras[tools.EXTRA]), 'pin every one: %s' % extras[tools.EXTRA]
+    assert set(extra) == {_name(n) for n in TOOL_MODULES.values()}
+    assert {n: pins.get(n) for n in extra} == extra, 'requirements.txt pins them otherwise'
+    files = package_modules()
+    imported = set()
+    for path in files.values():
+        imported |= _third_party(imported_modules(path))
+    unknown = imported - set(FLIGHT_MODULES) - FLIGHT_ROS - set(TOOL_MODULES) - ROS_BESIDE
+    assert not unknown, 'the package imports %s: add it to the flight package or the extra' % (
+        sorted(unknown))
+    for command, (_, needs) in tools.TOOLS.items():
+        # what it imports on start, and what it may import as it runs (matplotlib aside: the
+        # figures of those that run without it are drawn where geoctl_ros.plots.available)
+        used = _on_import('geoctl_ros.cli.' + command, files) | (
+            _on_import('geoctl_ros.cli.' + command, files, lazy=True) - {'matplotlib'}
+            - NEVER_CALLED.get(command, set()))
+        used &= set(TOOL_MODULES)
+        assert used <= set(needs), '%s imports %s: add them to cli.tools.TOOLS' % (
+            command, sorted(used - set(needs)))
+    assert {tools.DISTRIBUTIONS.get(m, m) for m in TOOL_MODULES} == set(TOOL_MODULES.values())
+
+
+def test_the_tests_imports_are_declared():
+    """Every import of the tests is the flight package's, a test_depend of package.xml, or a
+    tool's (those tests skip without the extra, which the vehicle has not).
+    """
+    exec_deps, test_deps = _exec_depends()
+    keys = {module: key for module, (key, _) in FLIGHT_MODULES.items()}
+    keys.update({'pytest': 'python3-pytest'})
+    imported = set()
+    for dirpath, _, names in os.walk(os.path.join(ROOT, 'test')):
+        imported |= {m for f in names if f.endswith('.py')
+                     for m in _third_party(imported_modules(os.path.join(dirpath, f)))}
+    local = {f[:-3] for d in ('test', 'benchmarks') for f in os.listdir(os.path.join(ROOT, d))
+             if f.endswith('.py')}                      # the tests' own helpers
+    imported -= local | set(TOOL_MODULES) | ROS_BESIDE
+    declared = exec_deps | test_deps
+    assert {keys.get(m, m) for m in imported} <= declared, sorted(
+        {keys.get(m, m) for m in imported} - declared)
+
+
+BLOCK_TOOLS = """
+import contextlib, io, json, sys
+class Block:
+    def find_spec(self, name, path=None, target=None):
+        if name.split('.')[0] in %r:
+            raise ImportError('blocked: ' + name)
+sys.meta_path.insert(0, Block())
+import importlib.util
+_find_spec = importlib.util.find_spec
+def find_spec(name, package=None):
+    if name.split('.')[0] in %r:
+        return None
+    return _find_spec(name, package)
+importlib.util.find_spec = find_spec
+"""
+
+TOOLS_WITHOUT_EXTRA = """
+from geoctl_ros.cli import tools
+out = {}
+for command in tools.TOOLS:
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            code = tools.run(command, ['--help'])
+        except SystemExit as e:
+            code = e.code
+    out[command] = [code, err.getvalue()]
+out['imported'] = sorted(m for m in sys.modules if m.split('.')[0] in %r)
+print(json.dumps(out))
+"""
+
+
+def test_without_the_extra_each_tool_says_in_one_line_where_it_runs():
+    """With the tools' modules made unimportable (as on the vehicle's stack), every tool command
+    (console script or ./run's) given --help says in one line that it is a development tool and
+    how to get the extra, exits 2, and has imported none of them; one that needs nothing of the
+    extra (soak, sensors) runs, and its help says where it runs.
+    """
+    from geoctl_ros.cli import tools  # noqa: PLC0415
+    blocked = sorted(TOOL_MODULES)
+    code = BLOCK_TOOLS % (blocked, blocked) + TOOLS_WITHOUT_EXTRA % (blocked,)
+    r = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, cwd=ROOT,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    assert out.pop('imported') == []
+    for command, (rc, err) in out.items():
+        if tools.TOOLS[command][1]:
+            assert rc == 2 and len(err.strip().splitlines()) == 1, (command, rc, err)
+            assert 'development tool' in err and "'.[tools]'" in err and 'Traceback' not in err
+            assert err.startswith(command + ': ')
+        else:
+            assert rc == 0 and not err, (command, rc, err)
+
+
+SCENARIO_WITHOUT_MATPLOTLIB = """
+from geoctl_ros.cli import scenario
+sys.exit(scenario.main([sys.argv[1], '--out', sys.argv[2], '--duration', '0.2']))
+"""
+
+
+def test_scenario_runs_on_the_vehicle_without_matplotlib_and_says_the_figures_are_skipped(
+        tmp_path):
+    """``scenario`` (the runbook's check of a parameter file on the vehicle) writes its summary
+    and history without matplotlib, and says in one line that the figures need the extra.
+    """
+    blocked = sorted(TOOL_MODULES)
+    code = BLOCK_TOOLS % (blocked, blocked) + SCENARIO_WITHOUT_MATPLOTLIB
+    path = os.path.join(ROOT, 'config', 'scenarios', 'testbed_yaw90.yaml')
+    r = subprocess.run([sys.executable, '-c', code, path, str(tmp_path)], capture_output=True,
+                       text=True, cwd=ROOT, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert 'Traceback' not in r.stderr
+    assert [line for line in r.stderr.splitlines() if line.startswith('scenario:')] == [
+        "scenario: no figures: matplotlib is not installed here (the extra 'tools': pip install "
+        "-e '.[tools]' in a clone, or draw them on a development machine); the rest is written"]
+    assert sorted(os.listdir(tmp_path)) == ['history.csv', 'summary.json']
+    assert 'constraint kept' in r.stdout
 
 
 @pytest.mark.skipif(shutil.which('colcon', path=os.path.dirname(sys.executable)) is None,
@@ -112,8 +358,9 @@ def test_package_xml_declares_what_the_code_imports():
                            'the launch tests build the package with colcon')
 def test_colcon_builds_installs_and_tests_the_package_as_on_the_vehicle(tmp_path):
     """The apt path's last two steps, in a workspace of its own: `colcon build` installs every
-    console script where `ros2 run` looks and the files the launch files name, and `colcon
-    test` runs the package's pytest suite (one module of it here).
+    console script where `ros2 run` looks and the files the launch files name (a tool's, without
+    its extra, says so in one line), and `colcon test` runs the package's pytest suite (one
+    module of it here).
     """
     ws = Workspace(str(tmp_path / 'ws'))
     colcon, env = ws.colcon, ws.env
@@ -129,6 +376,15 @@ def test_colcon_builds_installs_and_tests_the_package_as_on_the_vehicle(tmp_path
     r = subprocess.run([str(prefix / 'lib' / 'geoctl_ros' / 'scenario'), '--help'], env=env,
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and 'usage' in r.stdout, r.stderr
+    # a tool's script, where its extra is not installed (the vehicle's stack): one line
+    r = subprocess.run([str(prefix / 'lib' / 'geoctl_ros' / 'tune'), '--help'], env=env,
+                       capture_output=True, text=True, timeout=60)
+    if importlib.util.find_spec('optuna') is None:
+        assert r.returncode == 2 and not r.stdout, r.stdout
+        assert r.stderr.startswith('tune: a development tool (gain tuning)'), r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+    else:
+        assert r.returncode == 0 and 'usage' in r.stdout, r.stderr
     colcon('test', '--packages-select', 'geoctl_ros', '--pytest-args', 'test/test_so3.py')
     summary = colcon('test-result', '--all')
     m = re.search(r'(\d+) tests, 0 errors, 0 failures', summary)

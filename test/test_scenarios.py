@@ -8,10 +8,9 @@ import re
 import subprocess
 import sys
 
-import matplotlib.image
 import pytest
+from tools_support import NO_EXTRA
 
-from geoctl_ros.benchmark.run import GAIN_KEYS
 from geoctl_ros.cli import scenario as scenario_cli
 from geoctl_ros.cli.demo import table_row
 from geoctl_ros.params import load_parameter_file, node_overrides, resolve
@@ -60,6 +59,11 @@ def runs(tmp_path_factory):
     return out
 
 
+def imread(path):
+    """A figure's pixels (matplotlib's reader)."""
+    return pytest.importorskip('matplotlib.image', reason=NO_EXTRA).imread(path)
+
+
 def test_every_run_writes_summary_history_and_figures(runs):
     for name, (summary, d) in runs.items():
         assert SUMMARY_KEYS <= set(summary), name
@@ -77,7 +81,7 @@ def test_every_run_writes_summary_history_and_figures(runs):
             assert not list(d.glob('*.png')), name                    # --no-plots
             continue
         for fig in FIGURES:
-            img = matplotlib.image.imread(d / fig)
+            img = imread(d / fig)
             assert img.shape[0] > 300 and img.shape[1] > 300 and img.std() > 0.01, (name, fig)
 
 
@@ -190,7 +194,7 @@ def test_testbed_rotors_keep_the_cone_converge_and_plot_motor_commands(runs):
     assert s['saturated_fraction'] < 0.01
     cmds = [int(float(rows[-1]['cmd_%d' % i])) for i in range(1, 7)]
     assert all(110 <= c <= 125 for c in cmds)                            # near hover (118)
-    img = matplotlib.image.imread(d / 'motor_commands.png')
+    img = imread(d / 'motor_commands.png')
     assert img.shape[0] > 300 and img.std() > 0.01
 
 
@@ -262,10 +266,12 @@ def test_the_testbed_scenarios_fly_the_testbeds_own_gains():
     its estimate and its guidance (the files repeat them: a scenario file is whole in itself), and
     testbed_experiment the paper's experiment's.
     """
+    keys = pytest.importorskip('geoctl_ros.benchmark.run', reason=NO_EXTRA).GAIN_KEYS
+
     def gains(name):
         path = os.path.join(ROOT, 'config', *name)
         return {k: v for k, v in resolve('controller', node_overrides(
-            load_parameter_file(path), 'controller')).items() if k in GAIN_KEYS}
+            load_parameter_file(path), 'controller')).items() if k in keys}
     testbed = gains(['testbed.yaml'])
     for name in ('testbed_yaw90.yaml', 'testbed_yaw90_wrong_mass.yaml'):
         assert gains(['scenarios', name]) == testbed, name

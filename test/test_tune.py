@@ -5,9 +5,15 @@ same seed proposes and finds the same gain sets, bit for bit.
 import csv
 import os
 
+import pytest
+from tools_support import NO_EXTRA
+
+pytest.importorskip('matplotlib', reason=NO_EXTRA)
+pytest.importorskip('distributed', reason=NO_EXTRA)
+pytest.importorskip('optuna', reason=NO_EXTRA)
+
 from matplotlib.image import imread
 import numpy as np
-import pytest
 
 from geoctl_ros.campaign import tune
 from geoctl_ros.cli import tune as tune_cli

@@ -12,6 +12,7 @@ import sys
 from geoctl_ros.benchmark import cases
 from geoctl_ros.benchmark.run import GAIN_SETS, benchmark, gain_set
 from geoctl_ros.campaign import cluster, runner
+from geoctl_ros.cli import tools
 from geoctl_ros.cli.args import add_cluster_arguments, cannot_start, positive_seconds
 from geoctl_ros.cli.campaign import progress_printer
 from geoctl_ros.params import ConfigError, load_parameter_file
@@ -19,7 +20,8 @@ from geoctl_ros.sil.rosenv import config_dir
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(prog='benchmark', description=__doc__.split('\n\n')[0])
+    parser = argparse.ArgumentParser(prog='benchmark', description=__doc__.split('\n\n')[0],
+                                     epilog=tools.WHERE)
     parser.add_argument('--out', required=True, help='output directory')
     parser.add_argument('--runs', type=int, default=1000,
                         help='random manoeuvres, each flown by every law (1000; 0: none)')

@@ -11,6 +11,7 @@ import sys
 import time
 
 from geoctl_ros.campaign import cluster, manoeuvres, runner, study
+from geoctl_ros.cli import tools
 from geoctl_ros.cli.args import add_cluster_arguments, cannot_start, positive_seconds
 from geoctl_ros.params import ConfigError, load_parameter_file
 from geoctl_ros.sil.rosenv import config_dir
@@ -32,7 +33,8 @@ def progress_printer(total, prog='campaign'):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(prog='campaign', description=__doc__.split('\n\n')[0])
+    parser = argparse.ArgumentParser(prog='campaign', description=__doc__.split('\n\n')[0],
+                                     epilog=tools.WHERE)
     parser.add_argument('--runs', type=int, default=1000, help='number of manoeuvres (1000)')
     parser.add_argument('--seed', type=int, default=1, help='campaign seed (1)')
     parser.add_argument('--stratum', choices=sorted(manoeuvres.STRATA), default='all',

@@ -16,6 +16,8 @@ import glob
 import os
 import sys
 
+from geoctl_ros import plots
+from geoctl_ros.cli import tools
 from geoctl_ros.records import scenario as scenario_files
 from geoctl_ros.sil import flight
 from geoctl_ros.sil.rosenv import config_dir
@@ -38,11 +40,11 @@ def table_row(summary):
 
 
 def headless(out):
-    rows = []
+    rows, figures = [], plots.available('demo')
     for path in sorted(glob.glob(os.path.join(config_dir(), 'scenarios', '*.yaml'))):
         name = os.path.splitext(os.path.basename(path))[0]
         result = scenario.run(scenario.load(path))
-        scenario_files.write(result, os.path.join(out, name))
+        scenario_files.write(result, os.path.join(out, name), plots=figures)
         rows.append(table_row(result.summary))
         print('%-34s done (%s)' % (name, os.path.join(out, name)), file=sys.stderr)
     print(TABLE_HEAD)
@@ -51,7 +53,8 @@ def headless(out):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(prog='demo', description=__doc__.split('\n\n')[0])
+    parser = argparse.ArgumentParser(prog='demo', description=__doc__.split('\n\n')[0],
+                                     epilog=tools.WHERE)
     parser.add_argument('--out', default='out', help='output folder (default: ./out)')
     parser.add_argument('--headless', action='store_true',
                         help='run every shipped scenario headless and print the results table')
@@ -95,7 +98,9 @@ def main(argv=None):
           % (sub['frequency_hz'], sub['gap_std_ms'], sub['gap_max_ms']))
     print('  commands after disarm  %s%s' % ('all zero' if s['commands_zero_after_disarm']
                                             else 'NOT ZERO', ' (at the ESCs)' if args.esc else ''))
-    print('  wrote %s/sil_summary.json, %s/sil.png' % (args.out, args.out))
+    print('  wrote %s/sil_summary.json%s' % (
+        args.out, ', %s/sil.png' % args.out if os.path.isfile(os.path.join(args.out, 'sil.png'))
+        else ''))
     if s['record']:
         print('  recorded the flight   %s (./run report %s)' % (s['record'], s['record']))
     ok = (s['min_cone_margin_deg'] is None or s['min_cone_margin_deg'] > 0) and \

@@ -18,6 +18,7 @@ import sys
 import time
 
 from geoctl_ros.campaign import cluster, manoeuvres
+from geoctl_ros.cli import tools
 from geoctl_ros.cli.args import add_cluster_arguments, cannot_start, positive_seconds
 from geoctl_ros.core.law.brake import ASSUMED_WINDOW_S
 from geoctl_ros.falsify.envelope import OUTSIDE, Envelope, Space
@@ -88,7 +89,8 @@ def write_evaluations(path, searches, space, names):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(prog='falsify', description=__doc__.split('\n\n')[0])
+    parser = argparse.ArgumentParser(prog='falsify', description=__doc__.split('\n\n')[0],
+                                     epilog=tools.WHERE)
     parser.add_argument('--budget', type=int, default=2000, help='evaluations per search (2000)')
     parser.add_argument('--optimizers', type=lambda t: _names(t, OPTIMIZERS, 'optimizer'),
                         default=['uniform', 'de'],
@@ -115,13 +117,9 @@ def main(argv=None):
         parser.error('--budget, --workers and --cones must be positive')
     if not (0.0 <= args.latency_max_ms <= 490.0 and 0.0 <= args.jitter_max_ms <= 100.0):
         parser.error('--latency-max-ms must be within 0-490 and --jitter-max-ms within 0-100')
-    try:
-        import rtamt  # noqa: F401, PLC0415  (development tools: not on the vehicle's stack)
-        import staliro  # noqa: F401, PLC0415
-    except ImportError:
-        print('falsify: needs psy-taliro and rtamt (pip install psy-taliro==3.2.0 rtamt==0.4.10, '
-              'as requirements.txt pins them): falsify on a development machine or a cluster, '
-              'not on the vehicle', file=sys.stderr)
+    absent = tools.missing('falsify')   # (psy-taliro and rtamt are imported when it searches)
+    if absent:
+        print(tools.refusal('falsify', absent), file=sys.stderr)
         return 2
     env = Envelope(latency_ms_max=args.latency_max_ms, jitter_ms_max=args.jitter_max_ms,
                    cones=args.cones, duration=args.duration)

@@ -4,11 +4,13 @@ import sys
 
 import numpy as np
 
+from geoctl_ros.cli import tools
 from geoctl_ros.fuzz import boundaries
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(prog='fuzz', description=boundaries.__doc__.split('\n\n')[0])
+    parser = argparse.ArgumentParser(prog='fuzz', description=boundaries.__doc__.split('\n\n')[0],
+                                     epilog=tools.WHERE)
     parser.add_argument('--examples', type=int, default=10_000, help='inputs per boundary')
     parser.add_argument('--boundary', action='append', choices=sorted(boundaries.BOUNDARIES),
                         help='only these (default: all)')

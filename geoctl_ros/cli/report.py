@@ -9,15 +9,16 @@ conventions), otherwise from ``/pose`` (records from before ``/attitude``).
 
 Writes ``summary.json``, ``summary.md``, ``flight.png`` and ``sensor_path.png`` to DIR (default:
 BAG/report) and prints the Markdown summary. Topics the bag lacks are named, and what can be
-drawn without them is drawn. What is not a readable bag ends with one line and exit code 2.
+drawn without them is drawn. What is not a readable bag ends with one line and exit code 2. The
+figures need matplotlib (the extra ``tools``): without it one line says they are skipped.
 """
 import argparse
 import json
 import os
 import sys
 
+from geoctl_ros import plots
 from geoctl_ros.params import ConfigError
-from geoctl_ros.plots import flight as flight_plots
 from geoctl_ros.records import report
 
 
@@ -59,7 +60,8 @@ def main(argv=None):
         fh.write('\n')
     with open(os.path.join(out, 'summary.md'), 'w') as fh:
         fh.write(text)
-    if not args.no_plots:
+    if not args.no_plots and plots.available('report'):
+        from geoctl_ros.plots import flight as flight_plots  # noqa: PLC0415  (matplotlib)
         flight_plots.flight_figures(f, out)
         if headless is not None:
             flight_plots.compare_figure(f, headless, t_arm, out)

@@ -4,7 +4,7 @@ A scenario file is a ROS 2 parameter file with ``/**`` (shared), ``controller:``
 optionally ``scenario:`` sections; the parameters are those of ``geoctl_ros.params``. The
 controller runs at ``rate_hz`` with a zero-order hold on its moment; the simulator integrates at
 ``integration_rate_hz`` (an integer multiple). Writes DIR/summary.json, DIR/history.csv (one row
-per control step) and PNG plots like the paper's figures.
+per control step) and PNG plots like the paper's figures (with matplotlib, the extra ``tools``).
 
 ``scenario.latency`` delays the measurements: at each control step the controller sees the
 simulated state of ``latency`` seconds before (noise added to that state), as a motion-capture
@@ -17,6 +17,7 @@ import argparse
 import os
 import sys
 
+from geoctl_ros import plots
 from geoctl_ros.cli.args import positive_seconds
 from geoctl_ros.core.law.gains import gain_condition
 from geoctl_ros.params import ConfigError, controller_config
@@ -60,7 +61,8 @@ def main(argv=None):
         print('warning: ' + check.message(), file=sys.stderr)
     result = run(scenario, args.duration)
     try:
-        scenario_files.write(result, args.out, plots=not args.no_plots)
+        scenario_files.write(result, args.out,
+                             plots=not args.no_plots and plots.available('scenario'))
     except OSError as e:
         print('scenario: --out %s: %s' % (args.out, e.strerror or e), file=sys.stderr)
         return 2

@@ -12,12 +12,14 @@ import os
 import sys
 import tempfile
 
+from geoctl_ros.cli import tools
 from geoctl_ros.sil import sensors
 from geoctl_ros.sil.rosenv import config_dir
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(prog='sensors', description=__doc__.split('\n\n')[0])
+    parser = argparse.ArgumentParser(prog='sensors', description=__doc__.split('\n\n')[0],
+                                     epilog=tools.WHERE)
     parser.add_argument('--case', action='append', choices=sorted(sensors.CASES),
                         help='a case (repeatable; default: all)')
     parser.add_argument('--duration', type=float, default=15.0,

@@ -12,12 +12,14 @@ import os
 import sys
 import tempfile
 
+from geoctl_ros.cli import tools
 from geoctl_ros.sil import measures, soak
 from geoctl_ros.sil.rosenv import config_dir
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(prog='soak', description=__doc__.split('\n\n')[0])
+    parser = argparse.ArgumentParser(prog='soak', description=__doc__.split('\n\n')[0],
+                                     epilog=tools.WHERE)
     parser.add_argument('--case', action='append', choices=sorted(soak.CASES),
                         help='a case to run (repeatable; default: all)')
     parser.add_argument('--duration', type=float, default=60.0, help='seconds per case (60)')

@@ -19,6 +19,7 @@ import time
 import numpy as np
 
 from geoctl_ros.campaign import cluster, study, tune
+from geoctl_ros.cli import tools
 from geoctl_ros.cli.args import add_cluster_arguments, cannot_start, positive_seconds
 from geoctl_ros.params import (
     CONTROLLER,
@@ -44,7 +45,8 @@ def _line(number, gains, got):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(prog='tune', description=__doc__.split('\n\n')[0])
+    parser = argparse.ArgumentParser(prog='tune', description=__doc__.split('\n\n')[0],
+                                     epilog=tools.WHERE)
     parser.add_argument('--trials', type=int, default=40, help='gain sets tried (40)')
     parser.add_argument('--runs', type=int, default=320,
                         help='random manoeuvres each gain set flies (320)')
@@ -70,11 +72,9 @@ def main(argv=None):
         parser.error('--trials, --runs, --workers, --best and --check-runs must be positive')
     if args.check_seed is None:
         args.check_seed = args.seed + 1000
-    try:
-        import optuna  # noqa: F401, PLC0415  (a development tool: not on the vehicle's stack)
-    except ImportError:
-        print('tune: needs optuna (pip install optuna==5.1.0, as requirements.txt pins it): '
-              'tune on a development machine or a cluster, not on the vehicle', file=sys.stderr)
+    absent = tools.missing('tune')      # (optuna is imported when the study starts)
+    if absent:
+        print(tools.refusal('tune', absent), file=sys.stderr)
         return 2
     latency_path = os.path.join(config_dir(), 'scenarios', 'testbed_yaw90.yaml')
     try:

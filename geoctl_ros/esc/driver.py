@@ -19,7 +19,7 @@ from typing import Any, List, Optional, Tuple
 
 import numpy as np
 
-from geoctl_ros.core.supervisor.safety import motor_commands_problem
+from geoctl_ros.core.actuation.esc_wire import motor_commands_problem
 from geoctl_ros.core.telemetry.stats import WindowStats
 from geoctl_ros.esc import protocol
 from geoctl_ros.esc.bus import BusError

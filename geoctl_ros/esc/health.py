@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import math
 from typing import Iterable, List, NamedTuple, Optional, Tuple
 
-from geoctl_ros.core.supervisor.safety import EscHealth
+from geoctl_ros.core.actuation.esc_wire import EscHealth
 from geoctl_ros.core.telemetry.codec import Codec, Key
 from geoctl_ros.core.telemetry.diagnostics import Window, window, window_text, window_value
 from geoctl_ros.esc import protocol

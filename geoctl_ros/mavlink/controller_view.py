@@ -6,11 +6,8 @@ import math
 
 import numpy as np
 
-from geoctl_ros.core.supervisor.safety import (
-    angular_velocity_problem,
-    attitude_of,
-    motor_commands_problem,
-)
+from geoctl_ros.core.actuation.esc_wire import motor_commands_problem
+from geoctl_ros.core.supervisor.safety import angular_velocity_problem, attitude_of
 from geoctl_ros.core.telemetry.diagnostics import Status
 
 # DEBUG_FLOAT_ARRAY / NAMED_VALUE_FLOAT names (at most 10 characters; docs/mavlink.md, "MAVLink").

@@ -18,10 +18,11 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray, UInt16MultiArray, UInt32MultiArray
 from std_srvs.srv import SetBool, Trigger
 
+from geoctl_ros.core.actuation.esc_wire import ArmedState
 from geoctl_ros.core.law.gains import gain_condition
 from geoctl_ros.core.supervisor.loop import ControlLoop
 from geoctl_ros.core.supervisor.loop_types import step_period
-from geoctl_ros.core.supervisor.safety import ArmedState, new_session
+from geoctl_ros.core.supervisor.safety import new_session
 from geoctl_ros.core.telemetry.diagnostics import NAME as DIAGNOSTICS_NAME
 from geoctl_ros.core.telemetry.diagnostics import failsafe
 from geoctl_ros.core.telemetry.stats import WindowStats
@@ -97,7 +98,7 @@ class ControllerNode(Node):
                                  qos.COMMAND)
         self.pub_motors = self.create_publisher(Float64MultiArray, 'motor_commands', qos.COMMAND)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
-        # the armed state and session the ESC node follows (core.supervisor.safety.ArmedState)
+        # the armed state and session the ESC node follows (core.actuation.esc_wire.ArmedState)
         self.session = new_session()
         self.pub_armed = self.create_publisher(UInt32MultiArray, '~/armed', qos.LATCHED)
         self._armed_sent = None

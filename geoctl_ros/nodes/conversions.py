@@ -10,7 +10,7 @@ from std_msgs.msg import (
     UInt32MultiArray,
 )
 
-from geoctl_ros.core.supervisor.safety import ArmedState
+from geoctl_ros.core.actuation.esc_wire import ArmedState
 from geoctl_ros.core.telemetry.diagnostics import Status, from_values, to_values
 from geoctl_ros.mavlink.health import Report as BridgeReport
 from geoctl_ros.mavlink.health import from_values as bridge_values

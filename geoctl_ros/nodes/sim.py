@@ -30,8 +30,8 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 
+from geoctl_ros.core.actuation.esc_wire import motor_commands_problem
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.core.supervisor.safety import motor_commands_problem
 from geoctl_ros.esc.protocol import current_raw, decode
 from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.nodes import qos, ros_params

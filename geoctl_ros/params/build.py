@@ -183,7 +183,6 @@ class ControllerSetup:
     loop: LoopSettings           # the loop's and the node's own settings
     frames: InputFrames          # the inputs' conventions
     agreement: AgreementSettings   # the sensor checks
-    values: dict                 # the resolved parameters it was built from (for reconfiguring)
 
 
 def controller_setup(values: dict) -> 'ControllerSetup':
@@ -239,7 +238,7 @@ def controller_setup(values: dict) -> 'ControllerSetup':
         raise ConfigError(errors)
     return ControllerSetup(config, mix, R_d, SetpointSchedule(times, rotations),
                            loop_settings(values), input_frames(values),
-                           agreement_settings(values), values)
+                           agreement_settings(values))
 
 
 def airframe(values: dict) -> Tuple[RotorGeometry, ThrustCurve, List[int]]:

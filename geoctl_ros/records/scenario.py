@@ -1,12 +1,11 @@
 """A scenario run's files: DIR/summary.json, DIR/history.csv (one row per control step) and the
-PNG figures like the paper's (``geoctl_ros.plots``).
+PNG figures like the paper's (``geoctl_ros.plots``, imported only to draw them: matplotlib is the
+development tools' extra, and ``scenario`` runs on the vehicle without it).
 """
 import json
 import os
 
 import numpy as np
-
-from geoctl_ros.plots import scenario as scenario_plots
 
 
 def write(result, out_dir, plots=True):
@@ -18,5 +17,6 @@ def write(result, out_dir, plots=True):
     np.savetxt(os.path.join(out_dir, 'history.csv'), result.history, delimiter=',',
                header=','.join(result.columns), comments='', fmt='%.9g')
     if plots:
+        from geoctl_ros.plots import scenario as scenario_plots  # noqa: PLC0415  (matplotlib)
         scenario_plots.scenario_figures(result, out_dir)
 

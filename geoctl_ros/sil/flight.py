@@ -13,6 +13,7 @@ import time
 import numpy as np
 import rclpy
 
+from geoctl_ros import plots
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.telemetry.diagnostics import aggregate_ms
 from geoctl_ros.esc.virtual import VirtualEscBus
@@ -27,7 +28,6 @@ from geoctl_ros.params import (
     resolve,
 )
 from geoctl_ros.params.esc import esc_config
-from geoctl_ros.plots import flight as flight_plots
 from geoctl_ros.sil.processes import Monitor, NodeProcess
 from geoctl_ros.sil.rosenv import use_node_env
 
@@ -130,6 +130,8 @@ def fly(params_file, out, duration, monitor_factory=None, mavlink=None, record=T
     with open(os.path.join(out, 'sil_summary.json'), 'w') as f:
         json.dump(summary, f, indent=2)
         f.write('\n')
-    flight_plots.sil_figure(out, t, angles, cones, err, psi, cmd_times - t_arm, commands)
+    if plots.available('demo'):
+        from geoctl_ros.plots import flight as flight_plots  # noqa: PLC0415  (matplotlib)
+        flight_plots.sil_figure(out, t, angles, cones, err, psi, cmd_times - t_arm, commands)
     return summary
 

@@ -214,20 +214,3 @@ class ConeSet:
     def margins_deg(self, R: np.ndarray) -> np.ndarray:
         """Cone margins (angle to axis minus half-angle, degrees) at attitude R."""
         return self.angles_deg(R) - self.theta_deg
-
-    def F(self, R: np.ndarray) -> np.ndarray:
-        """The paper's F (eq. 28) at R for each cone, (n, 3, 3): d/dt e_RB,i = F_i Omega.
-
-        Valid outside the floor band, where the barrier is the paper's; used by tests and the gain
-        check, not by the control step.
-        """
-        out = np.empty((len(self), 3, 3))
-        r = self.r
-        r_hat = hat(r)
-        for i, v in enumerate(self.V):
-            RTv = R.T @ v
-            d = float(r @ RTv) - self.cos_theta[i]        # s - cos(theta)
-            term = np.outer(R.T @ (hat(v) @ (R @ r)), v @ R @ r_hat)
-            out[i] = ((float(v @ R @ r) * np.eye(3) - np.outer(RTv, r) + term / d)
-                      / (self.alpha * d))
-        return out

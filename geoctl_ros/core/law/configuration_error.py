@@ -9,7 +9,7 @@ import numpy as np
 
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.so3 import matvec, transpose, vee
-from geoctl_ros.core.law.cones import ConeEval, ConeSet
+from geoctl_ros.core.law.cones import ConeEval
 from geoctl_ros.core.law.mechanics import gravity_moment
 
 
@@ -19,20 +19,6 @@ def attractive_error(R: np.ndarray, R_d: np.ndarray, G: np.ndarray) -> Tuple[Any
     A = 0.5 * so3.dot(1.0 - np.diagonal(RdtR, 0, -2, -1), G)
     M = G[:, None] * RdtR            # G R_d^T R; its transpose is R^T R_d G
     return A, 0.5 * vee(M - transpose(M))
-
-
-def E_matrix(R: np.ndarray, R_d: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """E(R, R_d) of eq. (27): d/dt e_RA = E e_Omega."""
-    M = (R.T @ R_d) * G[None, :]     # R^T R_d G
-    return 0.5 * (np.trace(M) * np.eye(3) - M)
-
-
-def configuration_error(R: np.ndarray, R_d: np.ndarray, G: np.ndarray, cones: ConeSet) -> tuple:
-    """Psi, e_R, A, e_RA and the cone evaluation at R (Prop. 1 generalised to several cones)."""
-    A, e_RA = attractive_error(R, R_d, G)
-    ev = cones.evaluate(R)
-    psi, e_R = with_cones(A[..., None], e_RA, ev)
-    return psi, e_R, A, e_RA, ev
 
 
 def with_cones(A: Any, e_RA: np.ndarray, ev: ConeEval) -> Tuple[Any, np.ndarray]:

@@ -14,15 +14,20 @@ Rules (docs/safety-behaviour.md says the same to users):
   the stream is lost.
 - Arming is refused unless pose and angular velocity are both fresh. While armed, if either is
   lost the supervisor disarms (failsafe) and says why. Motor commands are zero unless armed.
+
+The values exchanged with the nodes that drive the motors (ArmedState, EscHealth, EscStatus and
+the motor_commands check) are ``geoctl_ros.core.actuation.esc_wire``'s, which esc/ imports
+without the supervisor; ``esc_problem`` here is the controller's judgement of the ESC node's
+report.
 """
 from dataclasses import dataclass
-from enum import IntEnum
 import math
 import secrets
-from typing import List, NamedTuple, Optional, Tuple
+from typing import List, Optional, Tuple
 
 import numpy as np
 
+from geoctl_ros.core.actuation.esc_wire import EscHealth, EscStatus
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.so3 import Vector
 from geoctl_ros.core.telemetry.diagnostics import failsafe
@@ -47,17 +52,6 @@ def attitude_of(q: Vector) -> Tuple[Optional[np.ndarray], Optional[str]]:
     """
     problem = quaternion_problem(q)
     return (None, problem) if problem else (so3.quat_to_rot(q), None)
-
-
-def motor_commands_problem(data: Vector, n: int) -> Optional[str]:
-    """Why a motor_commands message cannot be actuated (a sentence), or None: it must hold n
-    finite values in [0, 1] (the sim and the ESC node refuse it the same way).
-    """
-    if not len(data) or len(data) != n or not all(math.isfinite(x) for x in data):
-        return 'expected %d finite values, got %r' % (n, [round(x, 4) for x in list(data)[:8]])
-    if min(data) < 0.0 or max(data) > 1.0:
-        return 'values outside [0, 1]'
-    return None
 
 
 def specific_force_problem(f: Optional[Vector]) -> Optional[str]:
@@ -191,34 +185,6 @@ class Stream:
                 'ride-through limit' if self.ride_through > self.timeout else 'timeout',
                 self.limit)
         return None
-
-
-class ArmedState(NamedTuple):
-    """What the controller tells the nodes that drive its motors (esc_i2c): whether it is armed,
-    and its session number, the random nonzero 32-bit number it drew at start and stamps on each
-    of its motor_commands (their ``layout.data_offset``), so commands from anything else (a
-    second publisher, a recorded flight played back) are told apart and refused.
-    """
-
-    armed: bool
-    session: int
-
-
-class EscHealth(IntEnum):
-    """Each ESC's health as the ESC node reports it to the controller (its ``esc_health``)."""
-
-    OK = 0
-    IGNORED = 1          # missing at start-up, and in esc.ignore: never written
-    LOST = 2             # no successful transfer for a while (esc.health.LOST)
-    FAULT = 3            # a self-test error or a failed start, or at esc.temperature_error
-
-
-class EscStatus(NamedTuple):
-    """The ESC node's last report: its motor.command_max, each ESC's EscHealth, when received."""
-
-    command_max: int
-    escs: tuple
-    receipt: float
 
 
 ESC_SILENT_S = 1.5       # s without a report from an ESC node that has reported: it is gone
