@@ -290,6 +290,7 @@ class Manoeuvres:
                     'stalls.duration': [b for _, b in m['stalls']]}
         if m.get('jitter_ms'):                  # (the falsifier's: steps up to this late)
             scenario['tick_jitter'] = m['jitter_ms'] / 1000.0
+            scenario['tick_jitter_seed'] = m.get('jitter_seed', m['noise_seed'])
         return {'/**': dict(base.get('/**', {})), 'controller': controller, 'sim': sim,
                 'scenario': scenario}
 

@@ -15,7 +15,9 @@ the campaign's own range, so that "inside the envelope" means the same for both:
   at any time of the run (at the approach to a cone too) and 10-40 ms long (whole ms);
 - the model's errors: the true mass, the inertia's stretch along each body axis and the centre of
   mass, each off by up to ``model_error``; a constant disturbance of any direction up to
-  ``disturbance_max``.
+  ``disturbance_max``;
+- the sensors' noise: its seed (a whole number), so the search can choose the noise too (the
+  late steps keep a seed of their own, ``JITTER_SEED``, so that runs batch by their jitter).
 
 A point whose manoeuvre is outside the campaign's rules (cones closer than 10 deg edge to edge,
 a start or goal within 5 deg of a cone, a straight way that misses the first cone, a body tilted
@@ -43,7 +45,8 @@ from geoctl_ros.campaign.manoeuvres import (
 from geoctl_ros.core.geometry import sphere
 
 OUTSIDE = 180.0          # the robustness of a point outside the envelope (deg: above any real)
-NOISE_SEED = 1           # every run's noise (runs with tick jitter fly together on one seed)
+NOISE_SEEDS = 1_000_000  # the sensors' noise: a coordinate, its seed a whole number below this
+JITTER_SEED = 1          # the late steps' seed (runs fly together only with the same late steps)
 JITTER_STEP_MS = 5.0     # the tick jitter in steps of this (runs fly together only with the same)
 
 
@@ -79,7 +82,7 @@ def coordinates(env: Envelope) -> List[Tuple[str, float, float]]:
             ('inertia_y_factor', 1.0 - e, 1.0 + e), ('inertia_z_factor', 1.0 - e, 1.0 + e),
             ('cog_factor', 1.0 - e, 1.0 + e),
             ('disturbance_azimuth_deg', 0.0, 360.0), ('disturbance_elevation_deg', -90.0, 90.0),
-            ('disturbance_share', 0.0, 1.0)]
+            ('disturbance_share', 0.0, 1.0), ('noise_seed', 0.0, float(NOISE_SEEDS))]
     return box
 
 
@@ -140,12 +143,14 @@ class Space:
         return {
             'cones': listed, 'R0': R0, 'R_d': R_d,
             'latency_ms': int(p['latency_ms']), 'jitter_ms': int(p['jitter_ms']),
+            'jitter_seed': JITTER_SEED,
             'disturbance': p['disturbance_share'] * _axis(p['disturbance_azimuth_deg'],
                                                           p['disturbance_elevation_deg']),
             'mass_factor': p['mass_factor'],
             'inertia_factors': np.array([p['inertia_x_factor'], p['inertia_y_factor'],
                                          p['inertia_z_factor']]),
-            'cog_factor': p['cog_factor'], 'noise_seed': NOISE_SEED, 'stalls': stalls,
+            'cog_factor': p['cog_factor'],
+            'noise_seed': min(int(p['noise_seed']), NOISE_SEEDS - 1), 'stalls': stalls,
         }
 
     def sections(self, x, title: str) -> Optional[dict]:

@@ -19,11 +19,8 @@ from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
-from geoctl_ros.core.actuation.motors import Mixer
-from geoctl_ros.core.law.brake import ApproachBrake, assumptions_held
 from geoctl_ros.falsify.envelope import OUTSIDE, Space
-from geoctl_ros.falsify.requirements import monitors, series_robustness
-from geoctl_ros.params import controller_setup
+from geoctl_ros.falsify.requirements import COVERED, monitors, series_robustness
 from geoctl_ros.params.scenario import from_sections, tick_jitter
 from geoctl_ros.sim import closed_loop
 
@@ -35,37 +32,31 @@ POPULATION = 256         # differential evolution's population (about: a multipl
 def fly_batch(job):
     """Worker: fly a batch of scenario sections; per requirement each run's robustness, each
     run's closest approach to a cone after any integration step (deg), and its closest approach
-    within the approach brake's assumptions (``closest_assumed_deg``).
+    within the approach brake's assumptions (``closest_assumed_deg``: the robustness of the
+    ``assumed`` requirement; inf where the derivation speaks of no step).
     """
     sections, names = job
     scenarios = [from_sections(s, 'falsify') for s in sections]
     flight = closed_loop.fly(scenarios, series=True, assumed=True)
-    mons = monitors(names, flight.dt)
-    got = series_robustness(mons, flight.times, flight.margin_series, flight.error_series)
+    a = flight.assumed
+    assert a is not None and flight.margin_series is not None
+    assert flight.error_series is not None
+    covered = a.covered()
+    signals = {'margin': flight.margin_series, 'error': flight.error_series,
+               'closest': np.minimum(a.hold_margin, flight.margin_series),
+               'assumed': np.where(covered, COVERED, -COVERED)}
+    got = series_robustness(monitors(names, flight.dt), flight.times, signals)
     got['closest_deg'] = flight.min_margin_deg.min(axis=-1)
-    got['closest_assumed_deg'] = closest_assumed(flight, controller_setup(
-        scenarios[0].controller))
+    got['closest_assumed_deg'] = closest_assumed(signals['closest'], covered)
     return got
 
 
-def closest_assumed(flight: Any, setup: Any) -> np.ndarray:
-    """(runs,) each run's closest approach (deg, at its control steps) at the steps the approach
-    brake's derivation speaks of (``brake.assumptions_held``: over the window before, the
-    rotors had spooled up, made every moment asked (no saturation), the unlearnt acceleration
-    was within a_u and the attitude measurement's error within e), up to the run's first
-    step inside a cone (what the derivation claims is that the sensor does not enter; of a
-    sensor already inside it says nothing); +inf for a run with no such step. So a negative
-    value is a counterexample to the derivation: the sensor entered a cone at a step it
-    speaks of.
+def closest_assumed(closest: np.ndarray, covered: np.ndarray) -> np.ndarray:
+    """(runs,) each run's closest approach (deg) over the control steps the approach brake's
+    derivation speaks of (``covered``: from a safe state, every bound held since), +inf for a
+    run with none: a negative value is a counterexample to the derivation.
     """
-    a = flight.assumed
-    assert flight.margin_series is not None and a is not None
-    held = assumptions_held(ApproachBrake.bounds_of(setup.config), a.unlearnt, a.measurement,
-                            a.saturated, flight.dt, Mixer.SPOOL_LAGS * setup.mixer.lag)
-    margin = flight.margin_series
-    inside = margin < 0.0
-    entered_before = (np.cumsum(inside, axis=0) - inside) > 0
-    return np.where(held & ~entered_before, margin, np.inf).min(axis=0)
+    return np.where(covered, closest, np.inf).min(axis=0)
 
 
 @dataclass

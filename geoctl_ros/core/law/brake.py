@@ -289,13 +289,15 @@ def least_deceleration(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: An
 
 def brake_authority(vertices: np.ndarray, J_inv: np.ndarray, m_rho: np.ndarray,
                     gravity: np.ndarray, tilt_max: float, r: np.ndarray,
-                    directions: int = 360, tilts: int = 9, azimuths: int = 72) -> float:
+                    directions: int = 720) -> float:
     """a_b (rad/s^2): the least, over the opening directions n (every unit n perpendicular to
     the sensor axis r: a cone is opened by turning r), of the deceleration along n that the
     rotors' moment polytope (its vertices) gives, less the gravity moment working against it at
     any attitude within tilt_max (rad) of upright: min over n of [max over vertices of
-    (J^-1 n) . u - max over the tilts of -(J^-1 n) . M_g]. Sampled finely (directions, tilts,
-    azimuths); the polytope's support is exact at each.
+    (J^-1 n) . u - max over the tilts of -(J^-1 n) . M_g]. With c = J^-1 n, -c . (m rho x g_b)
+    = g_b . (m rho x c), and gravity in the body frame g_b ranges over the cap of half-angle
+    tilt_max round -e3 (|g_b| = g): its most is g |k| cos(max(0, angle(k, -e3) - tilt_max)) for
+    k = m rho x c. The directions are sampled finely; the support and the cap are exact.
     """
     r = np.asarray(r, dtype=float)
     e1 = np.cross(r, np.eye(3)[int(np.argmin(np.abs(r)))])
@@ -305,19 +307,12 @@ def brake_authority(vertices: np.ndarray, J_inv: np.ndarray, m_rho: np.ndarray,
     n = np.cos(t)[:, None] * e1 + np.sin(t)[:, None] * e2            # (N, 3)
     c = so3.matvec(J_inv, n)                                          # J^-1 n
     support = so3.dot(c[:, None, :], vertices[None, :, :]).max(axis=1)
-    up = -gravity / math.sqrt(so3.dot(gravity, gravity))
     g = math.sqrt(so3.dot(gravity, gravity))
-    a1 = np.cross(up, np.eye(3)[int(np.argmin(np.abs(up)))])
-    a1 /= math.sqrt(so3.dot(a1, a1))
-    a2 = np.cross(up, a1)
-    worst = np.zeros(len(n))
-    for beta in np.linspace(0.0, tilt_max, tilts):
-        for phi in np.linspace(0.0, 2.0 * math.pi, azimuths, endpoint=False):
-            # gravity in the body frame with body z tilted beta from up, towards azimuth phi
-            axis = math.cos(phi) * a1 + math.sin(phi) * a2
-            g_b = -g * so3.matvec(so3.exp(axis * beta).T, up)
-            M_g = np.cross(m_rho, g_b)
-            worst = np.maximum(worst, -so3.dot(c, M_g[None, :]))
+    k = so3.cross(np.broadcast_to(m_rho, c.shape), c)
+    size = np.sqrt(so3.dot(k, k))
+    down = -k[:, 2] / np.maximum(size, 1e-300)                         # cos angle(k, -e3)
+    off = np.maximum(np.arccos(np.clip(down, -1.0, 1.0)) - tilt_max, 0.0)
+    worst = np.maximum(g * size * np.cos(np.minimum(off, math.pi)), 0.0)
     return float((support - worst).min())
 
 

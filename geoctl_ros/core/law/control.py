@@ -269,7 +269,7 @@ class AttitudeController:
         return -held
 
     def step(self, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool = True,
-             blind: Any = 0.0, brake: Any = None) -> ControlOutput:
+             blind: Any = 0.0, brake: Any = None, guide: bool = True) -> ControlOutput:
         """One control step at attitude R and body angular velocity Omega, by the configured law
         (``config.law``, one of ``LAWS``).
 
@@ -279,8 +279,10 @@ class AttitudeController:
         barrier then acts on each cone widened by how far the sensor travels towards it in that
         time (``blind_widening``). brake: the approach brake's inputs of the tick
         (``core.law.brake.BrakeInputs``), or None (no brake this step: disarmed, spooling).
+        guide: move guidance's set point (not while the rotors spool up: it is planned at the
+        take-over).
         """
-        if self.guidance is not None and not self._tracking:
+        if guide and self.guidance is not None and not self._tracking:
             self._follow(R)
         return self._law(self, R, Omega, dt, adapt, blind,
                          brake if self.brake is not None else None)

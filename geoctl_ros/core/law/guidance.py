@@ -60,17 +60,18 @@ def arc_clearance(a: np.ndarray, b: np.ndarray, axes: np.ndarray) -> np.ndarray:
     the nearer end is the nearest point.
     """
     a, b = np.broadcast_arrays(a, b)
-    n = np.cross(a, b)
-    norm = np.sqrt(np.sum(n * n, axis=-1, keepdims=True))
+    n = so3.cross(a, b)
+    norm = np.sqrt(so3.dot(n, n))[..., None]
     n = np.where(norm > 1e-12, n / np.maximum(norm, 1e-12), 0.0)
     a, b, n = a[..., None, :], b[..., None, :], n[..., None, :]
-    vn = np.sum(axes * n, axis=-1)                                     # (..., C)
+    vn = so3.dot(axes, n)                                              # (..., C)
     p = axes - vn[..., None] * n
-    inside = ((np.sum(np.cross(a, p) * n, axis=-1) >= 0.0) &
-              (np.sum(np.cross(p, b) * n, axis=-1) >= 0.0) & (norm > 1e-12))
+    # (a x p) . n >= 0 and (p x b) . n >= 0: p lies between a and b on the great circle
+    inside = ((so3.dot(so3.cross(a, p), n) >= 0.0) & (so3.dot(so3.cross(p, b), n) >= 0.0)
+              & (norm > 1e-12))
     mid = np.arcsin(np.clip(np.abs(vn), 0.0, 1.0))
-    ends = np.minimum(np.arccos(np.clip(np.sum(a * axes, axis=-1), -1.0, 1.0)),
-                      np.arccos(np.clip(np.sum(b * axes, axis=-1), -1.0, 1.0)))
+    ends = np.minimum(np.arccos(np.clip(so3.dot(a, axes), -1.0, 1.0)),
+                      np.arccos(np.clip(so3.dot(b, axes), -1.0, 1.0)))
     return np.where(inside, mid, ends)
 
 
@@ -163,20 +164,27 @@ def upright(d: np.ndarray, r: np.ndarray, up: np.ndarray) -> np.ndarray:
     side of up): its tilt is |elevation of d - elevation of r in the body|, the least any
     attitude pointing r along d has.
     """
-    e3 = np.array([0.0, 0.0, 1.0])
-    z_b = e3 - so3.dot(e3, r) * r                      # body z, less its part along r
-    z_w = up - so3.dot(up, d) * d                      # towards up, across d
-    nb, nw = math.sqrt(so3.dot(z_b, z_b)), math.sqrt(so3.dot(z_w, z_w))
+    (rx, ry, rz), (dx, dy, dz), (ux, uy, uz) = (np.asarray(v, dtype=float).tolist()
+                                                for v in (r, d, up))
+    zb = [-rz * rx, -rz * ry, 1.0 - rz * rz]            # body z, less its part along r
+    dot_ud = ux * dx + uy * dy + uz * dz
+    zw = [ux - dot_ud * dx, uy - dot_ud * dy, uz - dot_ud * dz]   # towards up, across d
+    nb = math.sqrt(zb[0] * zb[0] + zb[1] * zb[1] + zb[2] * zb[2])
+    nw = math.sqrt(zw[0] * zw[0] + zw[1] * zw[1] + zw[2] * zw[2])
     if nb < 1e-9:                                      # r along the body's z: any turn will do
-        z_b = np.cross(r, np.eye(3)[int(np.argmin(np.abs(r)))])
-        nb = math.sqrt(so3.dot(z_b, z_b))
+        zb = so3.cross_floats([rx, ry, rz], np.eye(3)[int(np.argmin(np.abs(r)))].tolist())
+        nb = math.sqrt(zb[0] * zb[0] + zb[1] * zb[1] + zb[2] * zb[2])
     if nw < 1e-9:                                      # d straight up or down
-        z_w = np.cross(d, np.eye(3)[int(np.argmin(np.abs(d)))])
-        nw = math.sqrt(so3.dot(z_w, z_w))
-    z_b, z_w = z_b / nb, z_w / nw
-    B = np.column_stack((r, z_b, np.cross(r, z_b)))
-    W = np.column_stack((d, z_w, np.cross(d, z_w)))
-    return so3.matmul(W, so3.transpose(B))
+        zw = so3.cross_floats([dx, dy, dz], np.eye(3)[int(np.argmin(np.abs(d)))].tolist())
+        nw = math.sqrt(zw[0] * zw[0] + zw[1] * zw[1] + zw[2] * zw[2])
+    zb = [v / nb for v in zb]
+    zw = [v / nw for v in zw]
+    yb = so3.cross_floats([rx, ry, rz], zb)
+    yw = so3.cross_floats([dx, dy, dz], zw)
+    # R = W B^T with the columns B = (r, z_b, r x z_b) and W = (d, z_w, d x z_w)
+    B, W = ([rx, ry, rz], zb, yb), ([dx, dy, dz], zw, yw)
+    return np.array([[W[0][i] * B[0][j] + W[1][i] * B[1][j] + W[2][i] * B[2][j]
+                      for j in range(3)] for i in range(3)])
 
 
 def _turn_about(d: np.ndarray, R: np.ndarray, base: np.ndarray) -> float:
@@ -252,15 +260,27 @@ def plan(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray, axes: np.ndarray,
     """
     up = np.array([0.0, 0.0, 1.0]) if up is None else up
     d0, d1 = so3.matvec(R0, r), so3.matvec(R_goal, r)
+    axes, rims = np.asarray(axes).reshape(-1, 3), np.asarray(rims).reshape(-1)
+    corners = sensor_path(d0, d1, axes, rims, clearance)
     cap_axes, cap_rims = joint_caps(up, r, tilt_max, np.stack([d0, d1]))
-    rims = np.asarray(rims).reshape(-1)
-    corners = sensor_path(d0, d1, np.concatenate((np.asarray(axes).reshape(-1, 3), cap_axes)),
-                          np.concatenate((rims, cap_rims)),
-                          np.concatenate((np.full(len(rims), clearance),
-                                          np.full(len(cap_rims), CAP_CLEARANCE))))
+    if corners is not None and len(cap_rims) and _enters(corners, cap_axes, cap_rims):
+        # the way round the cones goes past the stops: round the stops' caps too (planned only
+        # then: the caps make the graph half as large again)
+        corners = sensor_path(d0, d1, np.concatenate((axes, cap_axes)),
+                              np.concatenate((rims, cap_rims)),
+                              np.concatenate((np.full(len(rims), clearance),
+                                              np.full(len(cap_rims), CAP_CLEARANCE))))
     if corners is None:
         return R_goal[None].copy()
     return attitude_path(R0, R_goal, r, corners, up)
+
+
+def _enters(corners: List[np.ndarray], axes: np.ndarray, rims: np.ndarray) -> bool:
+    """Whether the way through corners passes within CAP_CLEARANCE of a cap (axes, half-angles
+    rims): each leg's closest approach to each cap's axis (``arc_clearance``).
+    """
+    a, b = np.array(corners[:-1]), np.array(corners[1:])
+    return bool(np.any(arc_clearance(a[:, None], b[:, None], axes[None]) < rims + CAP_CLEARANCE))
 
 
 class Guidance:

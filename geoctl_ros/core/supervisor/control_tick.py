@@ -178,7 +178,7 @@ class ControlTick:
             brake = self.brake_inputs(R_b, W_b, d + np.maximum(ages[0], ages[1]),
                                       mixer.design_hold_for(dt, held), t)
         out = controller.step(R, Omega, dt, adapt=adapt and self.flying, blind=blind,
-                              brake=brake)
+                              brake=brake, guide=not spooling)
         if spooling:                        # the feed-forward alone, the vehicle held
             out = out._replace(u=controller.feedforward(R))
         if not np.isfinite(out.u).all():           # a last line of defence: never command it
