@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.core.law.cbf_law import closest_admissible, pointing_cbf, project
+from geoctl_ros.core.law.cbf_law import pointing_cbf
+from geoctl_ros.core.law.projection import closest_admissible, project
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.control import AttitudeController
 from geoctl_ros.core.law.mechanics import gravity_moment
@@ -52,7 +53,9 @@ def test_each_law_flies_the_derived_yaw_past_a_cone_as_expected(law):
     r = scenario.run(s, duration=10.0)
     closest = r.summary['min_cone_angle_deg']['obstacle'] - 12.0
     if law == 'geometric':
-        assert closest == pytest.approx(-12.0, abs=0.05), closest
+        # (the closest approach is sampled at the 1 kHz integration steps: the axis is swept
+        # through at up to 2 rad/s, so a sample lands within 0.06 deg of it)
+        assert closest == pytest.approx(-12.0, abs=0.1), closest
     else:
         assert closest > 0.5, closest
 
@@ -184,7 +187,8 @@ def test_the_qp_solver_finds_the_kkt_point_among_the_rotors_limits_and_the_cones
     testbed = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
                            'config', 'testbed.yaml')
     values = resolve(CONTROLLER, node_overrides(load_parameter_file(testbed), CONTROLLER))
-    A_m, beta_m = controller_setup(values).config.moment_limits
+    polytope = controller_setup(values).config.moment_limits
+    A_m, beta_m = polytope.A, polytope.beta
     assert A_m.shape == (12, 3)
     rng = np.random.default_rng(3)
     solved = 0

@@ -149,7 +149,7 @@ def test_a_row_without_an_action_does_not_count():
     assert ref.missing(['pose refused: ' + W, 'no pose received yet',
                         'arming refused: ' + W], rows) == ['no pose received yet',
                                                           'pose refused: ' + W]
-    assert ref.missing(['ticks', 'esc ' + W, 'arming refused: ' + W], rows, keys=True) == [
+    assert ref.missing(['ticks', 'esc' + ' ' + W, 'arming refused: ' + W], rows, keys=True) == [
         'arming refused: ' + W, 'ticks']
 
 

@@ -20,7 +20,6 @@ import time
 from geoctl_ros.campaign import cluster, manoeuvres
 from geoctl_ros.cli import tools
 from geoctl_ros.cli.args import add_cluster_arguments, cannot_start, positive_seconds
-from geoctl_ros.core.law.brake import ASSUMED_WINDOW_S
 from geoctl_ros.falsify.envelope import OUTSIDE, Envelope, Space
 from geoctl_ros.falsify.requirements import REQUIREMENTS
 from geoctl_ros.falsify.search import OPTIMIZERS, Search, search
@@ -65,13 +64,15 @@ def summary_lines(searches, names, budget, env, wall, where):
         lines.append('| %s, %s | %d | %d | %s | %+.2f | %d | %s |' % (
             s.optimizer, s.target, len(s.evaluations), len(inside), ' | '.join(lows), closest,
             len(assumed), '%+.2f' % min(assumed) if assumed else '-'))
-    lines += ['', "Within the brake's assumptions: the control steps the approach brake's "
-              'derivation speaks of (core.law.brake.assumptions_held): over the %.1f s before, '
-              'the rotors had spooled up after the arming and made every moment asked of them '
-              '(no saturation), the acceleration the model did not know stayed within a_u, and '
-              "the attitude measurement's error within e. A run counts when it has such a step; "
-              'its closest approach is over those steps, up to its first step inside a cone (of '
-              'a sensor already inside, the derivation says nothing).' % ASSUMED_WINDOW_S,
+    lines += ['', "Within the brake's assumptions (the `assumed` requirement's robustness): the "
+              "control steps the approach brake's derivation speaks of "
+              '(sim.closed_loop.AssumedSeries.covered): from a step whose true state was on the '
+              "brake's safe set, every bound held at every step since (the allocation not "
+              "saturated nor the lag compensation clipped, the brake's condition met, each hold "
+              "within its design, what the brake's model did not know of each approach within "
+              'a_u, the measurements within e and e_w). A run counts when it has such a step; its '
+              "closest approach is over those steps' holds: below 0 is a counterexample to the "
+              'derivation.',
               '', 'wall time %.0f s' % wall]
     return lines
 

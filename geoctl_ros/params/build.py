@@ -92,10 +92,11 @@ def controller_config(values: dict) -> ControllerConfig:
         unmodelled_moment_max=values['unmodelled_moment_max'],
         blind_guard_max=math.radians(values['blind_guard_max_deg']), law=values['law'],
         cbf_rate=values['cbf_rate'], cbf_moment_bound=values['cbf_moment_bound'],
-        approach_brake_rate=values['approach_brake_rate'],
+        approach_brake=values['approach_brake'],
         brake_acceleration=values['brake_acceleration'],
         attitude_noise=math.radians(values['attitude_noise_deg']),
         gyro_noise=values['gyro_noise'], tilt_max=math.radians(values['joint_tilt_max_deg']),
+        motor_lag=values['motor_lag_compensation'],
         guidance_lookahead=math.radians(values['guidance_lookahead_deg']),
         guidance_clearance=math.radians(values['guidance_clearance_deg']))
 
@@ -202,7 +203,7 @@ def controller_setup(values: dict) -> 'ControllerSetup':
                        '(%.1f rad/s^2)' % (asked, authority)))
     config = replace(config, moment_limits=polytope, brake_acceleration=asked or authority)
     a_u = unmodelled_acceleration(config.cbf_moment_bound, config.J)
-    if config.approach_brake_rate > 0.0 and config.brake_acceleration <= a_u:
+    if config.approach_brake and config.brake_acceleration <= a_u:
         errors.append(('cbf_moment_bound', 'the approach brake needs the rotors to out-brake the '
                        'unlearnt moment: a_u %.1f rad/s^2 against %.1f'
                        % (a_u, config.brake_acceleration)))

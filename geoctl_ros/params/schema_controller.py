@@ -45,14 +45,15 @@ PARAMS = [
        "CBF: a_i . u >= beta_i + bound |a_i|), and the delay-robust law's approach brake "
        '(its sampled-data margin); 0 = the model taken as exact', CONTROLLER,
        lo=0.0, hi=10.0),
-    _p('approach_brake_rate', 'double', 0.0, '1/s',
-       'the approach brake (docs/safety.md, "The approach brake"): on when above 0, with the '
-       'rate at which a state past its curve (after a fall, or inside a cone) is brought back; '
-       '0 = off', CONTROLLER, lo=0.0, hi=1000.0),
+    _p('approach_brake', 'bool', False, '-',
+       'the approach brake (docs/safety.md, "The approach brake"): every cone\'s sampled-data '
+       'margin kept for the loop as it runs (blind time, hold, the rotors\' lag, the unlearnt '
+       'moment cbf_moment_bound), the cones joined in one QP within the rotors\' reach',
+       CONTROLLER),
     _p('brake_acceleration', 'double', 0.0, 'rad/s^2',
        "the deceleration the approach brake takes the rotors to make along any cone's opening "
        "direction: 0 = all the rotors can (their moment polytope less the gravity moment up to "
-       'the joint\'s stops, computed at configuration); a value above that is refused',
+       "the joint's stops, computed at configuration); a value above that is refused",
        CONTROLLER, lo=0.0, hi=10000.0),
     _p('attitude_noise_deg', 'double', 0.1, 'deg',
        "the attitude measurement's noise (one standard deviation): the approach brake keeps 3 "

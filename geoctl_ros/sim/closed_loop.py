@@ -231,7 +231,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
             record.add(k, t, out, motors)
         command = out.u if actuator is None else motors.commands
         if judge is not None:
-            judge.tick(k, t, out, motors, fresh, noise[:, k], holds[k] * h, dt)
+            judge.at_tick(k, t, out, motors, fresh, noise[:, k], holds[k] * h, dt)
         for i in range(holds[k]):
             tau = bed.moment(command, h)
             if judge is not None:
@@ -305,8 +305,8 @@ class _Judge:
         self.noise = np.zeros((2, n, 3))       # the errors of the samples in use
         self.terms: Optional[BrakeTerms] = None
 
-    def tick(self, k: int, t: float, out: Any, motors: Any, fresh: np.ndarray,
-             noise: np.ndarray, held: float, dt: float) -> None:
+    def at_tick(self, k: int, t: float, out: Any, motors: Any, fresh: np.ndarray,
+                noise: np.ndarray, held: float, dt: float) -> None:
         """Judge step k at its tick (after the controller's step): the true state's margin and
         the measurements in use, the allocation, the brake, the hold; keep the brake's view
         for the hold.

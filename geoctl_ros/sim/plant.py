@@ -33,7 +33,6 @@ from geoctl_ros.core.law.mechanics import (
     gravity_moment,
 )
 
-
 STOP_HZ = 25.0        # the joint's stops: a contact of this natural frequency
 STOP_DAMPING = 0.7    # and damping ratio, about the pivot's mean principal inertia
 

@@ -82,6 +82,7 @@ class Allocator:
         self.B4 = self.B[2:]                                  # rows F_z, M_x, M_y, M_z
         P = so3.right_inverse(self.B4)                        # n_alive x 4, minimum norm
         self._d, self._p_rp, self._p_y = P[:, 0], P[:, 1:3], P[:, 3]
+        self.base_share = self._d               # each alive rotor's thrust per N of collective
         self._p_moment = np.ascontiguousarray(P[:, 1:])
         if np.any(self._d <= 1e-9):
             raise AirframeError('collective thrust would need rotor(s) %s to push the other way'

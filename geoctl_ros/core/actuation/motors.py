@@ -210,6 +210,18 @@ class Mixer:
         now = model if held <= 0.0 else sent + math.exp(-held / self.lag) * (model - sent)
         return matvec(B, sent), matvec(B, now)
 
+    def thrust_offsets(self, held: float) -> Any:
+        """Each alive rotor's thrust by the lag model, held s after the last command, less its
+        share of the collective thrust (N; the allocation's base): where the rotors are now
+        within the moment polytope's frame (``Allocator.moment_polytope``); None without a
+        lag model.
+        """
+        if self.sent_thrusts is None:
+            return None
+        sent, model = self.sent_thrusts, self.modelled_thrusts
+        now = model if held <= 0.0 else sent + math.exp(-held / self.lag) * (model - sent)
+        return now[..., self.allocator.alive] - self.collective_thrust * self.allocator.base_share
+
     def spool_ticks(self, dt: float) -> int:
         """How many on-time ticks of period dt the spool-up takes (``spools``), the arming's
         included; 0 without a lag model.

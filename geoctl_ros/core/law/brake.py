@@ -3,48 +3,53 @@
 
 The loop. At a tick the controller has measurements T_b old (their age from capture); it
 predicts the state at the tick by its model and the moments already commanded, then commands a
-moment that is held for the hold h, and the lagged rotors, compensated (``core.actuation.
-motors.Mixer``), reach it at the end of the hold. The moment in force during the hold moves
-monotonically from the one the rotors make at the tick to the one commanded.
+moment that is held for the hold h. The rotors follow with their first-order lag tau: the mixer's
+compensation brings them to the command by the end of the hold where the command is within their
+reach in one hold, and that reach is a shrunk copy of their moment polytope P round the moment
+they make now, M_s: a M_s + (1 - a) P, a = exp(-h / tau) (``reachable``). So the moment the
+rotors make moves monotonically from M_s to the command over the hold, and no faster than the
+lag allows: from one hold to the next at most (1 - a) of the way to P's edge.
 
 One cone, in one axis. Let g = phi - theta be the sensor's gap to the cone (its angle to the
 axis less the half-angle), w = -dg/dt its approach rate, and D the deceleration of w that the
-moment in force gives by the brake's model (``deceleration``: D = n . J^-1 (M + f) - kin, n the
-cone's opening direction, f the model's moment besides the rotors' (gravity, the estimate, the
-gyroscopic term, the observed model error), kin the approach's kinematic term). Then
+moment the rotors make gives by the brake's model (``brake_terms``: D = n . J^-1 (M + f) - kin,
+n the cone's opening direction, f the model's moment besides the rotors' (gravity, the estimate,
+the gyroscopic term, the observed model error), kin the approach's kinematic term). Then
 dw/dt = -D + d with |d| <= a_u: a_u bounds what the model, frozen at the tick, does not know
 over a hold. Bounds (numbers from the parameters; docs/safety.md has the testbed's):
 - e, e_w: the attitude's and the gyro's measurement errors (3 standard deviations);
 - a_u: the unknown acceleration (``cbf_moment_bound`` over the smallest pivot inertia);
-- a_b: the deceleration the rotors can always make along any opening direction, gravity at the
-  joint's tilt limit counted (``brake_authority``, from the rotors' moment polytope).
+- a_b: the deceleration the rotors' polytope gives along any opening direction, gravity at the
+  joint's tilt limit counted (``brake_authority``).
 The prediction is off by at most dw = e_w + e |Omega| + a_u T_b in w and dg = e + (e_w +
 e |Omega|) T_b + a_u T_b^2 / 2 in g, so the brake takes the worst state in that box:
 w0 = w + dw, G0 = g - dg.
 
-The backup. From any tick, the full brake (the rotors asked for a_b) keeps the sensor out if
-the peak of its travel towards the cone is at most the gap: over the first hold the
-deceleration is at least min(D_s, a_b) (D_s: the rotors' at the tick), then a_b, against a_u
-throughout. Its margin Phi = G0 - peak is >= 0 on the safe set.
+The backup. From a tick with the rotors at D_s, braking as hard as the lag lets: over the first
+hold the deceleration is at least min(D_s, D_1), D_1 = a D_s + (1 - a) a_b, and then rises hold
+by hold, a_b - a^j (a_b - D_1) at the end of the j-th hold after it (the rotors close (1 - a) of
+their gap to a_b each hold, exponentially within it: at least the chord), against a_u
+throughout; after ``BACKUP_HOLDS`` holds at the level then reached, for ever.
+The peak of its worst-case travel towards the cone (``backup_travel``) within the gap is the
+safe set: Phi = G0 - peak >= 0.
 
 The condition. A command whose deceleration at the end of its hold is D keeps the state safe at
-the next tick if the travel over its hold (deceleration at least min(D_s, D)), one more hold at
-the backup's min(D, a_b), and the backup's a_b after, peaks within G0 (``least_deceleration``:
-the least such D, in closed form; ``peak_travel`` the travel). By induction the true state stays
-in the safe set at every tick, and the sensor out of the cone between them: where no command
-meets the condition the backup itself does. A state past the curve (Phi < 0: at take-over
-after a fall, after the bounds broke, or inside a cone) is brought back at the rate k_b
-(``approach_brake_rate``): the travel after the hold must peak within G0 - (1 - k_b h) Phi, so
-the deceleration asked grows with the depth and pushes an entry back out.
+the next tick if the travel over its hold (deceleration at least min(D_s, D)) and the backup
+from D after it peaks within G0 (``least_deceleration``: the least such D, by bisection). By
+induction the true state stays in the safe set at every tick, and the sensor out of the cone
+between them: the backup's own first command always meets the condition where Phi >= 0. Past
+the curve (Phi < 0: at a take-over after a fall, after the bounds broke, or inside a cone) the
+brake asks for the backup, the rotors' hardest deceleration within reach, until it is back.
 
 Several cones are joined: each condition is a row on the moment, (J^-1 n_i) . u >= beta_i, and
 the law's moment, where it breaks one, is replaced by the closest moment that meets every row
-within the rotors' polytope (``core.law.cbf_law.closest_admissible``); where none exists, by the
-polytope's vertex that decelerates the unmet cones most.
+within the rotors' reach this hold (``core.law.projection.project``); where the rows conflict
+(a narrow corridor between two cones, at speed), by the closest that meets them all relaxed by
+the least common amount.
 
 Assumptions (what "derived" covers): the bounds above hold over every hold (judged per step by
-``covered``), the allocation is not saturated and the lag compensation not clipped (so the
-rotors reach each command at the end of its hold), each command is held no longer than its
+``covered``), the allocation is not saturated and the lag compensation not clipped (the rotors
+make the moment commanded by the end of the hold), each command is held no longer than its
 designed hold, and the state is safe (Phi >= 0) at the start.
 """
 from dataclasses import dataclass
@@ -58,31 +63,34 @@ from geoctl_ros.core.law.projection import TOL, project, slack_of
 
 SIGMAS = 3.0      # the measurement errors are bounded at this many standard deviations
 NET_SHARE_MIN = 0.25   # the backup must out-brake a_u by at least this share of a_b
+BACKUP_HOLDS = 10      # the backup's lag is followed hold by hold for this many holds
+BISECTIONS = 24        # the least deceleration's bisection (its bracket over 2^24)
 
 
 @dataclass(frozen=True)
 class ApproachBrake:
-    """The brake's bounds and recovery rate (see the module)."""
+    """The brake's bounds (see the module)."""
 
-    rate: float             # 1/s, k_b: how fast a state past the curve is brought back
     authority: float        # rad/s^2, a_b: the deceleration the rotors can always make
     unmodelled: float       # rad/s^2, a_u: what the model does not know over a hold
     measurement: float      # rad, e: the attitude measurement's error
-    rate_error: float = 0.0  # rad/s, e_w: the gyro's error
+    rate_error: float       # rad/s, e_w: the gyro's error
+    lag: float              # s, tau: the rotors' thrust time constant (0: none modelled)
 
     @classmethod
     def of(cls, config: Any) -> Optional['ApproachBrake']:
         """The brake of a ControllerConfig, or None when it is off."""
-        return cls.bounds_of(config) if config.approach_brake_rate > 0.0 else None
+        return cls.bounds_of(config) if config.approach_brake else None
 
     @classmethod
     def bounds_of(cls, config: Any) -> 'ApproachBrake':
         """The brake's bounds of a ControllerConfig, whether or not its law brakes (what a
         flight is judged against: ``covered``).
         """
-        return cls(config.approach_brake_rate, config.brake_acceleration,
+        return cls(config.brake_acceleration,
                    unmodelled_acceleration(config.cbf_moment_bound, config.J),
-                   SIGMAS * config.attitude_noise, SIGMAS * config.gyro_noise)
+                   SIGMAS * config.attitude_noise, SIGMAS * config.gyro_noise,
+                   config.motor_lag)
 
     def uncertainty(self, T_b: Any, spin: Any) -> tuple:
         """(dg, dw): how far the predicted gap (rad) and approach rate (rad/s) can be from the
@@ -93,6 +101,12 @@ class ApproachBrake:
         return (self.measurement + e_w * T_b + 0.5 * self.unmodelled * T_b * T_b,
                 e_w + self.unmodelled * T_b)
 
+    def keep(self, hold: float) -> float:
+        """a = exp(-h / tau): the share of the rotors' gap to a new command left after a hold
+        (0 without a lag).
+        """
+        return math.exp(-hold / self.lag) if self.lag > 0.0 else 0.0
+
 
 def unmodelled_acceleration(moment_bound: float, J: np.ndarray) -> float:
     """a_u: the largest angular acceleration (rad/s^2) an unlearnt moment of moment_bound (N m)
@@ -101,60 +115,113 @@ def unmodelled_acceleration(moment_bound: float, J: np.ndarray) -> float:
     return moment_bound / so3.symmetric_eigenvalues(J)[0]
 
 
-def peak_travel(v: Any, alpha: Any, T: Any, b: Any) -> Any:
-    """The farthest (rad) the sensor travels towards the cone from now, at approach rate v, with
-    the approach accelerating at alpha for T, then decelerating at b > 0 for ever (0 if it never
-    approaches). Floats or arrays alike.
+def _phase(x: Any, w: Any, best: Any, acc0: Any, acc1: Any, T: float) -> tuple:
+    """A phase of T whose acceleration goes linearly from acc0 to acc1, from travel x at rate w,
+    best the farthest so far: (x, w, best) at its end (the stop within it caught: where w
+    passes 0 going down, the root of w + acc0 t + (acc1 - acc0) t^2 / 2 T).
     """
-    w_T = v + alpha * T
-    x_T = (v + 0.5 * alpha * T) * T
-    turn = (v > 0.0) & (w_T < 0.0)                     # it stops within the phase
-    inside = np.where(turn, v * v / (2.0 * np.maximum(-alpha, 1e-12)), 0.0)
-    after = x_T + np.maximum(w_T, 0.0) ** 2 / (2.0 * b)
-    return np.maximum(np.maximum(inside, after), 0.0)
+    c = 0.5 * (acc1 - acc0) / T
+    w_T = w + (acc0 + c * T) * T
+    x_T = x + (w + (0.5 * acc0 + c * T / 3.0) * T) * T
+    # the stop: c t^2 + acc0 t + w = 0, the root where w falls through 0 (w > 0 > w_T)
+    turn = (w > 0.0) & (w_T < 0.0)
+    disc = np.maximum(acc0 * acc0 - 4.0 * c * w, 0.0)
+    linear = np.abs(c) < 1e-12
+    root = np.where(linear, -w / np.where(acc0 < 0.0, acc0, -1.0),
+                    (-acc0 - np.sqrt(disc)) / np.where(linear, 1.0, 2.0 * c))
+    root = np.where((root > 0.0) & (root < T), root, np.where(
+        linear, root, (-acc0 + np.sqrt(disc)) / np.where(linear, 1.0, 2.0 * c)))
+    t = np.clip(root, 0.0, T)
+    inside = np.where(turn, x + (w + (0.5 * acc0 + c * t / 3.0) * t) * t, x)
+    return x_T, w_T, np.maximum(best, np.maximum(inside, x_T))
 
 
-def largest_acceleration(v: Any, T: Any, b: Any, budget: Any) -> Any:
-    """The largest alpha with ``peak_travel(v, alpha, T, b)`` <= budget (-inf where none: a
-    budget below 0, or an approach already too fast for any stop within it). In closed form:
-    where the approach still closes at the end of the phase, the peak is
-    v T + alpha T^2 / 2 + (v + alpha T)^2 / (2 b), whose largest root in y = alpha T is
-    (-(2 v + b T) + sqrt(b (b T^2 - 4 v T + 8 budget))) / 2; where it stops within the phase,
-    v^2 / (2 (-alpha)) = budget.
+def backup_travel(brake: ApproachBrake, w0: Any, D_s: Any, D: Any, authority: Any,
+                  hold: float) -> Any:
+    """The farthest (rad) the sensor travels towards the cone in the worst case from a tick with
+    the approach w0 (rad/s) and the rotors at D_s: a command reaching D at the end of its hold
+    (the deceleration over it at least min(D_s, D)), then the backup (see the module) to
+    ``authority`` (a_b; per cone), a_u pushing in throughout. Over each of the backup's holds
+    the rotors' deceleration rises exponentially, so the chord from its start to its end is a
+    lower bound of it. Floats or arrays alike.
     """
-    disc = b * (b * T * T - 4.0 * v * T + 8.0 * budget)
-    y = 0.5 * (np.sqrt(np.maximum(disc, 0.0)) - (2.0 * v + b * T))
-    root = (disc >= 0.0) & (v + y >= 0.0)
-    stop = np.where((v > 0.0) & (budget > 0.0), -v * v / (2.0 * np.maximum(budget, 1e-300)),
-                    -np.inf)
-    return np.where(budget < 0.0, -np.inf, np.where(root, y / T, stop))
+    a_u, keep = brake.unmodelled, brake.keep(hold)
+    x, best = 0.0 * w0, 0.0 * w0
+    low = a_u - np.minimum(D_s, D)
+    x, w, best = _phase(x, w0, best, low, low, hold)
+    gap_left = authority - np.minimum(D, authority)        # the backup's deficit to a_b
+    share = 1.0
+    for _ in range(BACKUP_HOLDS if keep > 0.0 else 1):
+        start = a_u - (authority - share * gap_left)
+        share *= keep
+        x, w, best = _phase(x, w, best, start, a_u - (authority - share * gap_left), hold)
+    final = a_u - (authority - share * gap_left)            # (< 0: see NET_SHARE_MIN)
+    return np.maximum(best, x + np.maximum(w, 0.0) ** 2 / (2.0 * np.maximum(-final, 1e-9)))
 
 
-def committed_travel(w0: Any, D_s: Any, D: Any, brake: ApproachBrake, authority: Any,
-                     hold: float) -> Any:
-    """The peak travel (rad) of the worst case from a tick: the approach w0 (rad/s), the rotors
-    at D_s, a command of deceleration D reached at the end of its hold, then the backup
-    (``authority``, a_b): the hold at min(D_s, D), one more at min(D, a_b), then a_b, each
-    against a_u.
+def backup_margin(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, authority: Any,
+                  hold: float) -> Any:
+    """Phi (rad): the gap left when the backup stops an approach w (rad/s) with the rotors at
+    D_s now (taken at most a_b): >= 0 on the safe set.
     """
-    a, b = brake.unmodelled, authority - brake.unmodelled
-    a0 = a - np.minimum(D_s, D)
-    x1 = (w0 + 0.5 * a0 * hold) * hold
-    w1 = w0 + a0 * hold
-    within = peak_travel(w0, a0, hold, np.inf)                      # the hold itself
-    return np.maximum(within, x1 + peak_travel(w1, a - np.minimum(D, authority), hold, b))
+    Ds = np.minimum(D_s, authority)
+    first = backup_first(brake, Ds, authority, hold)
+    return gap - backup_travel(brake, w, Ds, first, authority, hold)
+
+
+def backup_first(brake: ApproachBrake, D_s: Any, authority: Any, hold: float) -> Any:
+    """D_1: where the backup's first command takes the rotors by the end of the hold, a D_s +
+    (1 - a) a_b (their reach in one hold towards a_b).
+    """
+    keep = brake.keep(hold)
+    return keep * D_s + (1.0 - keep) * authority
+
+
+def least_deceleration(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: Any,
+                       spin: Any, authority: Any, hold: float,
+                       law: Optional[Any] = None) -> tuple:
+    """(D, Phi) per cone: the least deceleration D (rad/s^2) the command must reach at the end of
+    its hold for the condition, and the backup's margin Phi (rad) now. Where Phi < 0, D is the
+    backup's own first command (past the curve: brake as hard as the lag lets). law: the law's
+    own deceleration (per cone), where it already meets the condition, D is it (no search).
+
+    The worst state (w0, G0) of the uncertainty box; the rotors' deceleration now taken at most
+    a_b. The travel falls as D grows, so D is found by bisection between the least deceleration
+    the polytope can give and the backup's first command (``BISECTIONS`` halvings).
+    """
+    dg, dw = brake.uncertainty(age, spin)
+    G0, w0 = gap - dg, w + dw
+    Ds = np.minimum(D_s, authority)
+    first = backup_first(brake, Ds, authority, hold)
+    margin = G0 - backup_travel(brake, w0, Ds, first, authority, hold)
+    past = margin < 0.0
+    if law is not None:
+        meets = backup_travel(brake, w0, Ds, law, authority, hold) <= G0
+        if np.all(meets | past):
+            return np.where(past, first, law), margin
+    # (where even the bracket's low end meets it, the answer is that low end: a row that a law
+    # decelerating less than a far cone's would need never binds)
+    lo = np.minimum(Ds, 0.0) - 4.0 * authority
+    hi = first
+    for _ in range(BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        ok = backup_travel(brake, w0, Ds, mid, authority, hold) <= G0
+        hi = np.where(ok, mid, hi)
+        lo = np.where(ok, lo, mid)
+    return np.where(past, first, hi), margin
 
 
 class BrakeRows(NamedTuple):
     """The brake's condition for every cone at a tick, as rows on the moment u:
     A u >= beta (``A`` (..., cones, 3), ``beta`` (..., cones)); ``margin``: each cone's Phi
-    (rad; < 0 past the curve); ``unmet``: where no deceleration meets it (beta is then +inf).
+    (rad; < 0 past the curve); ``weak``: where the backup's authority is too weak for the
+    derivation (``BrakeTerms.weak``).
     """
 
     A: np.ndarray
     beta: np.ndarray
     margin: np.ndarray
-    unmet: np.ndarray
+    weak: np.ndarray
 
 
 class BrakeInputs(NamedTuple):
@@ -162,8 +229,9 @@ class BrakeInputs(NamedTuple):
     arrays): the state predicted at the tick (R, Omega: not the lead the law flies on), the
     measurements' age T_b (s), the hold the command is designed for (s), the moment the rotors
     make at the tick (about the pivot, N m) and the model's moment besides the rotors' there
-    (f: gravity, the estimate, the gyroscopic term, the observed error; N m), and its gravity
-    moment alone (N m).
+    (f: gravity, the estimate, the gyroscopic term, the observed error; N m), its gravity
+    moment alone (N m), and where the rotors' thrusts are now within their polytope's frame
+    (``Mixer.thrust_offsets``; None: no lag model).
     """
 
     R: np.ndarray
@@ -173,6 +241,7 @@ class BrakeInputs(NamedTuple):
     rotors: np.ndarray
     f: np.ndarray
     gravity: np.ndarray
+    thrusts: Optional[np.ndarray] = None
 
 
 def opening(cones: Any, R: np.ndarray, Omega: np.ndarray) -> tuple:
@@ -240,51 +309,18 @@ def brake_terms(brake: ApproachBrake, cones: Any, J_inv: np.ndarray,
     return BrakeTerms(gap, n, w, kin, A, f_along, D_s, authority, weak)
 
 
-def rows(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, x: BrakeInputs) -> BrakeRows:
-    """The brake's condition at a tick for every cone (``BrakeRows``; see the module)."""
+def rows(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, x: BrakeInputs,
+         u: Optional[np.ndarray] = None) -> BrakeRows:
+    """The brake's condition at a tick for every cone (``BrakeRows``; see the module); u: the
+    law's moment, where it is known (a law that meets every row needs no search).
+    """
     t = brake_terms(brake, cones, J_inv, x)
     spin = np.sqrt(so3.dot(x.Omega, x.Omega))[..., None]
     age = np.asarray(x.age, dtype=float)[..., None] if np.ndim(x.age) else x.age
-    D, margin = least_deceleration(brake, t.gap, t.w, t.D_s, age, spin, t.authority, x.hold)
-    return BrakeRows(t.A, D - t.f_along + t.kin, margin, ~np.isfinite(D))
-
-
-def backup_margin(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, authority: Any,
-                  hold: float) -> Any:
-    """Phi (rad): the gap left when the backup (the rotors asked for a_b, ``authority``) stops
-    an approach w (rad/s) with the rotors at D_s now (taken at most a_b): >= 0 on the safe set.
-    """
-    Ds = np.minimum(D_s, authority)
-    return gap - committed_travel(w, Ds, authority, brake, authority, hold)
-
-
-def least_deceleration(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: Any,
-                       spin: Any, authority: Any, hold: float) -> tuple:
-    """(D, Phi) per cone: the least deceleration D (rad/s^2) the command must reach at the end of
-    its hold for the condition (+inf where none can), and the backup's margin Phi (rad) now.
-
-    The worst state (w0, G0) of the uncertainty box; the rotors' deceleration now taken at most
-    a_b (D_s' = min(D_s, a_b): a conservative start). Where Phi >= 0, the peak of
-    ``committed_travel`` must be within G0: if even D <= D_s' does (both holds at D, one phase
-    of 2 h), D is ``largest_acceleration``'s; else the first hold is at D_s' and the second
-    carries D. Past the curve (Phi < 0), the travel after the first hold must peak within
-    G0 - (1 - gamma) Phi, gamma = min(1, k_b h), asking at least D_s'.
-    """
-    dg, dw = brake.uncertainty(age, spin)
-    G0, w0 = gap - dg, w + dw
-    a = brake.unmodelled
-    b = authority - a
-    Ds = np.minimum(D_s, authority)
-    margin = backup_margin(brake, G0, w0, D_s, authority, hold)
-    both = a - largest_acceleration(w0, 2.0 * hold, b, G0)            # D <= D_s'
-    a0 = a - Ds
-    x1 = (w0 + 0.5 * a0 * hold) * hold
-    w1 = w0 + a0 * hold
-    gamma = min(1.0, brake.rate * hold)
-    budget = np.where(margin >= 0.0, G0, G0 - (1.0 - gamma) * margin) - x1
-    second = np.maximum(a - largest_acceleration(w1, hold, b, budget), Ds)
-    D = np.where((margin >= 0.0) & (both <= Ds), both, second)
-    return D, margin
+    law = None if u is None else so3.dot(t.A, u[..., None, :]) + t.f_along - t.kin
+    D, margin = least_deceleration(brake, t.gap, t.w, t.D_s, age, spin, t.authority, x.hold,
+                                   law)
+    return BrakeRows(t.A, D - t.f_along + t.kin, margin, t.weak)
 
 
 def brake_authority(vertices: np.ndarray, J_inv: np.ndarray, m_rho: np.ndarray,
@@ -336,8 +372,8 @@ def covered(ok: np.ndarray, safe: np.ndarray, lead: int) -> np.ndarray:
 
 class Braked(NamedTuple):
     """The brake stage's result: the moment, and per run whether the brake changed the law's
-    (``braking``) and whether no moment within the rotors' limits met its condition, so that
-    the polytope's most decelerating vertex was taken instead (``unmet``).
+    (``braking``) and whether its condition could not be met for every cone within the rotors'
+    reach this hold, or its bounds were too weak for it (``unmet``: outside the derivation).
     """
 
     u: np.ndarray
@@ -345,57 +381,68 @@ class Braked(NamedTuple):
     unmet: Any
 
 
+def reachable(polytope: Any, keep: float, offsets: Optional[np.ndarray]) -> tuple:
+    """The moments the lagged rotors reach by the end of a hold from where they are now, within
+    their polytope A M >= beta (each rotor j between its limits: lo <= base_j + P_j M <= hi):
+    each rotor's thrust reaches a f0_j + (1 - a) [lo, hi] (keep: a = exp(-h / tau)), so
+    A M >= (1 - a) beta + a [f0 - base, base - f0] (offsets: f0 - base per alive rotor, one row
+    per run of a batch; None: no lag model, the whole polytope). Returns (A, beta (per run)).
+    """
+    if offsets is None or keep <= 0.0:
+        return polytope.A, polytope.beta
+    return polytope.A, (1.0 - keep) * polytope.beta + keep * np.concatenate(
+        (offsets, -offsets), axis=-1)
+
+
 def braked(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, polytope: Any,
            x: BrakeInputs, u: np.ndarray, extra: Optional[tuple] = None) -> Braked:
     """The brake stage: u (the law's moment; one per run of a batch) where it meets every cone's
-    condition (``rows``), else the closest moment that meets them all within the rotors'
-    ``polytope`` (``core.law.projection.project``); where none does, the polytope's vertex that
-    decelerates the unmet cones most. extra: more rows (A, beta) the moment must meet with the
-    brake's (the cbf law's pointing constraints), or None.
+    condition (``rows``) within the rotors' reach this hold (``reachable``), else the closest
+    moment that does (``core.law.projection.project``); where none does, the closest that meets
+    the cones' rows relaxed by the least common amount (``_compromise``). extra: more rows
+    (A, beta) the moment must meet with the brake's (the cbf law's pointing constraints), or
+    None.
     """
-    r = rows(brake, cones, J_inv, x)
+    r = rows(brake, cones, J_inv, x, u if extra is None else None)
     A, beta = r.A, r.beta
     if extra is not None:
         A = np.concatenate((extra[0], A), axis=-2)
         beta = np.concatenate((extra[1], beta), axis=-1)
-    slack = np.where(np.isinf(beta), -np.inf, slack_of(A, u, np.where(np.isinf(beta), 0.0, beta)))
-    need = np.any(slack < -TOL, axis=-1)
-    if extra is not None:                  # (a filter keeps the rotors' limits too)
-        need = need | np.any(slack_of(polytope.A, u, polytope.beta) < -TOL, axis=-1)
-    unmet_any = np.any(r.unmet, axis=-1)
+    A_p, beta_p = reachable(polytope, brake.keep(x.hold), x.thrusts)
+    braking = np.any(slack_of(A, u, beta) < -TOL, axis=-1)
+    # (and a moment the rotors cannot reach this hold, which the lag compensation would clip:
+    # the derivation's rotors reach every command, the law's too)
+    need = braking | np.any(slack_of(A_p, u, beta_p) < -TOL, axis=-1)
+    weak = np.any(r.weak, axis=-1)
     if not np.any(need):
-        return Braked(u, need, unmet_any)
+        return Braked(u, braking, weak)
     out = np.array(u, dtype=float, copy=True)
-    unmet = np.array(unmet_any, copy=True)
+    unmet = np.array(weak, copy=True)
     for i in zip(*np.nonzero(need)) if out.ndim > 1 else [()]:
-        A_i = np.concatenate((A[i], polytope.A))
-        beta_i = np.concatenate((np.where(np.isinf(beta[i]), _reach(polytope, A[i]), beta[i]),
-                                 polytope.beta))
+        A_i = np.concatenate((A[i], A_p))
+        beta_i = np.concatenate((beta[i], beta_p[i] if beta_p.ndim > 1 else beta_p))
         v, ok = project(u[i], A_i, beta_i)
         if not ok:
-            v = _compromise(u[i], A_i, beta_i, len(beta[i]))
+            v = _compromise(u[i], A_i, beta_i, len(beta[i]), x.rotors[i])
             unmet[i] = True
         out[i] = v
-    return Braked(out, need, unmet)
-
-
-def _reach(polytope: Any, A: np.ndarray) -> np.ndarray:
-    """Per row, the most A_i u any moment of the polytope gives (its support along A_i)."""
-    return so3.dot(A[:, None, :], polytope.vertices[None, :, :]).max(axis=-1)
+    return Braked(out, braking, unmet)
 
 
 def _compromise(u: np.ndarray, A: np.ndarray, beta: np.ndarray, rows_: int,
-                iterations: int = 30) -> np.ndarray:
+                rotors: np.ndarray, iterations: int = 30) -> np.ndarray:
     """Where the first ``rows_`` rows (the cones') cannot all be met within the rest (the
-    rotors' polytope): the moment closest to u that meets them all relaxed by the least common
+    rotors' reach): the moment closest to u that meets them all relaxed by the least common
     amount e (rad/s^2 of deceleration: A_i u >= beta_i - e), found by bisection on e, so that no
     cone is given up for another (two cones' rows conflict where the sensor runs fast down a
     narrow corridor between them).
     """
     soft = np.zeros(len(beta))
     soft[:rows_] = 1.0
-    # (at e = max beta_i the zero moment meets every relaxed row, and the polytope holds it)
-    lo, hi = 0.0, max(float(np.max(beta[:rows_])), 0.0) + 1.0
+    # (relaxed by the most any row asks beyond the rotors' moment now, every row is met there,
+    # and the reach holds it)
+    lo = 0.0
+    hi = max(float(np.max(beta[:rows_] - slack_of(A[:rows_], rotors, 0.0))), 0.0) + 1.0
     best = None
     for _ in range(iterations):
         mid = 0.5 * (lo + hi)

@@ -49,7 +49,7 @@ def cbf_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt:
     closest to Lee's geometric controller's that keeps every cone's pointing constraint
     (``pointing_cbf``) with a double pole at -``cbf_rate``, against any unlearnt moment up to
     ``cbf_moment_bound``, within the rotors' limits. With the approach brake on
-    (``approach_brake_rate``), its condition for every cone joins the QP
+    (``approach_brake``), its condition for every cone joins the QP
     (``core.law.brake.braked``). The estimate adapts as the baseline's.
     """
     terms, out = unconstrained(controller, R, Omega, dt, adapt)

@@ -95,13 +95,14 @@ class ControllerConfig:
     k_Delta_cog: float = 0.0         # adaptation gain of the m*rho block (constant+cog model)
     guidance_lookahead: float = 0.0  # rad, guidance's set point at most this far ahead; 0 = off
     guidance_clearance: float = 0.0  # rad, guidance's path this far outside each cone's barrier
-    approach_brake_rate: float = 0.0  # 1/s, the approach brake's recovery rate k_b; 0 = off
+    approach_brake: bool = False      # the approach brake on (``core.law.brake``)
     brake_acceleration: float = 0.0   # rad/s^2, a_b: the deceleration the rotors can always
                                       # make (``core.law.brake.brake_authority``; set with the
                                       # rotors by ``params.controller_setup``)
     attitude_noise: float = 0.0       # rad, the attitude measurement's standard deviation
     gyro_noise: float = 0.0           # rad/s, the gyro's standard deviation
     tilt_max: float = math.pi         # rad, the joint's tilt limit (its stops)
+    motor_lag: float = 0.0            # s, the rotors' thrust time constant the mixer models
     moment_limits: Optional[Any] = None   # MomentPolytope: the moments the rotors make
                                           # unsaturated (``Allocator.moment_polytope``); the
                                           # brake and the cbf law's QP keep them

@@ -114,9 +114,14 @@ class DelayPredictor:
         self.reset()
 
     def reset(self) -> None:
-        """Forget the observer (at arming: what held the vehicle on its stops is not its error)."""
+        """Forget the observer (at the take-over: what held the vehicle on its stops or in a
+        hand is not its error).
+        """
         self.acc_error = 0.0          # rad/s^2: model minus measured acceleration, low-passed
         self._last: Optional[tuple] = None    # (capture time, Omega) of the last rate sample
+        self.residual: Any = None     # rad/s^2: the last rate sample's |acceleration
+                                               # the model and the observer did not know| (one
+                                               # run; None until a sample taught it)
 
     def acceleration(self, R: np.ndarray, Omega: np.ndarray, moment: np.ndarray) -> np.ndarray:
         """The model's angular acceleration at (R, Omega) under the rotors' moment."""
@@ -130,6 +135,7 @@ class DelayPredictor:
         before the first command held teaches nothing.
         """
         last, self._last = self._last, (captured, Omega)
+        self.residual = None
         if last is None:
             return
         if np.ndim(captured) == 0:              # one run (the node's tick): plain floats
@@ -138,8 +144,9 @@ class DelayPredictor:
                 return
             modelled = self.acceleration(R, 0.5 * (Omega + last[1]),
                                          history.at(last[0] + 0.5 * interval))
-            self.acc_error = self.acc_error + (
-                modelled - (Omega - last[1]) / interval - self.acc_error) * (
+            innovation = modelled - (Omega - last[1]) / interval - self.acc_error
+            self.residual = np.sqrt(so3.dot(innovation, innovation))
+            self.acc_error = self.acc_error + innovation * (
                 interval / (PREDICT_SLOW_S + interval))
             return
         interval = captured - last[0]

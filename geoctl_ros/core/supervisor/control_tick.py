@@ -176,7 +176,8 @@ class ControlTick:
         brake = None
         if controller.brake is not None and self.flying:
             brake = self.brake_inputs(R_b, W_b, d + np.maximum(ages[0], ages[1]),
-                                      mixer.design_hold_for(dt, held), t)
+                                      mixer.design_hold_for(dt, held), t,
+                                      mixer.thrust_offsets(dt if held is None else held))
         out = controller.step(R, Omega, dt, adapt=adapt and self.flying, blind=blind,
                               brake=brake, guide=not spooling)
         if spooling:                        # the feed-forward alone, the vehicle held
@@ -191,7 +192,7 @@ class ControlTick:
         return Command(out, motors, spooling, took_over)
 
     def brake_inputs(self, R: np.ndarray, Omega: np.ndarray, age: Any, hold: float,
-                     t: float) -> BrakeInputs:
+                     t: float, thrusts: Optional[np.ndarray] = None) -> BrakeInputs:
         """The approach brake's inputs at the tick (``core.law.brake.BrakeInputs``): the state
         predicted at the tick, the measurements' age, the hold, the moment the rotors make now
         (the command history's lag model) and the model's other moments there, its observed
@@ -203,7 +204,21 @@ class ControlTick:
         error = self.predict.acc_error          # (0.0 until the observer has learnt)
         if np.ndim(error):
             f = f - matvec(controller.config.J, error)
-        return BrakeInputs(R, Omega, age, hold, self.history.at(t), f, M_g)
+        return BrakeInputs(R, Omega, age, hold, self.history.at(t), f, M_g, thrusts)
+
+    def takeover_inputs(self, R: np.ndarray, Omega: np.ndarray, age: Any,
+                        dt: float) -> BrakeInputs:
+        """The approach brake's inputs as they will be at the take-over after an arming now,
+        the vehicle held or resting where it is: the rotors spooled up to the feed-forward for
+        SPOOL_LAGS time constants from rest (uncompensated: the moment is the feed-forward's
+        1 - exp(-SPOOL_LAGS) share), the model's other moments at (R, Omega), the measurements
+        age old.
+        """
+        controller = self.controller
+        spooled = (1.0 - math.exp(-self.mixer.SPOOL_LAGS)) if self.mixer.lag > 0.0 else 1.0
+        M_g = controller.gravity_moment(R)
+        return BrakeInputs(R, Omega, age, dt, spooled * controller.feedforward(R),
+                           controller.model_moment(R, Omega, M_g), M_g)
 
     def _produced(self, motors, armed):
         """The moments the rotors make from this tick on: the one they settle to and the one they

@@ -5,6 +5,7 @@ The node turns messages into calls of this class and its results into messages; 
 adaptation, the diagnostics level and its reasons) is made here, so it is tested without rclpy.
 """
 
+import math
 from typing import Any, List, Optional, Sequence
 
 import numpy as np
@@ -32,6 +33,27 @@ from geoctl_ros.core.telemetry.diagnostics import Status, failsafe
 from geoctl_ros.core.telemetry.stats import WindowStats
 
 NON_FINITE = failsafe('non-finite control output')
+SPOOL_MOVE_DEG = 2.0     # the attitude may move this far while the rotors spool up
+
+
+def _unlearnt_bound(controller: AttitudeController) -> float:
+    """The approach brake's a_u (rad/s^2), which the acceleration the model does not know is
+    watched against; inf without the brake (no derivation to hold).
+    """
+    return math.inf if controller.brake is None else controller.brake.unmodelled
+
+
+def spool_movement(R_armed: np.ndarray, R: np.ndarray) -> Optional[str]:
+    """Why the spool-up must stop (the vehicle moved more than SPOOL_MOVE_DEG from where it was
+    armed: it was neither held nor resting on its stops, and the brake's take-over did not
+    reckon with the fall), or None.
+    """
+    moved = math.degrees(so3.angle(so3.matmul(so3.transpose(R_armed), R)))
+    if moved <= SPOOL_MOVE_DEG:
+        return None
+    return ('the vehicle moved %.1f deg while the rotors spooled up (more than %.1f deg): hold '
+            'it, or rest it on its stops, until the controller takes over' % (moved,
+                                                                             SPOOL_MOVE_DEG))
 
 
 class ControlLoop:
@@ -72,6 +94,10 @@ class ControlLoop:
         self._inside = False
         self.esc = None                 # the ESC node's last EscStatus (None: no ESC node)
         self.gaps = {'pose': [0, 0.0], 'angular velocity': [0, 0.0]}   # count, longest (s)
+        # the acceleration the model did not know, against the approach brake's a_u
+        self.unlearnt_bound = _unlearnt_bound(self.controller)
+        self.unlearnt_over = 0          # rate samples past it since the take-over
+        self._spool_from = None         # the attitude at arming, while the rotors spool up
 
     # --- inputs ------------------------------------------------------------------------------
     def offer_pose(self, q: Vector, stamp: float, receipt: float,
@@ -169,9 +195,8 @@ class ControlLoop:
             self.agreement.reset_flight()
             if not was_armed:
                 self.cone_entries, self.entry, self._inside = 0, None, False
-                self.step.history.clear()
-                self.step.predict.reset()
-                self.controller.replan()        # guidance's way from where the vehicle is
+                self.unlearnt_over = 0
+                self._spool_from = self.R       # (the take-over starts the flight's model)
         return result
 
     def disarm(self, reason: str = 'disarm requested', failed: bool = False) -> ArmResult:
@@ -194,6 +219,7 @@ class ControlLoop:
             return str(e)
         setup.mixer.adopt_state(self.setup.mixer)
         self.setup = setup
+        self.unlearnt_bound = _unlearnt_bound(self.controller)
         self.agreement.configure(setup.agreement)
         self.step.reconfigure(setup.mixer, 0.0)
         s = setup.loop
@@ -231,7 +257,7 @@ class ControlLoop:
                 self._schedule_index = i
         state = self.bridge.update(now, self.pose.fresh(now), self.rate.fresh(now))
         if state is None:
-            out, motors = self.step.idle(dt, now)
+            out, motors = self.step.idle(dt, now)[:2]
             tick = self._result(None, motors, armed, False, None)
         else:
             bridging = self.bridge.bridging
@@ -242,8 +268,19 @@ class ControlLoop:
             # as fresh. The estimate learns only from measurements.
             ages = tuple(0.0 if s.last_receipt is None else s.capture_age(now)
                          for s in (self.pose, self.rate))
-            out, motors = self.step(R, Omega, dt, now, ages, armed=armed,
-                                    adapt=armed and not bridging, predict=not bridging)
+            out, motors, spooling, took_over = self.step(
+                R, Omega, dt, now, ages, armed=armed, adapt=armed and not bridging,
+                predict=not bridging)
+            if took_over:
+                self.unlearnt_over = 0
+                self._spool_from = None
+            elif spooling and self._spool_from is not None:
+                moved = spool_movement(self._spool_from, R)
+                if moved is not None:
+                    self.disarm(failsafe(moved), failed=True)
+                    armed = False
+            if self.window.note_unlearnt(self.step.predict.residual, self.unlearnt_bound):
+                self.unlearnt_over += 1
             if out is None:
                 self.disarm(NON_FINITE, failed=True)
                 armed = False

@@ -9,7 +9,16 @@ import numpy as np
 
 from geoctl_ros.core.supervisor.control_tick import BLIND_BOUND_S, SUSTAINED_BLIND_BOUND_S
 from geoctl_ros.core.supervisor.gaps import GYRO, POSE
-from geoctl_ros.core.telemetry.diagnostics import ERROR, OK, WARN, Counts, Figures, Gaps, Status
+from geoctl_ros.core.telemetry.diagnostics import (
+    ERROR,
+    OK,
+    WARN,
+    Counts,
+    Figures,
+    Gaps,
+    Status,
+    Unlearnt,
+)
 
 NEAR_CONE_DEG = 2.0           # a cone margin below this is reported (WARN)
 
@@ -25,6 +34,19 @@ class Window:
     blind_ms: int = 0             # the longest blind time of an armed tick
     steady_blind_ms: int = 0      # the shortest blind time of an armed tick (a sustained latency)
     gain_pct: int = 100           # the lowest degraded-mode gain scale of an armed tick
+    unlearnt: float = 0.0         # rad/s^2: the largest acceleration the model did not know
+    unlearnt_over: int = 0        # rate samples with it past the approach brake's a_u
+
+    def note_unlearnt(self, residual: Optional[float], bound: float) -> bool:
+        """A rate sample's acceleration the model did not know (None: no sample taught it this
+        tick); whether it was past the bound.
+        """
+        if residual is None:
+            return False
+        self.unlearnt = max(self.unlearnt, residual)
+        over = residual > bound
+        self.unlearnt_over += over
+        return over
 
     def note(self, armed: bool, saturated: Any, bridging: bool, blind_s: float,
              gain_scale: Any) -> None:
@@ -116,6 +138,13 @@ def status(loop: Any, now: float, other_commanders: Optional[str] = None) -> Sta
                             np.max(loop.pose_age.samples(), initial=0.0),
                             np.max(loop.rate_age.samples(), initial=0.0)),
                             1e3 * BLIND_BOUND_S))
+    if sup.armed and w.unlearnt_over:
+        warnings.append('the model did not know up to %.1f rad/s^2 of the acceleration at %d '
+                        "rate samples (%d since the take-over), past the approach brake's a_u "
+                        'of %.1f rad/s^2: its derivation does not hold (docs/safety.md); a '
+                        'moment the model lacks (a disturbance, a wrong mass, centre of mass or '
+                        'inertia)' % (w.unlearnt, w.unlearnt_over, loop.unlearnt_over,
+                                      loop.unlearnt_bound))
     if sup.armed and w.armed_ticks and w.gain_pct < 100:
         warnings.append('degraded: feedback gains down to %d %% of their bandwidth while '
                         'blind past the bound' % w.gain_pct)
@@ -139,6 +168,9 @@ def status(loop: Any, now: float, other_commanders: Optional[str] = None) -> Sta
         pose_gaps=Gaps(*loop.gaps['pose']), imu_gaps=Gaps(*loop.gaps['angular velocity']),
         ticks_bridging=w.bridging, ticks=w.ticks, cone_entries=loop.cone_entries,
         psi=None if out is None else float(out.psi), min_cone_margin_deg=margin,
-        motor_commands=None if out is None else tuple(int(c) for c in tick.motors.commands))
+        motor_commands=None if out is None else tuple(int(c) for c in tick.motors.commands),
+        unlearnt=(Unlearnt(w.unlearnt, loop.unlearnt_bound, w.unlearnt_over,
+                           loop.unlearnt_over)
+                  if sup.armed and math.isfinite(loop.unlearnt_bound) else None))
     message = '; '.join(errors + warnings) or 'armed, all inputs fresh'
     return Status(level, message, figures)

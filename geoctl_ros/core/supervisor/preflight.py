@@ -2,6 +2,10 @@
 import math
 from typing import Any, List, Optional
 
+import numpy as np
+
+from geoctl_ros.core.law.brake import opening, rows
+
 
 def arm_problems(loop: Any, now: float, extra_problem: Optional[str] = None) -> List[str]:
     """Every reason not to arm now (sentences; empty: it may), as a preflight check names
@@ -26,4 +30,30 @@ def arm_problems(loop: Any, now: float, extra_problem: Optional[str] = None) -> 
             elif margin < guard:
                 problems.append('sensor within the guard of cone %r (margin %.2f deg, '
                                 'guard %.2f deg)' % (name, margin, guard))
+        problems += takeover_problems(loop, now)
     return problems
+
+
+def takeover_problems(loop: Any, now: float) -> List[str]:
+    """Where the approach brake could not keep a cone from the take-over after an arming now
+    (``core.law.brake.rows``' margin of the state then, ``ControlTick.takeover_inputs``: the
+    vehicle held or resting where it is while the rotors spool up, the gravity moment at its
+    tilt that the spooled rotors do not yet hold, the unlearnt acceleration a_u over the
+    measurements' age, the rotors' lag): a sentence per cone, naming the predicted closest
+    approach.
+    """
+    step, controller = loop.step, loop.controller
+    brake = controller.brake
+    if brake is None or loop.Omega is None:
+        return []
+    ages = [s.capture_age(now) for s in (loop.pose, loop.rate) if s.last_receipt is not None]
+    x = step.takeover_inputs(loop.R, loop.Omega, max(ages, default=0.0),
+                             1.0 / loop.setup.loop.rate_hz)
+    cones = controller.config.cones
+    margin = rows(brake, cones, controller.J_inv, x).margin
+    gap = np.degrees(opening(cones, loop.R, loop.Omega)[0])
+    return ['the approach brake could not keep cone %r once the rotors have spooled up: '
+            'predicted closest approach %.2f deg (from %.2f deg out, in the worst case of the '
+            "spool-up and the brake's bounds): arm further from it, or level the vehicle"
+            % (name, math.degrees(m), gap_i)
+            for name, m, gap_i in zip(cones.names, np.ravel(margin), np.ravel(gap)) if m < 0.0]

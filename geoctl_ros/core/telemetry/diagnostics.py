@@ -82,6 +82,18 @@ class Counts(NamedTuple):
     refused: int
 
 
+class Unlearnt(NamedTuple):
+    """The acceleration the model and its observer did not know at the rate samples (the
+    observer's innovation), against the approach brake's bound a_u (rad/s^2): the largest of
+    this window, the bound, and the samples past it in this window and since the take-over.
+    """
+
+    largest: float
+    bound: float
+    over: int
+    over_since_takeover: int
+
+
 class Gaps(NamedTuple):
     """Gaps of an input stream ridden through since the start, and the longest (s)."""
 
@@ -116,6 +128,7 @@ class Figures:
     psi: Optional[float] = None
     min_cone_margin_deg: Optional[float] = None
     motor_commands: Optional[tuple] = None
+    unlearnt: Optional['Unlearnt'] = None   # the acceleration the model did not know (armed)
     # the node's own timing of the window
     loop_period: Optional[Window] = None
     tick_to_command: Optional[Window] = None
@@ -170,6 +183,24 @@ def _margin_value(text):
     return None if text == 'no cones' else float(text)
 
 
+_UNLEARNT = re.compile(r'max (\S+) of a_u (\S+); (\d+) samples past it \((\d+) since the '
+                       r'take-over\)$')
+
+
+def _unlearnt_text(u: 'Unlearnt') -> str:
+    return 'max %.2f of a_u %.2f; %d samples past it (%d since the take-over)' % u
+
+
+def _unlearnt_value(text: str) -> Optional['Unlearnt']:
+    m = _UNLEARNT.match(text)
+    return None if m is None else Unlearnt(float(m.group(1)), float(m.group(2)),
+                                           int(m.group(3)), int(m.group(4)))
+
+
+def _unlearnt_absent(figures):
+    return figures.unlearnt is None
+
+
 def _after_first_step(figures):
     return figures.psi is None
 
@@ -203,6 +234,8 @@ CODEC = Codec(Figures, {
                                _after_first_step),
     'motor_commands': Key('motor commands', lambda c: ' '.join(str(x) for x in c),
                           lambda t: tuple(int(x) for x in t.split()), _after_first_step),
+    'unlearnt': Key('unlearnt acceleration [rad/s^2]', _unlearnt_text, _unlearnt_value,
+                    _unlearnt_absent),
 })
 assert set(CODEC.table) == {f.name for f in fields(Figures)}
 
