@@ -28,18 +28,21 @@ and closes a window on the pose that ends it; it computes (and allocates) only t
 """
 from dataclasses import dataclass
 import math
-from typing import List, NamedTuple, Optional
+from typing import List, NamedTuple, Optional, Tuple
 
 import numpy as np
 
+from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.sphere import angle_between_deg
 from geoctl_ros.core.sensors.frames import (
     BODY_FRAMES,
     WORLD_FRAMES,
     Y_UP_BODY_DEG,
     InputFrames,
+    matrix_rpy,
     rpy_matrix,
 )
+from geoctl_ros.core.sensors.yaw_offset import YawOffset
 
 SIGMAS = 5.0              # standard deviations of the difference a check allows
 REST_WINDOW = 0.5         # s of poses per arming window
@@ -51,6 +54,12 @@ REST_RATE = 0.05          # rad/s: the poses turn slower than this at rest
 FORCE_SHARE = 0.25        # |f| within this share of |g| at rest (else no accelerometer data)
 LATE = 3.0                # a window older than this many windows does not count for arming
 RESOLVED_RAD = 1.0        # a window whose poses (or gyro) turn more than this is not judged
+GAP_SHARE = 0.2           # a hole in either stream's stamps longer than this share of the
+                          # window (20 ms in flight, 0.1 s at rest) ends it unjudged
+YAW_FLOOR_DEG = 10.0      # a yaw between the gyro and the poses beyond this (by SIGMAS of its
+                          # standard error) is a mounting error, named in flight
+YAW_STEP_DEG = 5.0        # the yaw a sentence names: the nearest multiple of 45 deg within
+                          # this, else rounded to this
 
 
 @dataclass(frozen=True)
@@ -79,15 +88,44 @@ class Window(NamedTuple):
     gyros: int
     resolved: bool               # the poses turned less than RESOLVED_RAD over it (else the
                                  # slope of the logarithm says nothing: not judged)
+    gyro_sigma: float            # rad/s: one standard deviation per axis of the gyro's mean
+    poses_sigma: float           # rad/s: of the poses' rate
+    gyro_spread: float           # rad/s: the gyro's samples about their mean, rms per axis
+    spread_tolerance: float      # rad/s: the spread noise alone stays under (SIGMAS sigmas of
+                                 # its chi-square)
 
     @property
     def disagreement(self) -> float:
         """|gyro - poses' rate| (rad/s)."""
-        return float(np.linalg.norm(self.gyro - self.poses_rate))
+        return _norm(self.gyro - self.poses_rate)
+
+    @property
+    def turning(self) -> float:
+        """|poses' rate| (rad/s)."""
+        return _norm(self.poses_rate)
+
+    @property
+    def moving(self) -> bool:
+        """The vehicle moved over the window: the poses turn beyond the rate's tolerance, or the
+        gyro's rate varies beyond its noise. A bias is a steady gyro rate while the poses stand
+        still: neither.
+        """
+        return self.turning > self.rate_tolerance or self.gyro_spread > self.spread_tolerance
 
     @property
     def gravity_angle_deg(self) -> Optional[float]:
         return None if self.force is None else angle_between_deg(self.force, self.up)
+
+
+def _norm(v: np.ndarray) -> float:
+    """|v| of a 3-vector, in floats (no BLAS kernel's rounding)."""
+    return math.sqrt(float(so3.dot(v, v)))
+
+
+def _yaw_between(a: np.ndarray, b: np.ndarray) -> float:
+    """The yaw psi (deg) that turns a's horizontal part (x, y) onto b's: Rz(psi) a ~ b."""
+    ax, ay, bx, by = float(a[0]), float(a[1]), float(b[0]), float(b[1])
+    return math.degrees(math.atan2(ax * by - ay * bx, ax * bx + ay * by))
 
 
 def _log_stack(M: np.ndarray) -> np.ndarray:
@@ -96,7 +134,7 @@ def _log_stack(M: np.ndarray) -> np.ndarray:
     """
     skew = 0.5 * np.stack([M[:, 2, 1] - M[:, 1, 2], M[:, 0, 2] - M[:, 2, 0],
                            M[:, 1, 0] - M[:, 0, 1]], axis=1)
-    sin_t = np.linalg.norm(skew, axis=1)
+    sin_t = np.sqrt(so3.dot(skew, skew))
     theta = np.arctan2(sin_t, 0.5 * (M[:, 0, 0] + M[:, 1, 1] + M[:, 2, 2] - 1.0))
     scale = np.where(sin_t > 1e-12, theta / np.where(sin_t > 1e-12, sin_t, 1.0), 1.0)
     return skew * scale[:, None]
@@ -106,46 +144,60 @@ class _Accumulator:
     """One window of poses (kept, by their stamps, in preallocated buffers: the hot path stores
     a pose and adds an IMU sample, nothing more) and the sums of the IMU's samples; the window's
     figures are computed once, when a pose closes it.
+
+    A hole in either stream's stamps longer than ``gap`` (both paused together, a stalled
+    source, samples lost) ends the window unjudged, and the next pose starts another: across the
+    hole the gyro's mean and the poses' slope weigh different stretches of the motion, and would
+    differ wherever it accelerates.
     """
 
     CAPACITY = 1024          # poses a window holds (a full one closes early)
 
     def __init__(self, span: float, settings: AgreementSettings):
         self.span = span
+        self.gap = GAP_SHARE * span
         self.configure(settings)
         self.Rs = np.zeros((self.CAPACITY, 3, 3))
         self.ts = np.zeros(self.CAPACITY)
         self.n = 0
         self.t0 = 0.0
         self.w = np.zeros(3)
+        self.ww = np.zeros(3)            # sums of the gyro's squares, per axis
         self.f = np.zeros(3)
         self.nw = self.nf = 0
+        self.imu_stamp: Optional[float] = None   # the last IMU sample's stamp
         self.last: Optional[Window] = None
 
     def configure(self, settings: AgreementSettings) -> None:
         """Take new settings (a reconfiguration: the next window closes with them)."""
         self.settings = settings
-        self.up_world = -settings.gravity / np.linalg.norm(settings.gravity)
+        self.up_world = -settings.gravity / _norm(settings.gravity)
 
     def _restart(self, R, stamp):
         self.Rs[0] = R
         self.ts[0] = stamp
         self.n, self.t0 = 1, stamp
         self.w[:] = 0.0
+        self.ww[:] = 0.0
         self.f[:] = 0.0
         self.nw = self.nf = 0
 
-    def imu(self, w: np.ndarray, f: Optional[np.ndarray]) -> None:
+    def imu(self, w: np.ndarray, f: Optional[np.ndarray], stamp: float) -> None:
+        last, self.imu_stamp = self.imu_stamp, stamp
         if not self.n:
             return
+        if last is not None and stamp - last > self.gap:
+            self.n = 0                   # a hole: unjudged; the next pose starts a window
+            return
         self.w += w
+        self.ww += w * w
         self.nw += 1
         if f is not None:
             self.f += f
             self.nf += 1
 
     def pose(self, R: np.ndarray, stamp: float, receipt: float) -> Optional[Window]:
-        if not self.n or stamp < self.t0:
+        if not self.n or stamp < self.t0 or stamp - self.ts[self.n - 1] > self.gap:
             self._restart(R, stamp)
             return None
         k = self.n
@@ -160,27 +212,33 @@ class _Accumulator:
         return out
 
     def _close(self, receipt: float, span: float) -> Optional[Window]:
-        n, s = self.n, self.settings
+        n, s, nw = self.n, self.settings, self.nw
         Rs, t = self.Rs[:n], self.ts[:n] - self.t0
-        theta = _log_stack(np.matmul(Rs[0].T, Rs))
-        st, stt = float(t.sum()), float(t @ t)
+        theta = _log_stack(so3.matmul(Rs[0].T, Rs))
+        st, stt = float(t.sum()), float((t * t).sum())
         spread = n * stt - st * st
-        if not self.nw or spread <= 0.0:
+        if not nw or spread <= 0.0:
             return None
-        slope = (n * (t @ theta) - st * theta.sum(axis=0)) / spread
-        sigma_rate = math.hypot(s.attitude_noise * math.sqrt(n / spread),
-                                s.gyro_noise / math.sqrt(self.nw))
+        slope = (n * (t[:, None] * theta).sum(axis=0) - st * theta.sum(axis=0)) / spread
+        poses_sigma = s.attitude_noise * math.sqrt(n / spread)
+        gyro_sigma = s.gyro_noise / math.sqrt(nw)
         force = self.f / self.nf if self.nf else None
-        g = float(np.linalg.norm(s.gravity))
+        g = _norm(s.gravity)
         sigma_tilt = math.hypot(s.attitude_noise / math.sqrt(n),
                                 s.accelerometer_noise / (g * math.sqrt(max(self.nf, 1))))
-        gyro = self.w / self.nw
-        turned = float(np.max(np.einsum('ij,ij->i', theta, theta)))
-        resolved = (turned < RESOLVED_RAD ** 2
-                    and float(np.linalg.norm(gyro)) * span < RESOLVED_RAD)
-        up = (self.up_world @ Rs).mean(axis=0)           # the mean of R^T e_up
-        self.last = Window(receipt, gyro, slope, SIGMAS * sigma_rate, up, force,
-                           SIGMAS * sigma_tilt, n, self.nw, resolved)
+        gyro = self.w / nw
+        if nw > 1:                   # the samples' spread, against a chi-square of 3 (nw - 1)
+            dof = 3 * (nw - 1)
+            gyro_spread = math.sqrt(max(float((self.ww - nw * gyro * gyro).sum()), 0.0) / dof)
+            spread_tolerance = s.gyro_noise * math.sqrt(1.0 + SIGMAS * math.sqrt(2.0 / dof))
+        else:
+            gyro_spread, spread_tolerance = 0.0, math.inf
+        turned = float(np.max(so3.dot(theta, theta)))
+        resolved = turned < RESOLVED_RAD ** 2 and _norm(gyro) * span < RESOLVED_RAD
+        up = so3.vecmat(self.up_world, Rs).mean(axis=0)     # the mean of R^T e_up
+        self.last = Window(receipt, gyro, slope, SIGMAS * math.hypot(poses_sigma, gyro_sigma),
+                           up, force, SIGMAS * sigma_tilt, n, nw, resolved, gyro_sigma,
+                           poses_sigma, gyro_spread, spread_tolerance)
         return self.last
 
 
@@ -196,7 +254,7 @@ _POSE_GUESSES = [
 
 
 class SensorAgreement:
-    """The two checks over the converted samples (module docstring)."""
+    """The checks over the converted samples (module docstring)."""
 
     def __init__(self, settings: AgreementSettings, frames: InputFrames):
         self.settings = settings
@@ -204,15 +262,19 @@ class SensorAgreement:
         self.rest = _Accumulator(REST_WINDOW, settings)
         self.flight = _Accumulator(FLIGHT_WINDOW, settings)
         self.mismatches = 0           # in-flight windows in a row that disagree
-        self._first = (0.0, 0.0, '')  # the first of them: disagreement, limit, likely cause
+        self._first: Optional[Tuple[Window, float]] = None   # the first of them, its limit
+        self.yaw = YawOffset()        # the yaw between the gyro and the poses since arming
+        self.yaw_named = 0            # in-flight windows in a row after which it is named
         self.flight_note: Optional[str] = None    # why, once FLIGHT_WINDOWS in a row did
         self.rest_problems: Optional[List[str]] = None   # the last rest window's verdict
         self.raw_pose: Optional[np.ndarray] = None    # the newest pose as the source streamed it
 
-    def imu(self, w: np.ndarray, f: Optional[np.ndarray]) -> None:
-        """A converted gyro sample and specific force (None: the IMU gave none)."""
-        self.rest.imu(w, f)
-        self.flight.imu(w, f)
+    def imu(self, w: np.ndarray, f: Optional[np.ndarray], stamp: float) -> None:
+        """A converted gyro sample and specific force (None: the IMU gave none) of stamp (s,
+        the IMU's clock: only the time between its samples is used).
+        """
+        self.rest.imu(w, f, stamp)
+        self.flight.imu(w, f, stamp)
 
     def pose(self, R: np.ndarray, stamp: float, receipt: float,
              raw: Optional[np.ndarray] = None) -> None:
@@ -223,21 +285,46 @@ class SensorAgreement:
         self.rest.pose(R, stamp, receipt)
         closed = self.flight.pose(R, stamp, receipt)
         if closed is not None and closed.resolved:
-            motion = max(float(np.linalg.norm(closed.gyro)),
-                         float(np.linalg.norm(closed.poses_rate)))
-            limit = closed.rate_tolerance + FLIGHT_FLOOR + FLIGHT_SHARE * motion
-            if closed.disagreement > limit:
-                self.mismatches += 1
-                if self.mismatches == 1:        # (named while the motion is still the pilot's)
-                    self._first = (closed.disagreement, limit, self._rate_cause(closed))
-                if self.mismatches >= FLIGHT_WINDOWS and self.flight_note is None:
-                    gap, allowed, cause = self._first
-                    self.flight_note = (
-                        'the gyro and the poses disagree by %.2f rad/s (over %.2f rad/s; %d '
-                        'windows of %.1f s in a row): %s'
-                        % (gap, allowed, self.mismatches, FLIGHT_WINDOW, cause))
-            else:
-                self.mismatches = 0
+            self.yaw.add(closed.gyro, closed.poses_rate, closed.gyro_sigma, closed.poses_sigma)
+            self._judge_rate(closed)
+            self._judge_yaw()
+
+    def _judge_rate(self, w: Window) -> None:
+        """The in-flight rate check of a window: the gyro against the poses' rate. The cause is
+        named from the first window that disagreed (while the motion was still the pilot's), a
+        yaw by the flight's estimate once it is beyond doubt.
+        """
+        motion = max(_norm(w.gyro), w.turning)
+        limit = w.rate_tolerance + FLIGHT_FLOOR + FLIGHT_SHARE * motion
+        if w.disagreement <= limit:
+            self.mismatches = 0
+            return
+        self.mismatches += 1
+        if self.mismatches == 1:        # (judged while the motion is still the pilot's)
+            self._first = (w, limit)
+        if self.mismatches >= FLIGHT_WINDOWS and self.flight_note is None:
+            first, allowed = self._first
+            self.flight_note = (
+                'the gyro and the poses disagree by %.2f rad/s (over %.2f rad/s; %d windows of '
+                '%.1f s in a row): %s' % (first.disagreement, allowed, self.mismatches,
+                                          FLIGHT_WINDOW, self._rate_cause(first, True)))
+
+    def _judge_yaw(self) -> None:
+        """The in-flight yaw check: the flight's windows so far name a yaw between the gyro and
+        the poses beyond YAW_FLOOR_DEG (by SIGMAS standard errors) after FLIGHT_WINDOWS windows
+        in a row.
+        """
+        yaw = self.yaw
+        if not yaw.beyond(YAW_FLOOR_DEG, SIGMAS):
+            self.yaw_named = 0
+            return
+        self.yaw_named += 1
+        if self.yaw_named >= FLIGHT_WINDOWS and self.flight_note is None:
+            self.flight_note = (
+                'the gyro and the poses disagree in yaw by %.1f deg (%.0f sigma %.1f deg, '
+                'allowed %.0f; %d windows of %.1f s since arming): %s'
+                % (yaw.deg, SIGMAS, SIGMAS * yaw.sigma_deg, YAW_FLOOR_DEG, yaw.windows,
+                   FLIGHT_WINDOW, self._yaw_cause(yaw.deg)))
 
     def configure(self, settings: AgreementSettings) -> None:
         """Take new settings (``ControlLoop.reconfigure``), in both windows too."""
@@ -246,8 +333,10 @@ class SensorAgreement:
         self.flight.configure(settings)
 
     def reset_flight(self) -> None:
-        """At arming: the in-flight verdict starts again."""
+        """At arming: the in-flight verdicts start again."""
         self.mismatches, self.flight_note = 0, None
+        self.yaw.reset()
+        self.yaw_named = 0
 
     # --- at arming -----------------------------------------------------------------------
     def arm_problems(self, now: float) -> List[str]:
@@ -256,7 +345,10 @@ class SensorAgreement:
         At rest (the poses turn slower than REST_RATE) both checks judge the last window. A
         turning vehicle (re-armed after a failsafe, say) is judged by the rate check with the
         in-flight tolerance, and by the gravity and bias checks of the last window it rested in
-        (the conventions cannot change while the node runs): it must have rested once.
+        (the conventions cannot change while the node runs): it must have rested once. A slow
+        window in which the vehicle moves (``Window.moving``) and the gyro and the poses differ
+        beyond the rest tolerance is refused as moving, not as a bias, and is no rest: the last
+        rest's verdict stays.
         """
         if not self.settings.enabled:
             return []
@@ -264,9 +356,9 @@ class SensorAgreement:
         if w is None or now - w.end > LATE * REST_WINDOW:
             return ['the sensor checks have no recent window (%.1f s of poses and IMU '
                     'samples; docs/sensors.md)' % REST_WINDOW]
-        turning = float(np.linalg.norm(w.poses_rate))
+        turning = w.turning
         if turning > REST_RATE or not w.resolved:
-            motion = max(turning, float(np.linalg.norm(w.gyro)))
+            motion = max(turning, _norm(w.gyro))
             limit = w.rate_tolerance + FLIGHT_FLOOR + FLIGHT_SHARE * motion
             if w.resolved and w.disagreement > limit:
                 return ['the gyro and the poses disagree by %.2f rad/s while turning at %.2f '
@@ -276,6 +368,12 @@ class SensorAgreement:
                 return ['the vehicle turns at %.2f rad/s and has not rested since start: arm it '
                         'at rest (the gravity check)' % turning]
             return list(self.rest_problems)
+        if w.moving and w.disagreement > w.rate_tolerance:
+            return ["the vehicle is moving (the poses turn at %.3f rad/s, the gyro's rate "
+                    'varies by %.3f rad/s rms about %.3f, its noise %.3f; they differ by %.3f, '
+                    'allowed %.3f at rest): arm it when it rests'
+                    % (turning, w.gyro_spread, _norm(w.gyro), self.settings.gyro_noise,
+                       w.disagreement, w.rate_tolerance)]
         self.rest_problems = self._rest_problems(w, turning)
         return list(self.rest_problems)
 
@@ -286,13 +384,13 @@ class SensorAgreement:
             problems.append(
                 'the gyro reads %.3f rad/s at rest (the poses %.3f; allowed %.3f): a gyro '
                 "bias (run calibrate, which writes gyro_bias) or the gyro's axes wrong"
-                % (float(np.linalg.norm(w.gyro)), turning, w.rate_tolerance))
-        g = float(np.linalg.norm(self.settings.gravity))
+                % (_norm(w.gyro), turning, w.rate_tolerance))
+        g = _norm(self.settings.gravity)
         if w.force is None:
             problems.append('the IMU sends no specific force (linear_acceleration): the gravity '
                             'check cannot run (consistency_checks false arms without it)')
             return problems
-        size = float(np.linalg.norm(w.force))
+        size = _norm(w.force)
         if abs(size - g) > FORCE_SHARE * g:
             problems.append("the IMU's specific force is %.2f m/s^2 at rest, not about %.2f: "
                             'no accelerometer data in linear_acceleration, or its units wrong'
@@ -307,7 +405,9 @@ class SensorAgreement:
 
     def _gravity_cause(self, w: Window, angle: float, allowed: float) -> str:
         """The likely causes of a gravity mismatch, in words: every other convention or IMU
-        mounting that would make gravity agree (at rest, level, several may), or the tilt.
+        mounting that would make gravity agree (at rest, level, several may), or the tilt. A yaw
+        of the mounting is measured: the yaw that turns the force's horizontal part onto the
+        poses' up's (resting tilted; level, both are about zero and none fits).
         """
         fr = self.frames
         fits = []
@@ -328,11 +428,10 @@ class SensorAgreement:
                 if R[2, 2] > 0.0 and angle_between_deg(f, R.T @ up_world) <= allowed:
                     fits.append(words + ', while the parameters say %s/%s'
                                 % (fr.world, fr.body))
-            for yaw in (90.0, 180.0, 270.0):
-                turned = rpy_matrix((0.0, 0.0, yaw)) @ w.force
-                if angle_between_deg(turned, w.up) <= allowed:
-                    fits.append('the IMU looks mounted about %.0f deg off in yaw '
-                                '(imu_rotation_deg)' % (yaw if yaw <= 180.0 else yaw - 360.0))
+            yaw = _yaw_between(w.force, w.up)
+            turned = so3.matvec(rpy_matrix((0.0, 0.0, yaw)), w.force)
+            if abs(yaw) >= YAW_FLOOR_DEG and angle_between_deg(turned, w.up) <= allowed:
+                fits.append(self._yaw_cause(yaw))
         if fits:
             return '; or '.join(fits)
         if angle < 30.0:
@@ -341,13 +440,33 @@ class SensorAgreement:
         return ('the frames wrong: pose_world_frame, body_frame, marker_rotation_deg or '
                 'imu_rotation_deg (docs/sensors.md)')
 
-    def _rate_cause(self, w: Window) -> str:
-        """The likely cause of a rate mismatch, in words."""
-        for yaw in (90.0, 180.0, 270.0):
-            turned = rpy_matrix((0.0, 0.0, yaw)) @ w.gyro
-            if float(np.linalg.norm(turned - w.poses_rate)) <= (
-                    w.rate_tolerance + FLIGHT_FLOOR + 0.5 * FLIGHT_SHARE
-                    * float(np.linalg.norm(w.poses_rate))):
-                return ('the IMU looks mounted about %.0f deg off in yaw (imu_rotation_deg), or '
-                        'the marker set is' % (yaw if yaw <= 180.0 else yaw - 360.0))
-        return ("the IMU's mounting, the marker set or the pose frame wrong (docs/sensors.md)")
+    def _rate_cause(self, w: Window, in_flight: bool = False) -> str:
+        """The likely cause of a rate mismatch, in words: a yaw between the gyro and the poses,
+        if turning the gyro by it makes them agree; in flight the flight's yaw once it is beyond
+        doubt (``YawOffset``), else the window's own.
+        """
+        if in_flight and self.yaw.beyond(YAW_FLOOR_DEG, SIGMAS):
+            yaw = self.yaw.deg
+        else:
+            yaw = _yaw_between(w.gyro, w.poses_rate)
+        turned = so3.matvec(rpy_matrix((0.0, 0.0, yaw)), w.gyro)
+        if abs(yaw) >= YAW_FLOOR_DEG and _norm(turned - w.poses_rate) <= (
+                w.rate_tolerance + FLIGHT_FLOOR + 0.5 * FLIGHT_SHARE * w.turning):
+            return self._yaw_cause(yaw)
+        return "the IMU's mounting, the marker set or the pose frame wrong (docs/sensors.md)"
+
+    def _yaw_cause(self, yaw_deg: float) -> str:
+        """The cause a yaw between the gyro and the poses names: the IMU's mounting turned by it
+        (the nearest multiple of 45 deg within YAW_STEP_DEG, as mountings mostly are, else
+        rounded to YAW_STEP_DEG), with the imu_rotation_deg that undoes it, or the marker set.
+        """
+        named = 45.0 * round(yaw_deg / 45.0)
+        if abs(named - yaw_deg) > YAW_STEP_DEG:
+            named = YAW_STEP_DEG * round(yaw_deg / YAW_STEP_DEG)
+        if named <= -180.0:
+            named += 360.0
+        mounting = np.round(matrix_rpy(so3.matmul(rpy_matrix((0.0, 0.0, named)),
+                                                   self.frames.imu_rotation)), 1) + 0.0
+        return ('the IMU looks mounted about %.0f deg off in yaw: set imu_rotation_deg [%.1f, '
+                '%.1f, %.1f] (or the marker set is off as much in yaw: calibrate --heading-deg '
+                'measures it)' % (named, mounting[0], mounting[1], mounting[2]))
