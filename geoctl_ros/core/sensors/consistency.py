@@ -303,7 +303,7 @@ class SensorAgreement:
         if self.mismatches == 1:        # (judged while the motion is still the pilot's)
             self._first = (w, limit)
         if self.mismatches >= FLIGHT_WINDOWS and self.flight_note is None:
-            first, allowed = self._first
+            first, allowed = self._first or (w, limit)
             self.flight_note = (
                 'the gyro and the poses disagree by %.2f rad/s (over %.2f rad/s; %d windows of '
                 '%.1f s in a row): %s' % (first.disagreement, allowed, self.mismatches,

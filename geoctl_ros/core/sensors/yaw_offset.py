@@ -17,6 +17,8 @@ error is of the order of a radian, and nothing is named.
 """
 import math
 
+import numpy as np
+
 
 class YawOffset:
     """The yaw psi (deg) with Rz(psi) gyro ~ poses' rate, over the windows added since reset."""
@@ -31,7 +33,8 @@ class YawOffset:
         self.variance = 0.0      # of Z's part across its direction
         self.windows = 0
 
-    def add(self, gyro, poses_rate, gyro_sigma: float, poses_sigma: float) -> None:
+    def add(self, gyro: np.ndarray, poses_rate: np.ndarray, gyro_sigma: float,
+            poses_sigma: float) -> None:
         """One window's mean gyro rate and poses' rate (body, rad/s), with their noise (one
         standard deviation per axis, rad/s).
         """
