@@ -153,16 +153,17 @@ class _Accumulator:
 
     CAPACITY = 1024          # poses a window holds (a full one closes early)
 
-    def __init__(self, span: float, settings: AgreementSettings):
+    def __init__(self, span: float, settings: AgreementSettings, spread: bool = False):
         self.span = span
         self.gap = GAP_SHARE * span
+        self.spread = spread             # sum the gyro's squares (the arming window's motion)
         self.configure(settings)
         self.Rs = np.zeros((self.CAPACITY, 3, 3))
         self.ts = np.zeros(self.CAPACITY)
         self.n = 0
-        self.t0 = 0.0
+        self.t0 = self.t_last = 0.0      # the window's first and last poses' stamps
         self.w = np.zeros(3)
-        self.ww = np.zeros(3)            # sums of the gyro's squares, per axis
+        self.ww = 0.0                    # the sum of the gyro's |w|^2
         self.f = np.zeros(3)
         self.nw = self.nf = 0
         self.imu_stamp: Optional[float] = None   # the last IMU sample's stamp
@@ -177,12 +178,14 @@ class _Accumulator:
         self.Rs[0] = R
         self.ts[0] = stamp
         self.n, self.t0 = 1, stamp
+        self.t_last = stamp
         self.w[:] = 0.0
-        self.ww[:] = 0.0
+        self.ww = 0.0
         self.f[:] = 0.0
         self.nw = self.nf = 0
 
     def imu(self, w: np.ndarray, f: Optional[np.ndarray], stamp: float) -> None:
+        """A gyro sample w and specific force f (or None) of stamp."""
         last, self.imu_stamp = self.imu_stamp, stamp
         if not self.n:
             return
@@ -190,20 +193,23 @@ class _Accumulator:
             self.n = 0                   # a hole: unjudged; the next pose starts a window
             return
         self.w += w
-        self.ww += w * w
+        if self.spread:
+            x, y, z = w.tolist()
+            self.ww += x * x + y * y + z * z
         self.nw += 1
         if f is not None:
             self.f += f
             self.nf += 1
 
     def pose(self, R: np.ndarray, stamp: float, receipt: float) -> Optional[Window]:
-        if not self.n or stamp < self.t0 or stamp - self.ts[self.n - 1] > self.gap:
+        if not self.n or stamp < self.t0 or stamp - self.t_last > self.gap:
             self._restart(R, stamp)
             return None
         k = self.n
         self.Rs[k] = R
         self.ts[k] = stamp
         self.n = k + 1
+        self.t_last = stamp
         tau = stamp - self.t0
         if tau < self.span and self.n < self.CAPACITY:
             return None
@@ -227,9 +233,9 @@ class _Accumulator:
         sigma_tilt = math.hypot(s.attitude_noise / math.sqrt(n),
                                 s.accelerometer_noise / (g * math.sqrt(max(self.nf, 1))))
         gyro = self.w / nw
-        if nw > 1:                   # the samples' spread, against a chi-square of 3 (nw - 1)
+        if self.spread and nw > 1:   # the samples' spread, against a chi-square of 3 (nw - 1)
             dof = 3 * (nw - 1)
-            gyro_spread = math.sqrt(max(float((self.ww - nw * gyro * gyro).sum()), 0.0) / dof)
+            gyro_spread = math.sqrt(max(self.ww - nw * float(so3.dot(gyro, gyro)), 0.0) / dof)
             spread_tolerance = s.gyro_noise * math.sqrt(1.0 + SIGMAS * math.sqrt(2.0 / dof))
         else:
             gyro_spread, spread_tolerance = 0.0, math.inf
@@ -259,7 +265,7 @@ class SensorAgreement:
     def __init__(self, settings: AgreementSettings, frames: InputFrames):
         self.settings = settings
         self.frames = frames          # the InputFrames in effect (to name a likely cause)
-        self.rest = _Accumulator(REST_WINDOW, settings)
+        self.rest = _Accumulator(REST_WINDOW, settings, spread=True)
         self.flight = _Accumulator(FLIGHT_WINDOW, settings)
         self.mismatches = 0           # in-flight windows in a row that disagree
         self._first: Optional[Tuple[Window, float]] = None   # the first of them, its limit
