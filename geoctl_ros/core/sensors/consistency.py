@@ -11,7 +11,10 @@ obstacle with every figure saying it is clear. Two pairs of measurements see suc
   the vehicle rests level (gravity lies along the yaw axis); it shows in proportion to the tilt.
 - **rate**: the gyro's mean over a window must agree with the rate of the poses over it (the
   least-squares slope of log(R_0^T R_k) against the poses' stamps, in the body). At rest this is
-  the gyro's bias; moving, it sees every rotation error, the yaw ones too.
+  the gyro's bias; moving, it sees every rotation error, the yaw ones too. A yaw error turns the
+  rates' horizontal parts (x, y) and leaves their z alone; over a flight the windows' horizontal
+  rates measure that yaw (``core.sensors.yaw_offset``), which names a mounting turned in yaw
+  long before the difference of one window exceeds its tolerance.
 
 The tolerances are derived from the sensors' noise figures (one standard deviation per axis and
 sample: ``attitude_noise``, ``gyro_noise``, ``accelerometer_noise``) and the samples each window
@@ -21,7 +24,15 @@ per window (a chi distribution of 2 or 3 degrees of freedom beyond 5), plus, for
 the vehicle accelerates, so the tolerance adds ``FLIGHT_SHARE`` of the rate and
 ``FLIGHT_FLOOR`` (the streams' clocks and their stamps' offset, the log's curvature over a turning
 window): a mismatch must exceed about a third of the motion, for ``FLIGHT_WINDOWS`` windows in a
-row; the failsafe names the cause the first of them shows.
+row; the failsafe names the cause the first of them shows. The flight's yaw is named beyond
+``YAW_FLOOR_DEG`` by ``SIGMAS`` of its standard error, for ``FLIGHT_WINDOWS`` windows in a row.
+
+Only windows that both streams sample are judged: a hole (a step in a stream's stamps longer
+than ``GAP_SHARE`` of a window) neither agrees nor disagrees. When both streams pause together
+the window ends at the pause, judged if it spans ``MIN_SHARE`` of a window; a hole in one stream
+while the other goes on loses the window (``_Accumulator``). At arming, a slow window in which
+the vehicle moves (the poses turn beyond the rate's tolerance, or the gyro's samples spread
+beyond its noise) is told from a bias (a steady gyro rate while the poses stand still).
 
 ``SensorAgreement`` takes the converted samples (``core.sensors.frames.InputFrames``) as they come
 and closes a window on the pose that ends it; it computes (and allocates) only then.
@@ -54,8 +65,10 @@ REST_RATE = 0.05          # rad/s: the poses turn slower than this at rest
 FORCE_SHARE = 0.25        # |f| within this share of |g| at rest (else no accelerometer data)
 LATE = 3.0                # a window older than this many windows does not count for arming
 RESOLVED_RAD = 1.0        # a window whose poses (or gyro) turn more than this is not judged
-GAP_SHARE = 0.2           # a hole in either stream's stamps longer than this share of the
-                          # window (20 ms in flight, 0.1 s at rest) ends it unjudged
+GAP_SHARE = 0.25          # a hole: a step in a stream's stamps longer than this share of a
+                          # window (25 ms in flight, 0.125 s at rest)
+MIN_SHARE = 0.5           # a window a pause of both streams ends early is judged if it spans
+                          # at least this share of a window
 YAW_FLOOR_DEG = 10.0      # a yaw between the gyro and the poses beyond this (by SIGMAS of its
                           # standard error) is a mounting error, named in flight
 YAW_STEP_DEG = 5.0        # the yaw a sentence names: the nearest multiple of 45 deg within
@@ -145,10 +158,14 @@ class _Accumulator:
     a pose and adds an IMU sample, nothing more) and the sums of the IMU's samples; the window's
     figures are computed once, when a pose closes it.
 
-    A hole in either stream's stamps longer than ``gap`` (both paused together, a stalled
-    source, samples lost) ends the window unjudged, and the next pose starts another: across the
-    hole the gyro's mean and the poses' slope weigh different stretches of the motion, and would
-    differ wherever it accelerates.
+    A window is judged only where both streams sample it: across a hole the gyro's mean and the
+    poses' slope weigh different stretches of the motion, and differ wherever it accelerates. A
+    hole is a step in a stream's stamps longer than ``gap``; whether the other stream paused too
+    is told by the receipts (the one clock both share). When both paused together (a stalled
+    source, the sim stopped), the window ends at the hole and is judged if it spans at least
+    ``MIN_SHARE`` of a window; a hole in one stream while the other went on loses the window.
+    So does an IMU that did not sample the window's start or end (its first or last sample
+    received more than ``gap`` from the window's first or closing pose).
     """
 
     CAPACITY = 1024          # poses a window holds (a full one closes early)
@@ -162,10 +179,13 @@ class _Accumulator:
         self.ts = np.zeros(self.CAPACITY)
         self.n = 0
         self.t0 = self.t_last = 0.0      # the window's first and last poses' stamps
+        self.r0 = self.pose_receipt = 0.0    # and their receipts
         self.w = np.zeros(3)
         self.ww = 0.0                    # the sum of the gyro's |w|^2
         self.f = np.zeros(3)
         self.nw = self.nf = 0
+        self.gyro_r0 = self.gyro_receipt = 0.0   # receipts of its first and last gyro samples
+        self.cut = False                 # a hole in the IMU's samples while the poses went on
         self.imu_stamp: Optional[float] = None   # the last IMU sample's stamp
         self.last: Optional[Window] = None
 
@@ -174,24 +194,29 @@ class _Accumulator:
         self.settings = settings
         self.up_world = -settings.gravity / _norm(settings.gravity)
 
-    def _restart(self, R, stamp):
+    def _restart(self, R, stamp, receipt):
         self.Rs[0] = R
         self.ts[0] = stamp
-        self.n, self.t0 = 1, stamp
-        self.t_last = stamp
+        self.n, self.t0, self.t_last = 1, stamp, stamp
+        self.r0 = self.pose_receipt = receipt
         self.w[:] = 0.0
         self.ww = 0.0
         self.f[:] = 0.0
         self.nw = self.nf = 0
+        self.cut = False
 
-    def imu(self, w: np.ndarray, f: Optional[np.ndarray], stamp: float) -> None:
-        """A gyro sample w and specific force f (or None) of stamp."""
+    def imu(self, w: np.ndarray, f: Optional[np.ndarray], stamp: float, receipt: float) -> None:
+        """A gyro sample w and specific force f (or None) of stamp, received at receipt."""
         last, self.imu_stamp = self.imu_stamp, stamp
-        if not self.n:
+        if not self.n or self.cut:
             return
-        if last is not None and stamp - last > self.gap:
-            self.n = 0                   # a hole: unjudged; the next pose starts a window
-            return
+        if last is not None and stamp - last > self.gap and (self.nw or self.n > 1):
+            if receipt - self.pose_receipt <= self.gap:     # the poses went on through it
+                self.cut = True
+            return                       # (both paused: the pose after the hole ends it)
+        if not self.nw:
+            self.gyro_r0 = receipt
+        self.gyro_receipt = receipt
         self.w += w
         if self.spread:
             x, y, z = w.tolist()
@@ -202,28 +227,38 @@ class _Accumulator:
             self.nf += 1
 
     def pose(self, R: np.ndarray, stamp: float, receipt: float) -> Optional[Window]:
-        if not self.n or stamp < self.t0 or stamp - self.t_last > self.gap:
-            self._restart(R, stamp)
+        if not self.n or stamp < self.t0 or self.cut:
+            self._restart(R, stamp, receipt)
             return None
+        if stamp - self.t_last > self.gap:          # a hole in the poses
+            out = None
+            if (receipt - self.gyro_receipt > self.gap           # the IMU paused too
+                    and self.t_last - self.t0 >= MIN_SHARE * self.span):
+                out = self._close(self.pose_receipt, self.t_last - self.t0)
+            self._restart(R, stamp, receipt)
+            return out
         k = self.n
         self.Rs[k] = R
         self.ts[k] = stamp
         self.n = k + 1
-        self.t_last = stamp
+        self.t_last, self.pose_receipt = stamp, receipt
         tau = stamp - self.t0
         if tau < self.span and self.n < self.CAPACITY:
             return None
         out = self._close(receipt, tau)
-        self._restart(R, stamp)
+        self._restart(R, stamp, receipt)
         return out
 
     def _close(self, receipt: float, span: float) -> Optional[Window]:
         n, s, nw = self.n, self.settings, self.nw
+        if (not nw or self.gyro_r0 - self.r0 > self.gap
+                or receipt - self.gyro_receipt > self.gap):     # the IMU missed its start or end
+            return None
         Rs, t = self.Rs[:n], self.ts[:n] - self.t0
         theta = _log_stack(so3.matmul(Rs[0].T, Rs))
         st, stt = float(t.sum()), float((t * t).sum())
         spread = n * stt - st * st
-        if not nw or spread <= 0.0:
+        if spread <= 0.0:
             return None
         slope = (n * (t[:, None] * theta).sum(axis=0) - st * theta.sum(axis=0)) / spread
         poses_sigma = s.attitude_noise * math.sqrt(n / spread)
@@ -275,12 +310,13 @@ class SensorAgreement:
         self.rest_problems: Optional[List[str]] = None   # the last rest window's verdict
         self.raw_pose: Optional[np.ndarray] = None    # the newest pose as the source streamed it
 
-    def imu(self, w: np.ndarray, f: Optional[np.ndarray], stamp: float) -> None:
+    def imu(self, w: np.ndarray, f: Optional[np.ndarray], stamp: float, receipt: float) -> None:
         """A converted gyro sample and specific force (None: the IMU gave none) of stamp (s,
-        the IMU's clock: only the time between its samples is used).
+        the IMU's clock: only the time between its samples is used), received at receipt (the
+        loop's clock).
         """
-        self.rest.imu(w, f, stamp)
-        self.flight.imu(w, f, stamp)
+        self.rest.imu(w, f, stamp, receipt)
+        self.flight.imu(w, f, stamp, receipt)
 
     def pose(self, R: np.ndarray, stamp: float, receipt: float,
              raw: Optional[np.ndarray] = None) -> None:
