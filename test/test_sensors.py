@@ -194,8 +194,9 @@ def yaw90_flight():
 def fly(source, pauses=(), seconds=8.0, **params):
     """The loop (params over the testbed's), armed at rest, fed seconds of yaw90_flight measured
     by source at the testbed's noise (poses at 200 Hz, the gyro at 100 Hz). pauses: (start,
-    length) (s from arming) in which neither stream sends a sample. Returns (the time it failed
-    safe or None, the most in-flight windows in a row that disagreed, the loop).
+    length) (s from arming) in which neither stream sends a sample, or (start, length, stream)
+    in which that one ('pose' or 'imu') sends none. Returns (the time it failed safe or None,
+    the most in-flight windows in a row that disagreed, the loop).
     """
     q, w, dt = yaw90_flight()
     loop = loop_of(**params)
@@ -208,12 +209,15 @@ def fly(source, pauses=(), seconds=8.0, **params):
     for k in range(min(len(q), int(round(seconds / dt)))):
         tk = t + 0.01 + k * dt
         R = so3.quat_to_rot(q[k])
-        if not any(start <= k * dt < start + length for start, length in pauses):
-            for half in (0.0, 0.5 * dt):
-                measured = R @ so3.exp(rng.normal(0.0, math.radians(NOISE_DEG), 3))
+        silent = {stream for start, length, *which in pauses
+                  if start <= k * dt < start + length for stream in (which or ['pose', 'imu'])}
+        for half in (0.0, 0.5 * dt):
+            measured = R @ so3.exp(rng.normal(0.0, math.radians(NOISE_DEG), 3))
+            if 'pose' not in silent:
                 loop.offer_pose(so3.rot_to_quat(measured), tk + half, tk + half)
-            loop.offer_angular_velocity(source.source_vector(w[k] + rng.normal(0, GYRO_NOISE, 3)),
-                                        tk, tk, None, source.source_vector(R.T @ UP))
+        gyro = source.source_vector(w[k] + rng.normal(0, GYRO_NOISE, 3))
+        if 'imu' not in silent:
+            loop.offer_angular_velocity(gyro, tk, tk, None, source.source_vector(R.T @ UP))
         tick = loop.tick(tk + 0.5 * dt, dt)
         most = max(most, loop.agreement.mismatches)
         if not tick.armed:
@@ -266,13 +270,18 @@ def test_in_flight_an_imu_turned_20_to_160_deg_in_yaw_is_named_by_the_yaw_it_mea
 def test_a_pause_of_both_streams_is_a_gap_and_not_a_disagreement():
     """The sim frozen for 150 ms (no pose and no IMU sample) during the testbed's turn, at each
     of its phases: with a true IMU no window across the pause is judged (none disagrees), and
-    the flight is not failed safe. An IMU 90 deg off in
+    the flight is not failed safe; nor across an IMU gap of 0.15 s or a pose gap of 0.4 s while
+    the other stream goes on (the soak's faults). An IMU 90 deg off in
     yaw still fails safe, at most the pause and the window it cut short later than without it.
     """
     q, w, dt = yaw90_flight()
     for start in np.arange(0.0, 1.5, 0.05):
         failed_at, most, loop = fly(InputFrames(), pauses=[(start, 0.15)], seconds=2.5)
         assert failed_at is None and most == 0, (start, most, loop.supervisor.reason)
+    for start in np.arange(0.0, 1.5, 0.2):     # one stream's gap (the other goes on): the same
+        for gap in ((start, 0.15, 'imu'), (start, 0.4, 'pose')):
+            failed_at, most, loop = fly(InputFrames(), pauses=[gap], seconds=2.5)
+            assert failed_at is None and most == 0, (gap, most, loop.supervisor.reason)
     rotated = InputFrames.of(imu_rpy_deg=(0.0, 0.0, 90.0))
     unpaused, _, _ = fly(rotated, seconds=2.5)
     for start in (0.0, 0.05, 0.1, 0.2):
