@@ -4,6 +4,7 @@ classes (``InputFrames.source_*``: what a source of those conventions streams), 
 noise figures: motion capture 0.1 deg at 200 Hz, gyro 0.005 rad/s and accelerometer 0.05 m/s^2
 at 100 Hz.
 """
+import functools
 import math
 import os
 
@@ -18,12 +19,15 @@ from geoctl_ros.core.supervisor.loop import ControlLoop
 from geoctl_ros.mavlink import frames as mavlink_frames
 from geoctl_ros.params import (
     CONTROLLER,
+    SIM,
     controller_setup,
     load_parameter_file,
     node_overrides,
     resolve,
 )
+from geoctl_ros.params.build import emulated_imu
 from geoctl_ros.sim import scenario
+from geoctl_ros.sim.testbed import testbed_sim as simulated_testbed
 
 pytestmark = pytest.mark.odroid
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -124,6 +128,22 @@ def test_at_arming_each_mismatch_is_refused_naming_it_and_the_matching_parameter
         assert armed.ok, armed.message
 
 
+@pytest.mark.parametrize('yaw', [45.0, 135.0])
+def test_resting_tilted_an_imu_turned_in_yaw_is_refused_naming_the_yaw_it_measures(yaw):
+    """Resting 5.8 deg tilted, an IMU turned 45 or 135 deg in yaw puts gravity 4.5 or 10.8 deg
+    from the poses' (2 sin(yaw / 2) of the tilt): refused, naming the yaw that turns the one
+    onto the other and the imu_rotation_deg that undoes it; with that setting it arms.
+    """
+    tilted = YAW90 @ rpy_matrix((5.0, 3.0, 0.0))
+    source = InputFrames.of(imu_rpy_deg=(0.0, 0.0, yaw))
+    loop = loop_of()
+    refused = loop.arm(rest(loop, source, tilted))
+    assert ('the IMU looks mounted about %.0f deg off in yaw: set imu_rotation_deg '
+            '[0.0, 0.0, %.1f]' % (yaw, yaw)) in refused.message, refused.message
+    loop = loop_of(imu_rotation_deg=[0.0, 0.0, yaw])
+    assert loop.arm(rest(loop, source, tilted)).ok
+
+
 def test_the_tolerances_come_from_the_noise_and_refuse_no_true_installation():
     """The rate tolerance is SIGMAS sigmas of the difference of the gyro's mean and the poses'
     slope, from the noise figures and the samples: 0.5 s of 200 Hz poses and 100 Hz gyro gives
@@ -158,48 +178,150 @@ def test_the_tolerances_come_from_the_noise_and_refuse_no_true_installation():
             assert (not loop.agreement.arm_problems(t)) == expect
 
 
-def test_in_flight_an_imu_90_deg_off_in_yaw_fails_safe_naming_it_and_a_true_one_never():
-    """The testbed's yaw past the cone (its true states, headless), measured by an IMU mounted
-    90 deg off in yaw with the defaults: the loop, armed, fails safe within the first 3 s (two
-    0.1 s windows of its motion in a row that disagree), naming the yaw; measured by a true IMU
-    (or the mounting given): no failsafe all through.
+@functools.lru_cache(maxsize=1)
+def yaw90_flight():
+    """The testbed's yaw past the cone (testbed_yaw90, headless, 8 s): its true attitudes and
+    body rates at the control rate, and the control period.
     """
     sc = scenario.load(os.path.join(ROOT, 'config', 'scenarios', 'testbed_yaw90.yaml'))
     run = scenario.run(sc, duration=8.0)
     cols = run.columns
     q = run.history[:, [cols.index(c) for c in ('qx', 'qy', 'qz', 'qw')]]
     w = run.history[:, [cols.index(c) for c in ('wx', 'wy', 'wz')]]
-    dt = 1.0 / sc.controller['rate_hz']
-    rotated = InputFrames.of(imu_rpy_deg=(0.0, 0.0, 90.0))
-    for source, params, fails in ((rotated, {}, True), (InputFrames(), {}, False),
-                                  (rotated, {'imu_rotation_deg': [0.0, 0.0, 90.0]}, False)):
-        loop = loop_of(**params)
-        rng = np.random.default_rng(5)
-        t = rest(loop, InputFrames(), so3.quat_to_rot(q[0]))
-        if source is rotated:      # (arming at rest, level: the mounting is not seen there)
-            loop.agreement.rest.last = None
-            t = rest(loop, source, so3.quat_to_rot(q[0]), t0=t + 0.005)
-        assert loop.arm(t).ok
-        failed_at = None
-        for k in range(len(q)):
-            tk = t + 0.01 + k * dt
-            R = so3.quat_to_rot(q[k])
-            for half in (0.0, 0.5 * dt):
-                measured = R @ so3.exp(rng.normal(0.0, math.radians(NOISE_DEG), 3))
+    return q, w, 1.0 / sc.controller['rate_hz']
+
+
+def fly(source, pauses=(), seconds=8.0, **params):
+    """The loop (params over the testbed's), armed at rest, fed seconds of yaw90_flight measured
+    by source at the testbed's noise (poses at 200 Hz, the gyro at 100 Hz). pauses: (start,
+    length) (s from arming) in which neither stream sends a sample, or (start, length, stream)
+    in which that one ('pose' or 'imu') sends none. Returns (the time it failed safe or None,
+    the most in-flight windows in a row that disagreed, the loop).
+    """
+    q, w, dt = yaw90_flight()
+    loop = loop_of(**params)
+    rng = np.random.default_rng(5)
+    t = rest(loop, InputFrames(), so3.quat_to_rot(q[0]))
+    loop.agreement.rest.last = None  # (the source at rest, level: a yaw mounting is not seen)
+    t = rest(loop, source, so3.quat_to_rot(q[0]), t0=t + 0.005)
+    assert loop.arm(t).ok
+    most = 0
+    for k in range(min(len(q), int(round(seconds / dt)))):
+        tk = t + 0.01 + k * dt
+        R = so3.quat_to_rot(q[k])
+        silent = {stream for start, length, *which in pauses
+                  if start <= k * dt < start + length for stream in (which or ['pose', 'imu'])}
+        for half in (0.0, 0.5 * dt):
+            measured = R @ so3.exp(rng.normal(0.0, math.radians(NOISE_DEG), 3))
+            if 'pose' not in silent:
                 loop.offer_pose(so3.rot_to_quat(measured), tk + half, tk + half)
-            loop.offer_angular_velocity(source.source_vector(w[k] + rng.normal(0, GYRO_NOISE, 3)),
-                                        tk, tk, None,
-                                        source.source_vector(R.T @ UP))
-            tick = loop.tick(tk + 0.5 * dt, dt)
-            if not tick.armed:
-                failed_at = k * dt
-                break
-        if fails:
-            assert failed_at is not None and failed_at < 3.0, failed_at
-            assert 'IMU looks mounted about 90 deg off in yaw' in loop.supervisor.reason
-            assert loop.supervisor.reason.startswith('failsafe: the gyro and the poses disagree')
-        else:
-            assert failed_at is None, loop.supervisor.reason
+        gyro = source.source_vector(w[k] + rng.normal(0, GYRO_NOISE, 3))
+        if 'imu' not in silent:
+            loop.offer_angular_velocity(gyro, tk, tk, None, source.source_vector(R.T @ UP))
+        tick = loop.tick(tk + 0.5 * dt, dt)
+        most = max(most, loop.agreement.mismatches)
+        if not tick.armed:
+            return k * dt, most, loop
+    return None, most, loop
+
+
+def test_in_flight_an_imu_90_deg_off_in_yaw_fails_safe_naming_it_and_a_true_one_never():
+    """The testbed's yaw past the cone (its true states, headless), measured by an IMU mounted
+    90 deg off in yaw with the defaults: the loop, armed, fails safe within the turn's first
+    0.3 s, naming the yaw and the imu_rotation_deg that undoes it; measured by a true IMU (or
+    the mounting given): no failsafe all through, and no window that disagrees.
+    """
+    rotated = InputFrames.of(imu_rpy_deg=(0.0, 0.0, 90.0))
+    failed_at, _, loop = fly(rotated)
+    assert failed_at is not None and failed_at < 0.3, failed_at
+    assert 'IMU looks mounted about 90 deg off in yaw: set imu_rotation_deg [0.0, 0.0, 90.0]' \
+        in loop.supervisor.reason
+    assert loop.supervisor.reason.startswith('failsafe: the gyro and the poses disagree')
+    for source, params in ((InputFrames(), {}),
+                           (rotated, {'imu_rotation_deg': [0.0, 0.0, 90.0]})):
+        failed_at, most, loop = fly(source, **params)
+        assert failed_at is None and most == 0, loop.supervisor.reason
+
+
+@pytest.mark.parametrize('yaw', [30.0, 45.0, 135.0, -60.0])
+def test_in_flight_an_imu_turned_20_to_160_deg_in_yaw_is_named_by_the_yaw_it_measures(yaw):
+    """An IMU turned yaw deg in yaw (set up with the defaults) over the testbed's yaw past the
+    cone: 30 and 45 deg disagree with the poses by less than the in-flight rate tolerance (the
+    manoeuvre turns mostly about the body's z, which a yaw leaves alone), yet the flight's yaw
+    between the gyro and the poses names it within the turn's first 0.3 s, with the
+    imu_rotation_deg that undoes it, and that setting flies. An IMU 5 deg off (within a
+    mounting's care) is not named.
+    """
+    failed_at, _, loop = fly(InputFrames.of(imu_rpy_deg=(0.0, 0.0, yaw)))
+    reason = loop.supervisor.reason
+    assert failed_at is not None and failed_at < 0.3, (failed_at, reason)
+    assert ('the IMU looks mounted about %.0f deg off in yaw: set imu_rotation_deg '
+            '[0.0, 0.0, %.1f]' % (yaw, yaw)) in reason, reason
+    measured = loop.agreement.yaw
+    assert abs(measured.deg - yaw) < 3.0 and 5.0 * measured.sigma_deg < 4.0
+    failed_at, most, loop = fly(InputFrames.of(imu_rpy_deg=(0.0, 0.0, yaw)),
+                                imu_rotation_deg=[0.0, 0.0, yaw])
+    assert failed_at is None and most == 0, loop.supervisor.reason
+    failed_at, most, loop = fly(InputFrames.of(imu_rpy_deg=(0.0, 0.0, 5.0)))
+    assert failed_at is None, loop.supervisor.reason
+    assert abs(loop.agreement.yaw.deg - 5.0) < 3.0
+
+
+def test_a_pause_of_both_streams_is_a_gap_and_not_a_disagreement():
+    """The sim frozen for 150 ms (no pose and no IMU sample) during the testbed's turn, at each
+    of its phases: with a true IMU no window across the pause is judged (none disagrees), and
+    the flight is not failed safe; nor across an IMU gap of 0.15 s or a pose gap of 0.4 s while
+    the other stream goes on (the soak's faults). An IMU 90 deg off in
+    yaw still fails safe, at most the pause and the window it cut short later than without it.
+    """
+    q, w, dt = yaw90_flight()
+    for start in np.arange(0.0, 1.5, 0.05):
+        failed_at, most, loop = fly(InputFrames(), pauses=[(start, 0.15)], seconds=2.5)
+        assert failed_at is None and most == 0, (start, most, loop.supervisor.reason)
+    for start in np.arange(0.0, 1.5, 0.2):     # one stream's gap (the other goes on): the same
+        for gap in ((start, 0.15, 'imu'), (start, 0.4, 'pose')):
+            failed_at, most, loop = fly(InputFrames(), pauses=[gap], seconds=2.5)
+            assert failed_at is None and most == 0, (gap, most, loop.supervisor.reason)
+    rotated = InputFrames.of(imu_rpy_deg=(0.0, 0.0, 90.0))
+    unpaused, _, _ = fly(rotated, seconds=2.5)
+    for start in (0.0, 0.05, 0.1, 0.2):
+        failed_at, _, loop = fly(rotated, pauses=[(start, 0.15)], seconds=2.5)
+        assert failed_at is not None, start
+        assert failed_at <= unpaused + 0.15 + consistency.FLIGHT_WINDOW + 1e-9, (start, failed_at)
+        assert 'IMU looks mounted about 90 deg off in yaw' in loop.supervisor.reason
+
+
+def test_a_vehicle_moving_at_arming_is_refused_as_moving_and_a_bias_at_rest_as_a_bias():
+    """The simulated testbed (config/testbed.yaml's sim: its plant, rates and noise), rotors
+    stopped, resting level on top of its joint, then nudged by a few mrad/s (as a disarm leaves
+    it) and falling away: asked every 50 ms, the arming check refuses the slow windows of the
+    fall (the poses turn under 0.05 rad/s while the gyro's rate grows) as moving, with the
+    figures, and never as a gyro bias. Resting with a bias of 0.02 rad/s, the bias is named.
+    """
+    values = resolve(SIM, node_overrides(load_parameter_file(TESTBED), SIM))
+    refusals = []
+    for nudge in (0.004, 0.005, 0.006, 0.007, 0.008):
+        sim, imu, loop = simulated_testbed(values), emulated_imu(values), loop_of()
+        h, stopped = 1e-3, np.zeros(len(sim.actuator.thrusts))
+        for k in range(4000):
+            if k == 1000:
+                sim.plant.Omega = np.array([nudge, 0.0, 0.0])
+            sim.step(stopped, h)
+            t = sim.plant.t
+            if k % 5 == 4:
+                loop.offer_pose(so3.rot_to_quat(sim.measure_attitude()), t, t)
+            if k % 10 == 9:
+                f = sim.specific_force(imu.gravity, imu.position, np.zeros(3))
+                loop.offer_angular_velocity(sim.measure_angular_velocity(), t, t, None,
+                                            f + sim.rng.normal(0.0, imu.force_noise, 3))
+            if k % 50 == 49 and t > 0.8:
+                refusals += loop.agreement.arm_problems(t)
+    assert refusals and all(r.startswith('the vehicle is moving (the poses turn at ')
+                            for r in refusals), refusals
+    assert not [r for r in refusals if 'bias' in r]
+    loop = loop_of()
+    message = loop.arm(rest(loop, InputFrames(), YAW90, bias=(0.02, 0.0, 0.0))).message
+    assert 'a gyro bias (run calibrate' in message and 'moving' not in message, message
 
 
 def test_calibration_recovers_the_bias_the_marker_set_and_the_imu_tilt_and_refuses_motion():

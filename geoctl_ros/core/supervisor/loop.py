@@ -135,7 +135,7 @@ class ControlLoop:
             self.Omega = self.frames.angular_velocity(w)
             self.bridge.gyro(self.Omega)
             self.agreement.imu(self.Omega, None if specific_force is None
-                               else self.frames.imu_vector(specific_force))
+                               else self.frames.imu_vector(specific_force), stamp, receipt)
         return problem
 
     def offer_esc_health(self, command_max: int, escs: Sequence[int],
