@@ -55,7 +55,8 @@ SOURCES = {
     'controller': [
         'nodes/controller.py', 'nodes/runtime.py', 'core/supervisor/loop.py',
         'core/supervisor/loop_status.py', 'core/supervisor/preflight.py',
-        'core/supervisor/safety.py', 'core/sensors/consistency.py', 'core/law/feasibility.py',
+        'core/supervisor/safety.py', 'core/actuation/esc_wire.py', 'core/sensors/consistency.py',
+        'core/law/feasibility.py',
         'core/law/gains.py', 'core/actuation/airframe.py', 'core/actuation/allocation.py',
         'core/telemetry/diagnostics.py', 'params/validate.py', 'params/param.py'],
     'esc_i2c': ['nodes/esc_i2c.py', 'esc/driver.py', 'esc/health.py', 'esc/protocol.py'],
@@ -68,17 +69,19 @@ SOURCES = {
 PRODUCERS = {
     'nodes/controller.py': ('ControllerNode._unconfigured', 'ControllerNode._other_commanders'),
     'core/supervisor/loop.py': ('ControlLoop.offer_esc_health', 'ControlLoop.request_setpoint',
-                                'ControlLoop.reconfiguration_problem'),
+                                'ControlLoop.reconfiguration_problem', 'spool_movement'),
     'core/supervisor/loop_status.py': ('gap_notes', 'status'),
-    'core/supervisor/preflight.py': ('arm_problems',),
+    'core/supervisor/preflight.py': ('arm_problems', 'takeover_problems'),
     'core/supervisor/safety.py': (
-        'quaternion_problem', 'motor_commands_problem', 'specific_force_problem',
+        'quaternion_problem', 'specific_force_problem',
         'angular_velocity_problem', 'esc_problem', 'Stream.offer', 'Stream.staleness',
         'Stream.loss', 'Supervisor.__init__', 'Supervisor.arm', 'Supervisor.disarm'),
     'core/sensors/consistency.py': (
         'SensorAgreement.pose', 'SensorAgreement.arm_problems',
         'SensorAgreement._rest_problems', 'SensorAgreement._gravity_cause',
-        'SensorAgreement._rate_cause'),
+        'SensorAgreement._rate_cause', 'SensorAgreement._judge_rate',
+        'SensorAgreement._judge_yaw', 'SensorAgreement._yaw_cause'),
+    'core/actuation/esc_wire.py': ('motor_commands_problem',),
     'core/law/feasibility.py': ('setpoint_problem',),
     'core/telemetry/diagnostics.py': ('failsafe',),
     'core/law/gains.py': ('GainCheck.message',),
@@ -173,6 +176,7 @@ FORWARDED = {
     ('nodes/esc_i2c.py', 'r.message'): 'esc.health.report',
     ('core/supervisor/loop.py', 'problem'): 'esc_problem',
     ('core/supervisor/loop.py', 'self.agreement.flight_note'): 'SensorAgreement.pose',
+    ('core/supervisor/loop.py', 'moved'): 'spool_movement',
     ('core/supervisor/safety.py', 'problem'): 'Stream.loss',
     # what the composers add that is made elsewhere
     ('core/supervisor/loop_status.py', 'sup.reason'): 'Supervisor (its states), failsafe(...)',
@@ -187,6 +191,7 @@ FORWARDED = {
         '_other_commanders, esc_problem, Stream.staleness',
     ('core/supervisor/preflight.py', 'loop.agreement.arm_problems(now)'):
         'SensorAgreement.arm_problems',
+    ('core/supervisor/preflight.py', 'takeover_problems(loop, now)'): 'takeover_problems',
     ('esc/health.py', '_esc_line(address, tel, driver.errors[i], missing, age)'):
         "the esc N keys' values, not messages",
     ('nodes/mavlink_calls.py', 'ap_warning'): 'AutopilotImu.health',

@@ -205,6 +205,16 @@ def fly(source, pauses=(), seconds=8.0, **params):
     loop.agreement.rest.last = None  # (the source at rest, level: a yaw mounting is not seen)
     t = rest(loop, source, so3.quat_to_rot(q[0]), t0=t + 0.005)
     assert loop.arm(t).ok
+    # the rotors spool up while the vehicle rests where the flight starts
+    for i in range(loop.setup.mixer.spool_ticks(dt)):
+        t += dt
+        for half in (0.0, 0.5 * dt):
+            measured = so3.quat_to_rot(q[0]) @ so3.exp(rng.normal(0.0, math.radians(NOISE_DEG),
+                                                                  3))
+            loop.offer_pose(so3.rot_to_quat(measured), t + half, t + half)
+        loop.offer_angular_velocity(source.source_vector(rng.normal(0, GYRO_NOISE, 3)), t, t,
+                                    None, source.source_vector(so3.quat_to_rot(q[0]).T @ UP))
+        assert loop.tick(t + 0.5 * dt, dt).armed
     most = 0
     for k in range(min(len(q), int(round(seconds / dt)))):
         tk = t + 0.01 + k * dt
