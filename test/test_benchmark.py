@@ -48,8 +48,12 @@ def test_the_benchmark_flies_every_law_on_a_case_and_the_same_random_runs(
     assert all(r['case'] == 'testbed_yaw90' and r['runs'] == '1' for r in rows.values())
     for law in cases.BENCHED:
         assert rows[law]['violations'] == '0' and float(rows[law]['closest_min_deg']) > 2.0
-    # nothing is late in this case, so the delay-robust law flies the paper's, bit for bit
-    assert all(rows['paper'][k] == rows['delay_robust'][k] for k in FLIGHT_FIGURES)
+    # nothing is late in this case and the sensor stays far from the cone, so the delay-robust
+    # law flies the paper's but for its brake keeping each command within the rotors' reach
+    # (a moment the lag compensation would clip): alike to a few per cent
+    for k in FLIGHT_FIGURES:
+        assert float(rows['delay_robust'][k]) == pytest.approx(float(rows['paper'][k]),
+                                                                rel=0.05, abs=0.02), k
     for r in rows.values():
         p50, p99 = float(r['step_p50_us']), float(r['step_p99_us'])
         assert 0.0 < p50 <= p99 < 1e5

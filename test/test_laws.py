@@ -14,10 +14,10 @@ import pytest
 
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.law.cbf_law import pointing_cbf
-from geoctl_ros.core.law.projection import closest_admissible, project
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.control import AttitudeController
 from geoctl_ros.core.law.mechanics import gravity_moment
+from geoctl_ros.core.law.projection import closest_admissible, project
 from geoctl_ros.params import (
     CONTROLLER,
     controller_config,

@@ -198,13 +198,17 @@ def test_testbed_rotors_keep_the_cone_converge_and_plot_motor_commands(runs):
     assert img.shape[0] > 300 and img.std() > 0.01
 
 
-def test_testbed_without_gravity_compensation_or_adaptation_falls_over(runs):
+def test_testbed_without_gravity_compensation_or_adaptation_falls_onto_its_stops(runs):
+    """Without gravity compensation or adaptation the testbed falls over its pivot, onto the
+    joint's stops (45 deg of tilt in its file: it rests there, within the stops' contact), and
+    ends far from the goal.
+    """
     s, d = runs['testbed_yaw90_uncompensated']
-    assert s['final_attitude_error_deg'] > 90.0
+    assert s['final_attitude_error_deg'] > 30.0
     tilt = [math.degrees(math.acos(max(-1.0, min(1.0, 1 - 2 * (float(r['qx']) ** 2
                                                                 + float(r['qy']) ** 2)))))
             for r in _history(d)]
-    assert max(tilt) > 90.0
+    assert 44.0 < max(tilt) < 46.0 and tilt[-1] > 44.0
 
 
 def test_testbed_with_wrong_mass_recovers_with_the_cog_model(runs):

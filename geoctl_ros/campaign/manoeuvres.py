@@ -71,16 +71,22 @@ STALL_MS = (10, 40)                # each stall's length (whole ms, uniform)
 
 class Stratum(NamedTuple):
     """Where a campaign's runs are drawn from: the sensor's start outside the first cone (deg,
-    uniform) and the measurement latency (whole ms, uniform); the rest of the draw is the same.
+    uniform), the measurement latency (whole ms, uniform) and how the runs start (``starts``:
+    held, resting on the joint's stops, or half of each); the rest of the draw is the same.
     """
 
     start_clear_deg: Tuple[float, float] = (5.0, 30.0)
     latency_ms: Tuple[int, int] = (0, LATENCY_MS_MAX)
+    starts: Tuple[str, ...] = ('held',)
 
 
 # 'all': the campaign's draw; 'near-cone': its hardest part, where every close approach of the
-# 10,000-run campaigns started (5-11 deg from a cone, 30-60 ms of latency; docs/campaigns.md)
-STRATA = {'all': Stratum(), 'near-cone': Stratum((5.0, 11.0), (30, LATENCY_MS_MAX))}
+# 10,000-run campaigns started (5-11 deg from a cone, 30-60 ms of latency; docs/campaigns.md);
+# 'arming': armed 2.25-5 deg from a cone (the arming checks' guard and just past it), half of the
+# runs resting on the joint's stops, half held, with the rest of the draw (the take-over's check
+# refuses some: ``Flight.takeover_margin_deg``)
+STRATA = {'all': Stratum(), 'near-cone': Stratum((5.0, 11.0), (30, LATENCY_MS_MAX)),
+          'arming': Stratum((2.25, 5.0), (0, LATENCY_MS_MAX), ('held', 'resting'))}
 
 
 def _aligning(r, d):
@@ -112,6 +118,28 @@ def _attitude(rng, r, d):
     return upright(r, d, rng.uniform(-TWIST_DEG, TWIST_DEG))
 
 
+def on_the_stops(rng, r, d, tilt_max_deg):
+    """An attitude with the sensor axis r along d whose body z axis is tilted exactly
+    tilt_max_deg from vertical (resting on the joint's stops), turned about d one way or the
+    other (drawn); None if no turn about d tilts it that far or if the least tilt is already
+    past it. Turning the most upright attitude U by psi about d: cos(tilt) = A cos psi +
+    B sin psi + C (A, B, C from d, U's z axis and up), solved for psi.
+    """
+    base = upright(r, d, 0.0)
+    if base is None:
+        return None
+    z = base @ UP
+    C = float(UP @ d) * float(d @ z)
+    A = float(UP @ z) - C
+    B = float(UP @ np.cross(d, z))
+    K = math.cos(math.radians(tilt_max_deg)) - C
+    size = math.hypot(A, B)
+    if size < 1e-12 or abs(K) > size:
+        return None
+    psi = math.atan2(B, A) + (1.0 if rng.uniform() < 0.5 else -1.0) * math.acos(K / size)
+    return so3.exp(d * psi) @ base
+
+
 def crosses(d0, d1, axis, half_angle_deg):
     """Whether the straight way of the sensor from d0 to d1 crosses the cone (axis, half-angle)."""
     arc = (1.0 - _ARC[:, None]) * d0 + _ARC[:, None] * d1
@@ -120,15 +148,23 @@ def crosses(d0, d1, axis, half_angle_deg):
 
 
 def run_seeds(seed, index):
-    """The two seeds of run index of campaign seed: the children of SeedSequence(seed).spawn(N)
-    [index] (the cone count's, and everything else's).
+    """The seeds of run index of campaign seed: the children of SeedSequence(seed).spawn(N)
+    [index] (the cone count's, everything else's, and how it starts).
     """
-    return np.random.SeedSequence(seed, spawn_key=(index,)).spawn(2)
+    return np.random.SeedSequence(seed, spawn_key=(index,)).spawn(3)
 
 
 def cone_count(seed, index):
     """The number of cones of run index (cheap: without drawing the rest of the run)."""
     return int(np.random.default_rng(run_seeds(seed, index)[0]).integers(1, 5))
+
+
+def start_of(seed, index, stratum='all'):
+    """How run index starts (``Stratum.starts``; cheap, as ``cone_count``: a batch shares it)."""
+    starts = STRATA[stratum].starts
+    if len(starts) == 1:
+        return starts[0]
+    return starts[int(np.random.default_rng(run_seeds(seed, index)[2]).integers(len(starts)))]
 
 
 def _place_cones(rng, n):
@@ -151,11 +187,14 @@ def _place_cones(rng, n):
             return theta[k], list(axes[k])
 
 
-def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None, duration=20.0, stratum='all'):
+def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None, duration=20.0, stratum='all',
+                   tilt_max_deg=180.0):
     """The random part of run index of campaign seed: a dict of per-run values. goal_ok(cones,
     R_d) (cones as [(axis, half-angle deg)]), if given, must accept the goal (else redrawn).
-    stratum: the part of the draw (``STRATA``; the same random numbers, other bounds).
+    stratum: the part of the draw (``STRATA``; the same random numbers, other bounds);
+    tilt_max_deg: the joint's stops, where a run that starts resting on them rests.
     """
+    start = start_of(seed, index, stratum)
     part = STRATA[stratum]
     n = cone_count(seed, index)
     rng = np.random.default_rng(run_seeds(seed, index)[1])
@@ -173,6 +212,8 @@ def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None, duration=20.0, stratu
         if not crosses(d0, d1, v0, theta[0]):
             continue                                    # the straight way misses the cone
         R0, R_d = _attitude(rng, r, d0), _attitude(rng, r, d1)
+        if start == 'resting':
+            R0 = on_the_stops(rng, r, d0, tilt_max_deg)
         if R0 is not None and R_d is not None and (
                 goal_ok is None or goal_ok(list(zip(axes, theta)), R_d)):
             break
@@ -187,6 +228,7 @@ def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None, duration=20.0, stratu
         'cog_factor': rng.uniform(1.0 - MODEL_ERROR, 1.0 + MODEL_ERROR),
         'noise_seed': int(rng.integers(0, 2 ** 31)),
         'stalls': _stalls(rng, duration),
+        'start': start,
     }
 
 
@@ -229,6 +271,7 @@ class Manoeuvres:
         self.nominal_c = resolve(CONTROLLER, node_overrides(base, CONTROLLER))
         self.nominal = testbed_setup(resolve(SIM, node_overrides(base, SIM))).plant
         self.sensor_axis = controller_config(self.nominal_c).cones.r
+        self.tilt_max_deg = math.degrees(self.nominal.tilt_max)
         self.unmodelled = unmodelled_moment(self.nominal, disturbance_max)
         self._probes = {}
 
@@ -255,7 +298,7 @@ class Manoeuvres:
         ``goal_refused`` tells.
         """
         m = draw_manoeuvre(seed, index, self.sensor_axis, self.goal_ok,
-                           self.duration, self.stratum)
+                           self.duration, self.stratum, self.tilt_max_deg)
         return self.sections_of(m, 'campaign seed %d, run %d' % (seed, index), gains)
 
     def sections_of(self, m, title, gains=None):
@@ -288,6 +331,8 @@ class Manoeuvres:
                     'latency': m['latency_ms'] / 1000.0,
                     'stalls.start': [a for a, _ in m['stalls']],
                     'stalls.duration': [b for _, b in m['stalls']]}
+        if m.get('start', 'held') != 'held':
+            scenario['start'] = m['start']
         if m.get('jitter_ms'):                  # (the falsifier's: steps up to this late)
             scenario['tick_jitter'] = m['jitter_ms'] / 1000.0
             scenario['tick_jitter_seed'] = m.get('jitter_seed', m['noise_seed'])

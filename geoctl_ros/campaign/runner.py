@@ -33,7 +33,7 @@ BATCH = 1024               # runs flown together at most (docs/campaigns.md, "Ca
 # runs.csv's columns, in order (gain_set only in a gain study)
 COLUMNS = ('gain_set', 'run', 'cones', 'closest_deg', 'violated', 'final_error_deg', 'converged',
            'settle_s', 'saturated_s', 'max_rate', 'effort_Nms', 'latency_ms', 'disturbance_Nm',
-           'goal_refused')
+           'takeover_deg', 'goal_refused')
 
 
 def plan(groups, workers, batch=BATCH):
@@ -98,6 +98,8 @@ def fly_batch(job):
         'disturbance_Nm': np.array([float(np.linalg.norm(s.testbed.plant.disturbance.constant))
                                     for s in scenarios]),
         'goal_refused': np.array([draw.goal_refused(s) for s in sections]),
+        'takeover_deg': (np.full(n, np.nan) if res.takeover_margin_deg is None
+                         else res.takeover_margin_deg.min(axis=1)),
         'draw_s': drawn, 'fly_s': res.wall_s,
     }
 
@@ -109,8 +111,10 @@ def fly(client, base, args, gain_sets, progress=None):
     workers)).
     """
     groups = {}
+    stratum = getattr(args, 'stratum', 'all')
     for i in range(args.runs):
-        groups.setdefault(manoeuvres.cone_count(args.seed, i), []).append(i)
+        groups.setdefault((manoeuvres.cone_count(args.seed, i),
+                           manoeuvres.start_of(args.seed, i, stratum)), []).append(i)
     workers = cluster.worker_count(client)
     jobs = []
     for k, gains in enumerate(gain_sets, 1):

@@ -165,6 +165,13 @@ def summary_table(columns):
         'runs with the allocation saturated': int(np.sum(sat > 0)),
         'saturated time p99 / max [s]': '%.2f / %.2f' % (np.percentile(sat, 99), sat.max()),
     }
+    takeover = columns.get('takeover_deg')
+    if takeover is not None and np.any(takeover < 0.0):
+        refused = takeover < 0.0
+        table['armings refused (the take-over check: its predicted closest approach below 0); '
+              'violations among the armings accepted'] = '%d (predicted %.2f deg at worst); %d' % (
+            int(refused.sum()), float(takeover.min()),
+            int(np.sum(columns['violated'] & ~refused)))
     bands = []
     for band in LATENCY_BANDS_MS:
         picked = margins[(columns['latency_ms'] >= band[0]) & (columns['latency_ms'] <= band[1])]

@@ -38,8 +38,10 @@ def main(argv=None):
     parser.add_argument('--runs', type=int, default=1000, help='number of manoeuvres (1000)')
     parser.add_argument('--seed', type=int, default=1, help='campaign seed (1)')
     parser.add_argument('--stratum', choices=sorted(manoeuvres.STRATA), default='all',
-                        help="the part of the draw: all (the campaign's), or near-cone (starts "
-                        '5-11 deg from a cone, 30-60 ms of latency: its hardest part)')
+                        help="the part of the draw: all (the campaign's), near-cone (starts "
+                        '5-11 deg from a cone, 30-60 ms of latency: its hardest part), or arming '
+                        "(armed 2.25-5 deg from a cone, half resting on the joint's stops, half "
+                        'held: the take-over check refuses some; the summary counts them)')
     parser.add_argument('--out', required=True, help='output directory')
     add_cluster_arguments(parser, '--jobs')
     parser.add_argument('--dashboard', action='store_true',

@@ -15,7 +15,7 @@ violated, by how much. A falsifier looks for a trace of negative robustness. The
 are none): it attacks the claim itself.
 """
 from dataclasses import dataclass
-from typing import Dict, Sequence
+from typing import Any, Dict, Sequence
 
 import numpy as np
 
@@ -62,7 +62,7 @@ class Monitor:
         spec.parse()
         self._spec = spec
 
-    def robustness(self, times: Sequence[float], signals: Dict[str, np.ndarray]) -> float:
+    def robustness(self, times: Any, signals: Dict[str, np.ndarray]) -> float:
         """The robustness of the trace (deg) at its start; signals: each of ``SIGNALS`` per
         step.
         """

@@ -46,6 +46,8 @@ def fly_batch(job):
                'closest': np.minimum(a.hold_margin, flight.margin_series),
                'assumed': np.where(covered, COVERED, -COVERED)}
     got = series_robustness(monitors(names, flight.dt), flight.times, signals)
+    if 'assumed' in got:        # (no covered step: no evidence, as a point outside the envelope)
+        got['assumed'] = np.minimum(got['assumed'], OUTSIDE)
     got['closest_deg'] = flight.min_margin_deg.min(axis=-1)
     got['closest_assumed_deg'] = closest_assumed(signals['closest'], covered)
     return got

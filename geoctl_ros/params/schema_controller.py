@@ -47,8 +47,8 @@ PARAMS = [
        lo=0.0, hi=10.0),
     _p('approach_brake', 'bool', False, '-',
        'the approach brake (docs/safety.md, "The approach brake"): every cone\'s sampled-data '
-       'margin kept for the loop as it runs (blind time, hold, the rotors\' lag, the unlearnt '
-       'moment cbf_moment_bound), the cones joined in one QP within the rotors\' reach',
+       "margin kept for the loop as it runs (blind time, hold, the rotors' lag, the unlearnt "
+       "moment cbf_moment_bound), the cones joined in one QP within the rotors' reach",
        CONTROLLER),
     _p('brake_acceleration', 'double', 0.0, 'rad/s^2',
        "the deceleration the approach brake takes the rotors to make along any cone's opening "

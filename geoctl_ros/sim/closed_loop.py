@@ -44,7 +44,7 @@ from geoctl_ros.core.telemetry.stats import SETTLE_PSI
 from geoctl_ros.params import CONTROLLER, SIM
 from geoctl_ros.params.scenario import PER_RUN, Scenario, differing
 from geoctl_ros.sim.history import History
-from geoctl_ros.sim.runs import Testbeds, shared_holds
+from geoctl_ros.sim.runs import Testbeds, late_holds, shared_holds
 from geoctl_ros.sim.testbed import measured_attitude, measured_rate
 
 SETTLED_DEG = 5.0       # attitude error below which a run has converged (at the end) or settled
@@ -83,6 +83,9 @@ class Flight:
                                          # control step (None unless asked for: assumed=True)
     times: np.ndarray              # (steps,): the control steps' times
     dt: float
+    takeover_margin_deg: Optional[np.ndarray] = None   # (runs, cones): the arming check's
+                                   # predicted margin at the take-over (below 0: it refuses the
+                                   # arming; ControlTick.takeover_margins); None without a brake
     wall_s: float = 0.0
 
     @property
@@ -167,8 +170,12 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     tick = ControlTick(controller, setup.mixer, 0.0 if stamped else setup.loop.measurement_delay)
     # the closest approach: the largest cosine to each cone's axis after any integration step
     # (arccos decreases), taken over each control step's steps at once
-    max_cos = cones.cosines(bed.state()[0])
-    max_cos = _spool_up(bed, tick, dt, n_sub, h, max_cos)
+    R_0, W_0 = bed.state()
+    max_cos = cones.cosines(R_0)
+    # what the arming check says of each run's start (its measurements the latency old)
+    takeover = (np.degrees(tick.takeover_margins(R_0, W_0, delay * h, dt))
+                if controller.brake is not None else None)
+    takeover, max_cos = _spool_up(bed, tick, dt, n_sub, h, max_cos)
     R_now, W_now = bed.state()
     # latency: a ring of the last states, one per integration step
     ring = int(delay.max()) + 1
@@ -216,7 +223,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         else:
             R_seen, W_seen = R_new, W_new
         max_rate = np.maximum(max_rate, np.sqrt(so3.dot(W_seen, W_seen)))
-        out, motors = tick(R_seen, W_seen, dt, t, ages)[:2]
+        out, motors = tick(R_seen, W_seen, dt, takeover + t, ages)[:2]
         saturated += motors.allocation.saturated
         effort += np.sqrt(so3.dot(out.u, out.u)) * (holds[k] * h)
         error = _error(controller.R_d, R_now)
@@ -231,11 +238,11 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
             record.add(k, t, out, motors)
         command = out.u if actuator is None else motors.commands
         if judge is not None:
-            judge.at_tick(k, t, out, motors, fresh, noise[:, k], holds[k] * h, dt)
+            judge.at_tick(k, takeover + t, out, motors, fresh, noise[:, k], holds[k] * h, dt)
         for i in range(holds[k]):
             tau = bed.moment(command, h)
             if judge is not None:
-                judge.during(k, j * h, tau)
+                judge.during(k, j * h, takeover + j * h, tau)
             plant.step(tau, h)
             j += 1
             R_now, W_now = bed.state()
@@ -259,29 +266,34 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         psi_settle_s=_settled(last_psi_above, times),
         margin_series=margin_series, sensor_series=sensor_series, error_series=error_series,
         history=record, assumed=None if judge is None else judge.series(), times=times,
-        dt=dt, wall_s=wall)
+        dt=dt, takeover_margin_deg=takeover, wall_s=wall)
 
 
 def _spool_up(bed: Testbeds, tick: ControlTick, dt: float, n_sub: int, h: float,
-              max_cos: np.ndarray) -> np.ndarray:
-    """Arm the runs and spool their rotors up before t = 0 (``Mixer.spool_ticks`` ticks on
-    time, each vehicle seen as it is): held still (``start: held``), or resting where gravity
-    and the stops take it (``resting``). Returns the closest approach's cosines so far.
+              max_cos: np.ndarray) -> tuple:
+    """Arm the runs and spool their rotors up before the take-over (``Mixer.spools``: ticks as
+    late as the flight's, each vehicle seen as it is), held still (``start: held``) or resting
+    where gravity and the stops take it (``resting``). Returns (the tick clock's time of the
+    take-over, the closest approach's cosines so far).
     """
-    ticks = tick.mixer.spool_ticks(dt)
+    o, b = bed.options[0], bed.beds[0]
+    seed = b.noise.seed if o.tick_jitter_seed < 0 else o.tick_jitter_seed
+    holds = late_holds(n_sub, o.tick_jitter / h, seed, 2)
     plant = bed.plant
-    plant.held = bed.options[0].start == 'held'
-    plant.t = -ticks * dt
-    for _ in range(ticks):
+    plant.held = o.start == 'held'
+    now, before = 0.0, None
+    while before is None or tick.mixer.spools(now - before, dt):
         R, W = bed.state()
-        out, motors = tick(R, W, dt)[:2]
+        out, motors = tick(R, W, dt, now)[:2]
         command = out.u if bed.actuator is None else motors.commands
-        for _ in range(n_sub):
+        hold = next(holds)
+        for _ in range(hold):
             plant.step(bed.moment(command, h), h)
         max_cos = np.maximum(max_cos, bed.cones.cosines(bed.state()[0]))
+        before, now = now, now + hold * h
     plant.held = False
     plant.t = 0.0
-    return max_cos
+    return now, max_cos
 
 
 class _Judge:
@@ -327,10 +339,11 @@ class _Judge:
         self.ok[k] = (within & ~np.asarray(motors.saturated) & ~np.asarray(out.brake_unmet)
                       & (held <= hold + 1e-9))
 
-    def during(self, k: int, t: float, tau: np.ndarray) -> None:
-        """Within step k's hold at time t (the rotors' true moment tau): how far each approach's
-        true rate of change is from the brake's model of it at the tick, under the moment in
-        force by the command history; the hold's bound is judged at its end (``series``).
+    def during(self, k: int, t: float, clock: float, tau: np.ndarray) -> None:
+        """Within step k's hold at time t (the tick's clock: clock; the rotors' true moment
+        tau): how far each approach's true rate of change is from the brake's model of it at the
+        tick, under the moment in force by the command history; the hold's bound is judged at
+        its end (``series``).
         """
         bed, terms = self.bed, self.terms
         assert terms is not None
@@ -340,7 +353,7 @@ class _Judge:
         true = true[None] if bed.single else true
         _, n_i, _, kin = opening(bed.cones, R, W)
         w_dot = kin - so3.dot(n_i, true[..., None, :])
-        model = terms.model_rate_change(self.tick.history.at(t))
+        model = terms.model_rate_change(self.tick.history.at(clock))
         self.unknown[k] = np.maximum(self.unknown[k], np.abs(w_dot - model).max(axis=-1))
 
     def series(self) -> AssumedSeries:

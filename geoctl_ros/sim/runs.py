@@ -31,6 +31,15 @@ def hold_steps(steps: int, n_sub: int, jitter: float, seed: int) -> np.ndarray:
     return holds[starts < steps * n_sub]
 
 
+def late_holds(n_sub: int, jitter: float, seed: int, stream: int):
+    """An endless draw of holds (integration steps) as ``hold_steps``' (n_sub, late by up to
+    jitter), from the stream of its own of ``seed``: the spool-up's ticks before a take-over.
+    """
+    rng = np.random.default_rng([seed, stream])
+    while True:
+        yield n_sub + (int(rng.integers(0, int(round(jitter)) + 1)) if jitter > 0.0 else 0)
+
+
 def shared_holds(bed: 'Testbeds', rate: float, n_sub: int, duration: float) -> np.ndarray:
     """The batch's hold sequence (integration steps per control step): the runs must share it."""
     h = 1.0 / (rate * n_sub)

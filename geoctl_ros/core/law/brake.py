@@ -442,7 +442,8 @@ def _compromise(u: np.ndarray, A: np.ndarray, beta: np.ndarray, rows_: int,
     # (relaxed by the most any row asks beyond the rotors' moment now, every row is met there,
     # and the reach holds it)
     lo = 0.0
-    hi = max(float(np.max(beta[:rows_] - slack_of(A[:rows_], rotors, 0.0))), 0.0) + 1.0
+    hi = max(float(np.max(beta[:rows_] - slack_of(A[:rows_], rotors, np.zeros(rows_)))),
+             0.0) + 1.0
     best = None
     for _ in range(iterations):
         mid = 0.5 * (lo + hi)

@@ -12,7 +12,7 @@ import numpy as np
 
 from geoctl_ros.core.actuation.motors import Mixer
 from geoctl_ros.core.geometry.so3 import matvec
-from geoctl_ros.core.law.brake import BrakeInputs
+from geoctl_ros.core.law.brake import BrakeInputs, rows
 from geoctl_ros.core.law.prediction import CommandHistory, DelayPredictor
 
 ON_TIME_S = 1e-6       # a step less late than this is on time (the clock's rounding)
@@ -219,6 +219,16 @@ class ControlTick:
         M_g = controller.gravity_moment(R)
         return BrakeInputs(R, Omega, age, dt, spooled * controller.feedforward(R),
                            controller.model_moment(R, Omega, M_g), M_g)
+
+    def takeover_margins(self, R: np.ndarray, Omega: np.ndarray, age: Any,
+                         dt: float) -> np.ndarray:
+        """Per cone (one row per run of a batch), the approach brake's margin Phi (rad) at the
+        take-over after an arming now (``takeover_inputs``; core.law.brake): below 0, the brake
+        could not keep the cone in the worst case of the spool-up and its bounds.
+        """
+        controller = self.controller
+        x = self.takeover_inputs(R, Omega, age, dt)
+        return rows(controller.brake, controller.config.cones, controller.J_inv, x).margin
 
     def _produced(self, motors, armed):
         """The moments the rotors make from this tick on: the one they settle to and the one they

@@ -4,7 +4,7 @@ from typing import Any, List, Optional
 
 import numpy as np
 
-from geoctl_ros.core.law.brake import opening, rows
+from geoctl_ros.core.law.brake import opening
 
 
 def arm_problems(loop: Any, now: float, extra_problem: Optional[str] = None) -> List[str]:
@@ -42,15 +42,13 @@ def takeover_problems(loop: Any, now: float) -> List[str]:
     measurements' age, the rotors' lag): a sentence per cone, naming the predicted closest
     approach.
     """
-    step, controller = loop.step, loop.controller
-    brake = controller.brake
-    if brake is None or loop.Omega is None:
+    controller = loop.controller
+    if controller.brake is None or loop.Omega is None:
         return []
     ages = [s.capture_age(now) for s in (loop.pose, loop.rate) if s.last_receipt is not None]
-    x = step.takeover_inputs(loop.R, loop.Omega, max(ages, default=0.0),
-                             1.0 / loop.setup.loop.rate_hz)
+    margin = loop.step.takeover_margins(loop.R, loop.Omega, max(ages, default=0.0),
+                                        1.0 / loop.setup.loop.rate_hz)
     cones = controller.config.cones
-    margin = rows(brake, cones, controller.J_inv, x).margin
     gap = np.degrees(opening(cones, loop.R, loop.Omega)[0])
     return ['the approach brake could not keep cone %r once the rotors have spooled up: '
             'predicted closest approach %.2f deg (from %.2f deg out, in the worst case of the '
