@@ -228,7 +228,7 @@ def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None, duration=20.0, stratu
         'cog_factor': rng.uniform(1.0 - MODEL_ERROR, 1.0 + MODEL_ERROR),
         'noise_seed': int(rng.integers(0, 2 ** 31)),
         'stalls': _stalls(rng, duration),
-        'start': start,
+        'start_mode': start,
     }
 
 
@@ -331,8 +331,8 @@ class Manoeuvres:
                     'latency': m['latency_ms'] / 1000.0,
                     'stalls.start': [a for a, _ in m['stalls']],
                     'stalls.duration': [b for _, b in m['stalls']]}
-        if m.get('start', 'held') != 'held':
-            scenario['start'] = m['start']
+        if m.get('start_mode', 'held') != 'held':
+            scenario['start'] = m['start_mode']
         if m.get('jitter_ms'):                  # (the falsifier's: steps up to this late)
             scenario['tick_jitter'] = m['jitter_ms'] / 1000.0
             scenario['tick_jitter_seed'] = m.get('jitter_seed', m['noise_seed'])

@@ -173,8 +173,8 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     R_0, W_0 = bed.state()
     max_cos = cones.cosines(R_0)
     # what the arming check says of each run's start (its measurements the latency old)
-    takeover = (np.degrees(tick.takeover_margins(R_0, W_0, delay * h, dt))
-                if controller.brake is not None else None)
+    arming = (np.degrees(tick.takeover_margins(R_0, W_0, delay * h, dt))
+              if controller.brake is not None else None)
     takeover, max_cos = _spool_up(bed, tick, dt, n_sub, h, max_cos)
     R_now, W_now = bed.state()
     # latency: a ring of the last states, one per integration step
@@ -266,7 +266,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         psi_settle_s=_settled(last_psi_above, times),
         margin_series=margin_series, sensor_series=sensor_series, error_series=error_series,
         history=record, assumed=None if judge is None else judge.series(), times=times,
-        dt=dt, takeover_margin_deg=takeover, wall_s=wall)
+        dt=dt, takeover_margin_deg=arming, wall_s=wall)
 
 
 def _spool_up(bed: Testbeds, tick: ControlTick, dt: float, n_sub: int, h: float,

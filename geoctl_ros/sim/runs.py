@@ -5,7 +5,7 @@ own seed, the late steps and the stalls.
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any, Callable, Tuple
+from typing import Any, Callable, Iterator, Tuple
 
 import numpy as np
 
@@ -31,7 +31,7 @@ def hold_steps(steps: int, n_sub: int, jitter: float, seed: int) -> np.ndarray:
     return holds[starts < steps * n_sub]
 
 
-def late_holds(n_sub: int, jitter: float, seed: int, stream: int):
+def late_holds(n_sub: int, jitter: float, seed: int, stream: int) -> Iterator[int]:
     """An endless draw of holds (integration steps) as ``hold_steps``' (n_sub, late by up to
     jitter), from the stream of its own of ``seed``: the spool-up's ticks before a take-over.
     """
