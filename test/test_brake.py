@@ -67,34 +67,35 @@ def _travel(w, phases, a_u, dt=1e-5):
     return best
 
 
-def _backup(D_s, D, a_b, keep, hold=0.01, holds=brake_module.BACKUP_HOLDS, pieces=20):
+def _backup(D_s, D, a_b, lag, hold=0.01, spans=brake_module.BACKUP_SPANS, pieces=20):
     """The backup's phases as the module states them, written here: the hold at min(D_s, D),
-    then hold j rising linearly from a_b - a^(j-1) (a_b - min(D, a_b)) to a_b - a^j (...)
-    (in ``pieces`` steps of constant deceleration, each at the chord's middle: exact in the rate
-    at their ends), then for ever at the level reached.
+    then over each span (span * lag long) rising linearly from a_b - e^-c (a_b - min(D, a_b))
+    to a_b - e^-(c + span) (...), c the spans before it (in ``pieces`` steps of constant
+    deceleration, each at the chord's middle: exact in the rate at their ends), then for ever
+    at the level reached.
     """
     phases = [(hold, min(D_s, D))]
     share, gap = 1.0, a_b - min(D, a_b)
-    for _ in range(holds if keep > 0.0 else 1):
-        start, end = a_b - share * gap, a_b - share * keep * gap
-        phases += [(hold / pieces, start + (end - start) * (i + 0.5) / pieces)
+    for span in (spans if lag > 0.0 else ()):
+        start, end = a_b - share * gap, a_b - share * math.exp(-span) * gap
+        phases += [(span * lag / pieces, start + (end - start) * (i + 0.5) / pieces)
                    for i in range(pieces)]
-        share *= keep
+        share *= math.exp(-span)
     return phases + [(math.inf, a_b - share * gap)]
 
 
 def test_the_backup_travel_is_its_phases_integrated_and_bounds_the_true_lag():
-    """``backup_travel``: its phases stepped through here (each hold's chord in 20 steps), to
+    """``backup_travel``: its phases stepped through here (each span's chord in 20 steps), to
     2e-5 rad; and never less than the travel under the rotors' true
     exponential approach to a_b (a first-order lag of 40 ms from the end of the command's
-    hold), nor more than what its truncation after BACKUP_HOLDS holds leaves beyond.
+    hold), nor more than what its truncation after the BACKUP_SPANS leaves beyond.
     """
     rng = np.random.default_rng(1)
     keep = BRAKE.keep(0.01)
     for _ in range(25):
         w, D_s, D = rng.uniform(-0.5, 3.0), rng.uniform(-30.0, 40.0), rng.uniform(-30.0, 40.0)
         got = float(backup_travel(BRAKE, w, D_s, D, BRAKE.authority, 0.01))
-        phases = _backup(min(D_s, BRAKE.authority), D, BRAKE.authority, keep)
+        phases = _backup(min(D_s, BRAKE.authority), D, BRAKE.authority, BRAKE.lag)
         assert got == pytest.approx(_travel(w, phases, BRAKE.unmodelled), abs=2e-5)
         # the true lag: from min(D, a_b) at the hold's end, exponentially to a_b
         x, v, best, t, dt = 0.0, w, 0.0, 0.0, 1e-5
@@ -135,7 +136,7 @@ def test_the_least_deceleration_is_where_the_worst_case_just_stops_outside():
         dw = BRAKE.rate_error + BRAKE.measurement * spin + BRAKE.unmodelled * age
 
         def peak(d):
-            return _travel(w + dw, _backup(Ds, d, BRAKE.authority, keep), BRAKE.unmodelled,
+            return _travel(w + dw, _backup(Ds, d, BRAKE.authority, BRAKE.lag), BRAKE.unmodelled,
                            2e-5)
         if D <= Ds - 4.0 * BRAKE.authority + 1e-3:        # (a far cone: no real need)
             continue
@@ -394,7 +395,7 @@ def _one_axis(T_b, brake, gap0, w0, dt=1e-4):
         first = a * D_s + (1.0 - a) * a_b             # the backup's first command
 
         def stops(d):
-            return _travel(W0, _backup(D_s, d, a_b, a, HOLD), a_u, 5e-5) <= G0
+            return _travel(W0, _backup(D_s, d, a_b, LAG, HOLD), a_u, 5e-5) <= G0
         if stops(0.0):
             D_cmd = 0.0
         elif not stops(first):

@@ -207,7 +207,12 @@ def draw_manoeuvre(seed, index, sensor_axis, goal_ok=None, duration=20.0, stratu
                               azimuth)
         d1 = sphere.direction(v0, th0 + math.radians(rng.uniform(5.0, 30.0)),
                         azimuth + math.pi + math.radians(rng.uniform(-30.0, 30.0)))
-        if any(angle_deg(d, v) < t + CLEAR_DEG for d in (d0, d1) for v, t in zip(axes, theta)):
+        # (the start's clearance from the first cone is the stratum's: the arming stratum
+        # starts within CLEAR_DEG of it)
+        clear = min(CLEAR_DEG, part.start_clear_deg[0])
+        if (any(angle_deg(d1, v) < t + CLEAR_DEG for v, t in zip(axes, theta))
+                or angle_deg(d0, v0) < theta[0] + clear
+                or any(angle_deg(d0, v) < t + CLEAR_DEG for v, t in zip(axes[1:], theta[1:]))):
             continue
         if not crosses(d0, d1, v0, theta[0]):
             continue                                    # the straight way misses the cone

@@ -26,16 +26,17 @@ e |Omega|) T_b + a_u T_b^2 / 2 in g, so the brake takes the worst state in that 
 w0 = w + dw, G0 = g - dg.
 
 The backup. From a tick with the rotors at D_s, braking as hard as the lag lets: over the first
-hold the deceleration is at least min(D_s, D_1), D_1 = a D_s + (1 - a) a_b, and then rises hold
-by hold, a_b - a^j (a_b - D_1) at the end of the j-th hold after it (the rotors close (1 - a) of
-their gap to a_b each hold, exponentially within it: at least the chord), against a_u
-throughout; after ``BACKUP_HOLDS`` holds at the level then reached, for ever.
+hold the deceleration is at least min(D_s, D_1), D_1 = a D_s + (1 - a) a_b, and then rises as
+a_b - (a_b - D_1) exp(-t / tau) (the compensated rotors asked for their most each hold follow
+their lag exactly); it is concave, so its chord over each of ``BACKUP_SPANS`` (in time
+constants) bounds it from below, and after them it is held at the level reached, for ever; a_u
+pushes in throughout.
 The peak of its worst-case travel towards the cone (``backup_travel``) within the gap is the
 safe set: Phi = G0 - peak >= 0.
 
 The condition. A command whose deceleration at the end of its hold is D keeps the state safe at
 the next tick if the travel over its hold (deceleration at least min(D_s, D)) and the backup
-from D after it peaks within G0 (``least_deceleration``: the least such D, by bisection). By
+from D after it peaks within G0 (``least_deceleration``: the least such D, from above). By
 induction the true state stays in the safe set at every tick, and the sensor out of the cone
 between them: the backup's own first command always meets the condition where Phi >= 0. Past
 the curve (Phi < 0: at a take-over after a fall, after the bounds broke, or inside a cone) the
@@ -63,8 +64,10 @@ from geoctl_ros.core.law.projection import TOL, project, slack_of
 
 SIGMAS = 3.0      # the measurement errors are bounded at this many standard deviations
 NET_SHARE_MIN = 0.25   # the backup must out-brake a_u by at least this share of a_b
-BACKUP_HOLDS = 10      # the backup's lag is followed hold by hold for this many holds
-BISECTIONS = 24        # the least deceleration's bisection (its bracket over 2^24)
+BACKUP_SPANS = (0.25, 0.25, 0.5, 1.0, 2.0)   # the backup's rise, followed over these spans (in
+                       # time constants; its chord over each): 4 of them, e^-4 of its deficit left
+FALSI_STEPS = 10       # the least deceleration's regula falsi steps (within 1 rad/s^2 of the
+                       # least: test_brake)
 
 
 @dataclass(frozen=True)
@@ -141,20 +144,22 @@ def backup_travel(brake: ApproachBrake, w0: Any, D_s: Any, D: Any, authority: An
     """The farthest (rad) the sensor travels towards the cone in the worst case from a tick with
     the approach w0 (rad/s) and the rotors at D_s: a command reaching D at the end of its hold
     (the deceleration over it at least min(D_s, D)), then the backup (see the module) to
-    ``authority`` (a_b; per cone), a_u pushing in throughout. Over each of the backup's holds
-    the rotors' deceleration rises exponentially, so the chord from its start to its end is a
-    lower bound of it. Floats or arrays alike.
+    ``authority`` (a_b; per cone), a_u pushing in throughout. After the hold the backup's
+    deceleration rises as a_b - (a_b - D) exp(-t / tau) (the compensated rotors asked for their
+    most each hold follow their lag exactly), so over each of ``BACKUP_SPANS`` its chord is a
+    lower bound of it; after them it stays at the level reached. Floats or arrays alike.
     """
-    a_u, keep = brake.unmodelled, brake.keep(hold)
+    a_u = brake.unmodelled
     x, best = 0.0 * w0, 0.0 * w0
     low = a_u - np.minimum(D_s, D)
     x, w, best = _phase(x, w0, best, low, low, hold)
     gap_left = authority - np.minimum(D, authority)        # the backup's deficit to a_b
     share = 1.0
-    for _ in range(BACKUP_HOLDS if keep > 0.0 else 1):
+    for span in (BACKUP_SPANS if brake.lag > 0.0 else ()):
         start = a_u - (authority - share * gap_left)
-        share *= keep
-        x, w, best = _phase(x, w, best, start, a_u - (authority - share * gap_left), hold)
+        share *= math.exp(-span)
+        x, w, best = _phase(x, w, best, start, a_u - (authority - share * gap_left),
+                            span * brake.lag)
     final = a_u - (authority - share * gap_left)            # (< 0: see NET_SHARE_MIN)
     return np.maximum(best, x + np.maximum(w, 0.0) ** 2 / (2.0 * np.maximum(-final, 1e-9)))
 
@@ -186,8 +191,9 @@ def least_deceleration(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: An
     own deceleration (per cone), where it already meets the condition, D is it (no search).
 
     The worst state (w0, G0) of the uncertainty box; the rotors' deceleration now taken at most
-    a_b. The travel falls as D grows, so D is found by bisection between the least deceleration
-    the polytope can give and the backup's first command (``BISECTIONS`` halvings).
+    a_b. The travel falls as D grows, so D is found by regula falsi (``FALSI_STEPS``) between
+    the law's (or a deceleration far below) and the backup's first command, returning the end
+    that meets the condition: never less than the least.
     """
     dg, dw = brake.uncertainty(age, spin)
     G0, w0 = gap - dg, w + dw
@@ -199,15 +205,26 @@ def least_deceleration(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: An
         meets = backup_travel(brake, w0, Ds, law, authority, hold) <= G0
         if np.all(meets | past):
             return np.where(past, first, law), margin
-    # (where even the bracket's low end meets it, the answer is that low end: a row that a law
-    # decelerating less than a far cone's would need never binds)
-    lo = np.minimum(Ds, 0.0) - 4.0 * authority
+        lo = np.where(meets, law - 1.0, law)
+    else:
+        lo = np.minimum(Ds, 0.0) - 4.0 * authority
+    # regula falsi (Illinois) between a deceleration that does not meet the condition and one
+    # that does (the backup's own first), keeping the one that does
     hi = first
-    for _ in range(BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        ok = backup_travel(brake, w0, Ds, mid, authority, hold) <= G0
-        hi = np.where(ok, mid, hi)
+    f_lo = backup_travel(brake, w0, Ds, lo, authority, hold) - G0
+    f_hi = backup_travel(brake, w0, Ds, hi, authority, hold) - G0
+    fine = f_lo <= 0.0                     # (even the low end meets it: a far cone)
+    hi = np.where(fine, lo, hi)
+    fixed = fine | past                    # (past: the backup's first, whatever the search)
+    f_lo, f_hi = np.where(fixed, 1.0, f_lo), np.where(fixed, -1.0, f_hi)
+    for _ in range(FALSI_STEPS):
+        mid = np.where(fixed, hi, hi - f_hi * (hi - lo) / np.minimum(f_hi - f_lo, -1e-12))
+        f_mid = backup_travel(brake, w0, Ds, mid, authority, hold) - G0
+        ok = f_mid <= 0.0
+        f_lo = np.where(ok, f_lo * 0.5, f_mid)
         lo = np.where(ok, lo, mid)
+        f_hi = np.where(ok, f_mid, f_hi)
+        hi = np.where(ok, mid, hi)
     return np.where(past, first, hi), margin
 
 
