@@ -91,7 +91,6 @@ def test_the_backup_travel_is_its_phases_integrated_and_bounds_the_true_lag():
     hold), nor more than what its truncation after the BACKUP_SPANS leaves beyond.
     """
     rng = np.random.default_rng(1)
-    keep = BRAKE.keep(0.01)
     for _ in range(25):
         w, D_s, D = rng.uniform(-0.5, 3.0), rng.uniform(-30.0, 40.0), rng.uniform(-30.0, 40.0)
         got = float(backup_travel(BRAKE, w, D_s, D, BRAKE.authority, 0.01))
