@@ -18,9 +18,10 @@ from geoctl_ros.params.param import declare as _p
 # Physical model, read by the controller (its model) and the simulator (the truth).
 BODY = [
     _p('inertia', 'double_array', LAB_INERTIA, 'kg m^2',
-       'inertia about the centre of mass, 9 values row-major', BOTH, length=9,
-       check=inertia_matrix, lo=-10.0, hi=10.0),
-    _p('mass', 'double', 1.26, 'kg', 'mass', BOTH, check=positive, lo=0.01, hi=100.0),
+       'inertia about the centre of mass, body frame, 9 values row-major (default: the lab '
+       "hexrotor's, docs/testbed.md)", BOTH, length=9, check=inertia_matrix, lo=-10.0, hi=10.0),
+    _p('mass', 'double', 1.26, 'kg', "mass (default: the lab hexrotor's)", BOTH, check=positive,
+       lo=0.01, hi=100.0),
     _p('cog_offset', 'double_array', [0.0, 0.0, 0.1], 'm',
        'pivot -> centre of mass, body frame (z up: above the pivot)', BOTH, length=3,
        lo=-1.0, hi=1.0),
