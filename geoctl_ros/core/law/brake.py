@@ -205,15 +205,16 @@ def least_deceleration(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: An
         meets = backup_travel(brake, w0, Ds, law, authority, hold) <= G0
         if np.all(meets | past):
             return np.where(past, first, law), margin
-        lo = np.where(meets, law - 1.0, law)
+        lo = law
     else:
         lo = np.minimum(Ds, 0.0) - 4.0 * authority
     # regula falsi (Illinois) between a deceleration that does not meet the condition and one
-    # that does (the backup's own first), keeping the one that does
+    # that does (the backup's own first), keeping the one that does; each cone's answer its
+    # own, whatever the others' (a run alone and in a batch alike)
     hi = first
     f_lo = backup_travel(brake, w0, Ds, lo, authority, hold) - G0
     f_hi = backup_travel(brake, w0, Ds, hi, authority, hold) - G0
-    fine = f_lo <= 0.0                     # (even the low end meets it: a far cone)
+    fine = f_lo <= 0.0                     # (even the low end meets it: a far cone, the law)
     hi = np.where(fine, lo, hi)
     fixed = fine | past                    # (past: the backup's first, whatever the search)
     f_lo, f_hi = np.where(fixed, 1.0, f_lo), np.where(fixed, -1.0, f_hi)
