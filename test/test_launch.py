@@ -1,8 +1,8 @@
 """The shipped launch files with the real `ros2 launch` (ROS 2 Jazzy's launch, launch_ros and
 ros2launch, installed by ./run from ../shared/wheels/launch), on the package as colcon installs
 it, as a lab runs them: sil.launch.xml flies the testbed on the loopback profile, a missing
-params_file stops the launch naming it, and testbed.launch.xml's remaps and prefix reach the
-controller, whose output keeps its name.
+params_file stops the launch naming it, and testbed.launch.xml's remaps, real-time class and
+prefix reach the controller, whose output keeps its name.
 """
 import os
 import pathlib
@@ -202,7 +202,15 @@ def test_testbed_launch_remaps_prefix_and_law_reach_the_controller(installed, ro
         # only the remapped topics feed it: the plain pose and imu carry nothing here
         mon.wait_for(mon.controller_has_inputs, 40.0, 'the controller fed on the remapped topics')
         [pid] = launch.children()
-        # the prefix: nice -n 3, three more than this process's own niceness (at most 19)
+        # the real-time class where this user may use it (root here), else normal priority and
+        # the node's own WARN; the diagnostics say which
+        scheduling = mon.last_diagnostic().figures.scheduling
+        if scheduling.realtime:
+            assert os.sched_getscheduler(pid) == os.SCHED_FIFO
+            assert os.sched_getparam(pid).sched_priority == 50 == scheduling.priority
+        else:
+            assert scheduling.asked == 50 and os.sched_getscheduler(pid) == os.SCHED_OTHER
+        # the further prefix: nice -n 3, three more than this process's niceness (at most 19)
         assert os.getpriority(os.PRIO_PROCESS, pid) == min(19, os.nice(0) + 3)
         with open('/proc/%d/cmdline' % pid, 'rb') as fh:
             cmdline = fh.read().split(b'\0')
@@ -213,3 +221,7 @@ def test_testbed_launch_remaps_prefix_and_law_reach_the_controller(installed, ro
         launch.stop()
     out = launch.output()
     assert '[controller-1]' in out and '[nice-1]' not in out, out[-2000:]
+    assert '[realtime-1]' not in out, out[-2000:]
+    assert (('realtime: controller in the real-time class (SCHED_FIFO 50)' in out)
+            == scheduling.realtime), out[-2000:]
+    assert ('not in the real-time class: SCHED_FIFO 50' in out) != scheduling.realtime

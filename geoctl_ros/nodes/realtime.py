@@ -5,9 +5,12 @@ and serves any other node the same way (``ros2 run --prefix``).
 
 Where the class is not permitted (no ``rtprio`` in /etc/security/limits.conf and no
 CAP_SYS_NICE: a development machine, a test), it says so in one line on stderr and runs COMMAND
-at normal priority, where ``chrt`` would stop. The threads COMMAND creates inherit the class
-(Fast DDS's included). ``ps -o pid,cls,rtprio,comm -C controller`` shows it: ``FF`` and the
-priority in the real-time class, ``TS`` and ``-`` outside it.
+at normal priority, where ``chrt`` would stop. It tells COMMAND the priority it asked for (the
+environment variable ``core.telemetry.scheduling.ASKED``): a node of this package then says at
+WARN that it runs outside the class, and shows its class under the diagnostics key
+``scheduling``. The threads COMMAND creates inherit the class (Fast DDS's included).
+``ps -o pid,cls,rtprio,comm -C controller`` shows it too: ``FF`` and the priority in the
+real-time class, ``TS`` and ``-`` outside it.
 
 Exit code: COMMAND's (it replaces this process); 2 for bad arguments, 127 when COMMAND cannot
 be run.
@@ -15,6 +18,8 @@ be run.
 import os
 import sys
 from typing import List, Optional
+
+from geoctl_ros.core.telemetry.scheduling import ALLOW, ASKED
 
 USAGE = 'usage: realtime PRIORITY COMMAND [ARGS...]   (PRIORITY 1-99 for SCHED_FIFO, 0: normal)'
 
@@ -47,24 +52,26 @@ def command_name(command: List[str]) -> str:
 def main(argv: Optional[List[str]] = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if len(argv) < 2 or not argv[0].isdigit() or not 0 <= int(argv[0]) <= 99:
-        print(USAGE, file=sys.stderr)
+        sys.stderr.write(USAGE + '\n')
         return 2
     priority, command = int(argv[0]), argv[1:]
     name = command_name(command)
     if priority:
         why = enter_realtime(priority)
         if why is None:
-            print('realtime: %s in the real-time class (SCHED_FIFO %d)' % (name, priority),
-                  file=sys.stderr)
+            sys.stderr.write('realtime: %s in the real-time class (SCHED_FIFO %d)\n'
+                             % (name, priority))
         else:
-            print("realtime: SCHED_FIFO %d is not permitted here (%s): %s runs at normal "
-                  "priority (to allow it: '<user> - rtprio 98' in /etc/security/limits.conf, "
-                  'then log in again)' % (priority, why, name), file=sys.stderr)
+            sys.stderr.write('realtime: SCHED_FIFO %d is not permitted here (%s): %s runs at '
+                             'normal priority (to allow it: %s)\n' % (priority, why, name, ALLOW))
+        os.environ[ASKED] = str(priority)
+    else:
+        os.environ.pop(ASKED, None)
     sys.stderr.flush()
     try:
         os.execvp(command[0], command)
     except OSError as e:
-        print('realtime: cannot run %s: %s' % (command[0], e.strerror or e), file=sys.stderr)
+        sys.stderr.write('realtime: cannot run %s: %s\n' % (command[0], e.strerror or e))
         return 127
     return 0       # (not reached: execvp replaced this process)
 

@@ -16,6 +16,7 @@ from typing import Any, Iterable, List, NamedTuple, Optional, Tuple
 import numpy as np
 
 from geoctl_ros.core.telemetry.codec import Codec, Key
+from geoctl_ros.core.telemetry.scheduling import Scheduling, scheduling_text, scheduling_value
 
 NAME = 'geoctl_ros: controller'     # the controller's DiagnosticStatus name
 # Diagnostics levels (the values of diagnostic_msgs/DiagnosticStatus).
@@ -133,11 +134,13 @@ class Figures:
     loop_period: Optional[Window] = None
     tick_to_command: Optional[Window] = None
     pose_to_command_latency: Optional[Window] = None
+    scheduling: Optional[Scheduling] = None   # the node's class (None: not a node's report)
 
     def with_timing(self, loop_period: Optional['Window'], tick_to_command: Optional['Window'],
-                    pose_to_command_latency: Optional['Window']) -> 'Figures':
+                    pose_to_command_latency: Optional['Window'],
+                    scheduling: Optional[Scheduling] = None) -> 'Figures':
         return replace(self, loop_period=loop_period, tick_to_command=tick_to_command,
-                       pose_to_command_latency=pose_to_command_latency)
+                       pose_to_command_latency=pose_to_command_latency, scheduling=scheduling)
 
 
 @dataclass(frozen=True)
@@ -236,6 +239,8 @@ CODEC = Codec(Figures, {
                           lambda t: tuple(int(x) for x in t.split()), _after_first_step),
     'unlearnt': Key('unlearnt acceleration [rad/s^2]', _unlearnt_text, _unlearnt_value,
                     _unlearnt_absent),
+    'scheduling': Key('scheduling', scheduling_text, scheduling_value,
+                      lambda f: f.scheduling is None),
 })
 assert set(CODEC.table) == {f.name for f in fields(Figures)}
 
