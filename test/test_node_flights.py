@@ -247,13 +247,13 @@ def _true_poses_on_disk(path):
 
 def test_a_recorded_flight_reads_back_with_rosbags_and_reports_its_closest_approach(ros,
                                                                                       tmp_path):
-    """``record`` beside the sim and the controller, in both storages. The sim starts tilted
-    20 deg towards the cone, and disarmed the testbed (its centre of mass above the pivot, its
-    joint without stops) falls, so the sensor sweeps into the cone; the recording runs until it has. The bags read back with
-    rosbags' own reader (not the package's), and ``report`` gives the closest approach that the
-    recorded true attitude gives, computed here with plain numpy. A third recorder, killed
-    mid-flight, leaves a bag that still reports. The live view runs beside them, and its markers
-    are in the records too.
+    """``record`` beside the sim and the controller, in both storages. The sim starts tilted 20
+    deg towards the cone, and disarmed the testbed (its centre of mass above the pivot, its
+    joint without stops) falls, so the sensor sweeps into the cone; the recording runs until it
+    has. The bags read back with rosbags' own reader (not the package's), and ``report`` gives
+    the closest approach that the recorded true attitude gives, computed here with plain numpy.
+    A third recorder, killed mid-flight, leaves a bag that still reports. The live view runs
+    beside them, and its markers are in the records too.
     """
     mon, launch = ros
     launch('controller')
