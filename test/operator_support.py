@@ -76,6 +76,7 @@ PRODUCERS = {
     'core/supervisor/safety.py': (
         'quaternion_problem', 'specific_force_problem',
         'angular_velocity_problem', 'esc_problem', 'Stream.offer', 'Stream.staleness',
+        'Stream.stamp_note',
         'Stream.loss', 'Supervisor.__init__', 'Supervisor.arm', 'Supervisor.disarm'),
     'core/sensors/consistency.py': (
         'SensorAgreement.pose', 'SensorAgreement.arm_problems',
@@ -185,6 +186,7 @@ FORWARDED = {
     ('core/supervisor/loop_status.py', 'sup.reason'): 'Supervisor (its states), failsafe(...)',
     ('core/supervisor/loop_status.py', 'loop.unconfigured'): 'ControllerNode._unconfigured',
     ('core/supervisor/loop_status.py', 'stale'): 'Stream.staleness',
+    ('core/supervisor/loop_status.py', 'untrusted'): 'Stream.stamp_note',
     ('core/supervisor/loop_status.py', 'escs'): 'esc_problem',
     ('core/supervisor/loop_status.py', 'lost'): 'Stream.loss',
     ('core/supervisor/loop_status.py', 'gap_notes(loop, now)'): 'loop_status.gap_notes',
