@@ -200,6 +200,37 @@ def test_the_brakes_authority_is_the_polytopes_less_gravity_at_the_stops():
     assert lower.brake_acceleration == 30.0
 
 
+def test_the_rate_error_budget_covers_an_attitude_error_of_e_at_any_angle_to_the_cone():
+    """``ApproachBrake.uncertainty``'s rate term: an attitude error of e turns the opening
+    direction n by up to e / sin phi, so the approach rate w = -n . Omega seen through it is off
+    by up to e |Omega| / sin phi (what ``rows`` budgets): random attitudes and rates near the
+    testbed's cone, each seen through 40 random errors of size e (``opening`` on the true and
+    the erred attitude), stay within it, and near the cone they exceed e |Omega| alone.
+    """
+    setup = controller_setup(_testbed_values())
+    cfg = setup.config
+    cones, e = cfg.cones, ApproachBrake.bounds_of(cfg).measurement
+    axis, theta = cones.V[0], float(cones.theta[0])
+    rng = np.random.default_rng(11)
+    beyond = 0
+    for _ in range(200):
+        phi = theta + math.radians(rng.uniform(0.5, 30.0))
+        az = math.atan2(axis[1], axis[0]) + phi * rng.choice([-1.0, 1.0])
+        R = so3.exp(np.array([0.0, 0.0, az])) @ so3.exp(rng.normal(0.0, 0.05, 3))
+        Omega = rng.normal(0.0, 1.0, 3)
+        gap, _, w, _ = opening(cones, R, Omega)
+        sin_phi = math.sin(float(gap[0]) + theta)
+        spin = float(np.linalg.norm(Omega))
+        worst = 0.0
+        for _ in range(40):
+            d = rng.normal(size=3)
+            R_seen = R @ so3.exp(e * d / np.linalg.norm(d))
+            worst = max(worst, abs(float(opening(cones, R_seen, Omega)[2][0] - w[0])))
+        assert worst <= e * spin / sin_phi * 1.05 + 1e-9, (worst, e * spin / sin_phi)
+        beyond += worst > 1.5 * e * spin
+    assert beyond > 20
+
+
 def test_several_cones_are_one_qp_and_a_corridor_is_shared_not_given_up():
     """``braked``: where the law's moment breaks a cone's condition, the moment returned meets
     every cone's row within the rotors' polytope and is the closest that does (KKT by brute

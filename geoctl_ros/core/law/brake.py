@@ -21,8 +21,9 @@ over a hold. Bounds (numbers from the parameters; docs/safety.md has the testbed
 - a_u: the unknown acceleration (``cbf_moment_bound`` over the smallest pivot inertia);
 - a_b: the deceleration the rotors' polytope gives along any opening direction, gravity at the
   joint's tilt limit counted (``brake_authority``).
-The prediction is off by at most dw = e_w + e |Omega| + a_u T_b in w and dg = e + (e_w +
-e |Omega|) T_b + a_u T_b^2 / 2 in g, so the brake takes the worst state in that box:
+The prediction is off by at most dw = e_w + e |Omega| / sin phi + a_u T_b in w (phi the
+sensor's angle to the axis) and dg = e + (e_w + e |Omega| / sin phi) T_b + a_u T_b^2 / 2 in
+g, so the brake takes the worst state in that box:
 w0 = w + dw, G0 = g - dg.
 
 The backup. From a tick with the rotors at D_s, braking as hard as the lag lets: over the first
@@ -97,8 +98,10 @@ class ApproachBrake:
 
     def uncertainty(self, T_b: Any, spin: Any) -> tuple:
         """(dg, dw): how far the predicted gap (rad) and approach rate (rad/s) can be from the
-        truth, with measurements T_b old (s) and |Omega| = spin (rad/s): the measurement
-        errors, and a_u acting over T_b.
+        truth, with measurements T_b old (s) and spin = |Omega| / sin phi (rad/s; phi the
+        sensor's angle to the cone's axis: an attitude error e turns the opening direction n by
+        up to e / sin phi, so w = -n . Omega is off by up to e |Omega| / sin phi): the
+        measurement errors, and a_u acting over T_b.
         """
         e_w = self.rate_error + self.measurement * spin
         return (self.measurement + e_w * T_b + 0.5 * self.unmodelled * T_b * T_b,
@@ -344,25 +347,30 @@ def rows(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, x: BrakeInputs,
     ``brake_terms`` of x where already computed.
     """
     t = brake_terms(brake, cones, J_inv, x) if terms is None else terms
-    D, margin = least_deceleration(brake, t.gap, t.w, t.D_s, _age(x), _spin(x), t.authority,
-                                   x.hold)
+    D, margin = least_deceleration(brake, t.gap, t.w, t.D_s, _age(x), _spin(cones, t, x),
+                                   t.authority, x.hold)
     return BrakeRows(t.A, D - t.f_along + t.kin, margin, t.weak)
 
 
-def law_meets(brake: ApproachBrake, terms: BrakeTerms, x: BrakeInputs,
+def law_meets(brake: ApproachBrake, cones: Any, terms: BrakeTerms, x: BrakeInputs,
               u: np.ndarray) -> np.ndarray:
     """(...,) bool: whether the law's moment u meets every cone's condition at the tick of x
     (``meets``, on the law's own deceleration along each cone; no search).
     """
     t = terms
     law = so3.dot(t.A, u[..., None, :]) + t.f_along - t.kin
-    return np.all(meets(brake, t.gap, t.w, t.D_s, _age(x), _spin(x), t.authority, x.hold, law),
-                  axis=-1)
+    return np.all(meets(brake, t.gap, t.w, t.D_s, _age(x), _spin(cones, t, x), t.authority,
+                        x.hold, law), axis=-1)
 
 
-def _spin(x: BrakeInputs) -> np.ndarray:
-    """|Omega| per run, one axis for the cones."""
-    return np.sqrt(so3.dot(x.Omega, x.Omega))[..., None]
+SIN_PHI_MIN = math.sin(math.radians(5.0))   # sin phi below which the rate error is taken at
+                                            # this (deep inside a cone, or opposite it)
+
+
+def _spin(cones: Any, t: BrakeTerms, x: BrakeInputs) -> np.ndarray:
+    """|Omega| / sin phi per run and cone (``ApproachBrake.uncertainty``)."""
+    sin_phi = np.maximum(np.sin(t.gap + cones.theta), SIN_PHI_MIN)
+    return np.sqrt(so3.dot(x.Omega, x.Omega))[..., None] / sin_phi
 
 
 def _age(x: BrakeInputs) -> Any:
@@ -457,7 +465,7 @@ def braked(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, polytope: Any,
     # the projection too: the derivation's rotors reach every command, the law's too)
     unreached = np.any(slack_of(A_p, u, beta_p) < -TOL, axis=-1)
     if extra is None:
-        braking = ~law_meets(brake, t, x, u)
+        braking = ~law_meets(brake, cones, t, x, u)
         if not np.any(braking | unreached):
             return Braked(u, braking, weak)
     r = rows(brake, cones, J_inv, x, t)
