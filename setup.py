@@ -77,6 +77,8 @@ setup(
             'view = geoctl_ros.nodes.view:main',
             'scenario = geoctl_ros.cli.scenario:main',
             'report = geoctl_ros.cli.report:main',
+            # the flight chain's launch prefix: SCHED_FIFO where permitted, else one line
+            'realtime = geoctl_ros.nodes.realtime:main',
             # the development tools: without the extra tools, one line says so
             'soak = geoctl_ros.cli.tools:soak',
             'campaign = geoctl_ros.cli.tools:campaign',

@@ -53,7 +53,8 @@ W = '\x00'                   # a template's wildcard: text that varies
 # The files whose messages an operator sees, by node (paths under geoctl_ros/).
 SOURCES = {
     'controller': [
-        'nodes/controller.py', 'nodes/runtime.py', 'core/supervisor/loop.py',
+        'nodes/controller.py', 'nodes/runtime.py', 'nodes/realtime.py',
+        'core/telemetry/scheduling.py', 'core/supervisor/loop.py',
         'core/supervisor/loop_status.py', 'core/supervisor/preflight.py',
         'core/supervisor/safety.py', 'core/actuation/esc_wire.py', 'core/sensors/consistency.py',
         'core/law/feasibility.py',
@@ -75,6 +76,7 @@ PRODUCERS = {
     'core/supervisor/safety.py': (
         'quaternion_problem', 'specific_force_problem',
         'angular_velocity_problem', 'esc_problem', 'Stream.offer', 'Stream.staleness',
+        'Stream.stamp_note',
         'Stream.loss', 'Supervisor.__init__', 'Supervisor.arm', 'Supervisor.disarm'),
     'core/sensors/consistency.py': (
         'SensorAgreement.pose', 'SensorAgreement.arm_problems',
@@ -84,6 +86,7 @@ PRODUCERS = {
     'core/actuation/esc_wire.py': ('motor_commands_problem',),
     'core/law/feasibility.py': ('setpoint_problem',),
     'core/telemetry/diagnostics.py': ('failsafe',),
+    'core/telemetry/scheduling.py': ('scheduling_problem',),
     'core/law/gains.py': ('GainCheck.message',),
     'core/actuation/airframe.py': ('check',),
     'core/actuation/allocation.py': ('Allocator.__init__',),
@@ -166,6 +169,7 @@ FORWARDED = {
     ('nodes/controller.py', "[('armed', problem)]"): 'validate.change_problem',
     ('nodes/controller.py', "[('cones', problem)]"): 'ControlLoop.reconfiguration_problem',
     ('nodes/runtime.py', 'str(e)'): 'ConfigError (the parameters, docs/parameters.md)',
+    ('nodes/runtime.py', 'problem'): 'scheduling_problem',
     ('nodes/esc_i2c.py', "[('esc.addresses', str(e))]"): 'EscStartError(...) in driver.start',
     ('nodes/esc_i2c.py', "[('esc_i2c', problem)]"): 'validate.change_problem',
     ('nodes/mavlink_bridge.py', "[('mavlink.signing_key_file', str(e))]"):
@@ -182,6 +186,7 @@ FORWARDED = {
     ('core/supervisor/loop_status.py', 'sup.reason'): 'Supervisor (its states), failsafe(...)',
     ('core/supervisor/loop_status.py', 'loop.unconfigured'): 'ControllerNode._unconfigured',
     ('core/supervisor/loop_status.py', 'stale'): 'Stream.staleness',
+    ('core/supervisor/loop_status.py', 'untrusted'): 'Stream.stamp_note',
     ('core/supervisor/loop_status.py', 'escs'): 'esc_problem',
     ('core/supervisor/loop_status.py', 'lost'): 'Stream.loss',
     ('core/supervisor/loop_status.py', 'gap_notes(loop, now)'): 'loop_status.gap_notes',

@@ -15,7 +15,14 @@ from geoctl_ros.core.law.mechanics import gravity_moment
 from geoctl_ros.core.law.prediction import CommandHistory, DelayPredictor
 from geoctl_ros.core.supervisor.loop import ControlLoop
 from geoctl_ros.core.supervisor.safety import REANCHOR_AFTER, Stream
-from geoctl_ros.core.telemetry.diagnostics import ERROR
+from geoctl_ros.core.telemetry.diagnostics import (
+    ERROR,
+    WARN,
+    StampTrust,
+    from_values,
+    key,
+    to_values,
+)
 from geoctl_ros.params import (
     CONTROLLER,
     SIM,
@@ -203,10 +210,39 @@ def test_an_input_is_as_old_as_its_capture_stamp_says_unless_the_stamp_is_not_be
     assert loop.offer_pose(q, 10.2, 100.2, delay=3600.0) is None         # an hour behind
     assert loop.pose.capture_age(100.2) == pytest.approx(0.007)
     assert loop.pose.untrusted_stamps == 2
+    # /diagnostics: the window's capture-to-receipt delays by the stamps (trusted or not), how
+    # many stamps were trusted, and a WARN sentence for those that were not
+    st = loop.status(100.2)
+    f = st.figures
+    assert f.pose_stamps == StampTrust(True, 1, 2) and f.imu_stamps == StampTrust(True, 0, 0)
+    assert (f.pose_delay.max, f.pose_delay.mean) == pytest.approx((3600.0, 3599.042 / 3))
+    assert f.imu_delay is None
+    assert st.level == WARN and (
+        'pose stamps not trusted: 2 of 3 this window are more than 10 ms ahead of this '
+        "computer's clock or more than 500 ms behind it (capture to receipt -1000.0 to "
+        '3600000.0 ms): each counted measurement_delay 7.0 ms old (synchronise the clocks, '
+        'docs/safety.md, "Delay")') in st.message
+    pairs = dict(to_values(f))
+    assert pairs[key('pose_stamps')] == 'partly trusted (1 of 3 this window): measurement_delay ' \
+                                   'counted for the rest'
+    assert pairs[key('imu_stamps')] == 'none this window'
+    assert pairs[key('pose_delay')].endswith('max 3600000.000')
+    assert from_values(to_values(f)).pose_stamps == f.pose_stamps
+    loop.end_window()                                   # a new window: nothing to say
+    assert loop.offer_pose(q, 10.3, 100.3, delay=0.004) is None
+    st = loop.status(100.3)
+    assert st.figures.pose_stamps == StampTrust(True, 1, 0) and 'not trusted' not in st.message
+    assert dict(to_values(st.figures))[key('pose_stamps')] == 'trusted (1 of 1 this window)'
     values['age_from_stamps'] = False
     loop = ControlLoop(controller_setup(values))
     assert loop.offer_pose(q, 10.0, 100.0, delay=0.042) is None
     assert loop.pose.capture_age(100.0) == pytest.approx(0.007)
+    # not used for the age, the stamps still show the delay they give, without a warning
+    st = loop.status(100.0)
+    assert st.figures.pose_delay.max == pytest.approx(0.042)
+    assert st.figures.pose_stamps == StampTrust(False, 0, 0) and 'stamps' not in st.message
+    assert dict(to_values(st.figures))[key('pose_stamps')] == (
+        'not used (age_from_stamps false): measurement_delay counted')
 
 
 @odroid

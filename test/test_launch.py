@@ -1,13 +1,14 @@
 """The shipped launch files with the real `ros2 launch` (ROS 2 Jazzy's launch, launch_ros and
 ros2launch, installed by ./run from ../shared/wheels/launch), on the package as colcon installs
 it, as a lab runs them: sil.launch.xml flies the testbed on the loopback profile, a missing
-params_file stops the launch naming it, and testbed.launch.xml's remaps and prefix reach the
-controller, whose output keeps its name.
+params_file stops the launch naming it, and testbed.launch.xml's remaps, real-time class and
+prefix reach the controller, whose output keeps its name.
 """
 import os
 import pathlib
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -73,6 +74,16 @@ class Launch:
         """The pids of the node processes launch started (the direct children of ros2 launch)."""
         r = subprocess.run(['pgrep', '-P', str(self.proc.pid)], capture_output=True, text=True)
         return [int(p) for p in r.stdout.split()]
+
+    def child(self, program):
+        """The pid of the one node process whose command line runs a path ending in program."""
+        found = []
+        for pid in self.children():
+            with open('/proc/%d/cmdline' % pid, 'rb') as fh:
+                if any(a.endswith(program.encode()) for a in fh.read().split(b'\0')):
+                    found.append(pid)
+        assert len(found) == 1, (program, found)
+        return found[0]
 
     def stop(self):
         if self.proc.poll() is None:
@@ -178,13 +189,30 @@ def test_a_params_file_that_does_not_exist_stops_the_launch_naming_it(installed,
     assert 'ready' not in out                         # no node came up on its defaults
 
 
+def free_udp_port():
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(('127.0.0.1', 0))
+        return s.getsockname()[1]
+
+
 @needs_launch
 def test_testbed_launch_remaps_prefix_and_law_reach_the_controller(installed, ros, tmp_path):
+    """The runbook's launch: one controller on the file and then the calibration (its gyro bias
+    in effect), the bridge on the link and signing key given; each in the real-time class at its
+    priority where permitted, else at normal priority with its WARN.
+    """
     env, _ = installed
     mon = ros
+    calibration = tmp_path / 'calibration.yaml'
+    calibration.write_text('controller:\n  ros__parameters:\n    gyro_bias: [0.0125, 0.0, 0.0]\n')
+    key = tmp_path / 'mavlink.key'
+    key.write_text('a long lab passphrase\n')
+    key.chmod(0o600)
+    url = 'udpout:127.0.0.1:%d' % free_udp_port()
     launch = Launch(env, tmp_path / 'launch.log', 'testbed.launch.xml',
                     'pose_topic:=/mocap/body/pose', 'imu_topic:=/board/imu',
-                    'prefix:=nice -n 3', 'law:=cbf')
+                    'prefix:=nice -n 3', 'law:=cbf', 'calibration:=%s' % calibration,
+                    'mavlink:=true', 'mavlink_url:=' + url, 'mavlink_key:=%s' % key)
     pub_pose = mon.create_publisher(PoseStamped, '/mocap/body/pose', qos.SENSOR)
     pub_imu = mon.create_publisher(Imu, '/board/imu', qos.SENSOR)
 
@@ -201,8 +229,22 @@ def test_testbed_launch_remaps_prefix_and_law_reach_the_controller(installed, ro
     try:
         # only the remapped topics feed it: the plain pose and imu carry nothing here
         mon.wait_for(mon.controller_has_inputs, 40.0, 'the controller fed on the remapped topics')
-        [pid] = launch.children()
-        # the prefix: nice -n 3, three more than this process's own niceness (at most 19)
+        mon.wait_for(lambda: mon.log['bridge'], 30.0, "the bridge's diagnostics")
+        bridge = mon.log['bridge'][-1][1].status
+        assert (bridge.url, bridge.signing_link_id) == (url, 0)       # signed, on the link given
+        pid, bridge_pid = (launch.child('lib/geoctl_ros/' + n)
+                           for n in ('controller', 'mavlink_bridge'))
+        # the real-time class where this user may use it (root here), else normal priority and
+        # the node's own WARN; the diagnostics say which
+        scheduling = mon.last_diagnostic().figures.scheduling
+        if scheduling.realtime:
+            assert os.sched_getscheduler(pid) == os.SCHED_FIFO
+            assert os.sched_getparam(pid).sched_priority == 50 == scheduling.priority
+            assert os.sched_getparam(bridge_pid).sched_priority == 40 == bridge.scheduling.priority
+        else:
+            assert scheduling.asked == 50 and os.sched_getscheduler(pid) == os.SCHED_OTHER
+            assert bridge.scheduling.asked == 40 and not bridge.scheduling.realtime
+        # the further prefix: nice -n 3, three more than this process's niceness (at most 19)
         assert os.getpriority(os.PRIO_PROCESS, pid) == min(19, os.nice(0) + 3)
         with open('/proc/%d/cmdline' % pid, 'rb') as fh:
             cmdline = fh.read().split(b'\0')
@@ -213,3 +255,9 @@ def test_testbed_launch_remaps_prefix_and_law_reach_the_controller(installed, ro
         launch.stop()
     out = launch.output()
     assert '[controller-1]' in out and '[nice-1]' not in out, out[-2000:]
+    assert '[realtime-1]' not in out, out[-2000:]
+    assert (('realtime: controller in the real-time class (SCHED_FIFO 50)' in out)
+            == scheduling.realtime), out[-2000:]
+    assert ('not in the real-time class: SCHED_FIFO 50' in out) != scheduling.realtime
+    assert 'gyro bias 0.0125, 0.0000, 0.0000 rad/s' in out, out[-2000:]    # the calibration's
+    assert out.count('controller ready') == 1, out[-2000:]                   # one controller

@@ -45,14 +45,17 @@ def test_launch_files_name_only_what_exists(name):
         assert node.get('exec') in _console_scripts(), node.get('exec')
         # the parameter file is passed as --params-file (a missing one then stops the node)
         assert not list(node.iter('param')), 'a param element only warns on a missing file'
-        # (followed by -p overrides of the launch's arguments, at most)
-        src = re.fullmatch(r'--params-file (\$\(var \w+\)|\S+)'
-                           r'(?: -p [\w.]+:=(?:\$\(var \w+\)|[\w.]+))*',
-                           node.get('ros_args')).group(1)
-        m = re.fullmatch(r'\$\(var (\w+)\)', src)
-        src = args[m.group(1)] if m else src
-        path = src.replace('$(find-pkg-share geoctl_ros)', ROOT)
-        assert os.path.isfile(path), src
+        # (followed by more parameter files and -p overrides of the launch's arguments, at most)
+        ros_args = node.get('ros_args')
+        assert re.fullmatch(r'(?:--params-file (?:\$\(var \w+\)|\S+))'
+                            r'(?: --params-file (?:\$\(var \w+\)|\S+))*'
+                            r'(?: -p [\w.]+:=(?:\$\(var \w+\)|[\w.]+))*', ros_args), ros_args
+        for src in re.findall(r'--params-file (\$\(var \w+\)|\S+)', ros_args):
+            for _ in range(3):                    # an argument whose default is another's
+                m = re.fullmatch(r'\$\(var (\w+)\)', src)
+                src = args[m.group(1)] if m else src
+            path = src.replace('$(find-pkg-share geoctl_ros)', ROOT)
+            assert os.path.isfile(path), src
         assert node.get('exec_name') == node.get('exec')    # labelled so under a prefix too
         for remap in node.iter('remap'):
             assert remap.get('from') in subscribed[node.get('exec')], remap.get('from')

@@ -179,6 +179,54 @@ def test_compare_flies_a_record_again_headless_and_finds_the_same_flight(tmp_pat
     assert report(never, '--out', tmp_path / 'o2', '--compare', TESTBED).returncode == 2
 
 
+@pytest.mark.dds
+def test_record_writes_the_remapped_raw_topics_under_their_real_names_and_report_reads_them(
+        ros, tmp_path, report):
+    """``record`` with the controller's remaps (the runbook's command) hears the drivers' own
+    topics and writes them under their real names: rosbags' own reader finds
+    /vicon/hexrotor/pose and /vn100/imu, and nothing of what another node publishes on the
+    package's plain /pose. ``report`` reads them as /pose and /imu.
+    """
+    from geometry_msgs.msg import PoseStamped as Pose  # noqa: PLC0415
+    from rosbags.highlevel import AnyReader  # noqa: PLC0415
+    from rosbags.typesys import Stores, get_typestore  # noqa: PLC0415
+    from sensor_msgs.msg import Imu  # noqa: PLC0415
+
+    from geoctl_ros.nodes import qos  # noqa: PLC0415
+    mon, launch = ros
+    path = tmp_path / 'flight1'
+    rec = launch('record', None, '-p', 'record.path:=%s' % path,
+                 '-r', 'pose:=/vicon/hexrotor/pose', '-r', 'imu:=/vn100/imu')
+    raw_pose = mon.create_publisher(Pose, '/vicon/hexrotor/pose', qos.SENSOR)
+    raw_imu = mon.create_publisher(Imu, '/vn100/imu', qos.SENSOR)
+    plain = mon.create_publisher(Pose, '/pose', qos.SENSOR)
+
+    def feed():
+        raw_pose.publish(Pose())
+        raw_imu.publish(Imu())
+        plain.publish(Pose())
+    timer = mon.create_timer(0.01, feed)
+    try:
+        mon.wait_for(lambda: all('first message on %s' % t in rec.output() for t in (
+            '/vicon/hexrotor/pose', '/vn100/imu')), 30.0, 'the raw topics in the record')
+    finally:
+        mon.destroy_timer(timer)
+    assert rec.stop() == 0, rec.output()
+    assert ('recording 16 topics to %s (mcap), /pose as /vicon/hexrotor/pose, /imu as /vn100/imu'
+            % path) in rec.output()
+    with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    assert counts['/vicon/hexrotor/pose'] > 0 and counts['/vn100/imu'] > 0, counts
+    assert '/pose' not in counts and '/imu' not in counts
+    out = tmp_path / 'out'
+    r = report(path, '--out', out)
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / 'summary.json').read_text())
+    assert s['attitude_source'] == '/pose'
+    assert '/pose' not in s['missing_topics'] and '/imu' not in s['missing_topics']
+    assert '/attitude' in s['missing_topics']
+
+
 def test_a_closed_bag_whose_file_was_cut_still_reports(tmp_path):
     """Issue (hostile input): a bag closed and then cut (its metadata.yaml present, its MCAP file
     short: a copy that stopped, a card pulled) was refused with "File end magic is invalid"; the

@@ -347,7 +347,8 @@ def test_calibration_recovers_the_bias_the_marker_set_and_the_imu_tilt_and_refus
     forces = np.array([source.source_vector(YAW90.T @ UP) + rng.normal(0.0, FORCE_NOISE, 3)
                        for _ in range(n // 2)])
     told = InputFrames.of('ned', 'frd', imu_rpy_deg=(0.0, 0.0, 90.0))
-    c = calibrate(poses, gyros, forces, told, 9.81, heading_deg=90.0)
+    # (the airframe's nose along NED's x axis, north: heading 0, its yaw 90 deg in ENU)
+    c = calibrate(poses, gyros, forces, told, 9.81, heading_deg=0.0)
     assert np.allclose(c.gyro_bias, bias, atol=5 * GYRO_NOISE / math.sqrt(n / 2))
     assert np.allclose(c.marker_rotation_deg, [4.0, -7.0, 12.0], atol=0.05)
     assert np.allclose(c.imu_rotation_deg, [2.0, -3.0, 90.0], atol=0.1)
@@ -355,7 +356,8 @@ def test_calibration_recovers_the_bias_the_marker_set_and_the_imu_tilt_and_refus
     assert c.gyro_noise == pytest.approx(GYRO_NOISE, rel=0.1)
     # without a stated heading only the tilt is taken: the markers' own yaw stays
     c = calibrate(poses, gyros, forces, told, 9.81)
-    assert abs(c.marker_rotation_deg[2]) < 0.05 and abs(c.heading_deg - 102.0) < 1.0
+    assert abs(c.marker_rotation_deg[2]) < 0.05 and abs(c.heading_deg - 12.0) < 1.0
+    assert abs(c.yaw_deg - 102.0) < 1.0
     # what calibrate wrote flies: the loop with it arms on the same source
     loop = loop_of(pose_world_frame='ned', body_frame='frd',
                    marker_rotation_deg=[4.0, -7.0, 12.0], imu_rotation_deg=[2.0, -3.0, 90.0],

@@ -15,6 +15,7 @@ from typing import Iterable, List, NamedTuple, Optional, Tuple
 from geoctl_ros.core.actuation.esc_wire import EscHealth
 from geoctl_ros.core.telemetry.codec import Codec, Key
 from geoctl_ros.core.telemetry.diagnostics import Window, window, window_text, window_value
+from geoctl_ros.core.telemetry.scheduling import Scheduling, scheduling_text, scheduling_value
 from geoctl_ros.esc import protocol
 from geoctl_ros.esc.driver import EscDriver
 
@@ -44,7 +45,7 @@ def esc_health(driver: EscDriver, now: float, temperature_error: float) -> Tuple
 class EscFigures:
     """What the node's diagnostics carry: why it writes what it writes, the set points
     (normalised), the commands refused and I2C errors so far, the command-to-bus latency of the
-    window, the motor test, and per ESC a line of its own.
+    window, the motor test, per ESC a line of its own, and the node's scheduling class.
     """
 
     output: str = ''
@@ -54,6 +55,7 @@ class EscFigures:
     latency: Optional[Window] = None
     motor_test: str = ''
     escs: Tuple[str, ...] = ()
+    scheduling: Optional[Scheduling] = None
 
 
 class EscReport(NamedTuple):
@@ -74,6 +76,8 @@ CODEC = Codec(EscFigures, {
     'latency': Key('command to last byte [ms]', window_text, window_value),
     'motor_test': Key('motor test'),
     'escs': Key('esc ', expand=True, numbered=True),
+    'scheduling': Key('scheduling', scheduling_text, scheduling_value,
+                      lambda f: f.scheduling is None),
 })
 
 
@@ -92,9 +96,10 @@ def _esc_line(address, tel, errors, missing, age):
 
 
 def report(driver: EscDriver, now: float, temperature_warn: float, temperature_error: float,
-           errors_before: int = 0, refused_before: int = 0) -> EscReport:
+           errors_before: int = 0, refused_before: int = 0,
+           scheduling: Optional[Scheduling] = None) -> EscReport:
     """The EscReport of the driver at now; errors_before and refused_before are the totals at the
-    last report (what is new since is judged).
+    last report (what is new since is judged); scheduling: the node's class.
     """
     cfg = driver.config
     problems, level = [], protocol.OK
@@ -134,7 +139,8 @@ def report(driver: EscDriver, now: float, temperature_warn: float, temperature_e
     return EscReport(level, message, EscFigures(
         driver.reason, tuple(float(x) for x in driver.output), driver.refused, total_errors,
         window(driver.latency.samples()),
-        'rotor %d at %g' % (test.rotor, test.command) if test else 'none', tuple(escs)))
+        'rotor %d at %g' % (test.rotor, test.command) if test else 'none', tuple(escs),
+        scheduling))
 
 
 def to_values(figures: EscFigures) -> List[Tuple[str, str]]:

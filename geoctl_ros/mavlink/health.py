@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from typing import Dict, List, NamedTuple, Optional, Tuple
 
 from geoctl_ros.core.telemetry.codec import Codec, Key
+from geoctl_ros.core.telemetry.scheduling import Scheduling, scheduling_text, scheduling_value
 
 NAME = 'geoctl_ros: mavlink_bridge'
 
@@ -34,6 +35,7 @@ class BridgeStatus:
     last_error: str = ''
     autopilot_age: Optional[float] = None
     autopilot_messages: Optional[int] = None        # None: no autopilot link configured
+    scheduling: Optional[Scheduling] = None         # the node's class
 
     @property
     def signing(self):
@@ -80,6 +82,8 @@ CODEC = Codec(BridgeStatus, {
                          omit=lambda s: s.autopilot_messages is None),
     'autopilot_messages': Key('autopilot imu messages', parse=int,
                               omit=lambda s: s.autopilot_messages is None),
+    'scheduling': Key('scheduling', scheduling_text, scheduling_value,
+                      omit=lambda s: s.scheduling is None),
 }, required=('url', 'gcs_age'))
 
 

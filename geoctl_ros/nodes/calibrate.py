@@ -5,7 +5,13 @@ With the vehicle level and at rest, it listens to ``pose`` and ``imu`` for --sec
 the gyro's bias, the marker set's rotation against the level airframe (its heading PSI stated,
 or the markers' own: then only the tilt), the IMU's tilt and the sensors' noise
 (``geoctl_ros.core.sensors.calibration``), with the conventions of FILE's controller section, and
-writes a parameter file for the controller to load after FILE:
+writes a parameter file for the controller to load after FILE. PSI is the angle from the
+motion-capture world's x axis to the airframe's nose, counter-clockwise seen from above: the nose
+along that x axis is 0, whether the motion capture streams ENU, NED or Y-up.
+
+    ros2 run geoctl_ros calibrate --params-file FILE --heading-deg 0 --out calibration.yaml
+
+and the controller loads that file after FILE:
 
     ros2 run geoctl_ros controller --ros-args --params-file FILE --params-file calibration.yaml
 
@@ -76,14 +82,18 @@ def main(argv=None):
                         help="the controller's parameter file (its conventions)")
     parser.add_argument('--seconds', type=float, default=5.0, help='seconds of samples (5)')
     parser.add_argument('--heading-deg', type=float, default=None,
-                        help="the airframe's heading (deg from the world's x towards y); "
-                        "default: the marker set's own (only the tilt is calibrated)")
+                        help="the airframe's heading: deg from the motion-capture world's x "
+                        'axis to the nose, counter-clockwise seen from above (nose along x: 0, '
+                        "in ENU, NED and Y-up alike); default: the marker set's own (only the "
+                        'tilt is calibrated)')
     parser.add_argument('--out', default='calibration.yaml', help='(calibration.yaml)')
     parser.add_argument('--wait', type=float, default=30.0,
                         help='seconds to wait for the first samples (30)')
     args = parser.parse_args(argv)
     if not 0.5 <= args.seconds <= 600.0:
         parser.error('--seconds must be within 0.5 and 600')
+    if args.heading_deg is not None and not -360.0 <= args.heading_deg <= 360.0:
+        parser.error('--heading-deg must be within -360 and 360')
     try:
         setup = controller_setup(resolve(CONTROLLER, node_overrides(
             load_parameter_file(args.params_file), CONTROLLER)))
@@ -124,7 +134,8 @@ def main(argv=None):
         {CONTROLLER: {'gyro_bias': c.gyro_bias, 'marker_rotation_deg': c.marker_rotation_deg,
                       'imu_rotation_deg': c.imu_rotation_deg}}, args.out,
         'Written by calibrate at %s from %d poses and %d IMU samples over %g s, level and at '
-        'rest (spread %.2f deg), heading %.1f deg (%s); measured noise: attitude %.3f deg, '
+        "rest (spread %.2f deg), heading %.1f deg from the motion capture's x axis, "
+        'counter-clockwise seen from above (%s); measured noise: attitude %.3f deg, '
         'gyro %.4f rad/s, accelerometer %.3f m/s^2 (the file %s says %g deg, %g rad/s, %g '
         'm/s^2). Load after %s.'
         % (datetime.datetime.now().isoformat(timespec='seconds'), c.poses, c.imu_samples,
@@ -133,9 +144,11 @@ def main(argv=None):
            c.attitude_noise_deg, c.gyro_noise, c.accelerometer_noise, args.params_file,
            math.degrees(told.attitude_noise), told.gyro_noise, told.accelerometer_noise,
            args.params_file))
-    print('gyro_bias: [%s] rad/s\nmarker_rotation_deg: [%s]\nimu_rotation_deg: [%s]\n'
+    print("heading: %.1f deg from the motion capture's x axis (%s; yaw %.1f deg in ENU)\n"
+          'gyro_bias: [%s] rad/s\nmarker_rotation_deg: [%s]\nimu_rotation_deg: [%s]\n'
           'noise: attitude %.3f deg, gyro %.4f rad/s, accelerometer %.3f m/s^2\nwrote %s'
-          % (', '.join('%.5f' % b for b in c.gyro_bias),
+          % (c.heading_deg, 'stated' if args.heading_deg is not None else "the markers' own",
+             c.yaw_deg, ', '.join('%.5f' % b for b in c.gyro_bias),
              ', '.join('%.2f' % a for a in c.marker_rotation_deg),
              ', '.join('%.2f' % a for a in c.imu_rotation_deg), c.attitude_noise_deg,
              c.gyro_noise, c.accelerometer_noise, args.out))

@@ -25,6 +25,7 @@ from geoctl_ros.core.supervisor.loop_types import step_period
 from geoctl_ros.core.supervisor.safety import new_session
 from geoctl_ros.core.telemetry.diagnostics import NAME as DIAGNOSTICS_NAME
 from geoctl_ros.core.telemetry.diagnostics import failsafe
+from geoctl_ros.core.telemetry.scheduling import scheduling
 from geoctl_ros.core.telemetry.stats import WindowStats
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.controller_topics import Telemetry
@@ -112,6 +113,7 @@ class ControllerNode(Node):
         self._compute_stats = WindowStats()
         self._latency_stats = WindowStats()
         self._last_state = None
+        self.scheduling = scheduling()      # (the realtime prefix's class: read once)
         self.create_timer(self.period, self._on_timer, clock=self.clock_)
         self.create_timer(DIAGNOSTICS_PERIOD, self._end_window, clock=self.clock_)
         self.get_logger().info('controller ready at %g Hz (%s clock), %d cone(s), disarmed'
@@ -315,7 +317,8 @@ class ControllerNode(Node):
         st = self.loop.status(self._now(), self._other_commanders())
         st = replace(st, figures=st.figures.with_timing(self._period_stats.window(),
                                                         self._compute_stats.window(),
-                                                        self._latency_stats.window()))
+                                                        self._latency_stats.window(),
+                                                        self.scheduling))
         self._armed_sent = None
         self._publish_armed(self.loop.supervisor.armed)
         msg = DiagnosticArray(status=[status_msg(st, STATUS_NAME, 'hexrotor')])

@@ -28,6 +28,7 @@ from std_msgs.msg import (
 )
 from std_srvs.srv import Trigger
 
+from geoctl_ros.core.telemetry.scheduling import scheduling
 from geoctl_ros.esc import health
 from geoctl_ros.esc.bus import I2cBus
 from geoctl_ros.esc.driver import EscDriver, EscStartError
@@ -64,6 +65,7 @@ class EscNode(Node):
             raise ConfigError([('esc.addresses', str(e))]) from None
         self.refusals = RefusalLog(self.get_logger())
         self._report_base = (0, 0)
+        self.scheduling = scheduling()      # (the realtime prefix's class: read once)
         self._stop = threading.Event()
         self._wake = threading.Event()
         self.create_subscription(Float64MultiArray, 'motor_commands', self._on_commands,
@@ -176,7 +178,7 @@ class EscNode(Node):
         d = self.driver
         now = time.monotonic()
         warn, error = self.setup.temperature_warn, self.setup.temperature_error
-        r = health.report(d, now, warn, error, *self._report_base)
+        r = health.report(d, now, warn, error, *self._report_base, scheduling=self.scheduling)
         self.pub_health.publish(esc_health_msg(
             d.config.command_max, health.esc_health(d, now, error)))
         self._report_base = (r.figures.i2c_errors, r.figures.refused)

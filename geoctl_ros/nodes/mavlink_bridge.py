@@ -23,6 +23,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core.telemetry.diagnostics import ERROR, WARN
 from geoctl_ros.core.telemetry.diagnostics import NAME as CONTROLLER_STATUS
+from geoctl_ros.core.telemetry.scheduling import scheduling
 from geoctl_ros.mavlink import health, identity, signing
 from geoctl_ros.mavlink.actions import Arm, Ignored, MotorTest, Send, SetParameter, m_const
 from geoctl_ros.mavlink.link import Link, encoder
@@ -73,6 +74,7 @@ class MavlinkBridge(ControllerCalls, GroundStationReports, Node):
                                        cfg.autopilot_imu_rate_hz, self.vehicle.mav)
                           if cfg.autopilot_url else None)
         self.counts = dict.fromkeys(health.BRIDGE_COUNTS, 0)
+        self.scheduling = scheduling()      # (the realtime prefix's class: read once)
         self.gcs_heartbeat = None
         self._text_period = 1.0 / cfg.statustext_rate_hz
         self._last_text = -1e9

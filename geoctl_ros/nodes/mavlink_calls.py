@@ -141,7 +141,7 @@ class GroundStationReports:
             refused={} if verifier is None else dict(verifier.refused),
             last_refused='' if last is None else '%s %s from %s' % tuple(last),
             last_error=self.link.last_error if self.link.counts['bad data'] else '',
-            autopilot_age=ap_age, autopilot_messages=ap_messages)
+            autopilot_age=ap_age, autopilot_messages=ap_messages, scheduling=self.scheduling)
         status = DiagnosticStatus(level=bytes([1 if warnings else 0]), name=health.NAME,
                                   hardware_id='mavlink',
                                   message='; '.join(warnings) or 'ground station connected',

@@ -1,6 +1,11 @@
 """The flight recorder: ``ros2 run geoctl_ros record`` writes the package's topics to a rosbag2
 bag (MCAP by default, or sqlite3) as ``ros2 bag record`` would, in a process of its own.
 
+Its topics are chosen by their package names (``record.topics``) and remapped as any node's:
+given the controller's remaps (``-r pose:=/vicon/hexrotor/pose -r imu:=/vn100/imu``), it records
+the drivers' raw topics under their real names, and writes which package name each stands for
+into the bag (``/record/topic_names``), so that ``report`` reads them as ``/pose`` and ``/imu``.
+
 Messages are recorded as they arrive (the bytes rclpy received, stamped with the receipt time on
 this node's clock) and written by geoctl_ros.records.bag on a thread of its own, so the disk never
 holds up a callback. The controller's cone and sensor parameters are asked for once it is up and
@@ -23,7 +28,7 @@ from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.controller_params import ControllerParameters
 from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.params import RECORD, ConfigError, settings
-from geoctl_ros.params.topics import BY_NAME, CONTROLLER_PARAMETERS
+from geoctl_ros.params.topics import BY_NAME, CONTROLLER_PARAMETERS, RECORDED_NAMES
 from geoctl_ros.records import bag, health
 from geoctl_ros.records.health import RecordFigures
 
@@ -52,7 +57,10 @@ class Recorder(Node):
         super().__init__('record', **kwargs)
         cfg = settings(ros_params.load(self, RECORD), 'record.')
         self.path = cfg.path or default_path()
-        topics = [BY_NAME[name] for name in cfg.topics]
+        # each topic under its real name: the package's, or where this node's remaps send it
+        chosen = [BY_NAME[name] for name in cfg.topics]
+        topics = [t._replace(name=self.resolve_topic_name(t.name)) for t in chosen]
+        renamed = {c.name: t.name for c, t in zip(chosen, topics) if c.name != t.name}
         parent = os.path.dirname(os.path.abspath(self.path))
         os.makedirs(parent, exist_ok=True)
         try:
@@ -60,6 +68,8 @@ class Recorder(Node):
         except ValueError as e:         # the folder exists, or cannot be made: say so, exit 2
             raise ConfigError([('record.path', str(e))]) from None
         clock = self.get_clock()
+        self.writer.put(RECORDED_NAMES.name, clock.now().nanoseconds,
+                        serialize_message(String(data=yaml.safe_dump(renamed))))
         self._silent = {t.name for t in topics}           # no message yet
         for topic in topics:
             def on_message(data, name=topic.name):
@@ -73,8 +83,9 @@ class Recorder(Node):
         self._error_said = False
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
         self.create_timer(1.0, self._check_writer)
-        self.get_logger().info('recording %d topics to %s (%s)' % (len(topics), self.path,
-                                                                    cfg.storage))
+        self.get_logger().info('recording %d topics to %s (%s)%s' % (
+            len(topics), self.path, cfg.storage, ''.join(
+                ', %s as %s' % pair for pair in renamed.items())))
 
     @staticmethod
     def _msg_class(type_name):

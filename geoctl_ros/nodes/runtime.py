@@ -1,5 +1,5 @@
 """Running a node: events executor, clean stop on SIGINT/SIGTERM, exit code 2 for bad
-parameters.
+parameters, a WARN line when the realtime prefix could not put it in the real-time class.
 """
 import math
 import signal
@@ -11,6 +11,7 @@ from rclpy._rclpy_pybind11 import RCLError
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
+from geoctl_ros.core.telemetry.scheduling import scheduling, scheduling_problem
 from geoctl_ros.params import ConfigError
 
 
@@ -52,6 +53,9 @@ def spin(node_class, name, args=None):
         rclpy.logging.get_logger(name).fatal(str(e))
         rclpy.try_shutdown()
         return 2
+    problem = scheduling_problem(scheduling())    # (the realtime prefix asked, and was refused)
+    if problem:
+        node.get_logger().warning(problem)
     executor = make_executor()
     executor.add_node(node)
     try:

@@ -63,8 +63,11 @@ PARAMS = [
        'sqlite3', RECORD,
        check=lambda v: None if v in ('mcap', 'sqlite3') else 'must be mcap or sqlite3'),
     _p('record.topics', 'string_array', list(RECORD_TOPICS), '-', 'the topics to record, '
-       'of those the package publishes and reads (docs/records.md, "Flight records")', RECORD,
-       check=lambda v: next(('unknown topic %r (one of %s)' % (t, ', '.join(RECORD_TOPICS))
+       "by the package's names, of those it publishes and reads; a remapped one (pose, imu) is "
+       'recorded under its real name (docs/records.md, "Flight records")', RECORD,
+       check=lambda v: next(("unknown topic %r (one of %s; a driver's own topic is recorded "
+                             'under its real name as /pose or /imu remapped: --ros-args -r '
+                             'pose:=NAME)' % (t, ', '.join(RECORD_TOPICS))
                              for t in v if t not in RECORD_TOPICS), None)),
     _p('record.controller', 'string', 'controller', '-', 'the controller node whose parameters '
        '(cones, sensor axis) are stored in the bag for the report', RECORD),

@@ -1,5 +1,10 @@
 """The package's topics as a recording sees them: name, type and the QoS their publisher offers
 (the recorder's subscriptions, the ``record.topics`` parameter's choices, the bag reader).
+
+A topic is chosen by its package name; the recorder hears it, and writes it, under its real name
+once its remaps apply (``record --ros-args -r pose:=/vicon/hexrotor/pose`` records the driver's
+topic as ``/vicon/hexrotor/pose``), and keeps which package name each real one stands for in the
+bag (``RECORDED_NAMES``), for ``report``.
 """
 from typing import NamedTuple
 
@@ -37,3 +42,7 @@ BY_NAME = {t.name: t for t in TOPICS}
 # Written by the recorder itself, not heard on DDS: the controller's cone and sensor parameters
 # (a YAML mapping), so that a bag cut short still knows its cones.
 CONTROLLER_PARAMETERS = Topic('/record/controller_parameters', 'std_msgs/msg/String', True, True)
+# Written by the recorder at the start: the real names of the topics it heard under another
+# name than the package's (a YAML mapping, package name -> real name; empty when none was
+# remapped).
+RECORDED_NAMES = Topic('/record/topic_names', 'std_msgs/msg/String', True, True)

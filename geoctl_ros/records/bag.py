@@ -24,8 +24,9 @@ from rosbags.interfaces import (
 )
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
+import yaml
 
-from geoctl_ros.params.topics import CONTROLLER_PARAMETERS
+from geoctl_ros.params.topics import CONTROLLER_PARAMETERS, RECORDED_NAMES
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 STORAGES = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
@@ -49,13 +50,14 @@ class BagWriter:
     """
 
     def __init__(self, path, topics, storage='mcap'):
-        """Create the bag at path (which must not exist) with these topics and
-        CONTROLLER_PARAMETERS; raises ValueError when it cannot.
+        """Create the bag at path (which must not exist) with these topics (by the names they
+        are written under), CONTROLLER_PARAMETERS and RECORDED_NAMES; raises ValueError when it
+        cannot.
         """
         if storage not in STORAGES:
             raise ValueError('storage must be one of %s, not %r' % (sorted(STORAGES), storage))
         self.path = path
-        topics = list(topics) + [CONTROLLER_PARAMETERS]
+        topics = list(topics) + [CONTROLLER_PARAMETERS, RECORDED_NAMES]
         self.counts = {t.name: 0 for t in topics}
         self.dropped = 0
         self.error = None              # what stopped the writer thread, if anything did
@@ -172,6 +174,26 @@ def read_bag(path, topics=None):
         except Exception as e:
             raise ValueError('%s: cannot be read as a rosbag2 bag: %s (and without its '
                              'metadata.yaml: %s)' % (path, first, e)) from None
+
+
+def by_package_names(topics):
+    """read_bag's {topic: [Message, ...]} with each topic the recorder heard under another name
+    (a remapped pose or imu: its real name) under its package name again, as the bag's
+    RECORDED_NAMES says (a bag without it, from ``ros2 bag record``, as it is).
+    """
+    stored = topics.get(RECORDED_NAMES.name)
+    if not stored:
+        return topics
+    try:
+        names = yaml.safe_load(stored[-1].msg.data) or {}
+    except yaml.YAMLError:
+        return topics
+    out = dict(topics)
+    if isinstance(names, dict):
+        for package, real in names.items():
+            if isinstance(real, str) and real in out and package not in out:
+                out[package] = out.pop(real)
+    return out
 
 
 def _read(source, topics):

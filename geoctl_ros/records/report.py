@@ -73,7 +73,7 @@ def _cones_of(stored, params_file):
 
 def load_flight(path, params_file=None):
     """The Flight recorded in the bag at path; raises ValueError (not a bag) or ConfigError."""
-    topics = bag.read_bag(path)
+    topics = bag.by_package_names(bag.read_bag(path))
     present = {k for k, v in topics.items() if v}
     if not present & set(BY_NAME):
         raise ValueError('%s has none of the topics geoctl_ros publishes (it has %s)' % (

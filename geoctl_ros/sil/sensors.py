@@ -35,7 +35,7 @@ class Case(NamedTuple):
     title: str
     sim: Dict[str, str]            # the sim's emulation (-p name:=value)
     matching: Dict[str, str]       # the controller's matching parameters
-    calibrate: bool = False        # the matching parameters come from calibrate (heading 90)
+    calibrate: bool = False        # the matching parameters come from calibrate (HEADING_DEG)
 
 
 CASES = {
@@ -53,7 +53,7 @@ CASES = {
     'gyro_bias': Case('a gyro bias of 0.02 rad/s (calibrated)',
                       {'noise.gyro_bias': '[0.02,0.0,0.0]'}, {}, calibrate=True),
 }
-HEADING_DEG = 90.0      # the testbed's airframe rests level at yaw 90 deg (its initial attitude)
+HEADING_DEG = 90.0      # the sim's airframe rests level, its nose 90 deg left of its ENU x axis
 
 
 class Outcome(NamedTuple):

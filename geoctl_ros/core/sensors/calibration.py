@@ -5,9 +5,15 @@ With the conventions in effect (``core.sensors.frames.InputFrames``: world and b
 is kept), from poses R_s,k, gyro readings w_k and specific forces f_k taken at rest:
 
 - the marker set: P = T R_s B, the marker body's attitude, averaged (the rotation nearest the
-  mean); the airframe rests level at the stated heading psi, R = Rz(psi), so R_am = Rz(psi)^T P
+  mean); the airframe rests level at the stated heading, R = Rz(psi), so R_am = Rz(psi)^T P
   (``marker_rotation_deg``). Without a stated heading, psi is the marker body's own, and only
   the tilt is corrected;
+- **the heading** (``heading_deg``, the one convention of ``calibrate --heading-deg``): the angle
+  from the motion-capture world's x axis to the airframe's nose, counter-clockwise seen from
+  above (turning left is positive), whatever the world's convention. The nose along the motion
+  capture's x axis is heading 0 in ENU, NED and Y-up alike. In the package's ENU world that is
+  the yaw psi = heading + the yaw of the source world's x axis (``airframe_yaw_deg``: 0 for ENU
+  and Y-up, 90 for NED, whose x is north);
 - the gyro's bias: the mean of w_k, in the IMU's own axes (``gyro_bias``);
 - the IMU's tilt: its gravity direction v = B^T f (mean, unit) must map to the airframe's up,
   R_ai v = e3, with R_ai = Rz(yaw_i) Ry(pitch) Rx(roll) and yaw_i the configured one: pitch =
@@ -32,6 +38,7 @@ from geoctl_ros.core.sensors.frames import (
     InputFrames,
     matrix_rpy,
     rpy_matrix,
+    world_x_yaw_deg,
 )
 
 MIN_SAMPLES = 20            # poses and IMU samples each, at least
@@ -56,7 +63,17 @@ class Calibration:
     poses: int
     imu_samples: int
     spread_deg: float                # the poses' largest angle from their mean
-    heading_deg: float               # the airframe's heading it took (stated or the markers')
+    heading_deg: float               # the airframe's heading it took (stated or the markers'),
+                                     # from the motion capture's x axis (``airframe_yaw_deg``)
+    yaw_deg: float                   # the same, as the airframe's yaw in the package's ENU
+
+
+def airframe_yaw_deg(heading_deg: float, world: str) -> float:
+    """The airframe's yaw (deg) in the package's ENU world for a heading stated as
+    ``calibrate --heading-deg`` takes it (module docstring): from the motion-capture world's x
+    axis, counter-clockwise seen from above, in the world ``world`` (enu, ned, y_up).
+    """
+    return float(heading_deg) + world_x_yaw_deg(world)
 
 
 def calibrate(poses: np.ndarray, gyros: np.ndarray, forces: np.ndarray, frames: InputFrames,
@@ -82,8 +99,9 @@ def calibrate(poses: np.ndarray, gyros: np.ndarray, forces: np.ndarray, frames: 
     if abs(size - gravity) > FORCE_SHARE * gravity:
         raise CalibrationError('the specific force is %.2f m/s^2, not about %.2f: no '
                                'accelerometer data, or the vehicle not at rest' % (size, gravity))
-    heading = float(matrix_rpy(mean)[2]) if heading_deg is None else float(heading_deg)
-    marker = rpy_matrix((0.0, 0.0, heading)).T @ mean
+    yaw = (float(matrix_rpy(mean)[2]) if heading_deg is None
+           else airframe_yaw_deg(heading_deg, frames.world))
+    marker = rpy_matrix((0.0, 0.0, yaw)).T @ mean
     v = B.T @ force / size
     imu_yaw = float(matrix_rpy(frames.imu_rotation)[2])
     imu = np.array([math.degrees(math.atan2(v[1], v[2])),
@@ -94,4 +112,10 @@ def calibrate(poses: np.ndarray, gyros: np.ndarray, forces: np.ndarray, frames: 
         attitude_noise_deg=math.degrees(float(deviations.std(axis=0).mean())),
         gyro_noise=float(gyros.std(axis=0).mean()),
         accelerometer_noise=float(forces.std(axis=0).mean()), poses=len(poses),
-        imu_samples=len(gyros), spread_deg=spread, heading_deg=heading)
+        imu_samples=len(gyros), spread_deg=spread,
+        heading_deg=_wrap_deg(yaw - world_x_yaw_deg(frames.world)), yaw_deg=_wrap_deg(yaw))
+
+
+def _wrap_deg(a: float) -> float:
+    """An angle (deg) in (-180, 180]."""
+    return 180.0 - (180.0 - a) % 360.0

@@ -48,6 +48,14 @@ BODY_FRAMES = {
 Y_UP_BODY_DEG = (90.0, 0.0, 0.0)     # a Y-up rigid body's axes against an FLU airframe
 
 
+def world_x_yaw_deg(world: str) -> float:
+    """The yaw (deg) of a source world's x axis in the package's ENU world: 0 for ``enu`` and
+    ``y_up`` (x kept), 90 for ``ned`` (its x is north, the package's y).
+    """
+    T = WORLD_FRAMES[world]
+    return math.degrees(math.atan2(float(T[1, 0]), float(T[0, 0])))
+
+
 def rpy_matrix(rpy_deg: Sequence[float]) -> np.ndarray:
     """Rotation of roll, pitch, yaw (deg), applied z-y-x: Rz(yaw) Ry(pitch) Rx(roll)."""
     r, p, y = (math.radians(float(a)) for a in rpy_deg)

@@ -68,9 +68,10 @@ class ControlLoop:
         self.controller = AttitudeController(setup.config)
         self.controller.set_setpoint(setup.setpoint)
         s = setup.loop
-        self.pose = Stream('pose', s.pose_timeout, s.pose_ride_through, s.measurement_delay)
+        self.pose = Stream('pose', s.pose_timeout, s.pose_ride_through, s.measurement_delay,
+                           s.age_from_stamps)
         self.rate = Stream('angular velocity', s.imu_timeout, s.imu_ride_through,
-                           s.measurement_delay)
+                           s.measurement_delay, s.age_from_stamps)
         self.supervisor = Supervisor([self.pose, self.rate])
         self.bridge = GapBridge(s.pose_rate_window)
         self.frames = setup.frames      # the inputs' conventions, applied as they come in
@@ -109,7 +110,7 @@ class ControlLoop:
         stream's ``measurement_delay`` is assumed; see ``core.supervisor.safety.Stream``).
         """
         previous = self.pose.last_receipt
-        problem = self.pose.offer(stamp, receipt, quaternion_problem(q), self._delay(delay))
+        problem = self.pose.offer(stamp, receipt, quaternion_problem(q), delay)
         if problem is None:
             self._pose_stamp = stamp if stamp_as_given is None else stamp_as_given
             self._end_gap(self.pose, previous, receipt)
@@ -129,7 +130,7 @@ class ControlLoop:
         previous = self.rate.last_receipt
         problem = self.rate.offer(
             stamp, receipt, angular_velocity_problem(w, self.setup.loop.max_angular_velocity)
-            or specific_force_problem(specific_force), self._delay(delay))
+            or specific_force_problem(specific_force), delay)
         if problem is None:
             self._end_gap(self.rate, previous, receipt)
             self.Omega = self.frames.angular_velocity(w)
@@ -153,10 +154,6 @@ class ControlLoop:
     def esc_report_problem(self, now: float) -> Optional[str]:
         """Why the ESC node's report forbids flight now, or None (no ESC node: None)."""
         return esc_problem(self.esc, now, self.setup.mixer.curve.command_max)
-
-    def _delay(self, delay):
-        """The delay a sample's stamp gives, if this loop takes ages from stamps."""
-        return delay if self.setup.loop.age_from_stamps else None
 
     def _end_gap(self, stream, previous, receipt):
         """Count a gap (a stale spell) of stream that the sample received at receipt ends."""
@@ -224,6 +221,7 @@ class ControlLoop:
         self.step.reconfigure(setup.mixer, 0.0)
         s = setup.loop
         self.pose.fallback_delay = self.rate.fallback_delay = s.measurement_delay
+        self.pose.age_from_stamps = self.rate.age_from_stamps = s.age_from_stamps
         self.pose.timeout, self.pose.ride_through = s.pose_timeout, s.pose_ride_through
         self.rate.timeout, self.rate.ride_through = s.imu_timeout, s.imu_ride_through
         self.bridge.rate_window = s.pose_rate_window
@@ -352,4 +350,6 @@ class ControlLoop:
         """Start a new diagnostics window (the node calls this on its fixed period)."""
         self.pose_age.reset()
         self.rate_age.reset()
+        self.pose.end_window()
+        self.rate.end_window()
         self.window = loop_status.Window()

@@ -109,6 +109,9 @@ def status(loop: Any, now: float, other_commanders: Optional[str] = None) -> Sta
         if reasons:
             warnings.append('%s refused: %s (%d so far)' % (s.name, ' | '.join(reasons),
                                                              s.refused))
+        untrusted = s.stamp_note()
+        if untrusted:
+            warnings.append(untrusted)
     tick = loop.last_tick
     out = tick.control if tick else None
     if sup.armed and loop.entry is not None:
@@ -165,6 +168,8 @@ def status(loop: Any, now: float, other_commanders: Optional[str] = None) -> Sta
         pose_counts=Counts(loop.pose.accepted, loop.pose.refused),
         imu_counts=Counts(loop.rate.accepted, loop.rate.refused),
         pose_age_at_tick=loop.pose_age.window(), imu_age_at_tick=loop.rate_age.window(),
+        pose_delay=loop.pose.delays.window(), imu_delay=loop.rate.delays.window(),
+        pose_stamps=loop.pose.stamps(), imu_stamps=loop.rate.stamps(),
         pose_gaps=Gaps(*loop.gaps['pose']), imu_gaps=Gaps(*loop.gaps['angular velocity']),
         ticks_bridging=w.bridging, ticks=w.ticks, cone_entries=loop.cone_entries,
         psi=None if out is None else float(out.psi), min_cone_margin_deg=margin,

@@ -30,7 +30,8 @@ import numpy as np
 from geoctl_ros.core.actuation.esc_wire import EscHealth, EscStatus
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.so3 import Vector
-from geoctl_ros.core.telemetry.diagnostics import failsafe
+from geoctl_ros.core.telemetry.diagnostics import StampTrust, failsafe
+from geoctl_ros.core.telemetry.stats import WindowStats
 
 QUATERNION_TOLERANCE = 1e-3
 SPECIFIC_FORCE_MAX = 2000.0     # m/s^2: beyond any IMU's range (about 200 g)
@@ -93,23 +94,30 @@ class Stream:
     than staying refused until a restart.
 
     Age: each sample's delay from capture to receipt is its stamp against this computer's clock
-    (``delay``, when the caller gives it and it lies within -STAMP_AHEAD_TOLERANCE..
-    STAMP_AGE_MAX), else the configured ``fallback_delay`` (the stamp's clock is not this one's;
-    counted in ``untrusted_stamps``). At a tick the input's age is that delay plus the time since
-    receipt.
+    (``delay``, when the caller gives it, ``age_from_stamps`` is on and it lies within
+    -STAMP_AHEAD_TOLERANCE..STAMP_AGE_MAX: the stamp is trusted), else the configured
+    ``fallback_delay`` (measurement_delay; a stamp outside those bounds is from a clock that is
+    not this one's, counted in ``untrusted_stamps``). At a tick the input's age is that delay plus
+    the time since receipt. Over each diagnostics window the stream keeps every accepted sample's
+    delay by its stamp, trusted or not (``delays``), and how many stamps were trusted and not
+    (``stamps``): what /diagnostics shows of the chain's latency and of the clocks.
     """
 
-    def __init__(self, name, timeout, ride_through=0.0, fallback_delay=0.0):
+    def __init__(self, name, timeout, ride_through=0.0, fallback_delay=0.0,
+                 age_from_stamps=True):
         self.name = name
         self.timeout = timeout
         self.ride_through = ride_through
         self.fallback_delay = fallback_delay
+        self.age_from_stamps = age_from_stamps
         self.last_stamp = -math.inf
         self.last_receipt = None
         self.last_delay = 0.0           # capture to receipt of the last accepted sample (s)
         self.accepted = 0
         self.refused = 0
         self.untrusted_stamps = 0       # samples whose stamp did not give their delay
+        self.delays = WindowStats()     # this window: every accepted sample's delay by its stamp
+        self._trusted = self._untrusted = 0     # this window: stamps trusted for the age, not
         self.reanchored = 0             # times the stream's clock was found to have stepped
         self._not_newer = 0             # good samples refused as not newer, in a row
         self.recent_refusals = []     # distinct reasons since take_refusals(), at most 5
@@ -134,13 +142,41 @@ class Stream:
         self._not_newer = 0
         self.last_stamp = stamp
         self.last_receipt = receipt
-        if delay is not None and -STAMP_AHEAD_TOLERANCE <= delay <= STAMP_AGE_MAX:
+        if delay is not None:
+            self.delays.add(delay)
+        if (self.age_from_stamps and delay is not None
+                and -STAMP_AHEAD_TOLERANCE <= delay <= STAMP_AGE_MAX):
             self.last_delay = max(delay, 0.0)
+            self._trusted += 1
         else:
             self.last_delay = self.fallback_delay
-            self.untrusted_stamps += delay is not None
+            if self.age_from_stamps and delay is not None:
+                self.untrusted_stamps += 1
+                self._untrusted += 1
         self.accepted += 1
         return None
+
+    def stamps(self) -> StampTrust:
+        """This window's stamps: used for the age or not, how many trusted and how many not."""
+        return StampTrust(self.age_from_stamps, self._trusted, self._untrusted)
+
+    def stamp_note(self) -> Optional[str]:
+        """A sentence when stamps of this window were not trusted for the age, else None."""
+        if not self._untrusted:
+            return None
+        d = self.delays.samples()
+        return ('%s stamps not trusted: %d of %d this window are more than %.0f ms ahead of this '
+                "computer's clock or more than %.0f ms behind it (capture to receipt %.1f to "
+                '%.1f ms): each counted measurement_delay %.1f ms old (synchronise the clocks, '
+                'docs/safety.md, "Delay")' % (
+                    self.name, self._untrusted, self._trusted + self._untrusted,
+                    1e3 * STAMP_AHEAD_TOLERANCE, 1e3 * STAMP_AGE_MAX, 1e3 * float(d.min()),
+                    1e3 * float(d.max()), 1e3 * self.fallback_delay))
+
+    def end_window(self) -> None:
+        """Start a new diagnostics window of delays and stamp counts."""
+        self.delays.reset()
+        self._trusted = self._untrusted = 0
 
     def capture_age(self, now: float) -> float:
         """How old the last accepted sample's content is at now (s): its delay from capture to

@@ -16,6 +16,7 @@ from typing import Any, Iterable, List, NamedTuple, Optional, Tuple
 import numpy as np
 
 from geoctl_ros.core.telemetry.codec import Codec, Key
+from geoctl_ros.core.telemetry.scheduling import Scheduling, scheduling_text, scheduling_value
 
 NAME = 'geoctl_ros: controller'     # the controller's DiagnosticStatus name
 # Diagnostics levels (the values of diagnostic_msgs/DiagnosticStatus).
@@ -94,6 +95,17 @@ class Unlearnt(NamedTuple):
     over_since_takeover: int
 
 
+class StampTrust(NamedTuple):
+    """An input's header stamps over one diagnostics window: whether they give its age at all
+    (``age_from_stamps``), and how many were trusted for it (within 10 ms ahead and 0.5 s behind
+    this computer's clock) and how many were not (counted ``measurement_delay`` old instead).
+    """
+
+    used: bool = True
+    trusted: int = 0
+    untrusted: int = 0
+
+
 class Gaps(NamedTuple):
     """Gaps of an input stream ridden through since the start, and the longest (s)."""
 
@@ -120,6 +132,12 @@ class Figures:
     imu_counts: Counts = Counts(0, 0)
     pose_age_at_tick: Optional[Window] = None
     imu_age_at_tick: Optional[Window] = None
+    # capture to receipt by the stamps against this computer's clock, this window (every
+    # accepted sample's, trusted or not), and whether the stamps were trusted for the ages
+    pose_delay: Optional[Window] = None
+    imu_delay: Optional[Window] = None
+    pose_stamps: StampTrust = StampTrust()
+    imu_stamps: StampTrust = StampTrust()
     pose_gaps: Gaps = Gaps(0, 0.0)
     imu_gaps: Gaps = Gaps(0, 0.0)
     ticks_bridging: int = 0
@@ -133,11 +151,13 @@ class Figures:
     loop_period: Optional[Window] = None
     tick_to_command: Optional[Window] = None
     pose_to_command_latency: Optional[Window] = None
+    scheduling: Optional[Scheduling] = None   # the node's class (None: not a node's report)
 
     def with_timing(self, loop_period: Optional['Window'], tick_to_command: Optional['Window'],
-                    pose_to_command_latency: Optional['Window']) -> 'Figures':
+                    pose_to_command_latency: Optional['Window'],
+                    scheduling: Optional[Scheduling] = None) -> 'Figures':
         return replace(self, loop_period=loop_period, tick_to_command=tick_to_command,
-                       pose_to_command_latency=pose_to_command_latency)
+                       pose_to_command_latency=pose_to_command_latency, scheduling=scheduling)
 
 
 @dataclass(frozen=True)
@@ -173,6 +193,39 @@ def _counts_value(text):
 def _gaps_value(text):
     m = _GAPS.match(text)
     return Gaps(int(m.group(1)), float(m.group(2)))
+
+
+_STAMPS = re.compile(r'(?:trusted|not trusted|partly trusted) \((\d+) of (\d+) this window\)')
+
+
+def _stamps_text(s: 'StampTrust') -> str:
+    """``trusted (50 of 50 this window)``, ``not trusted (0 of 50 this window): measurement_delay
+    counted``, ``partly trusted (40 of 50 ...): measurement_delay counted for the rest``, ``none
+    this window``, ``not used (age_from_stamps false): measurement_delay counted``.
+    """
+    if not s.used:
+        return 'not used (age_from_stamps false): measurement_delay counted'
+    n = s.trusted + s.untrusted
+    if not n:
+        return 'none this window'
+    if not s.untrusted:
+        return 'trusted (%d of %d this window)' % (s.trusted, n)
+    if not s.trusted:
+        return 'not trusted (0 of %d this window): measurement_delay counted' % n
+    return ('partly trusted (%d of %d this window): measurement_delay counted for the rest'
+            % (s.trusted, n))
+
+
+def _stamps_value(text: str) -> 'StampTrust':
+    if text.startswith('not used'):
+        return StampTrust(False)
+    if text == 'none this window':
+        return StampTrust()
+    m = _STAMPS.match(text)
+    if m is None:
+        raise ValueError(text)
+    trusted, n = int(m.group(1)), int(m.group(2))
+    return StampTrust(True, trusted, n - trusted)
 
 
 def _margin_text(margin):
@@ -221,6 +274,10 @@ CODEC = Codec(Figures, {
     'imu_counts': Key('imu accepted/refused', '%d/%d'.__mod__, _counts_value),
     'pose_age_at_tick': Key('pose age at tick [ms]', window_text, window_value),
     'imu_age_at_tick': Key('imu age at tick [ms]', window_text, window_value),
+    'pose_delay': Key('pose capture to receipt [ms]', window_text, window_value),
+    'imu_delay': Key('imu capture to receipt [ms]', window_text, window_value),
+    'pose_stamps': Key('pose stamps', _stamps_text, _stamps_value),
+    'imu_stamps': Key('imu stamps', _stamps_text, _stamps_value),
     'pose_gaps': Key('pose gaps ridden through', '%d (longest %.3f s)'.__mod__, _gaps_value),
     'imu_gaps': Key('imu gaps ridden through', '%d (longest %.3f s)'.__mod__, _gaps_value),
     'ticks_bridging': Key('ticks bridging a gap', parse=int),
@@ -236,6 +293,8 @@ CODEC = Codec(Figures, {
                           lambda t: tuple(int(x) for x in t.split()), _after_first_step),
     'unlearnt': Key('unlearnt acceleration [rad/s^2]', _unlearnt_text, _unlearnt_value,
                     _unlearnt_absent),
+    'scheduling': Key('scheduling', scheduling_text, scheduling_value,
+                      lambda f: f.scheduling is None),
 })
 assert set(CODEC.table) == {f.name for f in fields(Figures)}
 
