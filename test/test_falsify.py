@@ -90,13 +90,13 @@ def test_a_short_falsification_writes_its_table_and_a_worst_flight_that_replays_
     steps taken here) is the search's.
     """
     out = tmp_path / 'f'
-    code = falsify_cli.main(['--budget', '50', '--duration', '4', '--out', str(out),
+    code = falsify_cli.main(['--budget', '24', '--duration', '2', '--out', str(out),
                              '--requirements', 'safety,assumed', '--scheduler', dask_scheduler])
     printed = capsys.readouterr()
     summary = (out / 'summary.md').read_text()
     assert code in (0, 1), printed.err
     assert (code == 1) == ('falsified: none' not in summary)
-    for row in ('| uniform, safety | 50 |', '| de, safety |', '| uniform, assumed | 50 |'):
+    for row in ('| uniform, safety | 24 |', '| de, safety |', '| uniform, assumed | 24 |'):
         assert row in summary
     with open(out / 'evaluations.csv') as f:
         rows = list(csv.DictReader(f))
@@ -106,7 +106,7 @@ def test_a_short_falsification_writes_its_table_and_a_worst_flight_that_replays_
     inside = [r for r in rows if r['inside'] == 'True']
     assert inside and all(float(r['safety']) == 180.0 for r in rows if r['inside'] == 'False')
     # the noise's seed is a coordinate: the points searched differ in it
-    assert len({r['noise_seed'] for r in inside}) > 10
+    assert len({r['noise_seed'] for r in inside}) > 5
     worst = min(inside, key=lambda r: float(r['safety']))
     # the worst flight, flown alone from its file as `scenario` flies it: the same robustness
     sections = load_parameter_file(str(out / 'worst_safety.yaml'))

@@ -64,6 +64,14 @@ def test_parameter_ids_are_short_unique_scalars_of_the_controller():
     assert BY_ID['GC_K_R'][0] == 'k_R'
 
 
+def test_the_manual_names_every_mavlink_parameter_with_its_ros_name():
+    """docs/mavlink.md's parameter list is the bridge's table: each id beside its ROS name."""
+    with open(os.path.join(os.path.dirname(__file__), '..', 'docs', 'mavlink.md')) as f:
+        text = ' '.join(f.read().split())
+    missing = [pid for ros, pid, _ in TABLE if '`%s` %s' % (pid, ros) not in text]
+    assert not missing, 'docs/mavlink.md, "Parameters", lacks %s' % missing
+
+
 def parse(msg, sysid=7):
     """What a ground station would decode from a message the vehicle built."""
     m = encoder(sysid, 1)

@@ -17,11 +17,20 @@ import numpy as np
 
 from geoctl_ros.campaign import tune
 from geoctl_ros.cli import tune as tune_cli
-from geoctl_ros.params import CONTROLLER, load_parameter_file, node_overrides, resolve
+from geoctl_ros.params import (
+    CONTROLLER,
+    LAB_INERTIA,
+    load_parameter_file,
+    node_overrides,
+    resolve,
+    write_parameter_file,
+)
+from geoctl_ros.sim import closed_loop
+from geoctl_ros.sim.scenario import from_sections
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SHORT = ['--trials', '4', '--runs', '6', '--duration', '2', '--latency-duration', '2',
-         '--seed', '3', '--check-runs', '6']
+SHORT = ['--trials', '3', '--runs', '4', '--duration', '1.5', '--latency-duration', '1.5',
+         '--seed', '3', '--check-runs', '4']
 
 
 def test_a_short_tuning_writes_its_trials_front_and_figure_and_repeats_from_its_seed(
@@ -37,7 +46,7 @@ def test_a_short_tuning_writes_its_trials_front_and_figure_and_repeats_from_its_
     assert first == second                                  # the same trials, to the bit
     with open(outs[0] / 'trials.csv') as f:
         rows = list(csv.DictReader(f))
-    assert [int(r['trial']) for r in rows] == [0, 1, 2, 3]
+    assert [int(r['trial']) for r in rows] == [0, 1, 2]
     # trial 0 is the testbed's own gains (the study starts from where it stands)
     testbed = resolve(CONTROLLER, node_overrides(load_parameter_file(
         os.path.join(ROOT, 'config', 'testbed.yaml')), CONTROLLER))
@@ -48,7 +57,7 @@ def test_a_short_tuning_writes_its_trials_front_and_figure_and_repeats_from_its_
         assert tuple(tune.SPACE) == point._fields
         for x, (name, (lo, hi, _)) in zip(point, tune.SPACE.items()):
             assert lo * (1 - 1e-9) <= x <= hi * (1 + 1e-9), (name, x)
-        assert int(r['runs']) == 6
+        assert int(r['runs']) == 4
         assert (r['feasible'] == 'True') == (int(r['violations']) == 0 and
                                              float(r['closest_p1_deg']) >= 2.5 and
                                              float(r['saturated_runs']) <= 0.01 and
@@ -69,10 +78,63 @@ def test_a_short_tuning_writes_its_trials_front_and_figure_and_repeats_from_its_
     assert (outs[0] / 'best.yaml').exists() == (' (chosen) ' in summary)
 
 
-@pytest.mark.parametrize('argv', [['--trials', '0'], ['--runs', '-1'], ['--duration', 'nan']])
-def test_the_tuner_refuses_bad_arguments_in_one_line(argv, tmp_path, capsys):
+def _closest_of_latency_rows(inertia, gains, duration):
+    """testbed_yaw90 with the gains, flown here at each of a trial's latency rows for duration s
+    on the inertia given (None: the file's own, the lab's): the closest approach of all (deg).
+    """
+    closest = []
+    for latency, jitter in tune.TRIAL_LATENCY_ROWS:
+        sections = load_parameter_file(os.path.join(ROOT, 'config', 'scenarios',
+                                                    'testbed_yaw90.yaml'))
+        if inertia is not None:
+            sections['/**']['inertia'] = inertia
+        sections['controller'].update(gains)
+        sections.setdefault('scenario', {}).update(latency=latency, tick_jitter=jitter,
+                                                   duration=duration)
+        closest.append(closed_loop.fly([from_sections(sections, 'row')]).min_margin_deg.min())
+    return float(min(closest))
+
+
+def test_another_airframe_is_tuned_with_its_latency_rows_flown_on_it(dask_scheduler, tmp_path,
+                                                                      capsys):
+    """`tune --params-file` with 1.5 times the lab's inertia, one trial of one short run: the
+    trial's latency rows are testbed_yaw90 flown on that inertia (their closest approach the same
+    to the bit) and not on the lab's; the summary names that airframe and the brake's bounds
+    computed from it.
+    """
+    base = load_parameter_file(os.path.join(ROOT, 'config', 'testbed.yaml'))
+    inertia = [1.5 * j for j in LAB_INERTIA]
+    base['/**']['inertia'] = inertia
+    other = str(tmp_path / 'heavier.yaml')
+    write_parameter_file(base, other, 'the testbed with 1.5 times its inertia')
+    out = tmp_path / 'tune'
+    code = tune_cli.main(['--params-file', other, '--trials', '1', '--runs', '1',
+                          '--duration', '0.3', '--latency-duration', '0.3', '--check-runs', '1',
+                          '--best', '1', '--out', str(out), '--scheduler', dask_scheduler])
+    printed = capsys.readouterr()
+    assert code in (0, 1), printed.err
+    with open(out / 'trials.csv') as f:
+        (row,) = list(csv.DictReader(f))
+    gains = {k: float(row[k]) for k in tune.GAINS}
+    got = float(row['latency_min_margin_deg'])
+    assert got == _closest_of_latency_rows(inertia, gains, 0.3)
+    assert got != _closest_of_latency_rows(None, gains, 0.3)
+    airframe = tune.airframe_of(base)
+    assert airframe.brake.unmodelled < tune.airframe_of(load_parameter_file(
+        os.path.join(ROOT, 'config', 'testbed.yaml'))).brake.unmodelled
+    assert airframe.describe() in (out / 'summary.md').read_text()
+    assert airframe.describe() in printed.err
+
+
+@pytest.mark.parametrize('argv, says', [
+    (['--trials', '0'], 'must be positive'), (['--runs', '-1'], 'must be positive'),
+    (['--duration', 'nan'], 'duration'),
+    (['--k-R', '3', '0.5'], '--k-R: 3-0.5 is no range'),
+    (['--k-Omega', '0.0001', '1.5'], 'k_Omega: must be in [0.001, 10] (got 0.0001)'),
+    (['--c-share', '0.25', '200'], 'c: must be in [0.0001, 100]')])
+def test_the_tuner_refuses_bad_arguments_in_one_line(argv, says, tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         tune_cli.main(argv + ['--out', str(tmp_path / 'o')])
     assert e.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].startswith('tune: error: '), err
+    assert err[-1].startswith('tune: error: ') and says in err[-1], err

@@ -1,13 +1,17 @@
 """Gain tuning: Optuna searches the controller's gains on the campaign's random manoeuvres.
 
-Each trial is a gain set: a point of ``SPACE`` (the feedback gains, the adaptation's weight c as a
-share of k_R / k_Omega, the time constants with which the estimate learns m*rho and a constant
-moment, guidance's lookahead), which ``controller_gains`` turns into the controller's parameters.
+Each trial is a gain set: a point of the search space (the feedback gains, the adaptation's
+weight c as a share of k_R / k_Omega, the time constants with which the estimate learns m*rho and
+a constant moment, guidance's lookahead), which ``controller_gains`` turns into the controller's
+parameters. The space's ranges are ``tune``'s options, ``SPACE`` by default; ``space_problems``
+refuses a space with a gain set the controller would not take.
 It flies the same ``runs`` manoeuvres of campaign seed ``seed`` with all of the campaign's draw
 (latency and stalls, model errors, noise, the motors' lag; ``geoctl_ros.campaign.manoeuvres``),
 and the hardest rows of docs/safety.md's latency table (``TRIAL_LATENCY_ROWS``:
-config/scenarios/testbed_yaw90.yaml with its measurements that old and its steps that late), all
-on the Dask cluster.
+config/scenarios/testbed_yaw90.yaml flown on the tuned file's airframe, ``latency_file``, with its
+measurements that old and its steps that late), all on the Dask cluster. The approach brake's
+bounds are those the airframe gives (``airframe_of``: ``controller_setup`` computes a_b from the
+rotors' polytope where ``brake_acceleration`` is 0, and a_u from the inertia).
 
 - **Objectives** (both minimised): the settle time's median and 95th percentile over the runs
   (the time from which the attitude error stays under 5 deg; a run that never settles counts as
@@ -26,21 +30,33 @@ The sampler is Optuna's TPE (multivariate) with ``seed``, and a trial's figures 
 function of its gains and the campaign seed (``runs.csv`` is the same on any cluster), so a
 tuning run again with the same seeds proposes and finds the same gain sets.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+import itertools
 import math
 import os
-from typing import Any, Dict, List, NamedTuple, Optional, Sequence
+from typing import Any, Dict, List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
 from geoctl_ros.campaign import manoeuvres, runner, study
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.law.brake import ApproachBrake
 from geoctl_ros.core.law.gains import learning_gain, learning_time
-from geoctl_ros.params import load_parameter_file
+from geoctl_ros.params import (
+    CONTROLLER,
+    ConfigError,
+    controller_setup,
+    load_parameter_file,
+    node_overrides,
+    resolve,
+)
 from geoctl_ros.params.build import GainSet, gain_set
+from geoctl_ros.params.scenario import on_airframe
 from geoctl_ros.sim import closed_loop
 from geoctl_ros.sim.scenario import from_sections
 
-# The search's coordinates, name: (low, high, log scale). The adaptation is searched by what it
+# The search's coordinates, name: (low, high, log scale), the defaults of ``tune``'s options
+# (``--k-R LO HI``, ...). The adaptation is searched by what it
 # does rather than by its raw gains: c as a share of k_R / k_Omega (at 1, e_Omega + c e_R vanishes
 # along the loop's own slow decay, so the estimate learns from what the model misses, not from the
 # manoeuvre itself), and each block's learning time constant (``core.law.gains.learning_time``),
@@ -55,10 +71,11 @@ SPACE = {
 }
 # the controller's parameters a trial sets (over the testbed's file)
 GAINS = GainSet.names()
+Space = Dict[str, Tuple[float, float, bool]]     # SPACE's shape: name: (low, high, log scale)
 
 
 class SearchPoint(NamedTuple):
-    """A point of SPACE."""
+    """A point of the search space (SPACE's coordinates)."""
 
     k_R: float
     k_Omega: float
@@ -147,12 +164,70 @@ def figures(columns: Dict[str, np.ndarray], duration: float,
         latency_margins_deg=[float(m) for m in latency_margins])
 
 
-def latency_row(job):
-    """Worker: testbed_yaw90 with the gains, its inputs ``latency`` old and its steps up to
-    ``jitter`` late, flown for ``duration`` s; its closest approach to the cone (deg).
+def space_problems(space: Space, gravity: float) -> List[Tuple[str, str]]:
+    """Why the controller would refuse some gain set of a search space, as (coordinate or 'the
+    search space', reason) pairs ([] when it takes all): a range that is not low < high (and
+    low > 0 on a log scale), or a corner of the box whose gains (``controller_gains``) the schema
+    refuses. Each gain is monotonic in each coordinate, so the corners hold its extremes.
     """
-    path, gains, latency, jitter, duration = job
-    sections = study.parameter_file(load_parameter_file(path), gains)
+    errors = []
+    for name, (lo, hi, log) in space.items():
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi and (lo > 0.0 or not log)):
+            errors.append((name, '%g-%g is no range (low < high%s)'
+                           % (lo, hi, ', low > 0: a log scale' if log else '')))
+    if errors:
+        return errors
+    for corner in itertools.product(*((lo, hi) for lo, hi, _ in space.values())):
+        point = SearchPoint(*corner)
+        try:
+            resolve(CONTROLLER, controller_gains(point, gravity))
+        except ConfigError as e:
+            return [('the search space', 'its corner %s gives %s' % (
+                ' '.join('%s=%g' % kv for kv in point._asdict().items()),
+                '; '.join('%s: %s' % err for err in e.errors)))]
+    return errors
+
+
+class Airframe(NamedTuple):
+    """What a tuning flies on, as its controller's model has it."""
+
+    mass: float                   # kg
+    pivot_inertia: Tuple[float, float, float]   # kg m^2, principal, about the pivot, ascending
+    brake: ApproachBrake          # the approach brake's bounds it gives
+
+    def describe(self) -> str:
+        return ('mass %.3g kg, principal inertias about the pivot %s kg m^2; the approach '
+                "brake's a_b %.1f rad/s^2, a_u %.2f rad/s^2"
+                % (self.mass, ' / '.join('%.4f' % j for j in self.pivot_inertia),
+                   self.brake.authority, self.brake.unmodelled))
+
+
+def airframe_of(sections: dict) -> Airframe:
+    """The Airframe of a parameter file's controller, as ``controller_setup`` builds it: the
+    brake's bounds are ``ApproachBrake.bounds_of`` its configuration (a_b from
+    ``core.law.brake.brake_authority`` where ``brake_acceleration`` is 0, a_u from the inertia).
+    Raises ConfigError where the file does not configure a controller.
+    """
+    config = controller_setup(resolve(CONTROLLER, node_overrides(sections, CONTROLLER))).config
+    return Airframe(float(config.mass), so3.symmetric_eigenvalues(config.J),
+                    ApproachBrake.bounds_of(config))
+
+
+def latency_file(path: str, base: dict) -> dict:
+    """The latency rows' scenario file (sections) flown on the airframe of the tuned file's
+    (``geoctl_ros.params.scenario.on_airframe``): its gains, cones and set points, base's body,
+    rotors and motors.
+    """
+    return on_airframe(load_parameter_file(path), base)
+
+
+def latency_row(job):
+    """Worker: the latency rows' file (sections: ``latency_file``, the gains put over it), its
+    inputs ``latency`` old and its steps up to ``jitter`` late, flown for ``duration`` s; its
+    closest approach to the cone (deg).
+    """
+    sections, latency, jitter, duration = job
+    sections = {node: dict(flat) for node, flat in sections.items()}
     sections.setdefault('scenario', {}).update(latency=float(latency), tick_jitter=float(jitter),
                                                duration=float(duration))
     flight = closed_loop.fly([from_sections(sections, 'latency')])
@@ -166,9 +241,10 @@ class TuneArgs:
     runs: int
     seed: int
     duration: float
-    latency_path: str
+    latency_path: str              # the latency rows' file (flown on the tuned file's airframe)
     latency_duration: float
     gravity: float = 9.81          # |g| of the testbed (m/s^2)
+    space: Space = field(default_factory=lambda: dict(SPACE))   # the search's ranges
     batch: int = runner.BATCH
     disturbance_max: float = manoeuvres.DISTURBANCE_MAX
     worst: int = 0
@@ -181,7 +257,8 @@ def evaluate(client, base, args: TuneArgs, gain_sets, rows=TRIAL_LATENCY_ROWS):
     columns, _, interrupted, _ = runner.fly(client, base, args, gain_sets)
     if interrupted:
         raise KeyboardInterrupt
-    jobs = [(args.latency_path, gains, lat, jit, args.latency_duration)
+    flown = latency_file(args.latency_path, base)
+    jobs = [(study.parameter_file(flown, gains), lat, jit, args.latency_duration)
             for gains in gain_sets for lat, jit in rows]
     margins = client.gather(client.map(latency_row, jobs, pure=False))
     n = len(rows)
@@ -189,17 +266,20 @@ def evaluate(client, base, args: TuneArgs, gain_sets, rows=TRIAL_LATENCY_ROWS):
                     args.duration, margins[k * n:(k + 1) * n]) for k in range(len(gain_sets))]
 
 
-def suggest(trial, gravity: float) -> Dict[str, Any]:
-    """The trial's gain set (GAINS, floats as the schema wants them) from its point of SPACE."""
+def suggest(trial, gravity: float, space: Space = SPACE) -> Dict[str, Any]:
+    """The trial's gain set (GAINS, floats as the schema wants them) from its point of the
+    search space.
+    """
     return controller_gains(SearchPoint(*(float(trial.suggest_float(name, lo, hi, log=log))
-                                          for name, (lo, hi, log) in SPACE.items())), gravity)
+                                          for name, (lo, hi, log) in space.items())), gravity)
 
 
 def tune(client, base, args: TuneArgs, trials: int, sampler_seed: int,
          report=None, start: Optional[Dict[str, float]] = None):
     """Run the study; (the Optuna study, [(trial number, gains, TrialFigures)]). start: a gain set
-    (GAINS) tried first where it lies in SPACE (the testbed's own, so that the study knows where
-    it stands). TRIALS_AT_ONCE trials are asked, flown together and told at a time.
+    (GAINS) tried first where it lies in the search space (args.space; the testbed's own, so that
+    the study knows where it stands). TRIALS_AT_ONCE trials are asked, flown together and told at
+    a time.
     """
     import optuna  # noqa: PLC0415  (here: only the tuner needs it, on a development machine)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -208,12 +288,12 @@ def tune(client, base, args: TuneArgs, trials: int, sampler_seed: int,
     optuna_study = optuna.create_study(directions=['minimize', 'minimize'], sampler=sampler)
     if start:
         point = search_point(start, args.gravity)
-        if all(lo <= x <= hi for x, (lo, hi, _) in zip(point, SPACE.values())):
+        if all(lo <= x <= hi for x, (lo, hi, _) in zip(point, args.space.values())):
             optuna_study.enqueue_trial(point._asdict(), skip_if_exists=True)
     done: list = []
     while len(done) < trials:
         asked = [optuna_study.ask() for _ in range(min(TRIALS_AT_ONCE, trials - len(done)))]
-        gain_sets = [suggest(t, args.gravity) for t in asked]
+        gain_sets = [suggest(t, args.gravity, args.space) for t in asked]
         for trial, gains, got in zip(asked, gain_sets, evaluate(client, base, args, gain_sets)):
             for name, value in zip(CONSTRAINTS, got.constraints()):
                 trial.set_constraint(name, value)        # (feasible: every value <= 0)

@@ -1,9 +1,13 @@
-"""Gain tuning: ``tune --trials 40 [--runs 320] [--seed 7] [--out DIR] [--workers N | --scheduler
-tcp://HOST:PORT]``.
+"""Gain tuning: ``tune --trials 40 [--runs 320] [--seed 7] [--out DIR] [--params-file FILE]
+[--k-R LO HI] [--k-Omega LO HI] ... [--workers N | --scheduler tcp://HOST:PORT]``.
 
 Optuna searches the controller's gains on the campaign's random manoeuvres, with all of the
 campaign's draw, and on docs/safety.md's latency rows, on the Dask cluster
-(``geoctl_ros.campaign.tune`` says what a trial flies and what it must keep). The best feasible
+(``geoctl_ros.campaign.tune`` says what a trial flies and what it must keep), all on the airframe
+of --params-file (config/testbed.yaml by default): the latency rows are testbed_yaw90's gains,
+cone and manoeuvre flown on that file's body, rotors and motors. Each coordinate of the search
+has its range as an option (--k-R, --k-Omega, --c-share, --cog-learning-s, --moment-learning-s,
+--guidance-lookahead-deg; defaults ``geoctl_ros.campaign.tune.SPACE``). The best feasible
 sets by settle p95 (--best) are then checked on manoeuvres of another seed (--check-runs of
 --check-seed) and on the whole latency table; the first that passes is the tuning's result.
 Writes DIR/trials.csv (a row per trial, floats exact), DIR/pareto.png, DIR/summary.md, the checked
@@ -32,6 +36,12 @@ from geoctl_ros.params import (
 from geoctl_ros.params.build import controller_config, gain_set
 from geoctl_ros.plots.campaign import tuning_figure
 from geoctl_ros.sil.rosenv import config_dir
+
+# what each coordinate of the search is (its option's help)
+_MEANING = {'k_R': 'k_R', 'k_Omega': 'k_Omega', 'c_share': 'c as a share of k_R / k_Omega',
+            'cog_learning_s': "m*rho's learning time constant (s)",
+            'moment_learning_s': "a constant moment's learning time constant (s)",
+            'guidance_lookahead_deg': "guidance's lookahead (deg)"}
 
 
 def _line(number, gains, got):
@@ -66,7 +76,13 @@ def main(argv=None):
                         help='output directory (out/tune)')
     add_cluster_arguments(parser)
     parser.add_argument('--params-file', default=None,
-                        help='the testbed (default: config/testbed.yaml)')
+                        help='the testbed: its airframe and its gains, trial 0 '
+                             '(default: config/testbed.yaml)')
+    for name, (lo, hi, log) in tune.SPACE.items():
+        parser.add_argument('--' + name.replace('_', '-'), dest=name, type=float, nargs=2,
+                            metavar=('LO', 'HI'), default=[lo, hi],
+                            help='the range of %s searched%s (%g %g)'
+                                 % (_MEANING[name], ', on a log scale' if log else '', lo, hi))
     args = parser.parse_args(argv)
     if min(args.trials, args.runs, args.workers, args.best, args.check_runs) < 1:
         parser.error('--trials, --runs, --workers, --best and --check-runs must be positive')
@@ -77,21 +93,29 @@ def main(argv=None):
         print(tools.refusal('tune', absent), file=sys.stderr)
         return 2
     latency_path = os.path.join(config_dir(), 'scenarios', 'testbed_yaw90.yaml')
+    params_file = args.params_file or os.path.join(config_dir(), 'testbed.yaml')
     try:
         os.makedirs(os.path.join(args.out, 'best'), exist_ok=True)
-        base = load_parameter_file(args.params_file or os.path.join(config_dir(), 'testbed.yaml'))
-        load_parameter_file(latency_path)
+        base = load_parameter_file(params_file)
         nominal = resolve(CONTROLLER, node_overrides(base, CONTROLLER))
+        airframe = tune.airframe_of(base)
+        tune.airframe_of(tune.latency_file(latency_path, base))    # (the rows configure there)
     except (ConfigError, OSError) as e:
         return cannot_start('tune', e, args.out)
     start = gain_set(nominal).overrides()
     gravity = float(np.linalg.norm(controller_config(nominal).gravity))
+    space = {name: (*getattr(args, name), log) for name, (_, _, log) in tune.SPACE.items()}
+    problems = tune.space_problems(space, gravity)
+    if problems:
+        parser.error('; '.join('%s: %s' % ('--' + name.replace('_', '-') if name in space
+                                           else name, reason) for name, reason in problems))
     targs = tune.TuneArgs(args.runs, args.seed, args.duration, latency_path,
-                          args.latency_duration, gravity=gravity)
+                          args.latency_duration, gravity=gravity, space=space)
     t0 = time.monotonic()
     with cluster.connect(args.scheduler, args.workers) as (client, where):
-        print('tune: %d trials of %d manoeuvres (seed %d) on %s'
-              % (args.trials, args.runs, args.seed, where), file=sys.stderr, flush=True)
+        print('tune: %d trials of %d manoeuvres (seed %d) on %s\ntune: the airframe of %s: %s'
+              % (args.trials, args.runs, args.seed, where, params_file, airframe.describe()),
+              file=sys.stderr, flush=True)
         try:
             _, done = tune.tune(client, base, targs, args.trials, args.seed,
                                 lambda *t: print(_line(*t), file=sys.stderr, flush=True),
@@ -110,6 +134,11 @@ def main(argv=None):
     chosen = next((k for k, (_, passed) in enumerate(checked, 1) if passed), None)
     lines = ['# Tuning: %d trials, %d manoeuvres of %g s each (campaign seed %d), %.0f s'
              % (args.trials, args.runs, args.duration, args.seed, wall), '',
+             'The airframe of `%s` (the runs and the latency rows fly it): %s.'
+             % (params_file, airframe.describe()),
+             'The search space: %s.' % ', '.join(
+                 '%s %g-%g%s' % (name, lo, hi, ' (log)' if log else '')
+                 for name, (lo, hi, log) in space.items()), '',
              '%d feasible (%s <= 0). The best by settle p95, each checked in turn on %d other '
              'manoeuvres (seed %d) and the whole latency table until one passes (no violation, '
              'closest p1 and every latency row at least %g deg, every run at least %g deg):'
@@ -141,8 +170,8 @@ def main(argv=None):
                                  os.path.join(args.out, 'best.yaml'), comment)
     if chosen is None:
         lines.append('(no set passed: try more trials, or look at trials.csv)')
-    lines += ['', 'latency rows (latency, jitter) [ms]: ' + ' '.join(
-        '(%.0f, %.0f)' % (1e3 * a, 1e3 * b) for a, b in tune.LATENCY_ROWS)]
+    lines += ['', 'latency rows (testbed_yaw90 on the airframe; latency, jitter) [ms]: ' +
+              ' '.join('(%.0f, %.0f)' % (1e3 * a, 1e3 * b) for a, b in tune.LATENCY_ROWS)]
     with open(os.path.join(args.out, 'summary.md'), 'w') as f:
         f.write('\n'.join(lines) + '\n')
     print('\n'.join(lines))

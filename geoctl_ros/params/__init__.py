@@ -50,6 +50,7 @@ from geoctl_ros.params.param import (
     Param,
 )
 from geoctl_ros.params.schema import (
+    AIRFRAME_NAMES,
     BY_NAME,
     CHANGE_WHILE_ARMED,
     CONE_KEY,
@@ -66,9 +67,9 @@ from geoctl_ros.params.validate import (
     resolve,
 )
 
-__all__ = ['BOTH', 'BY_NAME', 'CHANGE_WHILE_ARMED', 'CONE_KEY', 'CONE_SCHEMA', 'CONTROLLER',
-           'ConfigError', 'ESC', 'ESC_LIVE', 'ControllerSetup', 'LAB_INERTIA', 'MAVLINK', 'Param',
-           'RECORD', 'SCENARIO', 'SCHEMA', 'SIM', 'VIEW',
+__all__ = ['AIRFRAME_NAMES', 'BOTH', 'BY_NAME', 'CHANGE_WHILE_ARMED', 'CONE_KEY', 'CONE_SCHEMA',
+           'CONTROLLER', 'ConfigError', 'ESC', 'ESC_LIVE', 'ControllerSetup', 'LAB_INERTIA',
+           'MAVLINK', 'Param', 'RECORD', 'SCENARIO', 'SCHEMA', 'SIM', 'VIEW',
            'airframe', 'change_problem', 'check_value', 'cone_param',
            'configuration_given', 'cone_set',
            'controller_config', 'controller_setup', 'flatten', 'load_parameter_file', 'mixer',

@@ -8,7 +8,7 @@ import sys
 import numpy as np
 
 from geoctl_ros.params.files import load_parameter_file, node_overrides
-from geoctl_ros.params.param import CONTROLLER, LAB_INERTIA
+from geoctl_ros.params.param import CONTROLLER
 from geoctl_ros.params.schema import CHANGE_WHILE_ARMED, CONE_SCHEMA, SCHEMA
 
 TESTBED = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(
@@ -50,8 +50,6 @@ def _fmt_default(value):
         return '`%s`' % str(value).lower()
     if isinstance(value, str):
         return '`%s`' % value if value else '`""`'
-    if isinstance(value, list) and len(value) > 4:
-        return '(lab hexrotor)' if value == LAB_INERTIA else '`%s`' % value
     return '`%s`' % (value,)
 
 

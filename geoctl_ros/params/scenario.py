@@ -1,7 +1,8 @@
-"""A scenario: a scenario file's parameters, resolved and validated (``load``, ``from_sections``),
-with its typed set-ups: the run's conditions (``ScenarioOptions``) and its testbed
-(``geoctl_ros.params.testbed.TestbedSetup``). ``geoctl_ros.sim.scenario.run`` flies one, and
-``geoctl_ros.sim.closed_loop.fly`` a batch, whose runs may differ only in ``PER_RUN``.
+"""A scenario: a scenario file's parameters, resolved and validated (``load``, ``from_sections``;
+``on_airframe``: a file's flown on another's airframe), with its typed set-ups: the run's
+conditions (``ScenarioOptions``) and its testbed (``geoctl_ros.params.testbed.TestbedSetup``).
+``geoctl_ros.sim.scenario.run`` flies one, and ``geoctl_ros.sim.closed_loop.fly`` a batch, whose
+runs may differ only in ``PER_RUN``.
 
 A scenario file is a ROS 2 parameter file with ``/**`` (shared), ``controller:``, ``sim:`` and
 optionally ``scenario:`` sections; the parameters are those of ``geoctl_ros.params``.
@@ -16,7 +17,7 @@ from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.params.build import cone_set, controller_setup, setpoint_rotation
 from geoctl_ros.params.files import load_parameter_file, node_overrides
 from geoctl_ros.params.param import CONTROLLER, SCENARIO, SIM, ConfigError
-from geoctl_ros.params.schema import BY_NAME
+from geoctl_ros.params.schema import AIRFRAME_NAMES, BY_NAME, schema_for
 from geoctl_ros.params.testbed import TestbedSetup, testbed_setup
 from geoctl_ros.params.validate import resolve
 
@@ -91,6 +92,24 @@ class Scenario:
     def cones(self) -> ConeSet:
         """Its ConeSet."""
         return cone_set(self.controller)
+
+
+def on_airframe(sections: dict, of: dict) -> dict:
+    """Parameter-file sections flown on the airframe of another file's (``of``): each node's
+    (the controller's, the sim's) ``AIRFRAME_NAMES`` as ``of`` resolves them (its defaults where
+    it sets none) put over its own section; the rest (gains, cones, set points, noise, timing)
+    stays theirs. Raises ConfigError where ``of`` does not resolve.
+    """
+    out = {node: dict(flat) for node, flat in sections.items()}
+    for node in (CONTROLLER, SIM):
+        values = resolve(node, node_overrides(of, node))
+        own = {p.name for p in schema_for(node)}
+        frame = {name: (values[name].tolist() if isinstance(values[name], np.ndarray)
+                        else values[name]) for name in AIRFRAME_NAMES if name in own}
+        keys = [k for k in (node, '/' + node) if k in out] or [node]
+        for key in keys:                     # (a file may address a node either way)
+            out.setdefault(key, {}).update(frame)
+    return out
 
 
 def load(path: str) -> Scenario:

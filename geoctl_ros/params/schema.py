@@ -16,6 +16,7 @@ from geoctl_ros.params.param import CONTROLLER, Param, half_angle, nonzero_vecto
 from geoctl_ros.params.param import declare as _p
 
 SCHEMA = schema_controller.PARAMS + schema_testbed.PARAMS + schema_tools.PARAMS
+AIRFRAME_NAMES = schema_testbed.AIRFRAME
 
 
 # Per-cone parameters; <name> is one of cones.names.

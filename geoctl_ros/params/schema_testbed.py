@@ -1,5 +1,5 @@
 """The testbed's parameters: the physical model (the controller's model, the simulator's truth),
-the airframe, the motors and the simulator.
+the airframe, the motors and the simulator; ``AIRFRAME``, the names that say what is flown.
 """
 
 from geoctl_ros.params.param import (
@@ -15,12 +15,13 @@ from geoctl_ros.params.param import (
 )
 from geoctl_ros.params.param import declare as _p
 
-PARAMS = [
-    # Physical model, read by the controller (its model) and the simulator (the truth).
+# Physical model, read by the controller (its model) and the simulator (the truth).
+BODY = [
     _p('inertia', 'double_array', LAB_INERTIA, 'kg m^2',
-       'inertia about the centre of mass, 9 values row-major', BOTH, length=9,
-       check=inertia_matrix, lo=-10.0, hi=10.0),
-    _p('mass', 'double', 1.26, 'kg', 'mass', BOTH, check=positive, lo=0.01, hi=100.0),
+       'inertia about the centre of mass, body frame, 9 values row-major (default: the lab '
+       "hexrotor's, docs/testbed.md)", BOTH, length=9, check=inertia_matrix, lo=-10.0, hi=10.0),
+    _p('mass', 'double', 1.26, 'kg', "mass (default: the lab hexrotor's)", BOTH, check=positive,
+       lo=0.01, hi=100.0),
     _p('cog_offset', 'double_array', [0.0, 0.0, 0.1], 'm',
        'pivot -> centre of mass, body frame (z up: above the pivot)', BOTH, length=3,
        lo=-1.0, hi=1.0),
@@ -30,7 +31,9 @@ PARAMS = [
        "the spherical joint's stops: the body's z axis tilts at most this far from upright (the "
        'sim rests on them; the approach brake counts the gravity moment up to them); 180 = no '
        'stops', BOTH, lo=1.0, hi=180.0),
-    # Airframe: rotor geometry (controller: allocation; sim: the true rotors).
+]
+# Airframe: rotor geometry (controller: allocation; sim: the true rotors).
+ROTORS = [
     _p('rotors.layout', 'string', 'tilted_ring', '-',
        'tilted_ring (from the five parameters below) or custom (rotors.positions/axes/spins)',
        BOTH, choices=('tilted_ring', 'custom')),
@@ -58,7 +61,9 @@ PARAMS = [
        'reaction moment per newton of thrust', BOTH, lo=0.0, hi=1.0),
     _p('rotors.failed', 'integer_array', [], '-', 'rotor numbers (1-based) to treat as dead',
        BOTH, lo=1, hi=12),
-    # Motors: thrust curve f = a x^2 + b x + c, x = voltage_scale * command.
+]
+# Motors: thrust curve f = a x^2 + b x + c, x = voltage_scale * command; the rotors' limits.
+MOTORS = [
     _p('motor.a', 'double_array', [6.0252e-5], 'N', 'thrust curve a (1 value, or 1 per rotor)',
        BOTH, lo=-10.0, hi=10.0),
     _p('motor.b', 'double_array', [8.4086e-3], 'N', 'thrust curve b (1 value, or 1 per rotor)',
@@ -76,7 +81,9 @@ PARAMS = [
        CONTROLLER, check=positive, lo=0.01, hi=50.0),
     _p('collective_thrust', 'double', 0.0, 'N',
        'thrust along body z to hold while armed; 0 = m * |gravity|', CONTROLLER, lo=0.0, hi=500.0),
-    # Simulator.
+]
+# Simulator.
+SIMULATOR = [
     _p('actuation', 'string', 'rotors', '-', 'rotors (commands through the motors) or torque '
        "(the controller's moment, ideal)", SIM, choices=('rotors', 'torque')),
     _p('motor_time_constant', 'double', 0.04, 's', "first-order lag of each rotor's thrust",
@@ -120,3 +127,11 @@ PARAMS = [
     _p('world_frame_id', 'string', 'world', '-', 'world frame id (sim: of pose messages; '
        'controller: of active_setpoint; view: of its markers)', (CONTROLLER, SIM, VIEW)),
 ]
+PARAMS = BODY + ROTORS + MOTORS + SIMULATOR
+
+# The airframe: what the body, its rotors and its motors are (the simulator's truth and the
+# controller's model of it), the rotors' lag and the controller's compensation of it. A flight
+# "on a file's airframe" takes these from that file (the tuner's latency rows: docs/campaigns.md,
+# "Gain tuning"); everything else (gains, cones, set points, noise, timing) from its own.
+AIRFRAME = tuple(p.name for p in BODY + ROTORS + MOTORS) + (
+    'motor_time_constant', 'motor_lag_compensation')

@@ -282,7 +282,7 @@ def _spool_up(bed: Testbeds, tick: ControlTick, dt: float, n_sub: int, h: float,
     plant = bed.plant
     plant.held = o.start == 'held'
     now, before = 0.0, None
-    while before is None or tick.mixer.spools(now - before, dt):
+    while tick.mixer.spools(None if before is None else now - before, dt):
         R, W = bed.state()
         out, motors = tick(R, W, dt, now)[:2]
         command = out.u if bed.actuator is None else motors.commands

@@ -182,34 +182,35 @@ def backup_first(brake: ApproachBrake, D_s: Any, authority: Any, hold: float) ->
     return keep * D_s + (1.0 - keep) * authority
 
 
-def least_deceleration(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: Any,
-                       spin: Any, authority: Any, hold: float,
-                       law: Optional[Any] = None) -> tuple:
-    """(D, Phi) per cone: the least deceleration D (rad/s^2) the command must reach at the end of
-    its hold for the condition, and the backup's margin Phi (rad) now. Where Phi < 0, D is the
-    backup's own first command (past the curve: brake as hard as the lag lets). law: the law's
-    own deceleration (per cone), where it already meets the condition, D is it (no search).
-
-    The worst state (w0, G0) of the uncertainty box; the rotors' deceleration now taken at most
-    a_b. The travel falls as D grows, so D is found by regula falsi (``FALSI_STEPS``) between
-    the law's (or a deceleration far below) and the backup's first command, returning the end
-    that meets the condition: never less than the least.
+def _worst(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: Any, spin: Any,
+           authority: Any, hold: float) -> tuple:
+    """The worst state of the uncertainty box and the backup from it, per cone: (G0, w0, the
+    rotors' deceleration now taken at most a_b, the backup's first command, Phi).
     """
     dg, dw = brake.uncertainty(age, spin)
     G0, w0 = gap - dg, w + dw
     Ds = np.minimum(D_s, authority)
     first = backup_first(brake, Ds, authority, hold)
-    margin = G0 - backup_travel(brake, w0, Ds, first, authority, hold)
+    return G0, w0, Ds, first, G0 - backup_travel(brake, w0, Ds, first, authority, hold)
+
+
+def least_deceleration(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: Any,
+                       spin: Any, authority: Any, hold: float) -> tuple:
+    """(D, Phi) per cone: the least deceleration D (rad/s^2) the command must reach at the end of
+    its hold for the condition, and the backup's margin Phi (rad) now. Where Phi < 0, D is the
+    backup's own first command (past the curve: brake as hard as the lag lets).
+
+    The worst state (w0, G0) of the uncertainty box; the rotors' deceleration now taken at most
+    a_b. The travel falls as D grows, so D is found by regula falsi (``FALSI_STEPS``) between
+    a deceleration far below and the backup's first command, returning the end that meets the
+    condition: never less than the least. Each cone's answer is its own, whatever the others'
+    (a run alone and in a batch alike).
+    """
+    G0, w0, Ds, first, margin = _worst(brake, gap, w, D_s, age, spin, authority, hold)
     past = margin < 0.0
-    if law is not None:
-        meets = backup_travel(brake, w0, Ds, law, authority, hold) <= G0
-        if np.all(meets | past):
-            return np.where(past, first, law), margin
-        lo = np.where(meets, law - 1.0, law)
-    else:
-        lo = np.minimum(Ds, 0.0) - 4.0 * authority
     # regula falsi (Illinois) between a deceleration that does not meet the condition and one
     # that does (the backup's own first), keeping the one that does
+    lo = np.minimum(Ds, 0.0) - 4.0 * authority
     hi = first
     f_lo = backup_travel(brake, w0, Ds, lo, authority, hold) - G0
     f_hi = backup_travel(brake, w0, Ds, hi, authority, hold) - G0
@@ -226,6 +227,17 @@ def least_deceleration(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: An
         f_hi = np.where(ok, f_mid, f_hi)
         hi = np.where(ok, mid, hi)
     return np.where(past, first, hi), margin
+
+
+def meets(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: Any, spin: Any,
+          authority: Any, hold: float, D: Any) -> Any:
+    """Per cone, whether a command reaching the deceleration D (rad/s^2) at the end of its hold
+    meets the condition (``least_deceleration``'s, without its search): its worst-case travel
+    peaks within the gap or, past the curve, D is at least the backup's own first command.
+    """
+    G0, w0, Ds, first, margin = _worst(brake, gap, w, D_s, age, spin, authority, hold)
+    return np.where(margin < 0.0, D >= first,
+                    backup_travel(brake, w0, Ds, D, authority, hold) <= G0)
 
 
 class BrakeRows(NamedTuple):
@@ -327,17 +339,35 @@ def brake_terms(brake: ApproachBrake, cones: Any, J_inv: np.ndarray,
 
 
 def rows(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, x: BrakeInputs,
-         u: Optional[np.ndarray] = None) -> BrakeRows:
-    """The brake's condition at a tick for every cone (``BrakeRows``; see the module); u: the
-    law's moment, where it is known (a law that meets every row needs no search).
+         terms: Optional[BrakeTerms] = None) -> BrakeRows:
+    """The brake's condition at a tick for every cone (``BrakeRows``; see the module); terms:
+    ``brake_terms`` of x where already computed.
     """
-    t = brake_terms(brake, cones, J_inv, x)
-    spin = np.sqrt(so3.dot(x.Omega, x.Omega))[..., None]
-    age = np.asarray(x.age, dtype=float)[..., None] if np.ndim(x.age) else x.age
-    law = None if u is None else so3.dot(t.A, u[..., None, :]) + t.f_along - t.kin
-    D, margin = least_deceleration(brake, t.gap, t.w, t.D_s, age, spin, t.authority, x.hold,
-                                   law)
+    t = brake_terms(brake, cones, J_inv, x) if terms is None else terms
+    D, margin = least_deceleration(brake, t.gap, t.w, t.D_s, _age(x), _spin(x), t.authority,
+                                   x.hold)
     return BrakeRows(t.A, D - t.f_along + t.kin, margin, t.weak)
+
+
+def law_meets(brake: ApproachBrake, terms: BrakeTerms, x: BrakeInputs,
+              u: np.ndarray) -> np.ndarray:
+    """(...,) bool: whether the law's moment u meets every cone's condition at the tick of x
+    (``meets``, on the law's own deceleration along each cone; no search).
+    """
+    t = terms
+    law = so3.dot(t.A, u[..., None, :]) + t.f_along - t.kin
+    return np.all(meets(brake, t.gap, t.w, t.D_s, _age(x), _spin(x), t.authority, x.hold, law),
+                  axis=-1)
+
+
+def _spin(x: BrakeInputs) -> np.ndarray:
+    """|Omega| per run, one axis for the cones."""
+    return np.sqrt(so3.dot(x.Omega, x.Omega))[..., None]
+
+
+def _age(x: BrakeInputs) -> Any:
+    """T_b per run, one axis for the cones (a float where one for all)."""
+    return np.asarray(x.age, dtype=float)[..., None] if np.ndim(x.age) else x.age
 
 
 def brake_authority(vertices: np.ndarray, J_inv: np.ndarray, m_rho: np.ndarray,
@@ -420,17 +450,23 @@ def braked(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, polytope: Any,
     (A, beta) the moment must meet with the brake's (the cbf law's pointing constraints), or
     None.
     """
-    r = rows(brake, cones, J_inv, x, u if extra is None else None)
+    t = brake_terms(brake, cones, J_inv, x)
+    weak = np.any(t.weak, axis=-1)
+    A_p, beta_p = reachable(polytope, brake.keep(x.hold), x.thrusts)
+    # (a moment the rotors cannot reach this hold, which the lag compensation would clip, needs
+    # the projection too: the derivation's rotors reach every command, the law's too)
+    unreached = np.any(slack_of(A_p, u, beta_p) < -TOL, axis=-1)
+    if extra is None:
+        braking = ~law_meets(brake, t, x, u)
+        if not np.any(braking | unreached):
+            return Braked(u, braking, weak)
+    r = rows(brake, cones, J_inv, x, t)
     A, beta = r.A, r.beta
     if extra is not None:
         A = np.concatenate((extra[0], A), axis=-2)
         beta = np.concatenate((extra[1], beta), axis=-1)
-    A_p, beta_p = reachable(polytope, brake.keep(x.hold), x.thrusts)
-    braking = np.any(slack_of(A, u, beta) < -TOL, axis=-1)
-    # (and a moment the rotors cannot reach this hold, which the lag compensation would clip:
-    # the derivation's rotors reach every command, the law's too)
-    need = braking | np.any(slack_of(A_p, u, beta_p) < -TOL, axis=-1)
-    weak = np.any(r.weak, axis=-1)
+        braking = np.any(slack_of(A, u, beta) < -TOL, axis=-1)
+    need = braking | unreached
     if not np.any(need):
         return Braked(u, braking, weak)
     out = np.array(u, dtype=float, copy=True)

@@ -36,6 +36,7 @@ A batch of cone sets (one per run of a campaign, each with the same number of co
 ConeSet with axes (batch, n, 3) and half-angles (batch, n); it evaluates a stack of attitudes
 (batch, 3, 3) with the same formulas.
 """
+import math
 from typing import Any, Optional
 
 import numpy as np
@@ -131,6 +132,14 @@ class ConeSet:
 
     def __len__(self):
         return self.theta.shape[-1]
+
+    @property
+    def band_deg(self) -> float:
+        """The barrier's band outside each real cone (deg): the guard (cone_guard_deg) plus the
+        floor band (barrier_floor_deg). Arming and set points must clear it; the near-cone warning
+        starts at it (or at 2 deg, if that is more).
+        """
+        return math.degrees(self.guard + self.floor)
 
     def terms(self, R: np.ndarray) -> np.ndarray:
         """(n, 4) per cone: s_i = r^T R^T v_i, then (R^T v_i) x r; both linear in R (the control

@@ -51,7 +51,7 @@ def setpoint_problem(config: Any, cones: Any, R_d: np.ndarray) -> Optional[str]:
     if not len(cones):
         return None
     margins = cones.margins_deg(R_d)
-    floor_deg = math.degrees(cones.floor + cones.guard)    # the barrier's band, guard included
+    floor_deg = cones.band_deg
     i = int(np.argmin(margins))
     if margins[i] < floor_deg:
         where = 'inside' if margins[i] < 0 else 'within %.2f deg of' % floor_deg

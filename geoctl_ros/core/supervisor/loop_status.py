@@ -119,7 +119,7 @@ def status(loop: Any, now: float, other_commanders: Optional[str] = None) -> Sta
         i = int(np.argmin(out.margins_deg))
         name = loop.setup.config.cones.names[i]
         cones = loop.setup.config.cones
-        near = max(NEAR_CONE_DEG, math.degrees(cones.guard + cones.floor))
+        near = max(NEAR_CONE_DEG, cones.band_deg)
         if out.violated:
             errors.append('sensor inside cone %r (margin %.2f deg)'
                           % (name, out.margins_deg[i]))

@@ -28,7 +28,7 @@ def arm_problems(loop: Any, now: float, extra_problem: Optional[str] = None) -> 
             problems.append('set point: ' + setpoint)
     cones = loop.setup.config.cones
     if loop.R is not None and len(cones):
-        guard = math.degrees(cones.guard + cones.floor)
+        guard = cones.band_deg
         margins = cones.margins_deg(loop.R)
         for name, margin in zip(cones.names, margins):
             if margin <= 0.0:
