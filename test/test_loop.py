@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.law import hold
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.control import AttitudeController
 from geoctl_ros.core.supervisor.control_tick import ControlTick
@@ -156,6 +157,32 @@ def test_arming_holds_the_attitude_measured_then_and_the_operator_commands_what_
     assert loop.arm(0.02).ok
     assert np.allclose(loop.controller.R_d, tilted)
     assert make_loop().hold() == 'no pose received yet'
+
+
+def test_a_hold_lifts_a_vehicle_resting_on_its_stops_five_degrees_inside_them():
+    """With the joint's stops at 45 deg, the attitude measured resting on them (45.3 deg: sunk
+    into their spring) is held at 40 deg, turned towards upright about the horizontal axis across
+    its tilt: the direction it leans in and its turn about its own z axis are kept. 30 deg of
+    tilt, within the stops, is held as measured; so is 45 deg without stops (make_loop's).
+    """
+    up = np.array([0.0, 0.0, 1.0])
+    on_stop = so3.quat_to_rot(YAW90) @ so3.axis_angle([0, 1, 0], math.radians(45.3))
+    loop = make_loop(joint_tilt_max_deg=45.0)
+    feed(loop, 0.0, q=so3.rot_to_quat(on_stop))
+    assert loop.arm(0.0).ok
+    held = loop.controller.R_d
+    assert math.degrees(hold.tilt(held, up)) == pytest.approx(40.0, abs=1e-9)
+    lean = held[:2, 2] / np.linalg.norm(held[:2, 2])               # the body's z, seen from above
+    assert np.allclose(lean, on_stop[:2, 2] / np.linalg.norm(on_stop[:2, 2]), atol=1e-12)
+    turn = held.T @ on_stop                                        # the lift, in the body
+    assert math.degrees(so3.angle(turn)) == pytest.approx(5.3, abs=1e-9)
+    assert abs(so3.log(turn)[2]) < 1e-12                           # none of it about z
+    within = so3.quat_to_rot(YAW90) @ so3.axis_angle([1, 0, 0], math.radians(30.0))
+    feed(loop, 0.01, q=so3.rot_to_quat(within))
+    assert loop.hold() is None and np.allclose(loop.controller.R_d, within)
+    free = make_loop()
+    feed(free, 0.0, q=so3.rot_to_quat(on_stop))
+    assert free.hold() is None and np.allclose(free.controller.R_d, on_stop)
 
 
 def test_an_arming_whose_hold_the_configuration_refuses_is_refused_with_the_reason():

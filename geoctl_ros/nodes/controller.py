@@ -40,15 +40,14 @@ from geoctl_ros.nodes.conversions import (
 )
 from geoctl_ros.nodes.runtime import spin
 from geoctl_ros.params import (
-    BY_NAME,
     CHANGE_WHILE_ARMED,
     CONTROLLER,
     ConfigError,
     change_problem,
-    check_value,
     configuration_given,
     controller_setup,
     resolve,
+    setpoint_change,
 )
 from geoctl_ros.records.fields import quaternion, vector
 
@@ -182,24 +181,23 @@ class ControllerNode(Node):
             problem = change_problem(changed, CHANGE_WHILE_ARMED, 'while disarmed')
             if problem:
                 raise ConfigError([('armed', problem)])
-        if changed == {'setpoint'}:
-            return self._setpoint_change(values['setpoint'])
+        q = setpoint_change(values, changed)
+        if q is not None:
+            return self._setpoint_change(q)
         setup = build(values)
         problem = self.loop.reconfiguration_problem(setup)
         if problem:
             raise ConfigError([('cones', problem)])
         return setup
 
-    def _setpoint_change(self, value):
-        """A new value of ``setpoint`` alone, checked by the parameter's schema and by the
-        controller as every set point is (``AttitudeController.setpoint_problem``: the cones'
-        bands, ``unmodelled_moment_max``), without building the whole configuration again (tens
-        of ms of the thread that runs the control steps): a SetpointChange, or ConfigError with
-        the reason.
+    def _setpoint_change(self, q):
+        """A new value q of ``setpoint`` alone (checked by the parameter's schema), checked by
+        the controller as every set point is (``AttitudeController.setpoint_problem``: the
+        cones' bands, ``unmodelled_moment_max``), without building the whole configuration again
+        (tens of ms of the thread that runs the control steps): a SetpointChange, or ConfigError
+        with the reason.
         """
-        q, problem = check_value(BY_NAME['setpoint'], value)
-        if problem is None:
-            problem = self.loop.controller.setpoint_problem(so3.quat_to_rot(q))
+        problem = self.loop.controller.setpoint_problem(so3.quat_to_rot(q))
         if problem:
             self.get_logger().warning('setpoint refused: ' + problem)
             raise ConfigError([('setpoint', problem)])

@@ -27,6 +27,7 @@ from geoctl_ros.params.build import (
                                      controller_config,
                                      controller_setup,
                                      mixer,
+                                     setpoint_change,
                                      setpoint_rotation,
                                      settings,
 )
@@ -74,4 +75,4 @@ __all__ = ['AIRFRAME_NAMES', 'BOTH', 'BY_NAME', 'CHANGE_WHILE_ARMED', 'CONE_KEY'
            'configuration_given', 'cone_set',
            'controller_config', 'controller_setup', 'flatten', 'load_parameter_file', 'mixer',
            'node_overrides', 'resolve', 'write_parameter_file',
-           'schema_for', 'setpoint_rotation', 'settings']
+           'schema_for', 'setpoint_change', 'setpoint_rotation', 'settings']

@@ -13,6 +13,7 @@ import numpy as np
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.so3 import Vector
 from geoctl_ros.core.law.control import AttitudeController, SetpointRejected
+from geoctl_ros.core.law.hold import hold_attitude
 from geoctl_ros.core.sensors.consistency import SensorAgreement
 from geoctl_ros.core.supervisor import loop_status, preflight
 from geoctl_ros.core.supervisor.control_tick import ControlTick
@@ -176,12 +177,23 @@ class ControlLoop:
         return problem
 
     def hold(self) -> Optional[str]:
-        """Adopt the attitude measured last as the set point (what an arming does with
-        ``arming_setpoint`` hold); None if adopted, else why not (the old one stays).
+        """Adopt the attitude measured last as the set point, lifted off the joint's stops
+        (``hold_attitude``; what an arming does with ``arming_setpoint`` hold); None if adopted,
+        else why not (the old one stays).
+        """
+        R_hold = self.hold_attitude()
+        if R_hold is None:
+            return 'no pose received yet'
+        return self._adopt(R_hold)
+
+    def hold_attitude(self) -> Optional[np.ndarray]:
+        """The attitude a hold flies now (``core.law.hold.hold_attitude`` of the attitude
+        measured last), or None before the first pose.
         """
         if self.R is None:
-            return 'no pose received yet'
-        return self._adopt(self.R)
+            return None
+        config = self.controller.config
+        return hold_attitude(self.R, config.gravity, config.tilt_max)
 
     def _adopt(self, R_d: np.ndarray) -> Optional[str]:
         """Fly R_d from now on, if the controller takes it; else why not."""
@@ -200,7 +212,8 @@ class ControlLoop:
 
     def arm(self, now: float, extra_problem: Optional[str] = None) -> ArmResult:
         """Arm unless arm_problems names a reason; the refusal names every one. An arming
-        (from disarmed) with ``arming_setpoint`` hold flies the attitude measured now.
+        (from disarmed) with ``arming_setpoint`` hold flies the attitude measured now, lifted
+        off the joint's stops (``hold_attitude``).
         """
         problems = self.arm_problems(now, extra_problem)
         was_armed = self.supervisor.armed
@@ -212,8 +225,8 @@ class ControlLoop:
                 self.cone_entries, self.entry, self._inside = 0, None, False
                 self.unlearnt_over = 0
                 self._spool_from = self.R       # (the take-over starts the flight's model)
-                if self.holds_at_arming:
-                    self._adopt(self.R)         # (arm_problems has checked it as a set point)
+                if self.holds_at_arming:        # (arm_problems has checked it as a set point)
+                    self._adopt(self.hold_attitude())
         return result
 
     @property
