@@ -29,24 +29,15 @@ from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.sensors.frames import rpy_matrix
+from geoctl_ros.nodes.conversions import refusal_reason
+from geoctl_ros.params import SETPOINT
 
 ACCEPTED, REFUSED, BAD_ARGUMENTS, NO_ANSWER = 0, 1, 2, 3
-SETPOINT = 'setpoint'          # the controller's parameter (docs/parameters.md)
 
 
 def setpoint_quaternion(yaw_deg: float, pitch_deg: float, roll_deg: float) -> list:
     """The set point (x, y, z, w) of yaw, pitch and roll (deg, z-y-x) in the package's world."""
     return [float(v) for v in so3.rot_to_quat(rpy_matrix((roll_deg, pitch_deg, yaw_deg)))]
-
-
-def reason_of(text: str) -> str:
-    """A refusal's reason on one line: the controller's ConfigError names the parameter after a
-    heading ('invalid parameters:'), one per line.
-    """
-    lines = [line.strip() for line in text.strip().splitlines()]
-    if lines and lines[0] == 'invalid parameters:':
-        lines = lines[1:]
-    return '; '.join(line for line in lines if line) or 'no reason given'
 
 
 def _call(node, service_type, name, request, wait):
@@ -131,7 +122,7 @@ def _send_setpoint(node, args, prefix):
         return None
     result = r.results[0] if r.results else None
     if result is None or not result.successful:
-        return False, reason_of(result.reason if result is not None else '')
+        return False, refusal_reason(result.reason if result is not None else '')
     return True, 'set point [%s] (x, y, z, w; %s)' % (', '.join('%.4f' % v for v in q), shown)
 
 

@@ -174,16 +174,21 @@ def setpoint_rotation(values: dict) -> np.ndarray:
     return so3.quat_to_rot(values['setpoint'])
 
 
+# The parameter a set point is sent as at run time (the setpoint command, a ground station's
+# SET_ATTITUDE_TARGET through the bridge): the controller takes it alone as a set point.
+SETPOINT = 'setpoint'
+
+
 def setpoint_change(values: dict, changed: set) -> Optional[np.ndarray]:
     """A run-time change of the ``setpoint`` parameter alone (a command's, a ground station's):
     its quaternion (x, y, z, w) checked by the schema (raises ConfigError with the reason); None
     when the change names any other parameter (it is a reconfiguration).
     """
-    if changed != {'setpoint'}:
+    if changed != {SETPOINT}:
         return None
-    q, problem = check_value(BY_NAME['setpoint'], values['setpoint'])
+    q, problem = check_value(BY_NAME[SETPOINT], values[SETPOINT])
     if problem:
-        raise ConfigError([('setpoint', problem)])
+        raise ConfigError([(SETPOINT, problem)])
     return q
 
 
