@@ -199,7 +199,7 @@ class ControllerNode(Node):
         """
         problem = self.loop.controller.setpoint_problem(so3.quat_to_rot(q))
         if problem:
-            self.get_logger().warning('setpoint refused: ' + problem)
+            self.get_logger().warning('set point refused: ' + problem)
             raise ConfigError([('setpoint', problem)])
         return SetpointChange(q)
 
@@ -295,7 +295,7 @@ class ControllerNode(Node):
             self.get_logger().info('set point: ' + response.message)
         else:
             response.message = 'hold refused: ' + problem
-            self.get_logger().warning(response.message)
+            self.get_logger().warning('hold refused: ' + problem)
         return response
 
     # --- the control tick --------------------------------------------------------------------
