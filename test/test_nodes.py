@@ -52,6 +52,9 @@ def test_arming_needs_fresh_inputs_and_disarming_zeroes_the_motors(ros):
     # about hover (118/240): a condition, since this process's feeder can stall beside the other
     # DDS tests, and the commands move while the controller rides its gap through
     mon.wait_for(lambda: all(0.3 < c < 0.7 for c in mon.last('motors')), 5.0, 'about hover')
+    # the arming holds the attitude fed (arming_setpoint hold); a set point 90 deg from it, sent
+    # as the setpoint command sends it, is taken armed
+    assert mon.set_parameter('setpoint', [0.0, 0.0, 0.0, 1.0]).successful
     # 90 deg from R_d: the estimate grows (a condition: beside the flights at nice 19 this test's
     # feeder stalls, and the controller learns nothing while it rides the gaps through)
     mon.wait_for(lambda: np.linalg.norm(mon.last('dbar')) > 1e-3, 10.0, 'the estimate to grow')

@@ -152,8 +152,9 @@ PARAMS = [
        'and nothing changes', CONTROLLER, length=4, check=unit_quaternion, lo=-1.0, hi=1.0),
     _p('arming_setpoint', 'string', 'hold', '-',
        'what an arming flies once the rotors have spooled up: hold (the attitude measured at '
-       'arming, as PX4 and ArduPilot arm; the operator commands what comes next: the setpoint '
-       'command, docs/interface.md) or configured (setpoint, then setpoint_schedule from the '
+       "arming, held 5 deg inside the joint's stops where it rests on them, as PX4 and "
+       'ArduPilot arm; the operator commands what comes next: the setpoint command, '
+       'docs/interface.md) or configured (setpoint, then setpoint_schedule from the '
        'arming: an experiment). The headless runners (scenario, campaign, benchmark, falsify, '
        'tune) fly their set point whatever this says', CONTROLLER, choices=('hold', 'configured')),
     _p('rate_hz', 'double', 100.0, 'Hz', 'control rate', CONTROLLER, lo=1.0, hi=1000.0),
