@@ -225,8 +225,9 @@ class ControlLoop:
                 self.cone_entries, self.entry, self._inside = 0, None, False
                 self.unlearnt_over = 0
                 self._spool_from = self.R       # (the take-over starts the flight's model)
-                if self.holds_at_arming:        # (arm_problems has checked it as a set point)
-                    self._adopt(self.hold_attitude())
+                R_hold = self.hold_attitude()   # (arm_problems has checked it as a set point;
+                if self.holds_at_arming and R_hold is not None:     # an arming needs a pose)
+                    self._adopt(R_hold)
         return result
 
     @property
