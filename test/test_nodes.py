@@ -358,7 +358,7 @@ def test_a_control_step_that_raises_disarms_and_commands_zero_and_the_node_stays
 def test_the_setpoint_command_takes_one_set_point_in_the_packages_frames(capsys):
     """What ``setpoint`` sends: yaw, pitch and roll (z-y-x, deg) as the quaternion the
     controller's ``setpoint`` takes; arguments that name no one set point, or no number, exit 2
-    before any node starts.
+    before any node starts; a command that no controller answers exits 3.
     """
     assert np.allclose(commands.setpoint_quaternion(90.0, 0.0, 0.0),
                        [0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5)])
@@ -376,3 +376,7 @@ def test_the_setpoint_command_takes_one_set_point_in_the_packages_frames(capsys)
     assert 'give one of --yaw-deg/--pitch-deg/--roll-deg' in capsys.readouterr().err
     assert refusal_reason('invalid parameters:\n  setpoint: setpoint is not finite\n') == (
         'setpoint: setpoint is not finite')
+    # no controller of that name answers: exit 3, saying so
+    assert commands.stop(['stop', '--controller', 'nobody', '--wait', '0.5']) == (
+        commands.NO_ANSWER)
+    assert 'stop: no answer from /nobody within 0.5 s' in capsys.readouterr().err
