@@ -50,13 +50,16 @@ def _call(node, service_type, name, request, wait):
     return future.result()
 
 
-def _run(prog, argv, build, call, problem=lambda args: None):
+def _run(prog, description, argv, build, call, problem=lambda args: None):
     """Parse argv (ROS arguments removed) with build(parser) (problem(args): why they cannot
     be used, or None), then call(node, args, service prefix) -> (accepted, text) or None (no
     answer); print the answer, return the exit code.
     """
     argv = sys.argv if argv is None else argv
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split('\n\n')[0])
+    parser = argparse.ArgumentParser(
+        prog=prog, description=description + ' Prints "accepted: ..." or "refused: <reason>"; '
+        'exit code 0 accepted, 1 refused, 2 bad arguments, 3 no answer (docs/interface.md, '
+        '"Set points and the stop").')
     parser.add_argument('--controller', default='controller',
                         help="the controller node's name (controller)")
     parser.add_argument('--wait', type=float, default=10.0,
@@ -138,7 +141,9 @@ def _setpoint_problem(args):
 
 def setpoint(argv=None):
     """``setpoint``: send the controller a set point (or --hold); see the module."""
-    return _run('setpoint', argv, _setpoint_arguments, _send_setpoint, _setpoint_problem)
+    return _run('setpoint', "Send the controller a set point in the package's world (ENU), or "
+                '--hold the attitude now.', argv, _setpoint_arguments, _send_setpoint,
+                _setpoint_problem)
 
 
 def stop(argv=None):
@@ -147,7 +152,8 @@ def stop(argv=None):
         r = _call(node, SetBool, prefix + '/arm', SetBool.Request(data=False), args.wait)
         return None if r is None else (r.success, r.message)
 
-    return _run('stop', argv, lambda parser: None, call)
+    return _run('stop', 'Disarm the controller: the rotors stop.', argv, lambda parser: None,
+                call)
 
 
 if __name__ == '__main__':      # python -m geoctl_ros.nodes.commands setpoint|stop ARGS
