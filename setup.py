@@ -75,6 +75,8 @@ setup(
             'calibrate = geoctl_ros.nodes.calibrate:main',
             'record = geoctl_ros.nodes.recorder:main',
             'view = geoctl_ros.nodes.view:main',
+            'setpoint = geoctl_ros.nodes.commands:setpoint',
+            'stop = geoctl_ros.nodes.commands:stop',
             'scenario = geoctl_ros.cli.scenario:main',
             'report = geoctl_ros.cli.report:main',
             # the flight chain's launch prefix: SCHED_FIFO where permitted, else one line

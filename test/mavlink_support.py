@@ -91,6 +91,28 @@ def arm(gcs, mon):
                     since=t0).result
 
 
+def statustext(gcs, prefix, timeout, mon, since):
+    """The first whole STATUSTEXT received since since that starts with prefix: its chunks (one
+    id, in chunk_seq order; the last one shorter than 50 characters) joined.
+    """
+    def whole():
+        chunks = {}
+        for m in gcs.since(since, 'STATUSTEXT'):
+            if not m.id:
+                if m.text.startswith(prefix):
+                    return m.text
+                continue
+            chunks.setdefault(m.id, {})[m.chunk_seq] = m.text
+        for parts in chunks.values():
+            text = ''.join(parts[k] for k in sorted(parts))
+            if (text.startswith(prefix) and sorted(parts) == list(range(len(parts)))
+                    and len(parts[len(parts) - 1]) < 50):
+                return text
+        return None
+    gcs.wait(lambda m: whole() is not None, timeout, 'a STATUSTEXT: ' + prefix, mon, since)
+    return whole()
+
+
 def is_ours(m):
     return m.get_srcSystem() == SYSID and m.get_srcComponent() == mav.MAV_COMP_ID_AUTOPILOT1
 

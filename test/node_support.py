@@ -5,6 +5,8 @@ checks what they publish and feeds inputs where a test needs it.
 import math
 import os
 import pathlib
+import subprocess
+import sys
 
 import numpy as np
 import rclpy
@@ -13,7 +15,7 @@ from rosbags.typesys import Stores, get_typestore
 from support import FakeInputs
 
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.sil.processes import NodeProcess
+from geoctl_ros.sil.processes import NodeProcess, executable
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TESTBED = os.path.join(ROOT, 'config', 'testbed.yaml')
@@ -97,3 +99,26 @@ def read_back(path, axis):
         assert counts == {c.topic: c.msgcount for c in reader.connections}
         return (counts, reader.start_time * 1e-9, reader.end_time * 1e-9, np.array(angles),
                 np.array(stamps))
+
+
+class OperatorCommand:
+    """An operator's command (``setpoint``, ``stop``: geoctl_ros.nodes.commands) as its console
+    script runs it (``ros2 run geoctl_ros NAME`` runs the same file), a process beside the
+    monitor; where the script is not installed, its module.
+    """
+
+    def __init__(self, name, *args):
+        exe = executable(name)
+        cmd = [exe] if exe else [sys.executable, '-m', 'geoctl_ros.nodes.commands', name]
+        self.proc = subprocess.Popen(cmd + list(args), stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True)
+
+    def answer(self, mon, timeout=30.0):
+        """(exit code, output), the monitor spinning (and recording) while the command runs."""
+        try:
+            mon.wait_for(lambda: self.proc.poll() is not None, timeout, 'the command to answer')
+        except TimeoutError:
+            self.proc.kill()
+            self.proc.wait()
+            raise
+        return self.proc.returncode, self.proc.stdout.read()

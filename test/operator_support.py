@@ -63,7 +63,9 @@ SOURCES = {
     'esc_i2c': ['nodes/esc_i2c.py', 'esc/driver.py', 'esc/health.py', 'esc/protocol.py'],
     'mavlink_bridge': [
         'nodes/mavlink_bridge.py', 'nodes/mavlink_calls.py', 'nodes/autopilot_imu.py',
-        'mavlink/health.py', 'mavlink/controller_view.py', 'mavlink/signing.py'],
+        'mavlink/health.py', 'mavlink/controller_view.py', 'mavlink/signing.py',
+        'mavlink/vehicle.py'],
+    'operator commands': ['nodes/commands.py'],     # setpoint, stop: what they print
 }
 
 # The functions whose sentences the sinks pass on (qualified names in their file).
@@ -116,7 +118,8 @@ MESSAGE_NAMES = {'problem', 'message', 'why', 'reason', 'flight_note', 'foreign_
 
 LOG_LEVELS = {'warning', 'warn', 'error', 'fatal'}          # WARN and above
 EXCEPTIONS = {'EscStartError', 'SigningKeyError'}
-STATUS_CLASSES = {'ArmResult': 1, 'Status': 1, 'EscReport': 1}   # class -> the message's index
+# class -> the message's index (Say: a STATUSTEXT the bridge sends for the vehicle)
+STATUS_CLASSES = {'ArmResult': 1, 'Status': 1, 'EscReport': 1, 'Say': 0}
 
 
 def _tree(path):
@@ -168,6 +171,7 @@ FORWARDED = {
     ('nodes/controller.py', "'; '.join(self.loop.gap_notes(now))"): 'loop_status.gap_notes',
     ('nodes/controller.py', "[('armed', problem)]"): 'validate.change_problem',
     ('nodes/controller.py', "[('cones', problem)]"): 'ControlLoop.reconfiguration_problem',
+    ('nodes/controller.py', "[('setpoint', problem)]"): 'setpoint_problem (a set point refused)',
     ('nodes/runtime.py', 'str(e)'): 'ConfigError (the parameters, docs/parameters.md)',
     ('nodes/runtime.py', 'problem'): 'scheduling_problem',
     ('nodes/esc_i2c.py', "[('esc.addresses', str(e))]"): 'EscStartError(...) in driver.start',
@@ -175,6 +179,7 @@ FORWARDED = {
     ('nodes/mavlink_bridge.py', "[('mavlink.signing_key_file', str(e))]"):
         'SigningKeyError(...) in signing.load_key',
     ('nodes/mavlink_bridge.py', 's.message'): "the controller's diagnostics message",
+    ('nodes/mavlink_bridge.py', 'action.text'): 'Say(...) in mavlink/vehicle.py',
     ('mavlink/signing.py', "'%s: %s' % (path, e.strerror)"): "the key file's path and the "
         "system's reason (No such file or directory, ...)",
     ('nodes/esc_i2c.py', 'r.message'): 'esc.health.report',
@@ -466,6 +471,8 @@ class Collector:
                                           lineno=node.lineno), 'log')
                 elif m.source(f) == 'sys.stderr.write' and node.args:
                     self.add(m, node.args[0], 'log')
+                elif name == 'print' and node.args:          # a command's output
+                    self.add(m, node.args[0], 'output')
                 elif name == '_text' and node.args:
                     self.add(m, node.args[0], 'statustext')
                 elif name in STATUS_CLASSES and len(node.args) > STATUS_CLASSES[name]:

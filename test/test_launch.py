@@ -129,7 +129,8 @@ def test_sil_launch_flies_each_law_on_loopback_and_keeps_the_cone(
     with open(os.path.join(ROOT, 'config', 'testbed.yaml')) as fh:
         doc = yaml.safe_load(fh)
     controller = doc['controller']['ros__parameters']
-    controller.update(pose_ride_through=1.0, imu_ride_through=1.0)
+    controller.update(pose_ride_through=1.0, imu_ride_through=1.0,
+                      arming_setpoint='configured')      # the arming flies the manoeuvre
     params = tmp_path / 'testbed_roomy.yaml'
     params.write_text(yaml.safe_dump(doc))
     launch = Launch(env, tmp_path / 'launch.log', 'sil.launch.xml', 'params_file:=%s' % params,

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.law import hold
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.control import AttitudeController
 from geoctl_ros.core.supervisor.control_tick import ControlTick
@@ -107,10 +108,11 @@ def test_setpoint_requests():
     assert np.allclose(loop.controller.R_d @ [1, 0, 0], [0, 1, 0])
 
 
-def test_schedule_plays_from_arming():
+def test_schedule_plays_from_arming_when_configured_and_not_into_a_hold():
     q1 = list(so3.rot_to_quat(so3.axis_angle([0, 0, 1], math.radians(80))))
-    loop = make_loop(**{'setpoint_schedule.times': [0.0, 2.0],
-                        'setpoint_schedule.quaternions': q1 + [0.0, 0.0, 0.0, 1.0]})
+    schedule = {'setpoint_schedule.times': [0.0, 2.0],
+                'setpoint_schedule.quaternions': q1 + [0.0, 0.0, 0.0, 1.0]}
+    loop = make_loop(arming_setpoint='configured', **schedule)
     feed(loop, 10.0)
     loop.tick(10.0, 0.01)
     assert np.allclose(loop.controller.R_d, np.eye(3))        # not before arming
@@ -120,6 +122,86 @@ def test_schedule_plays_from_arming():
     feed(loop, 12.05)
     loop.tick(12.05, 0.01)
     assert np.allclose(loop.controller.R_d, np.eye(3))
+    held = make_loop(**schedule)                               # arming_setpoint hold
+    for t in (10.0, 10.01, 12.05):
+        feed(held, t)
+        if t == 10.0:
+            assert held.arm(t).ok
+        held.tick(t, 0.01)
+        assert np.allclose(held.controller.R_d, so3.quat_to_rot(YAW90))
+
+
+def test_arming_holds_the_attitude_measured_then_and_the_operator_commands_what_follows():
+    """arming_setpoint hold (the default): an arming flies the attitude measured at it,
+    resting on a stop (45 deg) or anywhere; a set point sent afterwards is flown; ~/hold takes
+    the attitude measured last; each new arming holds where the vehicle is then.
+    """
+    loop = make_loop()
+    on_stop = so3.quat_to_rot(YAW90) @ so3.axis_angle([0, 1, 0], math.radians(45.0))
+    feed(loop, 0.0, q=so3.rot_to_quat(on_stop))
+    assert np.allclose(loop.controller.R_d, np.eye(3))        # the configured one, disarmed
+    assert loop.arm(0.0).ok
+    assert np.allclose(loop.controller.R_d, on_stop)
+    tick = loop.tick(0.0, 0.01)
+    assert np.allclose(tick.setpoint, on_stop)                # what active_setpoint shows
+    assert loop.request_setpoint((0.0, 0.0, 0.0, 1.0)) is None
+    assert np.allclose(loop.controller.R_d, np.eye(3))
+    feed(loop, 0.01)                                          # level at yaw 90 now
+    assert loop.hold() is None
+    assert np.allclose(loop.controller.R_d, so3.quat_to_rot(YAW90))
+    assert loop.arm(0.01).ok                                  # armed already: nothing changes
+    assert loop.request_setpoint((0.0, 0.0, 0.0, 1.0)) is None
+    loop.disarm()
+    tilted = so3.quat_to_rot(YAW90) @ so3.axis_angle([1, 0, 0], math.radians(-20.0))
+    feed(loop, 0.02, q=so3.rot_to_quat(tilted))
+    assert loop.arm(0.02).ok
+    assert np.allclose(loop.controller.R_d, tilted)
+    assert make_loop().hold() == 'no pose received yet'
+
+
+def test_a_hold_lifts_a_vehicle_resting_on_its_stops_five_degrees_inside_them():
+    """With the joint's stops at 45 deg, the attitude measured resting on them (45.3 deg: sunk
+    into their spring) is held at 40 deg, turned towards upright about the horizontal axis across
+    its tilt: the direction it leans in and its turn about its own z axis are kept. 30 deg of
+    tilt, within the stops, is held as measured; so is 45 deg without stops (make_loop's).
+    """
+    up = np.array([0.0, 0.0, 1.0])
+    on_stop = so3.quat_to_rot(YAW90) @ so3.axis_angle([0, 1, 0], math.radians(45.3))
+    loop = make_loop(joint_tilt_max_deg=45.0)
+    feed(loop, 0.0, q=so3.rot_to_quat(on_stop))
+    assert loop.arm(0.0).ok
+    held = loop.controller.R_d
+    assert math.degrees(hold.tilt(held, up)) == pytest.approx(40.0, abs=1e-9)
+    lean = held[:2, 2] / np.linalg.norm(held[:2, 2])               # the body's z, seen from above
+    assert np.allclose(lean, on_stop[:2, 2] / np.linalg.norm(on_stop[:2, 2]), atol=1e-12)
+    turn = held.T @ on_stop                                        # the lift, in the body
+    assert math.degrees(so3.angle(turn)) == pytest.approx(5.3, abs=1e-9)
+    assert abs(so3.log(turn)[2]) < 1e-12                           # none of it about z
+    within = so3.quat_to_rot(YAW90) @ so3.axis_angle([1, 0, 0], math.radians(30.0))
+    feed(loop, 0.01, q=so3.rot_to_quat(within))
+    assert loop.hold() is None and np.allclose(loop.controller.R_d, within)
+    free = make_loop()
+    feed(free, 0.0, q=so3.rot_to_quat(on_stop))
+    assert free.hold() is None and np.allclose(free.controller.R_d, on_stop)
+
+
+def test_an_arming_whose_hold_the_configuration_refuses_is_refused_with_the_reason():
+    """The attitude to hold is checked as any set point is: 5 deg clear of the cone, the
+    barrier cannot hold unmodelled_moment_max 0.1 N m there (the default k_R: about 11 deg is
+    needed), so the arming is refused naming it, and nothing changes; configured, the same
+    arming flies the set point in force.
+    """
+    near = so3.axis_angle([0, 0, 1], math.radians(45.0 - 17.0))          # 5 deg clear
+    for arming in ('hold', 'configured'):
+        loop = make_loop(unmodelled_moment_max=0.1, arming_setpoint=arming)
+        feed(loop, 0.0, q=so3.rot_to_quat(near))
+        result = loop.arm(0.0)
+        assert result.ok == (arming == 'configured'), result.message
+        assert np.allclose(loop.controller.R_d, np.eye(3))
+        if arming == 'hold':
+            assert ("the attitude to hold: setpoint is 5.00 deg clear of cone 'obstacle'; "
+                    'against unmodelled_moment_max = 0.1 N m') in result.message
+            assert loop.hold().startswith('setpoint is 5.00 deg clear')
 
 
 def test_schedule_through_a_cone_is_refused_at_configuration():

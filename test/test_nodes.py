@@ -9,6 +9,7 @@ from node_support import (
     FED,
     LEVEL_YAW90,
     TESTBED,
+    OperatorCommand,
     fed_controller,
     published_values_are_finite,
     wait_for_controller,
@@ -22,7 +23,9 @@ from std_srvs.srv import SetBool
 
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.telemetry.diagnostics import ERROR, WARN
+from geoctl_ros.nodes import commands
 from geoctl_ros.nodes.controller import ControllerNode
+from geoctl_ros.nodes.conversions import refusal_reason
 
 pytestmark = pytest.mark.dds
 
@@ -52,6 +55,9 @@ def test_arming_needs_fresh_inputs_and_disarming_zeroes_the_motors(ros):
     # about hover (118/240): a condition, since this process's feeder can stall beside the other
     # DDS tests, and the commands move while the controller rides its gap through
     mon.wait_for(lambda: all(0.3 < c < 0.7 for c in mon.last('motors')), 5.0, 'about hover')
+    # the arming holds the attitude fed (arming_setpoint hold); a set point 90 deg from it, sent
+    # as the setpoint command sends it, is taken armed
+    assert mon.set_parameter('setpoint', [0.0, 0.0, 0.0, 1.0]).successful
     # 90 deg from R_d: the estimate grows (a condition: beside the flights at nice 19 this test's
     # feeder stalls, and the controller learns nothing while it rides the gaps through)
     mon.wait_for(lambda: np.linalg.norm(mon.last('dbar')) > 1e-3, 10.0, 'the estimate to grow')
@@ -63,8 +69,14 @@ def test_arming_needs_fresh_inputs_and_disarming_zeroes_the_motors(ros):
     # are held still, so the controller's delay compensation predicts a motion that never comes
     # and the estimate keeps growing afterwards)
     assert np.linalg.norm(mon.since('dbar', t_reset)[0]) < 0.2 * before
-    assert mon.arm(False).success
+    # the operator's commands (their console scripts): hold the attitude now, then stop
+    code, out = OperatorCommand('setpoint', '--hold').answer(mon)
+    assert (code, out.strip()) == (0, 'accepted: holding [0.0000, 0.0000, 0.7071, 0.7071] '
+                                      '(x, y, z, w)'), out
+    code, out = OperatorCommand('stop').answer(mon)
+    assert (code, out.strip()) == (0, 'accepted: disarmed'), out
     mon.wait_for(lambda: zero_commands(mon), 2.0, 'zero commands after disarming')
+    assert mon.last_diagnostic().figures.state == 'disarm requested'
 
 
 @pytest.mark.realtime
@@ -341,3 +353,30 @@ def test_a_control_step_that_raises_disarms_and_commands_zero_and_the_node_stays
         executor.remove_node(mon)
         executor.shutdown()
         node.destroy_node()
+
+
+def test_the_setpoint_command_takes_one_set_point_in_the_packages_frames(capsys):
+    """What ``setpoint`` sends: yaw, pitch and roll (z-y-x, deg) as the quaternion the
+    controller's ``setpoint`` takes; arguments that name no one set point, or no number, exit 2
+    before any node starts; a command that no controller answers exits 3.
+    """
+    assert np.allclose(commands.setpoint_quaternion(90.0, 0.0, 0.0),
+                       [0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5)])
+    R = so3.quat_to_rot(commands.setpoint_quaternion(30.0, 10.0, -5.0))
+    assert np.allclose(R, so3.axis_angle([0, 0, 1], math.radians(30.0))
+                       @ so3.axis_angle([0, 1, 0], math.radians(10.0))
+                       @ so3.axis_angle([1, 0, 0], math.radians(-5.0)))
+    for argv in ([], ['--hold', '--yaw-deg', '0'], ['--quaternion', '0', '0', '0', '1',
+                                                   '--pitch-deg', '5'],
+                 ['--quaternion', '0', '0', '0', '1', '--hold'], ['--yaw-deg', 'nan'],
+                 ['--hold', '--wait', '0']):
+        with pytest.raises(SystemExit) as e:
+            commands.setpoint(['setpoint'] + argv)
+        assert e.value.code == commands.BAD_ARGUMENTS, argv
+    assert 'give one of --yaw-deg/--pitch-deg/--roll-deg' in capsys.readouterr().err
+    assert refusal_reason('invalid parameters:\n  setpoint: setpoint is not finite\n') == (
+        'setpoint: setpoint is not finite')
+    # no controller of that name answers: exit 3, saying so
+    assert commands.stop(['stop', '--controller', 'nobody', '--wait', '0.5']) == (
+        commands.NO_ANSWER)
+    assert 'stop: no answer from /nobody within 0.5 s' in capsys.readouterr().err

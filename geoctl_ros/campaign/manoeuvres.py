@@ -317,6 +317,7 @@ class Manoeuvres:
         controller.update(gains or {})
         controller.update(cone_values(m['cones']))
         controller['setpoint'] = _floats(so3.rot_to_quat(m['R_d']))
+        controller['arming_setpoint'] = 'configured'     # an experiment, on the nodes too
         if gains and not self.goal_ok(m['cones'], m['R_d'], gains):
             controller['unmodelled_moment_max'] = 0.0
         S = np.diag(np.sqrt(m['inertia_factors']))

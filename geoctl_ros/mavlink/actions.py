@@ -29,6 +29,24 @@ class SetParameter(NamedTuple):
     index: int
 
 
+class Say(NamedTuple):
+    """Tell the ground station text in STATUSTEXT, in chunks of 50 characters when longer;
+    limited: at most mavlink.statustext_rate_hz (what a flood of bad messages would repeat).
+    """
+
+    text: str
+    severity: str = 'MAV_SEVERITY_WARNING'
+    limited: bool = False
+
+
+class SetAttitude(NamedTuple):
+    """Fly this set point (the ground station's SET_ATTITUDE_TARGET, in the package's frames:
+    the quaternion (x, y, z, w) of ENU <- FLU) through the controller's ``setpoint`` parameter.
+    """
+
+    q: tuple
+
+
 class MotorTest(NamedTuple):
     """Spin rotor (1-based) at a normalised command for seconds through the ESC node."""
 

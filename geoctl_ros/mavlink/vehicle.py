@@ -17,6 +17,8 @@ import math
 
 import numpy as np
 
+from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.supervisor.safety import quaternion_problem
 from geoctl_ros.core.telemetry.diagnostics import ERROR
 from geoctl_ros.mavlink import frames
 from geoctl_ros.mavlink.actions import (
@@ -25,7 +27,9 @@ from geoctl_ros.mavlink.actions import (
     Arm,
     Ignored,
     MotorTest,
+    Say,
     Send,
+    SetAttitude,
     SetParameter,
     m_const,
     shown,
@@ -43,6 +47,7 @@ from geoctl_ros.params.build import input_timeouts
 from geoctl_ros.params.param import MOTOR_TEST_DURATION_MAX
 
 ARRAY_MARGINS, ARRAY_DBAR = 1, 2
+SAME_SETPOINT = 1e-4       # rad: a SET_ATTITUDE_TARGET this close to the set point in force is it
 
 
 class Vehicle:
@@ -196,8 +201,8 @@ class Vehicle:
         return target in (0, self.system_id)
 
     def handle(self, msg):
-        """What an incoming message asks: a list of actions (Send, Arm, SetParameter, MotorTest;
-        Ignored for anything not for us).
+        """What an incoming message asks: a list of actions (Send, Say, Arm, SetParameter,
+        SetAttitude, MotorTest; Ignored for anything not for us).
         """
         kind = msg.get_type()
         if not self.for_us(msg):
@@ -215,6 +220,8 @@ class Vehicle:
             if i is None:
                 return [Send(self.statustext('unknown parameter %s' % msg.param_id))]
             return [SetParameter(TABLE[i][0], float(msg.param_value), i)]
+        if kind == 'SET_ATTITUDE_TARGET':
+            return self._attitude_target(msg)
         if kind == 'SETUP_SIGNING':       # the key is the vehicle's file, never set over the link
             return [Send(self.statustext('SETUP_SIGNING refused: the signing key comes from '
                                              "the vehicle's key file only"))]
@@ -223,6 +230,26 @@ class Vehicle:
                                                            msg.get_srcComponent(), 0,
                                                            getattr(msg, 'mission_type', 0)))]
         return []
+
+    def _attitude_target(self, msg):
+        """SET_ATTITUDE_TARGET (a ground station's or an offboard computer's set point): its
+        attitude (NED/FRD, w x y z) as SetAttitude in the package's frames; the body rates and
+        the thrust are not taken (the controller holds what it is given). Refused with a
+        STATUSTEXT (at most statustext_rate_hz) when the message ignores the attitude or its
+        quaternion is not one; nothing when it is the set point in force (a stream of the same
+        one asks once).
+        """
+        if msg.type_mask & m_const('ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE'):
+            return [Say('set point refused: SET_ATTITUDE_TARGET ignores its attitude (only an '
+                        'attitude is taken)', limited=True)]
+        w, x, y, z = (float(v) for v in msg.q)
+        problem = quaternion_problem((x, y, z, w))
+        if problem:
+            return [Say('set point refused: SET_ATTITUDE_TARGET ' + problem, limited=True)]
+        R = frames.enu_flu(frames.from_wxyz((w, x, y, z)))
+        if self.view.R_d is not None and so3.angle(self.view.R_d.T @ R) < SAME_SETPOINT:
+            return [Ignored('the set point in force')]
+        return [SetAttitude(tuple(float(v) for v in so3.rot_to_quat(R)))]
 
     def denied(self, command, why):
         """COMMAND_ACK DENIED and a STATUSTEXT saying why: the answer to a malformed command."""

@@ -9,9 +9,11 @@ docs/interface.md and docs/parameters.md.
 from dataclasses import replace
 import sys
 import time
+from typing import NamedTuple
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, QuaternionStamped
+import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import Imu
@@ -19,6 +21,7 @@ from std_msgs.msg import Float64MultiArray, UInt16MultiArray, UInt32MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core.actuation.esc_wire import ArmedState
+from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.law.gains import gain_condition
 from geoctl_ros.core.supervisor.loop import ControlLoop
 from geoctl_ros.core.supervisor.loop_types import step_period
@@ -45,11 +48,20 @@ from geoctl_ros.params import (
     configuration_given,
     controller_setup,
     resolve,
+    setpoint_change,
 )
 from geoctl_ros.records.fields import quaternion, vector
 
 DIAGNOSTICS_PERIOD = 0.5      # s: the fixed statistics window
 STATUS_NAME = DIAGNOSTICS_NAME
+
+
+class SetpointChange(NamedTuple):
+    """A change of the ``setpoint`` parameter alone (a command's, a ground station's), checked:
+    the quaternion (x, y, z, w) to fly.
+    """
+
+    q: np.ndarray
 
 
 def build(values):
@@ -105,6 +117,7 @@ class ControllerNode(Node):
         self._armed_sent = None
         self.create_service(SetBool, '~/arm', self._on_arm)
         self.create_service(Trigger, '~/reset_adaptation', self._on_reset)
+        self.create_service(Trigger, '~/hold', self._on_hold)
 
         self.motors_msg = motor_commands_msg(self.session)
         self.telemetry = Telemetry(self, self.frame_id, self.world_frame_id)
@@ -163,19 +176,43 @@ class ControllerNode(Node):
     def _validate(self, values, changed):
         """A run-time change: only gains and goals while armed (``CHANGE_WHILE_ARMED``), the
         whole configuration, and the set point now being flown (which may have come in on the
-        topic) against the new cones.
+        topic) against the new cones. A change of the set point alone is checked as the
+        controller takes a set point (``_setpoint_change``).
         """
         if self.loop.supervisor.armed:
             problem = change_problem(changed, CHANGE_WHILE_ARMED, 'while disarmed')
             if problem:
                 raise ConfigError([('armed', problem)])
+        q = setpoint_change(values, changed)
+        if q is not None:
+            return self._setpoint_change(q)
         setup = build(values)
         problem = self.loop.reconfiguration_problem(setup)
         if problem:
             raise ConfigError([('cones', problem)])
         return setup
 
+    def _setpoint_change(self, q):
+        """A new value q of ``setpoint`` alone (checked by the parameter's schema), checked by
+        the controller as every set point is (``AttitudeController.setpoint_problem``: the
+        cones' bands, ``unmodelled_moment_max``), without building the whole configuration again
+        (tens of ms of the thread that runs the control steps): a SetpointChange, or ConfigError
+        with the reason.
+        """
+        problem = self.loop.controller.setpoint_problem(so3.quat_to_rot(q))
+        if problem:
+            self.get_logger().warning('set point refused: ' + problem)
+            raise ConfigError([('setpoint', problem)])
+        return SetpointChange(q)
+
     def _apply(self, setup, changed):
+        if isinstance(setup, SetpointChange):
+            problem = self.loop.request_setpoint(setup.q)
+            if problem:     # (checked just before, against the same controller: a defect)
+                self.get_logger().error('set point not applied: ' + problem)
+            else:
+                self.get_logger().info('set point: flying %s (x, y, z, w)' % _shown(setup.q))
+            return
         problem = self.loop.reconfigure(
             setup, setpoint_changed='setpoint' in changed,
             schedule_changed=any(n.startswith('setpoint_schedule.') for n in changed))
@@ -248,6 +285,19 @@ class ControllerNode(Node):
     def _on_reset(self, request, response):
         self.loop.reset_adaptation()
         response.success, response.message = True, 'disturbance estimate reset to zero'
+        return response
+
+    def _on_hold(self, request, response):
+        """~/hold: fly the attitude measured last, if the controller takes it as a set point."""
+        problem = self.loop.hold()
+        response.success = problem is None
+        if problem is None:
+            response.message = 'holding %s (x, y, z, w)' % _shown(
+                so3.rot_to_quat(self.loop.controller.R_d))
+            self.get_logger().info('set point: ' + response.message)
+        else:
+            response.message = 'hold refused: ' + problem
+            self.get_logger().warning('hold refused: ' + problem)
         return response
 
     # --- the control tick --------------------------------------------------------------------
@@ -331,6 +381,11 @@ class ControllerNode(Node):
         for s in (self._period_stats, self._compute_stats, self._latency_stats):
             s.reset()
         self.loop.end_window()
+
+
+def _shown(q):
+    """A quaternion as the replies and log lines show it."""
+    return '[%s]' % ', '.join('%.4f' % v for v in q)
 
 
 def main():

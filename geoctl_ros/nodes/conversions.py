@@ -90,6 +90,16 @@ def python_value(value):
     return value
 
 
+def refusal_reason(text):
+    """A parameter set's refusal (``SetParametersResult.reason``) on one line: the controller's
+    ConfigError names each parameter after a heading ('invalid parameters:'), one per line.
+    """
+    lines = [line.strip() for line in str(text).strip().splitlines()]
+    if lines and lines[0] == 'invalid parameters:':
+        lines = lines[1:]
+    return '; '.join(line for line in lines if line) or 'no reason given'
+
+
 def level(status_msg):
     """The level of a diagnostic_msgs/DiagnosticStatus as an int (the field is a byte)."""
     raw = status_msg.level

@@ -4,7 +4,8 @@ station.
 A thin shell: topics of the controller feed ``geoctl_ros.mavlink.vehicle.Vehicle``, its messages go
 out through ``geoctl_ros.mavlink.link.Link`` (a thread of its own), and what a ground station asks
 is carried out through the controller's own services: ``~/arm`` for MAV_CMD_COMPONENT_ARM_DISARM,
-``set_parameters`` for PARAM_SET (validated exactly as ``ros2 param set`` is); and the ESC node's
+``set_parameters`` for PARAM_SET (validated exactly as ``ros2 param set`` is) and for
+SET_ATTITUDE_TARGET (its ``setpoint``, checked as every set point is); and the ESC node's
 ``~/motor_test`` for MAV_CMD_DO_MOTOR_TEST (refused while armed). Optionally a second
 link reads a PX4/ArduPilot board's HIGHRES_IMU and publishes it on ``imu`` (FLU). Its own health
 goes to /diagnostics. Parameters: ``mavlink.*`` in docs/parameters.md.
@@ -25,7 +26,16 @@ from geoctl_ros.core.telemetry.diagnostics import ERROR, WARN
 from geoctl_ros.core.telemetry.diagnostics import NAME as CONTROLLER_STATUS
 from geoctl_ros.core.telemetry.scheduling import scheduling
 from geoctl_ros.mavlink import health, identity, signing
-from geoctl_ros.mavlink.actions import Arm, Ignored, MotorTest, Send, SetParameter, m_const
+from geoctl_ros.mavlink.actions import (
+    Arm,
+    Ignored,
+    MotorTest,
+    Say,
+    Send,
+    SetAttitude,
+    SetParameter,
+    m_const,
+)
 from geoctl_ros.mavlink.link import Link, encoder
 from geoctl_ros.mavlink.params import TABLE
 from geoctl_ros.mavlink.vehicle import Vehicle
@@ -80,6 +90,8 @@ class MavlinkBridge(ControllerCalls, GroundStationReports, Node):
         self._last_text = -1e9
         self._last_diag = (None, None)
         self._cone_entries = 0          # the controller's cone entries last reported
+        # SET_ATTITUDE_TARGET: one asked at a time, the next waiting, the last one refused
+        self._attitude_pending, self._attitude_next, self._attitude_refused = False, None, None
         ctl = '/' + cfg.controller.strip('/')
 
         view = self.vehicle.view
@@ -250,12 +262,16 @@ class MavlinkBridge(ControllerCalls, GroundStationReports, Node):
     def _act(self, action, msg):
         if isinstance(action, Send):
             self.link.send(action.message)
+        elif isinstance(action, Say):
+            self._text(action.text, action.severity, action.limited)
         elif isinstance(action, Ignored):
             self.counts[health.IGNORED] += 1
         elif isinstance(action, Arm):
             self._arm(action.on, action.command)
         elif isinstance(action, SetParameter):
             self._set_param(action.name, action.value, action.index)
+        elif isinstance(action, SetAttitude):
+            self._set_attitude(action.q)
         elif isinstance(action, MotorTest):
             self._motor_test(action.rotor, action.command, action.seconds, action.mav_command)
         else:

@@ -1,6 +1,7 @@
 """The MAVLink bridge's parts (mixins of ``MavlinkBridge``): what it asks of the other nodes for a
-ground station (arm, set a parameter, test a motor) through their services, answering the ground
-station when they answer; and what it reports (STATUSTEXT, its own diagnostics).
+ground station (arm, set a parameter or the set point, test a motor) through their services,
+answering the ground station when they answer; and what it reports (STATUSTEXT, its own
+diagnostics).
 """
 import time
 
@@ -11,6 +12,8 @@ from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.mavlink import health
 from geoctl_ros.mavlink.params import BY_ROS, to_ros
+from geoctl_ros.nodes.conversions import refusal_reason
+from geoctl_ros.params import SETPOINT
 
 GCS_TIMEOUT = 3.0          # s without a ground-station heartbeat: "no ground station"
 UNSIGNED_WARNING = 'MAVLink unsigned: anyone on the link can arm the vehicle'
@@ -38,6 +41,42 @@ class ControllerCalls:
                 command, 'MAV_RESULT_ACCEPTED' if ok else 'MAV_RESULT_DENIED'))
             if not ok:
                 self._text(r.message if r is not None else 'arm: no answer', 'MAV_SEVERITY_ERROR')
+        future.add_done_callback(done)
+
+    def _set_attitude(self, q):
+        """SET_ATTITUDE_TARGET's set point q (x, y, z, w; ENU <- FLU) through the controller's
+        ``setpoint`` parameter, checked there as every set point is. One at a time: one that
+        comes while another is asked waits, replaced by any later one. A refusal is answered
+        with a STATUSTEXT giving the reason (once: a stream of the same set point is not asked
+        again), an acceptance with an INFO one (at most statustext_rate_hz).
+        """
+        if self._attitude_pending:
+            self._attitude_next = q
+            return
+        if q == self._attitude_refused:
+            return
+        if not self.set_client.service_is_ready():
+            self._text('set point refused: the controller is not reachable',
+                       'MAV_SEVERITY_ERROR', limited=True)
+            return
+        self._attitude_pending = True
+        param = Parameter(SETPOINT, value=list(q)).to_parameter_msg()
+        future = self.set_client.call_async(SetParameters.Request(parameters=[param]))
+
+        def done(f):
+            self._attitude_pending = False
+            r = f.result()
+            res = r.results[0] if r is not None and r.results else None
+            if res is not None and res.successful:
+                self._attitude_refused = None
+                self._text('set point accepted', 'MAV_SEVERITY_INFO', limited=True)
+            else:
+                self._attitude_refused = q
+                self._text('set point refused: ' + refusal_reason(
+                    res.reason if res is not None else 'no answer'), 'MAV_SEVERITY_ERROR')
+            waiting, self._attitude_next = self._attitude_next, None
+            if waiting is not None:
+                self._set_attitude(waiting)
         future.add_done_callback(done)
 
     def _motor_test(self, rotor, command, duration, mav_command):

@@ -21,50 +21,52 @@ Nothing here imports rclpy: the nodes (``geoctl_ros.nodes.ros_params``) and the 
 use the same code.
 """
 from geoctl_ros.params.build import (
+                                     SETPOINT,
                                      ControllerSetup,
                                      airframe,
                                      cone_set,
                                      controller_config,
                                      controller_setup,
                                      mixer,
+                                     setpoint_change,
                                      setpoint_rotation,
                                      settings,
 )
 from geoctl_ros.params.files import (
-    flatten,
-    load_parameter_file,
-    node_overrides,
-    write_parameter_file,
+                                     flatten,
+                                     load_parameter_file,
+                                     node_overrides,
+                                     write_parameter_file,
 )
 from geoctl_ros.params.param import (
-    BOTH,
-    CONTROLLER,
-    ESC,
-    LAB_INERTIA,
-    MAVLINK,
-    RECORD,
-    SCENARIO,
-    SIM,
-    VIEW,
-    ConfigError,
-    Param,
+                                     BOTH,
+                                     CONTROLLER,
+                                     ESC,
+                                     LAB_INERTIA,
+                                     MAVLINK,
+                                     RECORD,
+                                     SCENARIO,
+                                     SIM,
+                                     VIEW,
+                                     ConfigError,
+                                     Param,
 )
 from geoctl_ros.params.schema import (
-    AIRFRAME_NAMES,
-    BY_NAME,
-    CHANGE_WHILE_ARMED,
-    CONE_KEY,
-    CONE_SCHEMA,
-    ESC_LIVE,
-    SCHEMA,
-    cone_param,
-    schema_for,
+                                     AIRFRAME_NAMES,
+                                     BY_NAME,
+                                     CHANGE_WHILE_ARMED,
+                                     CONE_KEY,
+                                     CONE_SCHEMA,
+                                     ESC_LIVE,
+                                     SCHEMA,
+                                     cone_param,
+                                     schema_for,
 )
 from geoctl_ros.params.validate import (
-    change_problem,
-    check_value,
-    configuration_given,
-    resolve,
+                                     change_problem,
+                                     check_value,
+                                     configuration_given,
+                                     resolve,
 )
 
 __all__ = ['AIRFRAME_NAMES', 'BOTH', 'BY_NAME', 'CHANGE_WHILE_ARMED', 'CONE_KEY', 'CONE_SCHEMA',
@@ -74,4 +76,4 @@ __all__ = ['AIRFRAME_NAMES', 'BOTH', 'BY_NAME', 'CHANGE_WHILE_ARMED', 'CONE_KEY'
            'configuration_given', 'cone_set',
            'controller_config', 'controller_setup', 'flatten', 'load_parameter_file', 'mixer',
            'node_overrides', 'resolve', 'write_parameter_file',
-           'schema_for', 'setpoint_rotation', 'settings']
+           'schema_for', 'SETPOINT', 'setpoint_change', 'setpoint_rotation', 'settings']

@@ -5,7 +5,7 @@ airframe that must produce every moment).
 import collections
 from dataclasses import dataclass, fields, replace
 import math
-from typing import Any, Dict, List, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -27,6 +27,7 @@ from geoctl_ros.core.supervisor.loop_types import LoopSettings
 from geoctl_ros.core.supervisor.safety import SetpointSchedule, quaternion_problem
 from geoctl_ros.params.param import ConfigError
 from geoctl_ros.params.schema import BY_NAME
+from geoctl_ros.params.validate import check_value
 
 MOTOR_A_MIN = 1e-12     # N: the thrust curve's a, at least (a denormal overflowed its inverse)
 
@@ -171,6 +172,24 @@ def input_timeouts(values: dict) -> Tuple[float, float]:
 def setpoint_rotation(values: dict) -> np.ndarray:
     """R_d of the resolved controller parameters."""
     return so3.quat_to_rot(values['setpoint'])
+
+
+# The parameter a set point is sent as at run time (the setpoint command, a ground station's
+# SET_ATTITUDE_TARGET through the bridge): the controller takes it alone as a set point.
+SETPOINT = 'setpoint'
+
+
+def setpoint_change(values: dict, changed: set) -> Optional[np.ndarray]:
+    """A run-time change of the ``setpoint`` parameter alone (a command's, a ground station's):
+    its quaternion (x, y, z, w) checked by the schema (raises ConfigError with the reason); None
+    when the change names any other parameter (it is a reconfiguration).
+    """
+    if changed != {SETPOINT}:
+        return None
+    q, problem = check_value(BY_NAME[SETPOINT], values[SETPOINT])
+    if problem:
+        raise ConfigError([(SETPOINT, problem)])
+    return q
 
 
 @dataclass

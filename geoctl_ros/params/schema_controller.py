@@ -146,8 +146,17 @@ PARAMS = [
        'names of the forbidden cones; each needs cones.<name>.axis and .half_angle_deg',
        CONTROLLER),
     _p('setpoint', 'double_array', [0.0, 0.0, 0.0, 1.0], '-',
-       'desired attitude R_d as a quaternion (x, y, z, w), world frame', CONTROLLER, length=4,
-       check=unit_quaternion, lo=-1.0, hi=1.0),
+       'desired attitude R_d as a quaternion (x, y, z, w), world frame: what an arming flies '
+       'with arming_setpoint configured; set at run time (ros2 param set, the setpoint command, '
+       "a ground station's SET_ATTITUDE_TARGET), it is flown at once, or refused with the reason "
+       'and nothing changes', CONTROLLER, length=4, check=unit_quaternion, lo=-1.0, hi=1.0),
+    _p('arming_setpoint', 'string', 'hold', '-',
+       'what an arming flies once the rotors have spooled up: hold (the attitude measured at '
+       "arming, held 5 deg inside the joint's stops where it rests on them, as PX4 and "
+       'ArduPilot arm; the operator commands what comes next: the setpoint command, '
+       'docs/interface.md) or configured (setpoint, then setpoint_schedule from the '
+       'arming: an experiment). The headless runners (scenario, campaign, benchmark, falsify, '
+       'tune) fly their set point whatever this says', CONTROLLER, choices=('hold', 'configured')),
     _p('rate_hz', 'double', 100.0, 'Hz', 'control rate', CONTROLLER, lo=1.0, hi=1000.0),
     _p('allow_default_configuration', 'bool', False, '-',
        'arm even when started with no parameter file and no override, on these built-in '
@@ -175,7 +184,8 @@ PARAMS = [
        'gyro readings faster than this are refused', CONTROLLER, check=positive,
        lo=0.1, hi=200.0),
     _p('setpoint_schedule.times', 'double_array', [], 's',
-       'optional: times after arming at which the scheduled set points take over', CONTROLLER,
+       'optional: times after arming at which the scheduled set points take over (with '
+       'arming_setpoint configured)', CONTROLLER,
        lo=0.0, hi=3600.0),
     _p('setpoint_schedule.quaternions', 'double_array', [], '-',
        'optional: the scheduled set points, 4 values (x, y, z, w) per time', CONTROLLER,

@@ -1,8 +1,9 @@
 """The sim-in-the-loop flight of ``./run demo`` (``geoctl_ros.cli.demo``): the ``sim`` and
 ``controller`` nodes as two processes on a parameter file, armed through the controller's
-``~/arm`` service, recorded, disarmed, and summed up (the closest approach from the sim's true
-attitude, the final error, the loop's rate and latency from the controller's diagnostics, and
-the command stream a subscriber sees).
+``~/arm`` service (the arming flying the file's set point: ``FLY_CONFIGURED``), recorded,
+disarmed, and summed up (the closest approach from the sim's true attitude, the final error,
+the loop's rate and latency from the controller's diagnostics, and the command stream a
+subscriber sees).
 """
 import json
 import math
@@ -28,7 +29,7 @@ from geoctl_ros.params import (
     resolve,
 )
 from geoctl_ros.params.esc import esc_config
-from geoctl_ros.sil.processes import Monitor, NodeProcess
+from geoctl_ros.sil.processes import FLY_CONFIGURED, Monitor, NodeProcess
 from geoctl_ros.sil.rosenv import use_node_env
 
 
@@ -59,7 +60,7 @@ def fly(params_file, out, duration, monitor_factory=None, mavlink=None, record=T
             os.unlink(bus_path)
         bus_args = ('-p', 'esc.virtual_bus:=' + bus_path)
     procs = [NodeProcess('sim', params_file, bus_args, log_dir=out),
-             NodeProcess('controller', params_file, log_dir=out)]
+             NodeProcess('controller', params_file, FLY_CONFIGURED, log_dir=out)]
     if esc:             # first in the list: stopped (zero to every ESC) before the sim goes
         procs.insert(0, NodeProcess('esc_i2c', params_file,
                                     bus_args + ('-p', 'esc.probe_timeout:=20.0'), log_dir=out))

@@ -50,6 +50,12 @@ def executable(name):
     return shutil.which(name)
 
 
+# What the experiment runners over DDS (the demo's flight, the sensor cases, the soak) give the
+# controller: an arming flies the file's set point (and schedule), as the headless runners do,
+# where the shipped testbed arms into a hold (``arming_setpoint``, docs/parameters.md).
+FLY_CONFIGURED = ('-p', 'arming_setpoint:=configured')
+
+
 class NodeProcess:
     """One node as a child process, its output in a log file."""
 

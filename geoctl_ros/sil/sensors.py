@@ -27,7 +27,7 @@ from geoctl_ros.params import (
     node_overrides,
     resolve,
 )
-from geoctl_ros.sil.processes import Monitor, NodeProcess, executable
+from geoctl_ros.sil.processes import FLY_CONFIGURED, Monitor, NodeProcess, executable
 from geoctl_ros.sil.rosenv import node_env, use_node_env
 
 
@@ -109,7 +109,8 @@ def run_case(name: str, matching: bool, params_file: str, out: str,
             mon.wait_for(lambda: mon.log['pose'], 30.0, 'the sim')
             extra.update(run_calibrate(params_file, out))
         procs.append(NodeProcess('controller', params_file,
-                                 _args(extra) if matching else [], log_dir=out))
+                                 [*FLY_CONFIGURED, *(_args(extra) if matching else [])],
+                                 log_dir=out))
         reply = mon.arm_when_ready(10.0)
         if not reply.success:
             return Outcome(name, 'matching' if matching else 'defaults', False, reply.message,

@@ -41,7 +41,7 @@ from geoctl_ros.core.telemetry.diagnostics import to_values
 from geoctl_ros.nodes.qos import EVENT
 from geoctl_ros.sil import measures
 from geoctl_ros.sil.loads import start_loads, stop_loads
-from geoctl_ros.sil.processes import Monitor, NodeProcess
+from geoctl_ros.sil.processes import FLY_CONFIGURED, Monitor, NodeProcess
 from geoctl_ros.sil.rosenv import PROFILE_VAR, cli_env, node_env
 
 AGENTS = 'geoctl_ros.sil.loads'
@@ -91,8 +91,8 @@ class Session:
                                           stderr=subprocess.DEVNULL)
         else:
             self.relay = None
-        self.controller = NodeProcess('controller', params_file, log_dir=out, env=env,
-                                      prefix=prefix)
+        self.controller = NodeProcess('controller', params_file, FLY_CONFIGURED, log_dir=out,
+                                      env=env, prefix=prefix)
         self.procs.append(self.controller)
         self._listen_file = os.path.join(out, 'command_times.npy')
         # the listener stands in for the ESC bridge: part of the flight chain, same priority

@@ -13,6 +13,7 @@ import numpy as np
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.so3 import Vector
 from geoctl_ros.core.law.control import AttitudeController, SetpointRejected
+from geoctl_ros.core.law.hold import hold_attitude
 from geoctl_ros.core.sensors.consistency import SensorAgreement
 from geoctl_ros.core.supervisor import loop_status, preflight
 from geoctl_ros.core.supervisor.control_tick import ControlTick
@@ -168,12 +169,36 @@ class ControlLoop:
         """A new desired attitude; None if adopted, else why it was refused (old one stays)."""
         problem = quaternion_problem(q)
         if problem is None:
-            try:
-                self.controller.set_setpoint(so3.quat_to_rot(q))
-            except SetpointRejected as e:
-                problem = str(e)
+            problem = self._adopt(so3.quat_to_rot(q))
         self.setpoint_note = None if problem is None else 'setpoint rejected: ' + problem
         return problem
+
+    def hold(self) -> Optional[str]:
+        """Adopt the attitude measured last as the set point, lifted off the joint's stops
+        (``hold_attitude``; what an arming does with ``arming_setpoint`` hold); None if adopted,
+        else why not (the old one stays).
+        """
+        R_hold = self.hold_attitude()
+        if R_hold is None:
+            return 'no pose received yet'
+        return self._adopt(R_hold)
+
+    def hold_attitude(self) -> Optional[np.ndarray]:
+        """The attitude a hold flies now (``core.law.hold.hold_attitude`` of the attitude
+        measured last), or None before the first pose.
+        """
+        if self.R is None:
+            return None
+        config = self.controller.config
+        return hold_attitude(self.R, config.gravity, config.tilt_max)
+
+    def _adopt(self, R_d: np.ndarray) -> Optional[str]:
+        """Fly R_d from now on, if the controller takes it; else why not."""
+        try:
+            self.controller.set_setpoint(R_d)
+        except SetpointRejected as e:
+            return str(e)
+        return None
 
     # --- commands ----------------------------------------------------------------------------
     def arm_problems(self, now: float, extra_problem: Optional[str] = None) -> List[str]:
@@ -183,7 +208,10 @@ class ControlLoop:
         return preflight.arm_problems(self, now, extra_problem)
 
     def arm(self, now: float, extra_problem: Optional[str] = None) -> ArmResult:
-        """Arm unless arm_problems names a reason; the refusal names every one."""
+        """Arm unless arm_problems names a reason; the refusal names every one. An arming
+        (from disarmed) with ``arming_setpoint`` hold flies the attitude measured now, lifted
+        off the joint's stops (``hold_attitude``).
+        """
         problems = self.arm_problems(now, extra_problem)
         was_armed = self.supervisor.armed
         result = self.supervisor.arm(now, '; '.join(problems) or None)
@@ -194,7 +222,17 @@ class ControlLoop:
                 self.cone_entries, self.entry, self._inside = 0, None, False
                 self.unlearnt_over = 0
                 self._spool_from = self.R       # (the take-over starts the flight's model)
+                R_hold = self.hold_attitude()   # (arm_problems has checked it as a set point;
+                if self.holds_at_arming and R_hold is not None:     # an arming needs a pose)
+                    self._adopt(R_hold)
         return result
+
+    @property
+    def holds_at_arming(self) -> bool:
+        """An arming holds the attitude measured then (``arming_setpoint`` hold), rather than
+        flying the set point and the schedule.
+        """
+        return self.setup.loop.arming_setpoint == 'hold'
 
     def disarm(self, reason: str = 'disarm requested', failed: bool = False) -> ArmResult:
         """Disarm; failed: by a failsafe (reason from core.telemetry.diagnostics.failsafe)."""
@@ -248,7 +286,7 @@ class ControlLoop:
             self.disarm(failsafe(self.agreement.flight_note), failed=True)
             armed = False
         schedule = self.setup.schedule
-        if armed and len(schedule):
+        if armed and len(schedule) and not self.holds_at_arming:
             i = schedule.index_at(now - self.supervisor.armed_since)
             if i != self._schedule_index and i >= 0:
                 self.controller.set_setpoint(schedule.rotations[i])   # checked at configuration

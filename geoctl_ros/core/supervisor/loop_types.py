@@ -32,6 +32,8 @@ class LoopSettings:
     measurement_delay: float       # s: the inputs' latency when their stamps do not give it
     age_from_stamps: bool          # the inputs' ages from their capture stamps (synced clocks)
     allow_default_configuration: bool   # may arm without a parameter file (the opt-in)
+    arming_setpoint: str           # 'hold': an arming holds the attitude measured then;
+                                   # 'configured': it flies the set point and the schedule
     frame_id: str                  # the body frame of the published vectors
     world_frame_id: str
 

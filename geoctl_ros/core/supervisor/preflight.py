@@ -11,15 +11,23 @@ def arm_problems(loop: Any, now: float, extra_problem: Optional[str] = None) -> 
     """Every reason not to arm now (sentences; empty: it may), as a preflight check names
     them: no configuration given, extra_problem (the caller's, e.g. another publisher of the
     motor commands), each stale input, the sensors' disagreement (``core.sensors.consistency``),
+    the set point an arming would fly (with ``arming_setpoint`` hold, the attitude now lifted off
+    the joint's stops: ``ControlLoop.hold_attitude``),
     and the measured sensor inside a cone or within its
     guard (the barrier's widening cone_guard_deg plus its floor band barrier_floor_deg).
     """
     problems = [p for p in (loop.unconfigured, extra_problem, loop.esc_report_problem(now)) if p]
     problems += [p for p in (s.staleness(now) for s in loop.supervisor.streams) if p]
     problems += loop.agreement.arm_problems(now)
-    setpoint = loop.controller.setpoint_problem(loop.controller.R_d)
-    if setpoint:
-        problems.append('set point: ' + setpoint)
+    if loop.holds_at_arming:     # the attitude now (off the stops) is what an arming flies
+        R_hold = loop.hold_attitude()
+        setpoint = None if R_hold is None else loop.controller.setpoint_problem(R_hold)
+        if setpoint:
+            problems.append('the attitude to hold: ' + setpoint)
+    else:
+        setpoint = loop.controller.setpoint_problem(loop.controller.R_d)
+        if setpoint:
+            problems.append('set point: ' + setpoint)
     cones = loop.setup.config.cones
     if loop.R is not None and len(cones):
         guard = cones.band_deg
