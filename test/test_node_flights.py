@@ -265,6 +265,33 @@ def test_sim_time_the_sim_drives_the_controllers_clock(ros):
     published_values_are_finite(mon)
 
 
+@pytest.mark.realtime
+def test_a_moment_the_model_lacks_past_a_u_is_warned_on_diagnostics(ros):
+    """The approach brake's a_u watched on the vehicle: the sim's testbed carries 0.4 N m the
+    controller's model lacks (a constant disturbance, four times ``cbf_moment_bound``); armed
+    into the hold, the controller's /diagnostics says at WARN that the model did not know the
+    acceleration past the brake's a_u, with the count of rate samples, and its figures carry it.
+    """
+    mon, launch = ros
+    launch('sim', TESTBED, '-p', 'disturbance.constant:=[0.4, 0.0, 0.0]')
+    launch('controller', TESTBED)
+    reply = mon.arm_when_ready()
+    assert reply.success, reply.message
+
+    def warned():
+        return [d for _, d in mon.log['diagnostics'] if d.level == WARN and d.figures.armed
+                and "past the approach brake's a_u" in d.message]
+    mon.wait_for(lambda: warned(), 15.0, 'the unlearnt-acceleration warning')
+    d = warned()[0]
+    part = next(p for p in d.message.split('; ') if "approach brake's a_u" in p)
+    over = int(part.split(' at ')[1].split(' rate samples')[0])
+    bound = float(part.split('a_u of ')[1].split(' rad/s^2')[0])
+    seen = float(part.split('up to ')[1].split(' rad/s^2')[0])
+    assert over > 0 and seen > bound > 0.0, part
+    assert d.figures.unlearnt is not None
+    published_values_are_finite(mon)
+
+
 def _true_poses_on_disk(path):
     """Whether the bag being written at path has true poses on disk (read as report reads a
     bag cut short).
