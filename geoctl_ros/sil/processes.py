@@ -53,7 +53,8 @@ def executable(name):
 # What the experiment runners over DDS (the demo's flight, the sensor cases, the soak) give the
 # controller: an arming flies the file's set point (and schedule), as the headless runners do,
 # where the shipped testbed arms into a hold (``arming_setpoint``, docs/parameters.md).
-FLY_CONFIGURED = ('-p', 'arming_setpoint:=configured')
+FLY_CONFIGURED = ('-p', 'controller:arming_setpoint:=configured')   # (the node's own: a
+# wildcard '-p' loses to the file's controller section)
 
 
 class NodeProcess:
