@@ -99,7 +99,7 @@ def table_row(shows):
 
 
 def quaternion_of_yaw(yaw_deg):
-    return '[%s]' % ','.join(repr(float(v)) for v in so3.rot_to_quat(rpy_matrix((0, 0, yaw_deg))))
+    return [float(v) for v in so3.rot_to_quat(rpy_matrix((0.0, 0.0, yaw_deg)))]
 
 
 class Command:
@@ -157,15 +157,17 @@ def test_the_runbook_flies_a_first_flight(installed, tmp_path, world):
     shell = dict(cli_env(env), PATH=BIN + os.pathsep + env['PATH'])     # the `ros2` verbs
     # step 2: the lab's file, the shipped one with step 3's row for what its poses show
     runbook_command('cp ~/ws/src/geoctl_ros/config/testbed.yaml ~/testbed.yaml', lab)
-    with open(TESTBED) as fh:
-        doc = yaml.safe_load(fh)
+    doc = yaml.safe_load(open(TESTBED))
     doc['/**']['ros__parameters'].update(table_row(shows))
     (lab / 'testbed.yaml').write_text(yaml.safe_dump(doc))
     # the drivers: the sim, on their topics, in the lab's conventions (the shipped file: the lab's
     # conventions reach it only as the truth it emulates), started as the runbook starts one
     realtime = str(prefix / 'lib' / 'geoctl_ros' / 'realtime')
-    emulation = ['-p', 'initial_attitude:=%s' % quaternion_of_yaw(rest_yaw),
-                 '-p', 'marker_rotation_deg:=[%s]' % ','.join(map(str, MARKER_TRUTH))]
+    # (its rest in a file of its own: a -p does not override the file's sim section)
+    doc = yaml.safe_load(open(TESTBED))
+    doc['sim']['ros__parameters']['initial_attitude'] = quaternion_of_yaw(rest_yaw)
+    (lab / 'sim.yaml').write_text(yaml.safe_dump(doc))
+    emulation = ['-p', 'marker_rotation_deg:=[%s]' % ','.join(map(str, MARKER_TRUTH))]
     for k, v in sources.items():
         emulation += ['-p', '%s:=%s' % (k, v)]
     procs = []
@@ -174,7 +176,7 @@ def test_the_runbook_flies_a_first_flight(installed, tmp_path, world):
     try:
         procs.append(Command(
             ['ros2', 'run', '--prefix', '%s 50' % realtime, 'geoctl_ros', 'sim', '--ros-args',
-             '--params-file', TESTBED, '-r', 'pose:=/vicon/hexrotor/pose', '-r',
+             '--params-file', str(lab / 'sim.yaml'), '-r', 'pose:=/vicon/hexrotor/pose', '-r',
              'imu:=/vn100/imu'] + emulation, env, lab, lab / 'sim.log'))
         mon.wait_for(lambda: mon.log['true_pose'], 30.0, 'the sim')
         # step 3: calibrate, level and at rest, nose along the motion capture's x axis
@@ -225,7 +227,9 @@ def test_the_runbook_flies_a_first_flight(installed, tmp_path, world):
         # a set point round the cone
         code, out = Command(['ros2', 'run', 'geoctl_ros', 'setpoint', '--yaw-deg',
                              '%g' % goal_yaw], env, lab).answer(mon)
-        assert code == 0 and out.strip().startswith('accepted: set point'), (code, out)
+        assert code == 0 and 'accepted: set point [%s] (x, y, z, w; yaw %g, pitch 0, roll 0 deg)' % (
+            ', '.join('%.4f' % v for v in quaternion_of_yaw(goal_yaw)), goal_yaw
+        ) in out.splitlines(), (code, out)
         goal = rpy_matrix((0.0, 0.0, goal_yaw))
         mon.wait_for(lambda: math.degrees(so3.angle(goal.T @ rotation(mon, time.monotonic())))
                      < 1.0, 15.0, 'the goal, within 1 deg')
