@@ -227,9 +227,9 @@ def test_the_runbook_flies_a_first_flight(installed, tmp_path, world):
         # a set point round the cone
         code, out = Command(['ros2', 'run', 'geoctl_ros', 'setpoint', '--yaw-deg',
                              '%g' % goal_yaw], env, lab).answer(mon)
-        assert code == 0 and 'accepted: set point [%s] (x, y, z, w; yaw %g, pitch 0, roll 0 deg)' % (
-            ', '.join('%.4f' % v for v in quaternion_of_yaw(goal_yaw)), goal_yaw
-        ) in out.splitlines(), (code, out)
+        accepted = 'accepted: set point [%s] (x, y, z, w; yaw %g, pitch 0, roll 0 deg)' % (
+            ', '.join('%.4f' % v for v in quaternion_of_yaw(goal_yaw)), goal_yaw)
+        assert code == 0 and accepted in out.splitlines(), (code, out)
         goal = rpy_matrix((0.0, 0.0, goal_yaw))
         mon.wait_for(lambda: math.degrees(so3.angle(goal.T @ rotation(mon, time.monotonic())))
                      < 1.0, 15.0, 'the goal, within 1 deg')
