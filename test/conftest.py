@@ -36,3 +36,21 @@ def ros(tmp_path):
     """The node tests' monitor node and a launcher for node processes (node_support.py)."""
     from node_support import node_processes  # noqa: PLC0415  (rclpy: only the DDS tests)
     yield from node_processes(tmp_path)
+
+
+@pytest.fixture(scope='session')
+def installed(tmp_path_factory):
+    """The package built and installed by colcon in a workspace of its own (workspace.py), and
+    the environment `ros2 launch` and `ros2 run` need to find it (the loopback profile and this
+    run's domain from use_node_env above): (env, install prefix). Built once, on first use.
+    """
+    import pathlib  # noqa: PLC0415
+    import sys  # noqa: PLC0415
+
+    from workspace import Workspace  # noqa: PLC0415
+    ws = Workspace(str(tmp_path_factory.mktemp('ws')))
+    ws.colcon('build', '--packages-select', 'geoctl_ros')
+    env, prefix = ws.env, pathlib.Path(ws.prefix)
+    env['AMENT_PREFIX_PATH'] = os.pathsep.join([str(prefix), sys.prefix])
+    env['PYTHONUNBUFFERED'] = '1'
+    return env, prefix

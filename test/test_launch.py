@@ -5,12 +5,7 @@ params_file stops the launch naming it, and testbed.launch.xml's remaps, real-ti
 prefix reach the controller, whose output keeps its name.
 """
 import os
-import pathlib
-import shutil
-import signal
 import socket
-import subprocess
-import sys
 import time
 
 from geometry_msgs.msg import PoseStamped
@@ -19,7 +14,7 @@ from rcl_interfaces.srv import GetParameters
 import rclpy
 from sensor_msgs.msg import Imu
 from support import FakeInputs
-from workspace import BIN, ROOT, Workspace
+from workspace import HAVE_LAUNCH, NO_LAUNCH, ROOT, Launch
 import yaml
 
 from geoctl_ros.core.geometry import so3
@@ -32,68 +27,7 @@ pytestmark = pytest.mark.dds
 
 LEVEL_YAW90 = (0.0, 0.0, 0.7071067811865476, 0.7071067811865476)
 
-try:
-    import launch_ros  # noqa: F401
-    HAVE_LAUNCH = shutil.which('colcon', path=BIN) is not None
-except ImportError:
-    HAVE_LAUNCH = False
-needs_launch = pytest.mark.skipif(
-    not HAVE_LAUNCH, reason='no `ros2 launch`: install it from ../shared/wheels/launch (./run '
-    'does when the folder exists, on Python 3.11)')
-
-
-@pytest.fixture(scope='module')
-def installed(tmp_path_factory):
-    """The package built and installed by colcon in a workspace of its own, and the environment
-    `ros2 launch` needs to find it (the loopback profile comes from conftest).
-    """
-    ws = Workspace(str(tmp_path_factory.mktemp('ws')))
-    ws.colcon('build', '--packages-select', 'geoctl_ros')
-    env, prefix = ws.env, pathlib.Path(ws.prefix)
-    env['AMENT_PREFIX_PATH'] = os.pathsep.join([str(prefix), sys.prefix])
-    env['PYTHONUNBUFFERED'] = '1'
-    return env, prefix
-
-
-class Launch:
-    """`ros2 launch geoctl_ros FILE args...` in a process group of its own."""
-
-    def __init__(self, env, log, *args):
-        self.log = open(log, 'w+')
-        self.proc = subprocess.Popen([os.path.join(BIN, 'ros2'), 'launch', 'geoctl_ros'] +
-                                     list(args), env=env, stdout=self.log,
-                                     stderr=subprocess.STDOUT, start_new_session=True)
-
-    def output(self):
-        if not self.log.closed:
-            self.log.flush()
-        with open(self.log.name) as fh:
-            return fh.read()
-
-    def children(self):
-        """The pids of the node processes launch started (the direct children of ros2 launch)."""
-        r = subprocess.run(['pgrep', '-P', str(self.proc.pid)], capture_output=True, text=True)
-        return [int(p) for p in r.stdout.split()]
-
-    def child(self, program):
-        """The pid of the one node process whose command line runs a path ending in program."""
-        found = []
-        for pid in self.children():
-            with open('/proc/%d/cmdline' % pid, 'rb') as fh:
-                if any(a.endswith(program.encode()) for a in fh.read().split(b'\0')):
-                    found.append(pid)
-        assert len(found) == 1, (program, found)
-        return found[0]
-
-    def stop(self):
-        if self.proc.poll() is None:
-            os.killpg(self.proc.pid, signal.SIGINT)             # as Ctrl-C in a terminal
-            try:
-                self.proc.wait(15)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-                self.proc.wait(5)
-        self.log.close()
+needs_launch = pytest.mark.skipif(not HAVE_LAUNCH, reason=NO_LAUNCH)
 
 
 @pytest.fixture
