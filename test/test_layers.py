@@ -96,6 +96,33 @@ def test_the_esc_layer_does_not_import_the_controllers_supervisor():
     assert not bad, bad
 
 
+def _supervisor_loaded_by(modules):
+    """The core.supervisor modules that importing these modules loads, in a fresh interpreter
+    (what they import, and what that imports, down to the package __init__ files).
+    """
+    code = ('import importlib, sys\n'
+            'for m in %r:\n'
+            '    importlib.import_module(m)\n'
+            'print(" ".join(k for k in sorted(sys.modules)\n'
+            '               if k.startswith("geoctl_ros.core.supervisor")))\n' % (modules,))
+    r = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    return r.stdout.split()
+
+
+def test_the_esc_node_does_not_load_the_controllers_supervisor():
+    """Nor through anything it imports: esc/'s modules and the ESC node (nodes/esc_i2c.py), the
+    parameters they read (params/ takes build.py, which brings in the supervisor, on first use).
+    """
+    esc = sorted('geoctl_ros.esc.' + p.stem for p in pathlib.Path(PKG, 'esc').glob('*.py')
+                 if p.stem != '__init__')
+    assert len(esc) >= 5
+    # it sees one: a module that imports params' builders
+    assert 'geoctl_ros.core.supervisor.safety' in _supervisor_loaded_by(
+        esc + ['geoctl_ros.params.build'])
+    assert _supervisor_loaded_by(esc + ['geoctl_ros.nodes.esc_i2c']) == []
+
+
 def _module_graph():
     """{module: modules of this package and of benchmarks/ it imports} over every file, with the
     imports under TYPE_CHECKING and inside functions (a name imported from a package that is a

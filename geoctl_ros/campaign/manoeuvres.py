@@ -360,6 +360,3 @@ def write_scenario_file(sections, path):
 
 # --- flying -----------------------------------------------------------------------------------
 
-_progress = None        # shared counter of simulated run-steps (set in each worker)
-
-

@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.core.supervisor.safety import quaternion_problem
+from geoctl_ros.core.geometry.quaternions import quaternion_problem
 from geoctl_ros.core.telemetry.diagnostics import ERROR
 from geoctl_ros.mavlink import frames
 from geoctl_ros.mavlink.actions import (

@@ -32,12 +32,9 @@ from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import Imu
 
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.quaternions import quaternion_problem
 from geoctl_ros.core.sensors.calibration import CalibrationError, calibrate
-from geoctl_ros.core.supervisor.safety import (
-    angular_velocity_problem,
-    quaternion_problem,
-    specific_force_problem,
-)
+from geoctl_ros.core.supervisor.safety import angular_velocity_problem, specific_force_problem
 from geoctl_ros.nodes import qos
 from geoctl_ros.params import (
     CONTROLLER,

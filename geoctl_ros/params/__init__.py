@@ -19,19 +19,13 @@ set-ups (test_layers.py checks it on every module).
 
 Nothing here imports rclpy: the nodes (``geoctl_ros.nodes.ros_params``) and the headless runner
 use the same code.
+
+build.py's names are imported on first use (``__getattr__`` below): build brings in the
+controller's supervisor (its LoopSettings and SetpointSchedule), which the ESC node, reading only
+the schema, does not load (test_layers.py checks it).
 """
-from geoctl_ros.params.build import (
-                                     SETPOINT,
-                                     ControllerSetup,
-                                     airframe,
-                                     cone_set,
-                                     controller_config,
-                                     controller_setup,
-                                     mixer,
-                                     setpoint_change,
-                                     setpoint_rotation,
-                                     settings,
-)
+from typing import TYPE_CHECKING, Any
+
 from geoctl_ros.params.files import (
                                      flatten,
                                      load_parameter_file,
@@ -77,3 +71,31 @@ __all__ = ['AIRFRAME_NAMES', 'BOTH', 'BY_NAME', 'CHANGE_WHILE_ARMED', 'CONE_KEY'
            'controller_config', 'controller_setup', 'flatten', 'load_parameter_file', 'mixer',
            'node_overrides', 'resolve', 'write_parameter_file',
            'schema_for', 'SETPOINT', 'setpoint_change', 'setpoint_rotation', 'settings']
+
+_BUILD = frozenset(['SETPOINT', 'ControllerSetup', 'airframe', 'cone_set', 'controller_config',
+                    'controller_setup', 'mixer', 'setpoint_change', 'setpoint_rotation',
+                    'settings'])
+
+if TYPE_CHECKING:
+    from geoctl_ros.params.build import (
+                                         SETPOINT,
+                                         ControllerSetup,
+                                         airframe,
+                                         cone_set,
+                                         controller_config,
+                                         controller_setup,
+                                         mixer,
+                                         setpoint_change,
+                                         setpoint_rotation,
+                                         settings,
+    )
+
+
+def __getattr__(name: str) -> Any:
+    """One of build.py's names, imported from it on first use."""
+    if name not in _BUILD:
+        raise AttributeError('module %r has no attribute %r' % (__name__, name))
+    from geoctl_ros.params import build  # noqa: PLC0415  (on first use: the ESC node needs none)
+    value = getattr(build, name)
+    globals()[name] = value
+    return value

@@ -18,13 +18,14 @@ from geoctl_ros.core.actuation.airframe import (
 from geoctl_ros.core.actuation.allocation import Allocator
 from geoctl_ros.core.actuation.motors import Mixer, ThrustCurve
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.quaternions import quaternion_problem
 from geoctl_ros.core.law.brake import brake_authority, unmodelled_acceleration
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.control import AttitudeController, ControllerConfig
 from geoctl_ros.core.sensors.consistency import AgreementSettings
 from geoctl_ros.core.sensors.frames import InputFrames
 from geoctl_ros.core.supervisor.loop_types import LoopSettings
-from geoctl_ros.core.supervisor.safety import SetpointSchedule, quaternion_problem
+from geoctl_ros.core.supervisor.safety import SetpointSchedule
 from geoctl_ros.params.param import ConfigError
 from geoctl_ros.params.schema import BY_NAME
 from geoctl_ros.params.validate import check_value

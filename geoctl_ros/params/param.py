@@ -6,7 +6,7 @@ from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
-from geoctl_ros.core.supervisor.safety import quaternion_problem
+from geoctl_ros.core.geometry.quaternions import quaternion_problem
 from geoctl_ros.params.topics import TOPICS as _RECORDED
 
 CONTROLLER, SIM, SCENARIO, MAVLINK, RECORD, VIEW, ESC = (

@@ -28,10 +28,7 @@ import numpy as np
 
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.so3 import cross, cross_floats, matvec, matvec_floats, vecmat
-from geoctl_ros.core.law.mechanics import (
-    body_gravity_moment,
-    gravity_moment,
-)
+from geoctl_ros.core.law.mechanics import body_gravity_moment
 
 STOP_HZ = 25.0        # the joint's stops: a contact of this natural frequency
 STOP_DAMPING = 0.7    # and damping ratio, about the pivot's mean principal inertia
@@ -57,11 +54,6 @@ class Plant:
         self._floats = None if self.R.ndim != 2 else (
             self.J.tolist(), self.J_inv.tolist(), config.m_rho.tolist(), config.gravity.tolist(),
             float(self._stop[0]), float(self._stop[1]))
-
-    def external_moment(self, t: float, R: np.ndarray) -> np.ndarray:
-        """Gravity moment plus disturbance about the pivot, body frame."""
-        c = self.config
-        return gravity_moment(R, c.m_rho, c.gravity) + c.disturbance(t)
 
     def angular_acceleration(self, t: float, g_b: np.ndarray, Omega: np.ndarray,
                              tau: np.ndarray) -> np.ndarray:

@@ -89,7 +89,6 @@ class Allocator:
                                 % [self.alive[i] + 1 for i in np.nonzero(self._d <= 1e-9)[0]])
         self.lo, self.hi = float(thrust_min), float(thrust_max)
         self._inv_d = 1.0 / self._d
-        self._thrusts = np.zeros(n)
 
     def moment_polytope(self, collective: float) -> 'MomentPolytope':
         """The moments the rotors make unsaturated at this collective thrust, as A M >= beta:

@@ -1,12 +1,16 @@
 """Quaternions in ROS order (x, y, z, w) and rotation matrices (``so3.quat_to_rot`` and
-``so3.rot_to_quat`` are these).
+``so3.rot_to_quat`` are these), and the check that a quaternion given as an attitude is a unit
+quaternion (``quaternion_problem``, which every reader of an attitude applies: the controller, the
+bridge, the calibration, the parameters).
 """
 import math
-from typing import Sequence, Union
+from typing import Optional, Sequence, Union
 
 import numpy as np
 
 Vector = Union[Sequence[float], np.ndarray]     # a vector given as a list or an array
+
+QUATERNION_TOLERANCE = 1e-3     # |q| off 1 by more than this: not a unit quaternion
 
 
 def quat_to_rot(q: Vector) -> np.ndarray:
@@ -41,3 +45,13 @@ def rot_to_quat(R: np.ndarray) -> np.ndarray:
     n = math.sqrt(x * x + y * y + z * z + w * w)       # (in floats: the same bits on any CPU)
     out = np.array([x / n, y / n, z / n, w / n])
     return -out if out[3] < 0.0 else out
+
+
+def quaternion_problem(q: Vector) -> Optional[str]:
+    """Why q (x, y, z, w) is not an acceptable attitude, or None."""
+    if not all(math.isfinite(v) for v in q):
+        return 'quaternion is not finite'
+    n = math.sqrt(sum(v * v for v in q))
+    if abs(n - 1.0) > QUATERNION_TOLERANCE:
+        return 'quaternion is not unit length (norm %.6g)' % n
+    return None

@@ -120,7 +120,6 @@ class ConeSet:
         self.cos_theta = np.cos(self.theta_b)
         self.log_scale = 1.0 + self.cos_theta
         self.g0 = self.cos_theta - np.cos(self.theta_b + self.floor)   # floor gap, > 0
-        self.B_floor = 1.0 - np.log(self.g0 / self.log_scale) / self.alpha
         self._B_offset = 1.0 + np.log(self.log_scale) / self.alpha
         self._inv_alpha = 1.0 / self.alpha
         self._inv_alpha_g0 = 1.0 / (self.alpha * self.g0)

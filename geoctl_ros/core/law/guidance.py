@@ -149,15 +149,6 @@ def _dijkstra(cost: np.ndarray, start: int) -> np.ndarray:
     return previous
 
 
-def _shortest_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The rotation by the shortest arc that takes the unit vector a to b (not opposite)."""
-    axis = np.cross(a, b)
-    s = math.sqrt(so3.dot(axis, axis))
-    if s < 1e-12:
-        return np.eye(3)
-    return so3.exp(axis / s * math.atan2(s, float(so3.dot(a, b))))
-
-
 def upright(d: np.ndarray, r: np.ndarray, up: np.ndarray) -> np.ndarray:
     """The attitude that points the body-fixed r along the unit d with the body's z axis as
     near up as it can be (R r = d, R e3 on the cone of half-angle angle(r, e3) round d, on the
@@ -296,7 +287,6 @@ class Guidance:
         self.clearance = clearance
         self.up = np.array([0.0, 0.0, 1.0]) if up is None else np.asarray(up, dtype=float)
         self.tilt_max = tilt_max
-        self.cos_lookahead = math.cos(lookahead)
         self.cos_replan = math.cos(min(math.pi, REPLAN_FACTOR * lookahead))
         # the path's points within the lookahead lie at most this many places ahead (its steps
         # turn the sensor at least PATH_STEP / 2, and the body at least as far)

@@ -125,10 +125,6 @@ class Window(NamedTuple):
         """
         return self.turning > self.rate_tolerance or self.gyro_spread > self.spread_tolerance
 
-    @property
-    def gravity_angle_deg(self) -> Optional[float]:
-        return None if self.force is None else angle_between_deg(self.force, self.up)
-
 
 def _norm(v: np.ndarray) -> float:
     """|v| of a 3-vector, in floats (no BLAS kernel's rounding)."""

@@ -11,6 +11,7 @@ from typing import Any, List, Optional, Sequence
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.quaternions import quaternion_problem
 from geoctl_ros.core.geometry.so3 import Vector
 from geoctl_ros.core.law.control import AttitudeController, SetpointRejected
 from geoctl_ros.core.law.hold import hold_attitude
@@ -27,7 +28,6 @@ from geoctl_ros.core.supervisor.safety import (
     Supervisor,
     angular_velocity_problem,
     esc_problem,
-    quaternion_problem,
     specific_force_problem,
 )
 from geoctl_ros.core.telemetry.diagnostics import Status, failsafe

@@ -29,22 +29,12 @@ import numpy as np
 
 from geoctl_ros.core.actuation.esc_wire import EscHealth, EscStatus
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.quaternions import quaternion_problem
 from geoctl_ros.core.geometry.so3 import Vector
 from geoctl_ros.core.telemetry.diagnostics import StampTrust, failsafe
 from geoctl_ros.core.telemetry.stats import WindowStats
 
-QUATERNION_TOLERANCE = 1e-3
 SPECIFIC_FORCE_MAX = 2000.0     # m/s^2: beyond any IMU's range (about 200 g)
-
-
-def quaternion_problem(q: Vector) -> Optional[str]:
-    """Why q (x, y, z, w) is not an acceptable attitude, or None."""
-    if not all(math.isfinite(v) for v in q):
-        return 'quaternion is not finite'
-    n = math.sqrt(sum(v * v for v in q))
-    if abs(n - 1.0) > QUATERNION_TOLERANCE:
-        return 'quaternion is not unit length (norm %.6g)' % n
-    return None
 
 
 def attitude_of(q: Vector) -> Tuple[Optional[np.ndarray], Optional[str]]:
