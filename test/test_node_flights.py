@@ -97,6 +97,9 @@ def test_sim_in_the_loop_flies_round_the_cone_and_converges(ros, tmp_path):
         "stored the controller's")), 20.0, 'the recorder')
     # the diagnostics can reach this monitor before its motor_commands subscription is matched
     mon.wait_for(lambda: mon.last('motors') is not None, 10.0, 'a first motor command')
+    # (and the sim's true pose, which the hold is measured against: matched later on a busy
+    # machine, it once was not yet heard at the arming)
+    mon.wait_for(lambda: mon.last('true_pose') is not None, 20.0, 'the true pose')
     assert zero_commands(mon)                                  # disarmed at start-up
     assert mon.last_diagnostic().figures.armed is False
     mon.wait_for(lambda: '6 ESCs on virtual ESC bus' in esc.output(), 30.0, 'the ESC node')
