@@ -198,7 +198,8 @@ def _worst(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: Any, spin: Any
 
 
 def least_deceleration(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: Any,
-                       spin: Any, authority: Any, hold: float) -> tuple:
+                       spin: Any, authority: Any, hold: float,
+                       worst: Optional[tuple] = None) -> tuple:
     """(D, Phi) per cone: the least deceleration D (rad/s^2) the command must reach at the end of
     its hold for the condition, and the backup's margin Phi (rad) now. Where Phi < 0, D is the
     backup's own first command (past the curve: brake as hard as the lag lets).
@@ -207,9 +208,11 @@ def least_deceleration(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: An
     a_b. The travel falls as D grows, so D is found by regula falsi (``FALSI_STEPS``) between
     a deceleration far below and the backup's first command, returning the end that meets the
     condition: never less than the least. Each cone's answer is its own, whatever the others'
-    (a run alone and in a batch alike).
+    (a run alone and in a batch alike). worst: ``_worst`` of the same arguments, where already
+    computed.
     """
-    G0, w0, Ds, first, margin = _worst(brake, gap, w, D_s, age, spin, authority, hold)
+    G0, w0, Ds, first, margin = (_worst(brake, gap, w, D_s, age, spin, authority, hold)
+                                 if worst is None else worst)
     past = margin < 0.0
     # regula falsi (Illinois) between a deceleration that does not meet the condition and one
     # that does (the backup's own first), keeping the one that does
@@ -233,12 +236,14 @@ def least_deceleration(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: An
 
 
 def meets(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: Any, spin: Any,
-          authority: Any, hold: float, D: Any) -> Any:
+          authority: Any, hold: float, D: Any, worst: Optional[tuple] = None) -> Any:
     """Per cone, whether a command reaching the deceleration D (rad/s^2) at the end of its hold
     meets the condition (``least_deceleration``'s, without its search): its worst-case travel
     peaks within the gap or, past the curve, D is at least the backup's own first command.
+    worst: ``_worst`` of the same arguments, where already computed.
     """
-    G0, w0, Ds, first, margin = _worst(brake, gap, w, D_s, age, spin, authority, hold)
+    G0, w0, Ds, first, margin = (_worst(brake, gap, w, D_s, age, spin, authority, hold)
+                                 if worst is None else worst)
     return np.where(margin < 0.0, D >= first,
                     backup_travel(brake, w0, Ds, D, authority, hold) <= G0)
 
@@ -342,25 +347,33 @@ def brake_terms(brake: ApproachBrake, cones: Any, J_inv: np.ndarray,
 
 
 def rows(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, x: BrakeInputs,
-         terms: Optional[BrakeTerms] = None) -> BrakeRows:
+         terms: Optional[BrakeTerms] = None, worst: Optional[tuple] = None) -> BrakeRows:
     """The brake's condition at a tick for every cone (``BrakeRows``; see the module); terms:
-    ``brake_terms`` of x where already computed.
+    ``brake_terms`` of x, worst: ``_worst_at`` of them, where already computed.
     """
     t = brake_terms(brake, cones, J_inv, x) if terms is None else terms
     D, margin = least_deceleration(brake, t.gap, t.w, t.D_s, _age(x), _spin(cones, t, x),
-                                   t.authority, x.hold)
+                                   t.authority, x.hold, worst)
     return BrakeRows(t.A, D - t.f_along + t.kin, margin, t.weak)
 
 
 def law_meets(brake: ApproachBrake, cones: Any, terms: BrakeTerms, x: BrakeInputs,
-              u: np.ndarray) -> np.ndarray:
+              u: np.ndarray, worst: Optional[tuple] = None) -> np.ndarray:
     """(...,) bool: whether the law's moment u meets every cone's condition at the tick of x
-    (``meets``, on the law's own deceleration along each cone; no search).
+    (``meets``, on the law's own deceleration along each cone; no search); worst: ``_worst_at``
+    of terms, where already computed.
     """
     t = terms
     law = so3.dot(t.A, u[..., None, :]) + t.f_along - t.kin
     return np.all(meets(brake, t.gap, t.w, t.D_s, _age(x), _spin(cones, t, x), t.authority,
-                        x.hold, law), axis=-1)
+                        x.hold, law, worst), axis=-1)
+
+
+def _worst_at(brake: ApproachBrake, cones: Any, t: BrakeTerms, x: BrakeInputs) -> tuple:
+    """``_worst`` of every cone at the tick of x (its terms t): once for the law's check and
+    the rows alike.
+    """
+    return _worst(brake, t.gap, t.w, t.D_s, _age(x), _spin(cones, t, x), t.authority, x.hold)
 
 
 SIN_PHI_MIN = math.sin(math.radians(5.0))   # sin phi below which the rate error is taken at
@@ -464,11 +477,12 @@ def braked(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, polytope: Any,
     # (a moment the rotors cannot reach this hold, which the lag compensation would clip, needs
     # the projection too: the derivation's rotors reach every command, the law's too)
     unreached = np.any(slack_of(A_p, u, beta_p) < -TOL, axis=-1)
+    worst = _worst_at(brake, cones, t, x)
     if extra is None:
-        braking = ~law_meets(brake, cones, t, x, u)
+        braking = ~law_meets(brake, cones, t, x, u, worst)
         if not np.any(braking | unreached):
             return Braked(u, braking, weak)
-    r = rows(brake, cones, J_inv, x, t)
+    r = rows(brake, cones, J_inv, x, t, worst)
     A, beta = r.A, r.beta
     if extra is not None:
         A = np.concatenate((extra[0], A), axis=-2)
