@@ -167,6 +167,42 @@ def test_the_law_follows_the_set_point_when_a_new_plan_puts_it_at_the_same_index
     assert same_index >= 1
 
 
+def _tilt_deg(R):
+    """The body's z axis from the world's up (z), in degrees."""
+    return np.degrees(np.arccos(np.clip(np.asarray(R)[..., 2, 2], -1.0, 1.0)))
+
+
+@pytest.mark.parametrize('index', [913, 0, 1, 4, 5, 7])
+def test_a_start_resting_on_the_stops_is_lifted_off_them_and_led_to_the_goal(index):
+    """The arming stratum's runs that rest on the joint's stops (45 deg; run 913 of seed 1 was
+    planned past them, to 48 deg, and then swung between the stops and the cone into it): the
+    path lifts the start within four steps to 2 deg inside the stops and keeps there (the tilt
+    of each attitude, from its matrix), neighbours are at most two PATH_STEPs apart, and a vehicle that goes where
+    the set point is (the carrot's own cones: 2 deg guard) reaches the goal.
+    """
+    m = manoeuvres.draw_manoeuvre(1, index, R_AXIS, stratum='arming', tilt_max_deg=45.0)
+    assert m['start_mode'] == 'resting'
+    axes = np.array([_unit(v) for v, _ in m['cones']])
+    theta = np.radians([t for _, t in m['cones']])
+    up = np.array([0.0, 0.0, 1.0])
+    assert _tilt_deg(m['R0']) == pytest.approx(45.0, abs=1e-6)
+    path = guidance.plan(m['R0'], m['R_d'], R_AXIS, axes, theta + math.radians(2.0),
+                         math.radians(8.0), up, math.radians(45.0))
+    assert np.array_equal(path[0], m['R0']) and np.array_equal(path[-1], m['R_d'])
+    tilts = _tilt_deg(path[:-1])
+    lifted = int(np.argmax(tilts <= 43.0 + 1e-6))        # the first 2 deg inside the stops
+    assert 0 < lifted <= 4 and np.all(np.diff(tilts[:lifted + 1]) < 0.0), tilts[:lifted + 1]
+    assert tilts[lifted:].max() <= 43.0 + 1e-6
+    steps = [math.degrees(so3.angle(a.T @ b)) for a, b in zip(path[:-1], path[1:])]
+    assert max(steps) <= 2.0 * math.degrees(guidance.PATH_STEP) + 1e-6
+    cones = ConeSet(R_AXIS, axes, theta, 8.0, math.radians(0.25), guard_rad=math.radians(2.0))
+    g = guidance.Guidance(math.radians(40.0), math.radians(8.0), up, math.radians(45.0))
+    R = m['R0']
+    for _ in range(300):
+        R = g.carrot(R, m['R_d'], cones)
+    assert np.array_equal(R, m['R_d'])
+
+
 def test_the_straight_yaw_arrives_round_the_cone():
     """The issue's case: config/scenarios/testbed_yaw90.yaml (no schedule) is under 5 deg by 8 s
     and under 1 deg by 15 s, at least 2 deg clear of the cone all the way.

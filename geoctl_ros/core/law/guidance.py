@@ -187,12 +187,15 @@ def _turn_about(d: np.ndarray, R: np.ndarray, base: np.ndarray) -> float:
 
 
 def attitude_path(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray,
-                  corners: List[np.ndarray], up: np.ndarray) -> np.ndarray:
+                  corners: List[np.ndarray], up: np.ndarray,
+                  tilt_max: float = math.pi) -> np.ndarray:
     """The attitudes along the sensor's path through corners (unit vectors, R0 r first and
     R_goal r last), at most PATH_STEP apart: (K, 3, 3), R0 first and R_goal last. At each point
     the most upright attitude (``upright``), turned about the sensor by the start's turn from
-    its own upright one blended into the goal's by arc length: the body stays as upright as the
-    path lets it (within the joint's stops where the path keeps out of their caps).
+    its own upright one blended into the goal's by arc length, and at the points between the
+    ends by no more than keeps the body's z axis CAP_CLEARANCE inside the joint's stops
+    (tilt_max, rad, from up; ``twist_within``): a start resting on the stops is lifted off them
+    at once, and no point of the path lies past them (where the path keeps out of their caps).
     """
     points = [corners[0]]
     for a, b in zip(corners[:-1], corners[1:]):
@@ -215,10 +218,47 @@ def attitude_path(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray,
                          for i in range(k + 1)])
     else:
         share = arc / arc[-1] if arc[-1] > 0.0 else np.linspace(0.0, 1.0, len(points))
-        path = np.array([so3.matmul(so3.exp(d[i] * (first + (last - first) * share[i])),
-                                    bases[i]) for i in range(len(points))])
+        twist = first + (last - first) * share
+        if tilt_max < math.pi - 1e-9:
+            limit = twist_within(bases, d, up, tilt_max - CAP_CLEARANCE)
+            twist[1:-1] = np.clip(twist[1:-1], -limit[1:-1], limit[1:-1])
+        path = np.array([so3.matmul(so3.exp(d[i] * twist[i]), bases[i])
+                         for i in range(len(points))])
     path[0], path[-1] = R0, R_goal
-    return path
+    return _filled(path)
+
+
+def _filled(path: np.ndarray) -> np.ndarray:
+    """The path with attitudes put in, PATH_STEP apart at most, along the shortest turn between
+    neighbours more than twice that apart (where the stops' limit on the turn about the sensor
+    changes the turn faster than the sensor moves: the lift off the stops at the start), so that
+    the set point, which looks LOOKAHEAD_MIN ahead near a cone, always has a next one in reach.
+    """
+    out = [path[0]]
+    for a, b in zip(path[:-1], path[1:]):
+        w = so3.log(so3.matmul(so3.transpose(a), b))
+        angle = math.sqrt(so3.dot(w, w))
+        k = int(math.ceil(angle / PATH_STEP)) if angle > 2.0 * PATH_STEP else 1
+        out += [so3.matmul(a, so3.exp(w * (i / k))) for i in range(1, k)] + [b]
+    return np.array(out)
+
+
+def twist_within(bases: List[np.ndarray], d: np.ndarray, up: np.ndarray,
+                 tilt: float) -> np.ndarray:
+    """The largest turn psi (rad, >= 0) about each sensor direction d[k] that keeps the body's
+    z axis of exp(+-psi d[k]) bases[k] within tilt (rad) of up; 0 where even the upright
+    attitude bases[k] (``upright``) is tilted further. With z = bases[k] e3 split into a part
+    a along d and b across it (b towards up: the upright attitude), up . z(psi) = a + b cos psi
+    falls with |psi| on [0, pi], so the bound is arccos((cos tilt - a) / b).
+    """
+    z = np.array([B[:, 2] for B in bases])
+    along = so3.dot(z, d)[:, None] * d
+    a = so3.dot(along, up[None, :])
+    b = so3.dot(z - along, up[None, :])
+    gap = math.cos(tilt) - a
+    # (b = 0: d along up, the tilt the same at every turn: any turn, or none)
+    c = np.where(b > 1e-12, gap / np.maximum(b, 1e-12), np.where(gap <= 0.0, -1.0, 1.0))
+    return np.arccos(np.clip(c, -1.0, 1.0))
 
 
 def joint_caps(up: np.ndarray, r: np.ndarray, tilt_max: float, ends: np.ndarray) -> tuple:
@@ -263,7 +303,7 @@ def plan(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray, axes: np.ndarray,
                                               np.full(len(cap_rims), CAP_CLEARANCE))))
     if corners is None:
         return R_goal[None].copy()
-    return attitude_path(R0, R_goal, r, corners, up)
+    return attitude_path(R0, R_goal, r, corners, up, tilt_max)
 
 
 def _enters(corners: List[np.ndarray], axes: np.ndarray, rims: np.ndarray) -> bool:
