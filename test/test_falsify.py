@@ -90,13 +90,13 @@ def test_a_short_falsification_writes_its_table_and_a_worst_flight_that_replays_
     steps taken here) is the search's.
     """
     out = tmp_path / 'f'
-    code = falsify_cli.main(['--budget', '24', '--duration', '2', '--out', str(out),
+    code = falsify_cli.main(['--budget', '16', '--duration', '1.5', '--out', str(out),
                              '--requirements', 'safety,assumed', '--scheduler', dask_scheduler])
     printed = capsys.readouterr()
     summary = (out / 'summary.md').read_text()
     assert code in (0, 1), printed.err
     assert (code == 1) == ('falsified: none' not in summary)
-    for row in ('| uniform, safety | 24 |', '| de, safety |', '| uniform, assumed | 24 |'):
+    for row in ('| uniform, safety | 16 |', '| de, safety |', '| uniform, assumed | 16 |'):
         assert row in summary
     with open(out / 'evaluations.csv') as f:
         rows = list(csv.DictReader(f))

@@ -18,7 +18,9 @@ from geoctl_ros.params import controller_setup, load_parameter_file
 from geoctl_ros.sim import scenario
 from geoctl_ros.sim.closed_loop import fly
 
-pytestmark = pytest.mark.odroid
+# on the vehicle's stack too, but for the straight yaw's 16 s flight (the closed loop there is
+# flown by the batch-against-alone flights of test_closed_loop)
+odroid = pytest.mark.odroid
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENARIOS = os.path.join(ROOT, 'config', 'scenarios')
@@ -37,6 +39,7 @@ def _arc_points(a, b, n=2001):
     return np.array([so3.exp(axis * (angle * t)) @ a for t in np.linspace(0.0, 1.0, n)])
 
 
+@odroid
 def test_arc_clearance_is_the_closest_approach_of_the_sampled_arc():
     rng = np.random.default_rng(3)
     a = np.array([_unit(rng.normal(size=3)) for _ in range(6)])
@@ -58,6 +61,7 @@ def _campaign_case(seed, index):
     return axes, theta, m['R0'], m['R_d']
 
 
+@odroid
 @pytest.mark.parametrize('index', range(12))
 def test_the_planned_path_keeps_every_cone_clear_and_ends_at_the_goal(index):
     """On the campaign's random cones (a straight way through the first one): every point of the
@@ -84,6 +88,7 @@ def test_the_planned_path_keeps_every_cone_clear_and_ends_at_the_goal(index):
     assert np.sum(np.radians(steps)) > math.acos(float(d[0] @ d[-1]))
 
 
+@odroid
 def test_the_set_point_runs_at_most_the_lookahead_ahead_and_never_back():
     axes, theta, R0, R_goal = _campaign_case(11, 0)
     cones = ConeSet(R_AXIS, axes, theta, 8.0, math.radians(0.25), guard_rad=math.radians(2.0))
@@ -100,6 +105,7 @@ def test_the_set_point_runs_at_most_the_lookahead_ahead_and_never_back():
     assert math.degrees(so3.angle(R_goal.T @ R)) < 0.01
 
 
+@odroid
 def test_the_set_point_is_planned_again_for_a_vehicle_pushed_off_its_way():
     axes, theta, R0, R_goal = _campaign_case(11, 1)
     cones = ConeSet(R_AXIS, axes, theta, 8.0, math.radians(0.25))
@@ -111,6 +117,7 @@ def test_the_set_point_is_planned_again_for_a_vehicle_pushed_off_its_way():
     assert np.allclose(g.paths[0, 0] @ R_AXIS, pushed @ R_AXIS)
 
 
+@odroid
 def test_a_batch_gives_each_run_the_set_points_it_gets_alone_when_one_is_planned_again():
     """Found by the falsifier: a run near its goal had its set point in its path's padding, past
     its own goal; a shorter plan of another run of the batch then put it off the end (an
@@ -135,6 +142,7 @@ def test_a_batch_gives_each_run_the_set_points_it_gets_alone_when_one_is_planned
         R = np.array([R[i] @ so3.exp(0.4 * so3.log(R[i].T @ P[i])) for i in range(2)])
 
 
+@odroid
 def test_the_law_follows_the_set_point_when_a_new_plan_puts_it_at_the_same_index():
     """Found by the falsifier at 150 ms of latency: a vehicle pushed off its way is planned for
     again, and the new set point can fall at the same index of the new path as the old one did
@@ -172,6 +180,7 @@ def _tilt_deg(R):
     return np.degrees(np.arccos(np.clip(np.asarray(R)[..., 2, 2], -1.0, 1.0)))
 
 
+@odroid
 @pytest.mark.parametrize('index', [913, 0, 1, 4, 5, 7])
 def test_a_start_resting_on_the_stops_is_lifted_off_them_and_led_to_the_goal(index):
     """The arming stratum's runs that rest on the joint's stops (45 deg; run 913 of seed 1 was
@@ -215,6 +224,7 @@ def test_the_straight_yaw_arrives_round_the_cone():
     assert f.final_error_deg[0] < 1.0
 
 
+@odroid
 def test_the_estimate_learns_the_true_m_rho_within_seconds():
     """The sim's centre of mass 20 % higher than the model's and its mass 20 % heavier (m*rho
     44 % off): the shipped gains learn m*rho with a time constant of a few seconds (derived,

@@ -28,12 +28,11 @@ from geoctl_ros.params import (
 )
 from geoctl_ros.sim import scenario
 
-# on the vehicle's stack too, but for the four long closed-loop flights: the scenario and campaign
-# tests and the sim-in-the-loop flight fly the same loop there
+# on the vehicle's stack too: the formulas (finite differences, the QP's optimality); the closed
+# loops flown here are the same code as the batch-against-alone flights there (test_closed_loop)
 odroid = pytest.mark.odroid
 
 
-@odroid
 @pytest.mark.parametrize('law', ['paper', 'delay_robust', 'geometric', 'cbf'])
 def test_each_law_flies_the_derived_yaw_past_a_cone_as_expected(law):
     """The control-law interface (``law``) on a case derived here: testbed_yaw90 with ideal
@@ -118,7 +117,6 @@ def test_the_cbf_qp_is_the_closest_admissible_moment():
     np.testing.assert_allclose(batch, [[2.0, 1.0, 0.5], u0])
 
 
-@odroid
 def test_the_cbf_law_holds_the_guarded_cone_in_the_ideal_loop():
     """The derived yaw (the geometric baseline's path crosses the 12 deg cone's axis), flown by
     the cbf law on the model itself: control at 100 Hz, the moment held, the rigid body
@@ -143,7 +141,6 @@ def test_the_cbf_law_holds_the_guarded_cone_in_the_ideal_loop():
     assert 1.99 < closest < 2.1, closest
 
 
-@odroid
 def test_the_cbf_filter_holds_the_cone_against_an_unlearnt_moment_up_to_its_bound():
     """The robust condition: with ``cbf_moment_bound`` D every row's beta_i grows by exactly
     D |a_i| (the worst a moment |d| <= D does to h''). Flown from a goal 1 deg outside a 20 deg

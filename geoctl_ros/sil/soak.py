@@ -65,6 +65,9 @@ CASES = {
     'imu gap 0.15 s': ((), ('drop_imu', 0.15, 5.0), 'no imu for 0.15 s every 5 s'),
     'sim paused 0.15 s': ((), ('pause', 0.15, 5.0), 'sim SIGSTOPped 0.15 s every 5 s'),
     'sim paused 2 s': ((), ('pause', 2.0, 10.0), 'sim SIGSTOPped 2 s every 10 s: failsafe'),
+    'monitoring+sim paused 0.15 s': (('cli',), ('pause', 0.15, 10.0),
+                                     'sim SIGSTOPped 0.15 s every 10 s, the README monitoring '
+                                     'commands (ros2 CLI) in a loop beside it'),
 }
 RELAYED = ('delay', 'duplicate', 'reorder', 'hold', 'drop_pose', 'drop_imu')
 
