@@ -186,8 +186,9 @@ def test_a_start_resting_on_the_stops_is_lifted_off_them_and_led_to_the_goal(ind
     """The arming stratum's runs that rest on the joint's stops (45 deg; run 913 of seed 1 was
     planned past them, to 48 deg, and then swung between the stops and the cone into it): the
     path lifts the start within four steps to 2 deg inside the stops and keeps there (the tilt
-    of each attitude, from its matrix), neighbours are at most two PATH_STEPs apart, and a vehicle that goes where
-    the set point is (the carrot's own cones: 2 deg guard) reaches the goal.
+    of each attitude, from its matrix), neighbours are at most two PATH_STEPs apart, and a
+    vehicle that goes where the set point is (the carrot's own cones: 2 deg guard) reaches the
+    goal.
     """
     m = manoeuvres.draw_manoeuvre(1, index, R_AXIS, stratum='arming', tilt_max_deg=45.0)
     assert m['start_mode'] == 'resting'

@@ -121,15 +121,12 @@ def unmodelled_acceleration(moment_bound: float, J: np.ndarray) -> float:
     return moment_bound / so3.symmetric_eigenvalues(J)[0]
 
 
-def _phase(x: Any, w: Any, best: Any, acc0: Any, acc1: Any, T: float) -> tuple:
-    """A phase of T whose acceleration goes linearly from acc0 to acc1, from travel x at rate w,
-    best the farthest so far: (x, w, best) at its end (the stop within it caught: where w
-    passes 0 going down, the root of w + acc0 t + (acc1 - acc0) t^2 / 2 T).
+def _stops(x: Any, w: Any, acc0: Any, c: Any, T: Any) -> Any:
+    """The travel at the stop within each phase that starts at travel x and rate w, its
+    acceleration acc0 + 2 c t for t in [0, T] (where w falls through 0 within it, w > 0 > the
+    rate at T; else x): the root of w + acc0 t + c t^2.
     """
-    c = 0.5 * (acc1 - acc0) / T
     w_T = w + (acc0 + c * T) * T
-    x_T = x + (w + (0.5 * acc0 + c * T / 3.0) * T) * T
-    # the stop: c t^2 + acc0 t + w = 0, the root where w falls through 0 (w > 0 > w_T)
     turn = (w > 0.0) & (w_T < 0.0)
     disc = np.maximum(acc0 * acc0 - 4.0 * c * w, 0.0)
     linear = np.abs(c) < 1e-12
@@ -138,8 +135,20 @@ def _phase(x: Any, w: Any, best: Any, acc0: Any, acc1: Any, T: float) -> tuple:
     root = np.where((root > 0.0) & (root < T), root, np.where(
         linear, root, (-acc0 + np.sqrt(disc)) / np.where(linear, 1.0, 2.0 * c)))
     t = np.clip(root, 0.0, T)
-    inside = np.where(turn, x + (w + (0.5 * acc0 + c * t / 3.0) * t) * t, x)
-    return x_T, w_T, np.maximum(best, np.maximum(inside, x_T))
+    return np.where(turn, x + (w + (0.5 * acc0 + c * t / 3.0) * t) * t, x)
+
+
+def _shares(spans: tuple) -> tuple:
+    """The share of the backup's deficit left at the start of each span and after the last
+    (exp of minus the spans so far, multiplied in turn).
+    """
+    shares = [1.0]
+    for span in spans:
+        shares.append(shares[-1] * math.exp(-span))
+    return tuple(shares)
+
+
+SHARES = _shares(BACKUP_SPANS)
 
 
 def backup_travel(brake: ApproachBrake, w0: Any, D_s: Any, D: Any, authority: Any,
@@ -151,20 +160,33 @@ def backup_travel(brake: ApproachBrake, w0: Any, D_s: Any, D: Any, authority: An
     deceleration rises as a_b - (a_b - D) exp(-t / tau) (the compensated rotors asked for their
     most each hold follow their lag exactly), so over each of ``BACKUP_SPANS`` its chord is a
     lower bound of it; after them it stays at the level reached. Floats or arrays alike.
+
+    The phases (the hold, then the spans) are integrated at once along a leading axis: each
+    phase's acceleration goes linearly from acc0 to acc1 over its T, so its rate and travel at
+    its end are the start's plus (acc0 + c T) T and (w + (acc0 / 2 + c T / 3) T) T
+    (c = (acc1 - acc0) / 2 T), summed in turn (``np.cumsum``), and the farthest point is a
+    phase's end or the stop within one (``_stops``).
     """
     a_u = brake.unmodelled
-    x, best = 0.0 * w0, 0.0 * w0
     low = a_u - np.minimum(D_s, D)
-    x, w, best = _phase(x, w0, best, low, low, hold)
+    spans = BACKUP_SPANS if brake.lag > 0.0 else ()
+    shares = np.array(SHARES[:len(spans) + 1])
     gap_left = authority - np.minimum(D, authority)        # the backup's deficit to a_b
-    share = 1.0
-    for span in (BACKUP_SPANS if brake.lag > 0.0 else ()):
-        start = a_u - (authority - share * gap_left)
-        share *= math.exp(-span)
-        x, w, best = _phase(x, w, best, start, a_u - (authority - share * gap_left),
-                            span * brake.lag)
-    final = a_u - (authority - share * gap_left)            # (< 0: see NET_SHARE_MIN)
-    return np.maximum(best, x + np.maximum(w, 0.0) ** 2 / (2.0 * np.maximum(-final, 1e-9)))
+    shape = (-1,) + (1,) * np.ndim(gap_left)
+    level = a_u - (authority - shares.reshape(shape) * gap_left)   # at each span's ends
+    acc0 = np.concatenate((low[None] if np.ndim(low) else np.array([low]),
+                           level[:-1] + 0.0 * low))
+    acc1 = np.concatenate((acc0[:1], level[1:] + 0.0 * low))
+    T = np.array((hold,) + tuple(span * brake.lag for span in spans)).reshape(shape)
+    c = 0.5 * (acc1 - acc0) / T
+    w = np.cumsum(np.concatenate(((w0 + 0.0 * low)[None], (acc0 + c * T) * T)), axis=0)
+    x = np.cumsum(np.concatenate(((0.0 * w0 + 0.0 * low)[None],
+                                  (w[:-1] + (0.5 * acc0 + c * T / 3.0) * T) * T)), axis=0)
+    best = np.maximum(np.maximum(_stops(x[:-1], w[:-1], acc0, c, T), x[1:]).max(axis=0),
+                      0.0 * w0)
+    final = level[-1]                                       # (< 0: see NET_SHARE_MIN)
+    return np.maximum(best, x[-1] + np.maximum(w[-1], 0.0) ** 2
+                      / (2.0 * np.maximum(-final, 1e-9)))
 
 
 def backup_margin(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, authority: Any,
@@ -186,15 +208,28 @@ def backup_first(brake: ApproachBrake, D_s: Any, authority: Any, hold: float) ->
 
 
 def _worst(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: Any, spin: Any,
-           authority: Any, hold: float) -> tuple:
+           authority: Any, hold: float, law: Any = None) -> tuple:
     """The worst state of the uncertainty box and the backup from it, per cone: (G0, w0, the
-    rotors' deceleration now taken at most a_b, the backup's first command, Phi).
+    rotors' deceleration now taken at most a_b, the backup's first command, Phi); with law (a
+    deceleration per cone: the law's), also the worst-case travel after a command reaching it,
+    integrated with the backup's in one ``backup_travel``.
     """
     dg, dw = brake.uncertainty(age, spin)
     G0, w0 = gap - dg, w + dw
     Ds = np.minimum(D_s, authority)
     first = backup_first(brake, Ds, authority, hold)
-    return G0, w0, Ds, first, G0 - backup_travel(brake, w0, Ds, first, authority, hold)
+    if law is None:
+        return G0, w0, Ds, first, G0 - backup_travel(brake, w0, Ds, first, authority, hold)
+    travel = backup_travel(brake, w0, Ds, np.stack(np.broadcast_arrays(first, law)),
+                           authority, hold)
+    return G0, w0, Ds, first, G0 - travel[0], travel[1]
+
+
+def _met(margin: Any, first: Any, D: Any, travel: Any, G0: Any) -> Any:
+    """``meets`` from the worst state's margin, the backup's first command, D and the
+    worst-case travel after a command reaching D.
+    """
+    return np.where(margin < 0.0, D >= first, travel <= G0)
 
 
 def least_deceleration(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: Any,
@@ -218,8 +253,8 @@ def least_deceleration(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: An
     # that does (the backup's own first), keeping the one that does
     lo = np.minimum(Ds, 0.0) - 4.0 * authority
     hi = first
-    f_lo = backup_travel(brake, w0, Ds, lo, authority, hold) - G0
-    f_hi = backup_travel(brake, w0, Ds, hi, authority, hold) - G0
+    f_lo, f_hi = backup_travel(brake, w0, Ds, np.stack(np.broadcast_arrays(lo, hi)),
+                               authority, hold) - G0
     fine = f_lo <= 0.0                     # (even the low end meets it: a far cone)
     hi = np.where(fine, lo, hi)
     fixed = fine | past                    # (past: the backup's first, whatever the search)
@@ -244,8 +279,7 @@ def meets(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: Any, spin: Any,
     """
     G0, w0, Ds, first, margin = (_worst(brake, gap, w, D_s, age, spin, authority, hold)
                                  if worst is None else worst)
-    return np.where(margin < 0.0, D >= first,
-                    backup_travel(brake, w0, Ds, D, authority, hold) <= G0)
+    return _met(margin, first, D, backup_travel(brake, w0, Ds, D, authority, hold), G0)
 
 
 class BrakeRows(NamedTuple):
@@ -357,22 +391,21 @@ def rows(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, x: BrakeInputs,
     return BrakeRows(t.A, D - t.f_along + t.kin, margin, t.weak)
 
 
-def law_meets(brake: ApproachBrake, cones: Any, terms: BrakeTerms, x: BrakeInputs,
-              u: np.ndarray, worst: Optional[tuple] = None) -> np.ndarray:
+def law_meets(brake: ApproachBrake, cones: Any, t: BrakeTerms, x: BrakeInputs,
+              u: np.ndarray) -> tuple:
     """(...,) bool: whether the law's moment u meets every cone's condition at the tick of x
-    (``meets``, on the law's own deceleration along each cone; no search); worst: ``_worst_at``
-    of terms, where already computed.
+    (``meets``, on the law's own deceleration along each cone; no search), and ``_worst`` of
+    every cone there (for the rows: once a tick), the law's travel integrated with it.
     """
-    t = terms
     law = so3.dot(t.A, u[..., None, :]) + t.f_along - t.kin
-    return np.all(meets(brake, t.gap, t.w, t.D_s, _age(x), _spin(cones, t, x), t.authority,
-                        x.hold, law, worst), axis=-1)
+    G0, w0, Ds, first, margin, travel = _worst(brake, t.gap, t.w, t.D_s, _age(x),
+                                               _spin(cones, t, x), t.authority, x.hold, law)
+    return (np.all(_met(margin, first, law, travel, G0), axis=-1),
+            (G0, w0, Ds, first, margin))
 
 
 def _worst_at(brake: ApproachBrake, cones: Any, t: BrakeTerms, x: BrakeInputs) -> tuple:
-    """``_worst`` of every cone at the tick of x (its terms t): once for the law's check and
-    the rows alike.
-    """
+    """``_worst`` of every cone at the tick of x (its terms t)."""
     return _worst(brake, t.gap, t.w, t.D_s, _age(x), _spin(cones, t, x), t.authority, x.hold)
 
 
@@ -477,11 +510,13 @@ def braked(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, polytope: Any,
     # (a moment the rotors cannot reach this hold, which the lag compensation would clip, needs
     # the projection too: the derivation's rotors reach every command, the law's too)
     unreached = np.any(slack_of(A_p, u, beta_p) < -TOL, axis=-1)
-    worst = _worst_at(brake, cones, t, x)
     if extra is None:
-        braking = ~law_meets(brake, cones, t, x, u, worst)
+        meet, worst = law_meets(brake, cones, t, x, u)
+        braking = ~meet
         if not np.any(braking | unreached):
             return Braked(u, braking, weak)
+    else:
+        worst = _worst_at(brake, cones, t, x)
     r = rows(brake, cones, J_inv, x, t, worst)
     A, beta = r.A, r.beta
     if extra is not None:

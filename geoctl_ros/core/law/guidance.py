@@ -218,11 +218,11 @@ def attitude_path(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray,
                          for i in range(k + 1)])
     else:
         share = arc / arc[-1] if arc[-1] > 0.0 else np.linspace(0.0, 1.0, len(points))
-        twist = first + (last - first) * share
+        turns = first + (last - first) * share
         if tilt_max < math.pi - 1e-9:
             limit = twist_within(bases, d, up, tilt_max - CAP_CLEARANCE)
-            twist[1:-1] = np.clip(twist[1:-1], -limit[1:-1], limit[1:-1])
-        path = np.array([so3.matmul(so3.exp(d[i] * twist[i]), bases[i])
+            turns[1:-1] = np.clip(turns[1:-1], -limit[1:-1], limit[1:-1])
+        path = np.array([so3.matmul(so3.exp(d[i] * turns[i]), bases[i])
                          for i in range(len(points))])
     path[0], path[-1] = R0, R_goal
     return _filled(path)
