@@ -136,10 +136,17 @@ def free_udp_port():
 def test_testbed_launch_remaps_prefix_and_law_reach_the_controller(installed, ros, tmp_path):
     """The runbook's launch: one controller on the file and then the calibration (its gyro bias
     in effect), the bridge on the link and signing key given; each in the real-time class at its
-    priority where permitted, else at normal priority with its WARN.
+    priority where permitted, else at normal priority with its WARN. The launch's law is in
+    force over a file whose controller section names another (a plain ``-p law:=`` loses to
+    that section in rclpy's order: the launch scopes it to the node).
     """
     env, _ = installed
     mon = ros
+    with open(os.path.join(ROOT, 'config', 'testbed.yaml')) as fh:
+        doc = yaml.safe_load(fh)
+    doc['controller']['ros__parameters']['law'] = 'paper'
+    params = tmp_path / 'lab.yaml'
+    params.write_text(yaml.safe_dump(doc))
     calibration = tmp_path / 'calibration.yaml'
     calibration.write_text('controller:\n  ros__parameters:\n    gyro_bias: [0.0125, 0.0, 0.0]\n')
     key = tmp_path / 'mavlink.key'
@@ -149,6 +156,7 @@ def test_testbed_launch_remaps_prefix_and_law_reach_the_controller(installed, ro
     launch = Launch(env, tmp_path / 'launch.log', 'testbed.launch.xml',
                     'pose_topic:=/mocap/body/pose', 'imu_topic:=/board/imu',
                     'prefix:=nice -n 3', 'law:=cbf', 'calibration:=%s' % calibration,
+                    'params_file:=%s' % params,
                     'mavlink:=true', 'mavlink_url:=' + url, 'mavlink_key:=%s' % key)
     pub_pose = mon.create_publisher(PoseStamped, '/mocap/body/pose', qos.SENSOR)
     pub_imu = mon.create_publisher(Imu, '/board/imu', qos.SENSOR)
@@ -186,7 +194,10 @@ def test_testbed_launch_remaps_prefix_and_law_reach_the_controller(installed, ro
         with open('/proc/%d/cmdline' % pid, 'rb') as fh:
             cmdline = fh.read().split(b'\0')
         assert any(arg.endswith(b'controller') for arg in cmdline), cmdline
-        assert b'law:=cbf' in cmdline, cmdline                   # the law, over the file's
+        assert b'controller:law:=cbf' in cmdline, cmdline
+        in_force = mon._call(mon.create_client(GetParameters, '/controller/get_parameters'),
+                             GetParameters.Request(names=['law']))
+        assert [v.string_value for v in in_force.values] == ['cbf']   # over the file's paper
     finally:
         mon.destroy_timer(timer)
         launch.stop()
