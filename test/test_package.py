@@ -22,7 +22,8 @@ import pytest
 from source_support import PKG, ROOT, imported_modules, module_level_imports, package_modules
 from workspace import Workspace
 
-pytestmark = pytest.mark.odroid
+# on the vehicle's stack too, but for the development tools' pins (requirements.txt, the extra)
+odroid = pytest.mark.odroid
 
 
 
@@ -31,6 +32,7 @@ def _console_scripts():
     return set(re.findall(r"'(\w+) = geoctl_ros\.[\w.]+:\w+'", text))
 
 
+@odroid
 @pytest.mark.parametrize('name', ['testbed.launch.xml', 'sil.launch.xml'])
 def test_launch_files_name_only_what_exists(name):
     root = ET.parse(os.path.join(ROOT, 'launch', name)).getroot()
@@ -166,6 +168,7 @@ def _on_import(name, files, lazy=False):
     return found
 
 
+@odroid
 def test_the_flight_packages_run_time_dependencies_are_the_vehicles_and_nothing_else():
     """package.xml's exec_depends are the flight package's (FLIGHT_MODULES' keys, FLIGHT_ROS and
     ros2launch) and setup.py's INSTALL_REQUIRES their index names: exactly what the flight
@@ -192,6 +195,7 @@ def test_the_flight_packages_run_time_dependencies_are_the_vehicles_and_nothing_
     assert 'BSD 3-Clause' in open(os.path.join(ROOT, 'LICENSE')).read()
 
 
+@odroid
 def test_no_flight_module_imports_a_tool_dependency_on_import():
     """No module of the flight package imports matplotlib, Dask, Optuna, ... when it is imported,
     directly or through the package's modules it imports (parsed; imports inside functions are
@@ -255,6 +259,7 @@ def test_the_tools_dependencies_are_the_extra_tools_pinned_as_requirements_txt()
     assert {tools.DISTRIBUTIONS.get(m, m) for m in TOOL_MODULES} == set(TOOL_MODULES.values())
 
 
+@odroid
 def test_the_tests_imports_are_declared():
     """Every import of the tests is the flight package's, a test_depend of package.xml, or a
     tool's (those tests skip without the extra, which the vehicle has not).
@@ -306,6 +311,7 @@ print(json.dumps(out))
 """
 
 
+@odroid
 def test_without_the_extra_each_tool_says_in_one_line_where_it_runs():
     """With the tools' modules made unimportable (as on the vehicle's stack), every tool command
     (console script or ./run's) given --help says in one line that it is a development tool and
@@ -335,6 +341,7 @@ sys.exit(scenario.main([sys.argv[1], '--out', sys.argv[2], '--duration', '0.2'])
 """
 
 
+@odroid
 def test_scenario_runs_on_the_vehicle_without_matplotlib_and_says_the_figures_are_skipped(
         tmp_path):
     """``scenario`` (the runbook's check of a parameter file on the vehicle) writes its summary
@@ -359,6 +366,7 @@ def test_scenario_runs_on_the_vehicle_without_matplotlib_and_says_the_figures_ar
 @pytest.mark.skipif(int(np.__version__.split('.')[0]) >= 2,
                     reason="the build as on the vehicle is checked on the vehicle's stack; here "
                            'the launch tests build the package with colcon')
+@odroid
 def test_colcon_builds_installs_and_tests_the_package_as_on_the_vehicle(tmp_path):
     """The apt path's last two steps, in a workspace of its own: `colcon build` installs every
     console script where `ros2 run` looks and the files the launch files name (a tool's, without
@@ -401,6 +409,7 @@ def _numpy_1_26():
         return {line.strip() for line in fh if line.strip() and not line.startswith('#')}
 
 
+@odroid
 def test_the_code_uses_nothing_that_numpy_1_26_lacks():
     """The vehicle's numpy (Ubuntu 24.04: 1.26.4) has every numpy name the package, its tests
     and benchmarks use; a miss is named with its file and line, not found deep in a flight.
@@ -422,6 +431,7 @@ def test_the_code_uses_nothing_that_numpy_1_26_lacks():
     assert not problems, '\n'.join(problems)
 
 
+@odroid
 def test_the_numpy_check_finds_what_1_26_lacks_and_only_that():
     source = ('import numpy as np\n'
               'from numpy import linalg as la\n'
@@ -433,6 +443,7 @@ def test_the_numpy_check_finds_what_1_26_lacks_and_only_that():
         (4, 'numpy.matvec'), (5, 'ndarray.mT'), (5, 'numpy.linalg.matrix_transpose')]
 
 
+@odroid
 @pytest.mark.skipif(not np.__version__.startswith('1.26.'), reason='needs numpy 1.26 itself')
 def test_the_committed_numpy_1_26_names_are_numpy_1_26s():
     assert set(numpy_api.names()) == _numpy_1_26(), 'regenerate: python test/numpy_api.py > %s' % (
@@ -446,6 +457,7 @@ def _ruff():
     return ruff
 
 
+@odroid
 def test_every_file_of_the_tree_is_clean_under_the_linter():
     """ruff with ruff.toml (ament_flake8's rules and pep257's) over the package, tests, benchmarks
     and launch files' Python; a new violation fails here with its file, line and rule.
@@ -455,6 +467,7 @@ def test_every_file_of_the_tree_is_clean_under_the_linter():
     assert r.returncode == 0, r.stdout + r.stderr
 
 
+@odroid
 def test_the_linter_finds_what_the_rules_forbid():
     planted = ('"""A module."""\n'
                'import os\n\n\n'
@@ -470,6 +483,7 @@ def test_the_linter_finds_what_the_rules_forbid():
     assert {'F401', 'PLC0415', 'Q000', 'E501'} <= found, r.stdout
 
 
+@odroid
 def test_the_rclpy_free_layers_are_clean_under_mypy(tmp_path):
     """mypy (mypy.ini: core, params, sim and esc) finds no type error; a planted one it finds."""
     if importlib.util.find_spec('mypy') is None:
@@ -485,6 +499,7 @@ def test_the_rclpy_free_layers_are_clean_under_mypy(tmp_path):
     assert r.returncode == 1 and 'Incompatible return value' in r.stdout, r.stdout
 
 
+@odroid
 def test_every_public_function_of_the_typed_layers_has_type_hints():
     """Every public function and method of core, params, sim and esc (mypy.ini's layers) says
     the types of its arguments and of what it returns, so that mypy checks it and its callers.
@@ -509,6 +524,7 @@ print(rosenv.config_dir())
 """
 
 
+@odroid
 def test_the_scripts_find_the_config_pip_installed_without_a_sourced_workspace(tmp_path):
     """Issue (hostile input): after ``pip install`` outside a sourced workspace, ``campaign``
     died with "Environment variable 'AMENT_PREFIX_PATH' is not set or empty". Here the package
@@ -544,6 +560,7 @@ def _anchor(heading):
     return re.sub(r'[^\w\- ]', '', heading.strip().lower()).replace(' ', '-')
 
 
+@odroid
 def test_every_link_of_the_readme_and_the_manual_leads_somewhere():
     """The README is a map and docs/ the manual: every relative link of theirs names a file that
     exists and, with a #fragment, a heading of that file.

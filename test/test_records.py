@@ -27,7 +27,9 @@ from geoctl_ros.params.topics import BY_NAME, Topic
 from geoctl_ros.records import bag
 from geoctl_ros.sim import scenario
 
-pytestmark = pytest.mark.odroid
+# on the vehicle's stack too, but for compare's headless flight (the development stack's; the
+# closed loop there is test_closed_loop's)
+odroid = pytest.mark.odroid
 TESTBED = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config',
                        'testbed.yaml')
 EXPERIMENT = os.path.join(os.path.dirname(TESTBED), 'scenarios', 'testbed_experiment.yaml')
@@ -79,6 +81,7 @@ def write(path, topic, values, storage='mcap'):
     assert w.error is None and w.counts[topic.name] == len(values)
 
 
+@odroid
 def test_what_is_not_a_bag_is_refused_in_one_line(tmp_path, report):
     one_line_refusal(report(tmp_path / 'nowhere'), 'nowhere', 'not a rosbag2 bag')
     (tmp_path / 'empty').mkdir()
@@ -92,6 +95,7 @@ def test_what_is_not_a_bag_is_refused_in_one_line(tmp_path, report):
     one_line_refusal(report(other), 'none of the topics geoctl_ros publishes', '/other/altitude')
 
 
+@odroid
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
 def test_a_bag_with_some_topics_reports_what_it_can_and_names_the_rest(tmp_path, storage,
                                                                       report):
@@ -110,6 +114,7 @@ def test_a_bag_with_some_topics_reports_what_it_can_and_names_the_rest(tmp_path,
     assert not (out / 'sensor_path.png').exists()
 
 
+@odroid
 def test_the_view_draws_each_cone_at_its_half_angle_and_the_trail_oldest_first():
     axis, theta = np.array([1.0, 1.0, 0.0]) / math.sqrt(2.0), math.radians(12.0)
     tris = cone_triangles(axis, theta, length=2.0, segments=16).reshape(16, 3, 3)
@@ -179,6 +184,7 @@ def test_compare_flies_a_record_again_headless_and_finds_the_same_flight(tmp_pat
     assert report(never, '--out', tmp_path / 'o2', '--compare', TESTBED).returncode == 2
 
 
+@odroid
 @pytest.mark.dds
 def test_record_writes_the_remapped_raw_topics_under_their_real_names_and_report_reads_them(
         ros, tmp_path, report):
@@ -227,6 +233,7 @@ def test_record_writes_the_remapped_raw_topics_under_their_real_names_and_report
     assert '/attitude' in s['missing_topics']
 
 
+@odroid
 def test_a_closed_bag_whose_file_was_cut_still_reports(tmp_path):
     """Issue (hostile input): a bag closed and then cut (its metadata.yaml present, its MCAP file
     short: a copy that stopped, a card pulled) was refused with "File end magic is invalid"; the
@@ -268,6 +275,7 @@ print('dropped:', w.dropped)
 """
 
 
+@odroid
 def test_a_full_disk_stops_the_bag_cleanly_and_what_was_written_reads_back(tmp_path):
     """Issue (hostile input): a full disk ended the writer thread silently and close() could
     wait forever on a full queue. Here a file size limit stands in for the full disk (the
@@ -284,6 +292,7 @@ def test_a_full_disk_stops_the_bag_cleanly_and_what_was_written_reads_back(tmp_p
     assert len(got['/configuration_error']) > 0
 
 
+@odroid
 def test_each_checkpoint_puts_the_bag_on_the_disk_not_only_in_the_page_cache(tmp_path,
                                                                              monkeypatch):
     """Issue (hostile input): the 1 s checkpoint flushed the MCAP file but did not fsync it, so a
