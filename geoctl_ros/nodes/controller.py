@@ -129,9 +129,9 @@ class ControllerNode(Node):
         self.scheduling = scheduling()      # (the realtime prefix's class: read once)
         self.create_timer(self.period, self._on_timer, clock=self.clock_)
         self.create_timer(DIAGNOSTICS_PERIOD, self._end_window, clock=self.clock_)
-        self.get_logger().info('controller ready at %g Hz (%s clock), %d cone(s), disarmed'
-                               % (setup.loop.rate_hz, 'ROS' if sim_time else 'steady',
-                                  len(setup.config.cones)))
+        self.get_logger().info('controller ready at %g Hz (%s clock), law %s, %d cone(s), '
+                               'disarmed' % (setup.loop.rate_hz, 'ROS' if sim_time else 'steady',
+                                             setup.config.law, len(setup.config.cones)))
 
     def _now(self):
         """Seconds on the node's clock: the ROS clock with use_sim_time, else the steady clock,
