@@ -234,3 +234,29 @@ def test_a_thrust_curve_whose_inverse_would_overflow_is_refused():
     with pytest.raises(ConfigError) as refused:       # (the minimum itself is no motor.a error:
         controller_setup(resolve(CONTROLLER, {'motor.a': [1e-12]}))   # its curve lifts little)
     assert [name for name, _ in refused.value.errors] == ['thrust_max']
+
+
+@pytest.mark.parametrize('order', ['wildcard first', 'node first'])
+def test_a_files_sections_apply_in_its_order_as_rclpy_applies_them(tmp_path, order):
+    """k_R set in '/**' (0.7) and in the controller's section (0.9) of one file: what the tools
+    read of it (``node_overrides``) is what a node given that file holds, in either order of
+    the sections (the later one's value: rclpy's order of first appearance).
+    """
+    rclpy = pytest.importorskip('rclpy')
+    from rclpy.context import Context
+    from rclpy.node import Node
+    wildcard = "/**:\n  ros__parameters:\n    k_R: 0.7\n"
+    own = "controller:\n  ros__parameters:\n    k_R: 0.9\n"
+    path = tmp_path / 'lab.yaml'
+    path.write_text(wildcard + own if order == 'wildcard first' else own + wildcard)
+    read = params.node_overrides(params.load_parameter_file(str(path)), CONTROLLER)['k_R']
+    context = Context()
+    rclpy.init(context=context, args=['--ros-args', '--params-file', str(path)])
+    try:
+        node = Node('controller', context=context,
+                    automatically_declare_parameters_from_overrides=True)
+        held = node.get_parameter('k_R').value
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+    assert read == held == (0.9 if order == 'wildcard first' else 0.7)

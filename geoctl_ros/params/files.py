@@ -62,17 +62,22 @@ def load_parameter_file(path: str) -> dict:
 
 
 def node_overrides(sections: dict, node: str) -> dict:
-    """The flat overrides node gets from a parameter file: '/**' first, then its own section.
+    """The flat overrides node gets from a parameter file: the sections that address it ('/**',
+    its own, '/' + its own) in the file's order, a later one's value over an earlier one's, as
+    rclpy applies them (so '/**' after the node's own section wins over it).
 
     Parameters in '/**' that node does not read are dropped (ROS ignores them too); its own section
     must contain only its parameters.
     """
     own = {p.name for p in schema_for(node)}
-    merged = {k: v for k, v in sections.get('/**', {}).items()
-              if k in own or (node == CONTROLLER and CONE_KEY.match(k))
-              or k not in BY_NAME and not CONE_KEY.match(k)}
-    for key in (node, '/' + node):
-        merged.update(sections.get(key, {}))
+    merged: dict = {}
+    for key, values in sections.items():
+        if key == '/**':
+            merged.update({k: v for k, v in values.items()
+                           if k in own or (node == CONTROLLER and CONE_KEY.match(k))
+                           or k not in BY_NAME and not CONE_KEY.match(k)})
+        elif key in (node, '/' + node):
+            merged.update(values)
     return merged
 
 
