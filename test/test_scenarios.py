@@ -283,3 +283,30 @@ def test_the_testbed_scenarios_fly_the_testbeds_own_gains():
     assert (experiment['k_R'], experiment['k_Omega'], experiment['c'], experiment['k_Delta'],
             experiment['disturbance_model'], experiment['guidance_lookahead_deg']) == (
         0.4, 0.7, 0.1, 0.05, 'constant', 0.0)
+
+
+# every shipped scenario's first seconds, the sha256 of its history, printed per line
+_HASHES = '''
+import hashlib, os, sys
+from geoctl_ros.sim import scenario
+for name in sorted(os.listdir(sys.argv[1])):
+    flight = scenario.run(scenario.load(os.path.join(sys.argv[1], name)), duration=1.5)
+    print(name, hashlib.sha256(flight.history.tobytes()).hexdigest())
+'''
+
+
+def test_every_scenario_flies_to_the_same_bits_under_another_blas_kernel():
+    """Every shipped scenario's first 1.5 s (its whole history: attitude, rates, moments, the
+    estimate, the rotors) has the same sha256 with OpenBLAS's Prescott kernel (the oldest x86
+    one) as with the kernel this CPU picks: nothing on the path goes through BLAS, whose kernels
+    round by the CPU (docs/scenarios.md's figures hold on any CPU).
+    """
+    def hashes(kernel):
+        env = {k: v for k, v in os.environ.items() if k != 'OPENBLAS_CORETYPE'}
+        env.update({'OPENBLAS_CORETYPE': kernel} if kernel else {})
+        out = subprocess.run([sys.executable, '-c', _HASHES, SCENARIOS], capture_output=True,
+                             text=True, env=env, check=True).stdout
+        return dict(line.split() for line in out.splitlines())
+    prescott = hashes('Prescott')
+    assert len(prescott) == len(os.listdir(SCENARIOS))
+    assert hashes(None) == prescott
