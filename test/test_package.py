@@ -49,9 +49,11 @@ def test_launch_files_name_only_what_exists(name):
         assert not list(node.iter('param')), 'a param element only warns on a missing file'
         # (followed by more parameter files and -p overrides of the launch's arguments, at most)
         ros_args = node.get('ros_args')
+        # (an override may be node-scoped, node:name:=value, as rcl reads it)
         assert re.fullmatch(r'(?:--params-file (?:\$\(var \w+\)|\S+))'
                             r'(?: --params-file (?:\$\(var \w+\)|\S+))*'
-                            r'(?: -p [\w.]+:=(?:\$\(var \w+\)|[\w.]+))*', ros_args), ros_args
+                            r'(?: -p (?:\w+:)?[\w.]+:=(?:\$\(var \w+\)|[\w.]+))*',
+                            ros_args), ros_args
         for src in re.findall(r'--params-file (\$\(var \w+\)|\S+)', ros_args):
             for _ in range(3):                    # an argument whose default is another's
                 m = re.fullmatch(r'\$\(var (\w+)\)', src)

@@ -243,10 +243,10 @@ def test_a_files_sections_apply_in_its_order_as_rclpy_applies_them(tmp_path, ord
     the sections (the later one's value: rclpy's order of first appearance).
     """
     rclpy = pytest.importorskip('rclpy')
-    from rclpy.context import Context
-    from rclpy.node import Node
-    wildcard = "/**:\n  ros__parameters:\n    k_R: 0.7\n"
-    own = "controller:\n  ros__parameters:\n    k_R: 0.9\n"
+    from rclpy.context import Context  # noqa: PLC0415  (after the skip above)
+    from rclpy.node import Node  # noqa: PLC0415
+    wildcard = '/**:\n  ros__parameters:\n    k_R: 0.7\n'
+    own = 'controller:\n  ros__parameters:\n    k_R: 0.9\n'
     path = tmp_path / 'lab.yaml'
     path.write_text(wildcard + own if order == 'wildcard first' else own + wildcard)
     read = params.node_overrides(params.load_parameter_file(str(path)), CONTROLLER)['k_R']

@@ -286,13 +286,13 @@ def test_the_testbed_scenarios_fly_the_testbeds_own_gains():
 
 
 # every shipped scenario's first seconds, the sha256 of its history, printed per line
-_HASHES = '''
+_HASHES = """
 import hashlib, os, sys
 from geoctl_ros.sim import scenario
 for name in sorted(os.listdir(sys.argv[1])):
     flight = scenario.run(scenario.load(os.path.join(sys.argv[1], name)), duration=1.5)
     print(name, hashlib.sha256(flight.history.tobytes()).hexdigest())
-'''
+"""
 
 
 def test_every_scenario_flies_to_the_same_bits_under_another_blas_kernel():
