@@ -101,7 +101,8 @@ def test_the_benchmark_flies_every_law_on_a_case_and_the_same_random_runs(
         assert np.std(image) > 0.05                                 # something is drawn
 
 
-# (not marked `headless`: ./run test's headless stream, with the shipped scenarios, is the longer)
+# (marked `headless`: ./run test's stream beside the rest, which is the longer without them)
+@pytest.mark.headless
 @pytest.mark.parametrize('case', cases.CASES)
 def test_the_cbf_filter_never_enters_a_cone_in_the_standard_cases(case):
     """Each standard case as its file has it (the cbf law's tuning included), flown whole by the

@@ -197,7 +197,8 @@ def test_the_flight_packages_run_time_dependencies_are_the_vehicles_and_nothing_
     assert 'BSD 3-Clause' in open(os.path.join(ROOT, 'LICENSE')).read()
 
 
-@odroid
+# (parsed, not imported: the same on either stack, so the development stack's alone; the tools'
+# commands without the extra run on both, test_without_the_extra_each_tool_says_in_one_line...)
 def test_no_flight_module_imports_a_tool_dependency_on_import():
     """No module of the flight package imports matplotlib, Dask, Optuna, ... when it is imported,
     directly or through the package's modules it imports (parsed; imports inside functions are
