@@ -81,7 +81,7 @@ def test_the_cbf_laws_constraint_terms_match_finite_differences_of_h():
     def h(t):
         R_t, _ = flow(t)
         return np.cos(cones.theta_b) - (cones.V @ R_t) @ cones.r
-    A, beta, h0, h_dot = pointing_cbf(c, R, Omega, c.terms(R, Omega))[:4]
+    A, beta, h0, h_dot = pointing_cbf(c.law_model, R, Omega, c.terms(R, Omega))[:4]
     eps = 1e-4
     np.testing.assert_allclose(h0, h(0.0), atol=1e-12)
     np.testing.assert_allclose(h_dot, (h(eps) - h(-eps)) / (2 * eps), rtol=1e-6, atol=1e-9)
@@ -152,8 +152,8 @@ def test_the_cbf_filter_holds_the_cone_against_an_unlearnt_moment_up_to_its_boun
     R0, W0 = so3.exp(np.array([0.1, -0.2, 0.3])), np.array([0.2, 0.1, -0.3])
     exact = AttitudeController(config(cones, law='cbf', adaptive=False))
     robust = AttitudeController(config(cones, law='cbf', adaptive=False, cbf_moment_bound=0.05))
-    A0, beta0 = pointing_cbf(exact, R0, W0, exact.terms(R0, W0))[:2]
-    A1, beta1 = pointing_cbf(robust, R0, W0, robust.terms(R0, W0))[:2]
+    A0, beta0 = pointing_cbf(exact.law_model, R0, W0, exact.terms(R0, W0))[:2]
+    A1, beta1 = pointing_cbf(robust.law_model, R0, W0, robust.terms(R0, W0))[:2]
     np.testing.assert_array_equal(A0, A1)
     np.testing.assert_allclose(beta1 - beta0, 0.05 * np.linalg.norm(A0, axis=-1), rtol=1e-12)
 

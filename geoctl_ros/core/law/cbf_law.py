@@ -1,18 +1,18 @@
 """The geometric baseline filtered by a control-barrier-function QP: each cone a pointing
 constraint of relative degree 2, solved exactly by its active set every step.
 """
-from typing import Any
+from typing import Optional
 
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.so3 import cross, matvec
-from geoctl_ros.core.law.brake import braked
-from geoctl_ros.core.law.geometric_law import unconstrained
+from geoctl_ros.core.law.brake import BrakeInputs, braked
 from geoctl_ros.core.law.projection import closest_admissible
+from geoctl_ros.core.law.step_types import ControlOutput, Law, LawModel, StepTerms
 
 
-def pointing_cbf(controller: Any, R: np.ndarray, Omega: np.ndarray, terms: Any) -> tuple:
+def pointing_cbf(model: LawModel, R: np.ndarray, Omega: np.ndarray, terms: StepTerms) -> tuple:
     """Each cone as a pointing constraint of relative degree 2, as the rows of A u >= beta.
 
     h_i = cos(theta_i + guard) - (R^T v_i) . r >= 0 (the sensor outside the guarded cone). With
@@ -25,7 +25,7 @@ def pointing_cbf(controller: Any, R: np.ndarray, Omega: np.ndarray, terms: Any) 
     estimate is no bound, and overshoots on its way: the filter does not use it.)
     Returns (A (..., n, 3), beta (..., n), h, h', b, f) (b: the rows R^T v_i; f as above).
     """
-    cfg = controller.config
+    cfg = model.config
     cones = cfg.cones
     ev = terms.cones
     b = so3.matmul(cones.V, R)                                     # rows R^T v_i
@@ -34,7 +34,7 @@ def pointing_cbf(controller: Any, R: np.ndarray, Omega: np.ndarray, terms: Any) 
     h_dot = so3.dot(c, Omega[..., None, :])
     c_dot = cross(cross(b, Omega[..., None, :]), np.broadcast_to(cones.r, b.shape))
     f = terms.M_g - cross(Omega, matvec(cfg.J, Omega))
-    A = so3.matmul(c, controller.J_inv)                            # J symmetric: rows (J^-1 c_i)^T
+    A = so3.matmul(c, model.J_inv)                            # J symmetric: rows (J^-1 c_i)^T
     lam = cfg.cbf_rate
     beta = -(so3.dot(c_dot, Omega[..., None, :]) + so3.dot(A, f[..., None, :])
              + 2.0 * lam * h_dot + lam * lam * h)
@@ -43,22 +43,23 @@ def pointing_cbf(controller: Any, R: np.ndarray, Omega: np.ndarray, terms: Any) 
     return A, beta, h, h_dot, b, f
 
 
-def cbf_law(controller: Any, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool,
-            blind: Any, brake: Any) -> Any:
-    """The geometric baseline filtered by a control-barrier-function QP on SO(3): the moment
-    closest to Lee's geometric controller's that keeps every cone's pointing constraint
-    (``pointing_cbf``) with a double pole at -``cbf_rate``, against any unlearnt moment up to
-    ``cbf_moment_bound``, within the rotors' limits. With the approach brake on
-    (``approach_brake``), its condition for every cone joins the QP
-    (``core.law.brake.braked``). The estimate adapts as the baseline's.
+def cbf_filter(out: ControlOutput, terms: StepTerms, R: np.ndarray, Omega: np.ndarray,
+               model: LawModel, brake: Optional[BrakeInputs]) -> ControlOutput:
+    """Lee's geometric moment (``out``, the attractive error alone; the estimate adapts as the
+    baseline's) filtered by a control-barrier-function QP on SO(3): the moment closest to it that
+    keeps every cone's pointing constraint (``pointing_cbf``) with a double pole at -``cbf_rate``,
+    against any unlearnt moment up to ``cbf_moment_bound``, within the rotors' limits. With the
+    approach brake on (``approach_brake``; brake: its inputs of the tick, or None), its condition
+    for every cone joins the QP (``core.law.brake.braked``).
     """
-    terms, out = unconstrained(controller, R, Omega, dt, adapt)
-    cfg = controller.config
+    cfg = model.config
     if not len(cfg.cones):
         return out
-    A, beta = pointing_cbf(controller, R, Omega, terms)[:2]
-    if brake is None:
+    A, beta = pointing_cbf(model, R, Omega, terms)[:2]
+    if brake is None or model.brake is None:
         return out._replace(u=closest_admissible(out.u, A, beta, cfg.moment_limits))
-    b = braked(controller.brake, cfg.cones, controller.J_inv, cfg.moment_limits, brake, out.u,
-               (A, beta))
+    b = braked(model.brake, cfg.cones, model.J_inv, cfg.moment_limits, brake, out.u, (A, beta))
     return out._replace(u=b.u, braking=b.braking, brake_unmet=b.unmet)
+
+
+CBF = Law(barrier=False, widened=False, filter=cbf_filter)

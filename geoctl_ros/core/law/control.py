@@ -33,9 +33,8 @@ how the campaign (``geoctl_ros.campaign.runner``) flies a thousand manoeuvres. T
 and model are shared by the batch. (``x.T`` on a stack of vectors puts the batch axis last, so
 ``(x.T * a).T`` scales each run's vector by its own scalar and a single vector by a scalar.)
 """
-from dataclasses import dataclass, field
 import math
-from typing import Any, NamedTuple, Optional
+from typing import Any, Optional
 
 import numpy as np
 
@@ -43,105 +42,24 @@ from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.flags import any_flag
 from geoctl_ros.core.geometry.so3 import cross, matvec, transpose
 from geoctl_ros.core.law.brake import ApproachBrake
-from geoctl_ros.core.law.cones import ConeEval, ConeSet
+from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.configuration_error import (
     LinearMap,
     blind_widening,
+    with_cones,
 )
+from geoctl_ros.core.law.controller_config import DISTURBANCE_MODELS, ControllerConfig
 from geoctl_ros.core.law.feasibility import setpoint_problem
 from geoctl_ros.core.law.guidance import Guidance
 from geoctl_ros.core.law.laws import LAWS
-from geoctl_ros.core.law.mechanics import (
-    cog_regressor,
-    first_moment,
-    gravity_moment,
-    pivot_inertia,
-)
+from geoctl_ros.core.law.mechanics import cog_regressor, gravity_moment
+from geoctl_ros.core.law.step_types import ControlOutput, LawModel, StepTerms
 
-# Disturbance models: name -> number of estimated parameters (the columns of W).
-#   constant:      W = I,                     Delta = a constant moment (the paper's case)
-#   constant+cog:  W = [I, -hat(R^T g_w)],    Delta = [constant moment; error of m * rho]
-DISTURBANCE_MODELS = {'constant': 3, 'constant+cog': 6}
-
+__all__ = ['DISTURBANCE_MODELS', 'AttitudeController', 'ControlOutput', 'ControllerConfig',
+           'SetpointRejected', 'StepTerms']
 
 class SetpointRejected(ValueError):
     """A desired attitude the controller refuses (non-finite, or inside or too close to a cone)."""
-
-
-@dataclass(frozen=True)
-class ControllerConfig:
-    """Everything the control law needs; built and validated by ``geoctl_ros.params``."""
-
-    k_R: float
-    k_Omega: float
-    k_Delta: float
-    c: float
-    G: np.ndarray                    # (3,) diagonal weights g1, g2, g3
-    cones: ConeSet
-    inertia: np.ndarray              # (3, 3) about the centre of mass, kg m^2
-    mass: float                      # kg
-    cog_offset: np.ndarray           # pivot -> centre of mass, body frame, m
-    gravity: np.ndarray              # world frame, m/s^2
-    adaptive: bool = True
-    gravity_compensation: bool = True
-    disturbance_model: str = 'constant'
-    delta_bar_max: float = 0.0       # bound on |constant estimate| (N m); 0 = none
-    cog_estimate_max: float = 0.0    # bound on |m rho estimate| (kg m); 0 = none
-    unmodelled_moment_max: float = 0.0   # what a set point must be held against (N m); 0 = none
-    blind_guard_max: float = 0.0     # rad, the most a blind loop widens a cone's barrier
-    law: str = 'delay_robust'        # the control law, a key of LAWS
-    cbf_rate: float = 4.0            # 1/s, the cbf law's double pole
-    cbf_moment_bound: float = 0.0    # N m, the unlearnt moment the cbf law's filter holds against
-    k_Delta_cog: float = 0.0         # adaptation gain of the m*rho block (constant+cog model)
-    guidance_lookahead: float = 0.0  # rad, guidance's set point at most this far ahead; 0 = off
-    guidance_clearance: float = 0.0  # rad, guidance's path this far outside each cone's barrier
-    approach_brake: bool = False      # the approach brake on (``core.law.brake``)
-    brake_acceleration: float = 0.0   # rad/s^2, a_b: the deceleration the rotors can always
-                                      # make (``core.law.brake.brake_authority``; set with the
-                                      # rotors by ``params.controller_setup``)
-    attitude_noise: float = 0.0       # rad, the attitude measurement's standard deviation
-    gyro_noise: float = 0.0           # rad/s, the gyro's standard deviation
-    tilt_max: float = math.pi         # rad, the joint's tilt limit (its stops)
-    motor_lag: float = 0.0            # s, the rotors' thrust time constant the mixer models
-    moment_limits: Optional[Any] = None   # MomentPolytope: the moments the rotors make
-                                          # unsaturated (``Allocator.moment_polytope``); the
-                                          # brake and the cbf law's QP keep them
-    J: np.ndarray = field(init=False, repr=False)        # inertia about the pivot
-    m_rho: np.ndarray = field(init=False, repr=False)    # mass times pivot -> centre of mass
-
-    def __post_init__(self):
-        object.__setattr__(self, 'J', pivot_inertia(self.inertia, self.mass, self.cog_offset))
-        object.__setattr__(self, 'm_rho', first_moment(self.mass, self.cog_offset))
-
-    @property
-    def n_params(self) -> int:
-        """Number of estimated disturbance parameters (length of Delta_bar)."""
-        return DISTURBANCE_MODELS[self.disturbance_model]
-
-
-class ControlOutput(NamedTuple):
-    """One control step's results."""
-
-    u: np.ndarray            # control moment about the pivot, body frame, N m
-    e_R: np.ndarray
-    e_Omega: np.ndarray
-    psi: float
-    delta_bar: np.ndarray    # estimate used for this u
-    violated: bool           # sensor on or inside a cone
-    saturated: bool          # some barrier in its floor band (repulsion saturated)
-    adapting: bool           # the estimate was advanced this step
-    cones: Any = None        # the ConeEval the step used
-    half_angles_deg: Optional[np.ndarray] = None
-    braking: Any = False     # the approach brake changed the law's moment
-    brake_unmet: Any = False  # no moment within the rotors' limits met the brake's condition
-    # (in a batch, each field has the batch axis first: psi, violated, ... one per run)
-
-    @property
-    def margins_deg(self) -> np.ndarray:
-        """Per cone: angle between the sensor and the cone's axis minus its half-angle, degrees
-        (computed when asked: the node publishes the motor commands first).
-        """
-        return self.cones.margins_deg(self.half_angles_deg)
 
 
 class AttitudeController:
@@ -154,9 +72,6 @@ class AttitudeController:
         self.Omega_d = np.zeros(3)
         self.dOmega_d = np.zeros(3)
         self._tracking = False      # Omega_d or its derivative nonzero
-        self.gain_scale = 1.0       # of the bandwidth (k_R by its square, k_Omega by it), set by
-                                    # the tick past the delay bound
-                                    # (core.supervisor.control_tick.DegradedMode)
 
     @property
     def R_d(self) -> np.ndarray:
@@ -270,9 +185,13 @@ class AttitudeController:
         return -held
 
     def step(self, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool = True,
-             blind: Any = 0.0, brake: Any = None, guide: bool = True) -> ControlOutput:
+             blind: Any = 0.0, brake: Any = None, guide: bool = True,
+             gain_scale: Any = 1.0) -> ControlOutput:
         """One control step at attitude R and body angular velocity Omega, by the configured law
-        (``config.law``, one of ``LAWS``).
+        (``config.law``, one of ``LAWS``): its configuration error (``terms``, with the cones'
+        barrier or without), the geometric moment with the estimate advanced (``moment``), and
+        the law's filter of that moment, if it has one (a pure function of the step's terms and
+        the model: ``core.law.step_types.Law``).
 
         dt is the time until the next step (the control period); adapt=False holds the estimate
         (e.g. while disarmed). blind: the time (s; one per run of a batch) over which the loop
@@ -281,12 +200,23 @@ class AttitudeController:
         time (``blind_widening``). brake: the approach brake's inputs of the tick
         (``core.law.brake.BrakeInputs``), or None (no brake this step: disarmed, spooling).
         guide: move guidance's set point (not while the rotors spool up: it is planned at the
-        take-over).
+        take-over). gain_scale: of the bandwidth (k_R by its square, k_Omega by it; one per run
+        of a batch), below 1 past the delay bound
+        (``core.supervisor.control_tick.DegradedMode``).
         """
         if guide and self.guidance is not None and not self._tracking:
             self._follow(R)
-        return self._law(self, R, Omega, dt, adapt, blind,
-                         brake if self.brake is not None else None)
+        law = self._law
+        terms = self.terms(R, Omega, blind if law.widened else 0.0)
+        if law.barrier:
+            psi, e_R = with_cones(terms.A, terms.e_RA, terms.cones)
+        else:
+            psi, e_R = terms.A[..., 0], terms.e_RA
+        out = self.moment(R, Omega, dt, adapt, terms, psi, e_R, law.barrier, gain_scale)
+        if law.filter is None:
+            return out
+        return law.filter(out, terms, R, Omega, self.law_model,
+                          brake if self.brake is not None else None)
 
     def _follow(self, R: np.ndarray) -> None:
         """Move the law's set point along guidance's path (``core.law.guidance``): its linear map
@@ -301,7 +231,7 @@ class AttitudeController:
             self._carrot = carrot.copy()
 
     # --- the pieces every law is made of -------------------------------------------------------
-    def terms(self, R: np.ndarray, Omega: np.ndarray, blind: Any = 0.0) -> 'StepTerms':
+    def terms(self, R: np.ndarray, Omega: np.ndarray, blind: Any = 0.0) -> StepTerms:
         """The step's terms at (R, Omega): ``StepTerms`` (the attractive error, the cones
         evaluated, widened by the blind time when it is given, and the gravity moment).
         """
@@ -317,11 +247,12 @@ class AttitudeController:
         ev = cfg.cones.evaluate_terms(sc, widened)
         return StepTerms(y[..., 0:1], y[..., 1:4], ev, y[..., -3:], self.regressor(R))
 
-    def moment(self, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool, terms: 'StepTerms',
-               psi: Any, e_R: np.ndarray, barrier: bool = True) -> ControlOutput:
+    def moment(self, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool, terms: StepTerms,
+               psi: Any, e_R: np.ndarray, barrier: bool = True,
+               gain_scale: Any = 1.0) -> ControlOutput:
         """The geometric law's moment for the configuration error (psi, e_R), with the adaptive
         estimate advanced: ``ControlOutput``. barrier: the error carries the cones' barrier
-        (the estimate then freezes where a barrier saturates).
+        (the estimate then freezes where a barrier saturates); gain_scale: as ``step``'s.
         """
         cfg = self.config
         ev = terms.cones
@@ -333,7 +264,7 @@ class AttitudeController:
             e_Omega = Omega - Omega_d
         W = terms.W
         delta_bar = self.delta_bar.copy()
-        g = self.gain_scale                     # past the delay bound, below 1 (DegradedMode)
+        g = gain_scale                          # past the delay bound, below 1 (DegradedMode)
         if np.ndim(g):                          # one per run of a batch
             k_R, k_Omega = (cfg.k_R * g * g)[..., None], (cfg.k_Omega * g)[..., None]
         else:
@@ -378,17 +309,8 @@ class AttitudeController:
         # (the brake needs the rotors' limits: a configuration built without them has none)
         self.brake = ApproachBrake.of(config) if config.moment_limits is not None else None
         self.J_inv = so3.inverse3(config.J)      # the model's, for the prediction too
+        self.law_model = LawModel(config, self.J_inv, self.brake)     # what a law's filter knows
         self._gamma = np.array([config.k_Delta] * 3 + [config.k_Delta_cog] * 3)[:config.n_params]
         self._balls = [(block, bound) for block, bound in ((slice(0, 3), config.delta_bar_max),
                                                            (slice(3, 6), config.cog_estimate_max))
                        if bound > 0.0 and block.start < config.n_params]
-
-
-class StepTerms(NamedTuple):
-    """What a step computes from the attitude before any law's choice (one per run of a batch)."""
-
-    A: np.ndarray        # attractive error A, with a trailing axis of 1
-    e_RA: np.ndarray     # its gradient
-    cones: ConeEval      # the cones at R (widened by the blind time, if any)
-    M_g: np.ndarray      # the model's gravity moment
-    W: Optional[np.ndarray]   # the regressor W(R) (None for the constant model, W = I)

@@ -172,14 +172,14 @@ class ControlTick:
                                                   0.5 * dt if mixer.lag > 0.0 else 0.0)
         blind = self.blind = blind_time(d, ages, dt, held)
         controller = self.controller
-        controller.gain_scale = self.degraded.scale(blind, dt if held is None else held)
+        gain_scale = self.degraded.scale(blind, dt if held is None else held)
         brake = None
         if controller.brake is not None and self.flying:
             brake = self.brake_inputs(R_b, W_b, d + np.maximum(ages[0], ages[1]),
                                       mixer.design_hold_for(dt, held), t,
                                       mixer.thrust_offsets(dt if held is None else held))
         out = controller.step(R, Omega, dt, adapt=adapt and self.flying, blind=blind,
-                              brake=brake, guide=not spooling)
+                              brake=brake, guide=not spooling, gain_scale=gain_scale)
         if spooling:                        # the feed-forward alone, the vehicle held
             out = out._replace(u=controller.feedforward(R))
         if not np.isfinite(out.u).all():           # a last line of defence: never command it

@@ -1,0 +1,74 @@
+"""What the stages of a control step pass each other (``core.law.control``): the step's terms
+before any law's choice, what a law's filter knows of the model, a law itself (its configuration
+error and its filter), and the step's output. A law is data and a pure function: it takes the
+step's terms and the model, never the controller.
+"""
+from typing import Any, Callable, NamedTuple, Optional
+
+import numpy as np
+
+from geoctl_ros.core.law.brake import ApproachBrake, BrakeInputs
+from geoctl_ros.core.law.cones import ConeEval
+from geoctl_ros.core.law.controller_config import ControllerConfig
+
+
+class StepTerms(NamedTuple):
+    """What a step computes from the attitude before any law's choice (one per run of a batch)."""
+
+    A: np.ndarray        # attractive error A, with a trailing axis of 1
+    e_RA: np.ndarray     # its gradient
+    cones: ConeEval      # the cones at R (widened by the blind time, if any)
+    M_g: np.ndarray      # the model's gravity moment
+    W: Optional[np.ndarray]   # the regressor W(R) (None for the constant model, W = I)
+
+
+class ControlOutput(NamedTuple):
+    """One control step's results."""
+
+    u: np.ndarray            # control moment about the pivot, body frame, N m
+    e_R: np.ndarray
+    e_Omega: np.ndarray
+    psi: float
+    delta_bar: np.ndarray    # estimate used for this u
+    violated: bool           # sensor on or inside a cone
+    saturated: bool          # some barrier in its floor band (repulsion saturated)
+    adapting: bool           # the estimate was advanced this step
+    cones: Any = None        # the ConeEval the step used
+    half_angles_deg: Optional[np.ndarray] = None
+    braking: Any = False     # the approach brake changed the law's moment
+    brake_unmet: Any = False  # no moment within the rotors' limits met the brake's condition
+    # (in a batch, each field has the batch axis first: psi, violated, ... one per run)
+
+    @property
+    def margins_deg(self) -> np.ndarray:
+        """Per cone: angle between the sensor and the cone's axis minus its half-angle, degrees
+        (computed when asked: the node publishes the motor commands first).
+        """
+        return self.cones.margins_deg(self.half_angles_deg)
+
+
+class LawModel(NamedTuple):
+    """What a law's filter knows of the model: the configuration (gains, inertia about the pivot
+    J, cones, the rotors' limits), J^-1, and the approach brake's bounds (None: the brake off).
+    """
+
+    config: ControllerConfig
+    J_inv: np.ndarray
+    brake: Optional[ApproachBrake]
+
+
+# A law's filter: (the geometric moment's output, the step's terms, R, Omega, the model, the
+# approach brake's inputs of the tick or None) -> the output with the moment the law commands
+LawFilter = Callable[[ControlOutput, StepTerms, np.ndarray, np.ndarray, LawModel,
+                      Optional[BrakeInputs]], ControlOutput]
+
+
+class Law(NamedTuple):
+    """A control law (a row of ``core.law.laws.LAWS``): whether its configuration error carries
+    the cones' log barrier (else the attractive error alone), whether each cone is widened by the
+    blind time, and its filter of the geometric moment (None: it commands that moment).
+    """
+
+    barrier: bool
+    widened: bool
+    filter: Optional[LawFilter] = None
