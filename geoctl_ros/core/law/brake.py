@@ -328,7 +328,7 @@ def opening(cones: Any, R: np.ndarray, Omega: np.ndarray) -> tuple:
     n = c * inv[..., None]
     Om = Omega[..., None, :]
     w = -so3.dot(n, Om)
-    b = so3.vecmat(cones.V, R[..., None, :, :])           # R^T v_i
+    b = cones.axes_in_body(R)                              # R^T v_i
     spin = so3.dot(Omega, Omega)[..., None]
     kin = (so3.dot(b, Om) * so3.dot(cones.r, Omega)[..., None] - s * (spin - w * w)) * inv
     gap = np.arccos(np.clip(s, -1.0, 1.0)) - cones.theta

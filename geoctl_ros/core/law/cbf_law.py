@@ -28,13 +28,13 @@ def pointing_cbf(model: LawModel, R: np.ndarray, Omega: np.ndarray, terms: StepT
     cfg = model.config
     cones = cfg.cones
     ev = terms.cones
-    b = so3.matmul(cones.V, R)                                     # rows R^T v_i
+    b = cones.axes_in_body(R)                                      # rows R^T v_i
     c = ev.cross
     h = cones.cos_theta - ev.s
     h_dot = so3.dot(c, Omega[..., None, :])
     c_dot = cross(cross(b, Omega[..., None, :]), np.broadcast_to(cones.r, b.shape))
     f = terms.M_g - cross(Omega, matvec(cfg.J, Omega))
-    A = so3.matmul(c, model.J_inv)                            # J symmetric: rows (J^-1 c_i)^T
+    A = so3.vecmat(c, model.J_inv)        # J symmetric: rows (J^-1 c_i)^T = c_i^T J^-1 (no BLAS)
     lam = cfg.cbf_rate
     beta = -(so3.dot(c_dot, Omega[..., None, :]) + so3.dot(A, f[..., None, :])
              + 2.0 * lam * h_dot + lam * lam * h)

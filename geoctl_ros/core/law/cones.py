@@ -140,6 +140,12 @@ class ConeSet:
         """
         return math.degrees(self.guard + self.floor)
 
+    def axes_in_body(self, R: np.ndarray) -> np.ndarray:
+        """The cones' axes in the body frame at R: rows b_i = R^T v_i ((..., n, 3); per run of a
+        batch), the same float operations for one run and a batch (no BLAS).
+        """
+        return vecmat(self.V, R[..., None, :, :])
+
     def terms(self, R: np.ndarray) -> np.ndarray:
         """(n, 4) per cone: s_i = r^T R^T v_i, then (R^T v_i) x r; both linear in R (the control
         step evaluates them as part of one precomputed linear map, see ``core.law.control``).
