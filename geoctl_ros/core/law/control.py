@@ -55,6 +55,9 @@ from geoctl_ros.core.law.laws import LAWS
 from geoctl_ros.core.law.mechanics import cog_regressor, gravity_moment
 from geoctl_ros.core.law.step_types import ControlOutput, LawModel, StepTerms
 
+_EYE3 = np.eye(3)
+_EYE3.flags.writeable = False
+
 __all__ = ['DISTURBANCE_MODELS', 'AttitudeController', 'ControlOutput', 'ControllerConfig',
            'SetpointRejected', 'StepTerms']
 
@@ -144,7 +147,9 @@ class AttitudeController:
         if self.config.disturbance_model == 'constant':
             return None
         Y = cog_regressor(R, self.config.gravity)
-        return np.concatenate((np.broadcast_to(np.eye(3), Y.shape), Y), axis=-1)
+        if Y.ndim == 2:                     # one run: no broadcast, the identity made once
+            return np.concatenate((_EYE3, Y), axis=1)
+        return np.concatenate((np.broadcast_to(_EYE3, Y.shape), Y), axis=-1)
 
     def gravity_moment(self, R: np.ndarray) -> np.ndarray:
         """The model's gravity moment at R (about the pivot, body frame)."""
