@@ -205,8 +205,8 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     t0 = time.perf_counter()
     for k in range(steps):
         t = times[k]
-        i = schedule.index_at(t) if len(schedule) else -1
-        if i != scheduled and i >= 0:                  # (checked at configuration)
+        i = schedule.due(t, scheduled)
+        if i >= 0:                                     # (checked at configuration)
             controller.R_d = np.repeat(schedule.rotations[i][None], n, axis=0)
             scheduled = i
         seen = np.maximum(j - delay, 0) % ring

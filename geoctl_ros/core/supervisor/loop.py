@@ -287,8 +287,8 @@ class ControlLoop:
             armed = False
         schedule = self.setup.schedule
         if armed and len(schedule) and not self.holds_at_arming:
-            i = schedule.index_at(now - self.supervisor.armed_since)
-            if i != self._schedule_index and i >= 0:
+            i = schedule.due(now - self.supervisor.armed_since, self._schedule_index)
+            if i >= 0:
                 self.controller.set_setpoint(schedule.rotations[i])   # checked at configuration
                 self._schedule_index = i
         state = self.bridge.update(now, self.pose.fresh(now), self.rate.fresh(now))

@@ -300,3 +300,11 @@ class SetpointSchedule:
     def index_at(self, t: float) -> int:
         """Index of the set point in force t seconds after arming (-1 before the first)."""
         return int(np.searchsorted(self.times, t, side='right')) - 1
+
+    def due(self, t: float, current: int) -> int:
+        """The index of the set point that takes over t seconds after arming, if it is not
+        ``current`` (the one in force; -1: none yet), else -1: the one rule the node's loop and
+        the closed loop switch by.
+        """
+        i = self.index_at(t) if len(self.times) else -1
+        return i if i != current else -1
