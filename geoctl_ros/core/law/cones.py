@@ -37,7 +37,7 @@ ConeSet with axes (batch, n, 3) and half-angles (batch, n); it evaluates a stack
 (batch, 3, 3) with the same formulas.
 """
 import math
-from typing import Any, Optional
+from typing import Any, Optional, Tuple
 
 import numpy as np
 
@@ -224,6 +224,13 @@ class ConeSet:
     def angles_deg(self, R: np.ndarray) -> np.ndarray:
         """Angle between the sensor's world direction R r and each cone axis, degrees."""
         return angle_deg(self.cosines(R))
+
+    def closest(self, margins_deg: np.ndarray) -> Tuple[str, float]:
+        """The cone the sensor is closest to, by its margins (deg, one per cone; one run), and
+        that margin: (name, margin).
+        """
+        i = int(np.argmin(margins_deg))
+        return self.names[i], float(margins_deg[i])
 
     def margins_deg(self, R: np.ndarray) -> np.ndarray:
         """Cone margins (angle to axis minus half-angle, degrees) at attitude R."""

@@ -338,14 +338,13 @@ class ControlLoop:
         """The sensor is inside a cone while armed: count the entry, keep the deepest (latched
         until the next arming).
         """
-        margins = out.margins_deg
-        i = int(np.argmin(margins))
-        depth = -float(margins[i])
+        name, margin = self.setup.config.cones.closest(out.margins_deg)
+        depth = -margin
         if not self._inside:
             self.cone_entries += 1
             self._inside = True
         if self.entry is None or depth > self.entry[1]:
-            self.entry = (self.setup.config.cones.names[i], depth)
+            self.entry = (name, depth)
 
     def _result(self, out, motors, armed, bridging, state):
         b = self.bridge

@@ -118,16 +118,15 @@ def status(loop: Any, now: float, other_commanders: Optional[str] = None) -> Sta
         errors.append('sensor entered cone %r, %.2f deg deep (%d entr%s since arming)'
                       % (loop.entry[0], loop.entry[1], loop.cone_entries,
                          'y' if loop.cone_entries == 1 else 'ies'))
-    if out is not None and len(out.margins_deg):
-        i = int(np.argmin(out.margins_deg))
-        name = loop.setup.config.cones.names[i]
-        cones = loop.setup.config.cones
+    cones = loop.setup.config.cones
+    # (the last tick's cones: a reconfiguration since may have changed them until the next tick)
+    if out is not None and len(cones) and len(out.margins_deg) == len(cones):
+        name, margin = cones.closest(out.margins_deg)
         near = max(NEAR_CONE_DEG, cones.band_deg)
         if out.violated:
-            errors.append('sensor inside cone %r (margin %.2f deg)'
-                          % (name, out.margins_deg[i]))
-        elif out.margins_deg[i] < near:
-            warnings.append('near cone %r (margin %.2f deg)' % (name, out.margins_deg[i]))
+            errors.append('sensor inside cone %r (margin %.2f deg)' % (name, margin))
+        elif margin < near:
+            warnings.append('near cone %r (margin %.2f deg)' % (name, margin))
     w = loop.window
     if sup.armed and w.steady_blind_ms > 1e3 * SUSTAINED_BLIND_BOUND_S:
         warnings.append('loop blind at least %d ms at every tick of the window (a sustained '
