@@ -370,14 +370,15 @@ def _flown(T_b):
     history = CommandHistory(64, LAG)
     made = mixer.moments(HOLD)
     history.push(-T_b - HOLD, made[0], made[1])
-    predictor = DelayPredictor(ctl)
+    predictor = DelayPredictor()
     predictor.observe = lambda *a: None                   # (the observer off)
     closest = math.inf
     steps = int(round(HOLD / h))
     for k in range(int(0.8 / HOLD)):
         t = k * HOLD
         R_m, W_m = past[0]
-        (R_b, W_b), (R_l, W_l) = predictor(R_m, W_m, T_b, T_b, history, t, 0.5 * HOLD)
+        (R_b, W_b), (R_l, W_l) = predictor(ctl.dynamics, R_m, W_m, T_b, T_b, history, t,
+                                           0.5 * HOLD)
         M_g = ctl.gravity_moment(R_b)
         x = BrakeInputs(R_b, W_b, T_b, mixer.design_hold_for(HOLD, HOLD), history.at(t),
                         ctl.model_moment(R_b, W_b, M_g), M_g, mixer.thrust_offsets(HOLD))

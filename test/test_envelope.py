@@ -69,7 +69,7 @@ def test_the_prediction_over_the_commands_sent_matches_the_plant_integrated_fine
             plant.step(produced, h)
             produced = target + math.exp(-h / lag) * (produced - target)
     now = 0.06
-    R_pred, W_pred = DelayPredictor(c)(R_then, W_then, now, now, history, now)[1]
+    R_pred, W_pred = DelayPredictor()(c.dynamics, R_then, W_then, now, now, history, now)[1]
     err_R = math.degrees(so3.angle(plant.R.T @ R_pred))
     err_W = np.linalg.norm(plant.Omega - W_pred)
     assert err_R < 0.1 and err_W < 0.05, (err_R, err_W)
@@ -93,14 +93,14 @@ def test_the_predictions_observer_learns_the_models_error_and_not_a_real_manoeuv
     plant = Plant(PlantConfig(cfg.inertia, cfg.mass, cfg.cog_offset, cfg.gravity,
                               Disturbance(unknown, np.zeros(3), 0.0)),
                   so3.exp(np.radians([5.0, -3.0, 20.0])), np.zeros(3))
-    predictor, history = DelayPredictor(c), CommandHistory(64)
+    predictor, history = DelayPredictor(), CommandHistory(64)
     age, dt, h = 0.06, 0.01, 1e-3
     lag = int(round(age / dt))
     past = [(plant.R.copy(), plant.Omega.copy())] * (lag + 1)     # past[-1]: the state now
     for k in range(150):
         now = k * dt
         R_seen, W_seen = past[-1 - lag]
-        R_pred, W_pred = predictor(R_seen, W_seen, age, age, history, now)[1]
+        R_pred, W_pred = predictor(c.dynamics, R_seen, W_seen, age, age, history, now)[1]
         moment = 0.5 * np.array([math.sin(4 * math.pi * now), math.cos(4 * math.pi * now),
                                  -math.sin(4 * math.pi * now)])
         moment = moment - gravity_moment(plant.R, cfg.m_rho, cfg.gravity)   # held up

@@ -49,14 +49,12 @@ from geoctl_ros.core.law.configuration_error import (
     with_cones,
 )
 from geoctl_ros.core.law.controller_config import DISTURBANCE_MODELS, ControllerConfig
+from geoctl_ros.core.law.dynamics import Dynamics
 from geoctl_ros.core.law.feasibility import setpoint_problem
 from geoctl_ros.core.law.guidance import Guidance
 from geoctl_ros.core.law.laws import LAWS
-from geoctl_ros.core.law.mechanics import cog_regressor, gravity_moment
+from geoctl_ros.core.law.mechanics import gravity_moment
 from geoctl_ros.core.law.step_types import ControlOutput, LawModel, StepTerms
-
-_EYE3 = np.eye(3)
-_EYE3.flags.writeable = False
 
 __all__ = ['DISTURBANCE_MODELS', 'AttitudeController', 'ControlOutput', 'ControllerConfig',
            'SetpointRejected', 'StepTerms']
@@ -140,16 +138,14 @@ class AttitudeController:
         self._project()
 
     # --- the hot path ----------------------------------------------------------------------------
+    @property
+    def dynamics(self) -> Dynamics:
+        """The model's dynamics with the estimate in force (``core.law.dynamics``)."""
+        return Dynamics(self.config, self.J_inv, self.delta_bar)
+
     def regressor(self, R: np.ndarray) -> Optional[np.ndarray]:
-        """W(R, Omega): 3 x n_params (a stack of them for a batch); None for the constant model,
-        where W = I.
-        """
-        if self.config.disturbance_model == 'constant':
-            return None
-        Y = cog_regressor(R, self.config.gravity)
-        if Y.ndim == 2:                     # one run: no broadcast, the identity made once
-            return np.concatenate((_EYE3, Y), axis=1)
-        return np.concatenate((np.broadcast_to(_EYE3, Y.shape), Y), axis=-1)
+        """W(R): ``Dynamics.regressor``."""
+        return self.dynamics.regressor(R)
 
     def gravity_moment(self, R: np.ndarray) -> np.ndarray:
         """The model's gravity moment at R (about the pivot, body frame)."""
@@ -157,27 +153,8 @@ class AttitudeController:
 
     def model_moment(self, R: np.ndarray, Omega: np.ndarray, M_g: Optional[np.ndarray] = None,
                      W: Any = False, delta_bar: Optional[np.ndarray] = None) -> np.ndarray:
-        """The model's moment about the pivot besides the rotors': M_g(R) + W Delta_bar -
-        Omega x J Omega, with its inertia, centre of mass and estimate (``delta_bar``: this one
-        instead of the estimate's present value). M_g, W: the gravity moment and regressor at R
-        when the step has them (``StepTerms``; W False: not given, since None is the constant
-        model's regressor).
-        """
-        cfg = self.config
-        if W is False:
-            W = self.regressor(R)
-        if M_g is None:
-            M_g = self.gravity_moment(R)
-        d = self.delta_bar if delta_bar is None else delta_bar
-        return M_g + (d if W is None else matvec(W, d)) - cross(Omega, matvec(cfg.J, Omega))
-
-    def model_acceleration(self, R: np.ndarray, Omega: np.ndarray, moment: np.ndarray,
-                           delta_bar: Optional[np.ndarray] = None,
-                           M_g: Optional[np.ndarray] = None, W: Any = False) -> np.ndarray:
-        """The model's angular acceleration at (R, Omega) under the rotors' moment (about the
-        pivot): J^-1 (moment + ``model_moment``).
-        """
-        return matvec(self.J_inv, moment + self.model_moment(R, Omega, M_g, W, delta_bar))
+        """The model's moment about the pivot besides the rotors': ``Dynamics.moment``."""
+        return self.dynamics.moment(R, Omega, M_g, W, delta_bar)
 
     def feedforward(self, R: np.ndarray) -> np.ndarray:
         """The moment that holds the model at rest at R: -(M_g(R) + W Delta_bar) (the law's

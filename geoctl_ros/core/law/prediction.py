@@ -22,6 +22,7 @@ import numpy as np
 
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.so3 import matvec
+from geoctl_ros.core.law.dynamics import Dynamics
 
 PREDICT_SLOW_S = 0.25    # s, the observer's low-pass of the model's error
 OBSERVE_GAP_MAX_S = 0.05  # s, the longest interval between rate samples the observer learns from
@@ -108,9 +109,8 @@ class DelayPredictor:
     accelerates is predicted to.
     """
 
-    def __init__(self, controller):
-        """controller: the AttitudeController whose model (inertia, gravity, estimate) it uses."""
-        self.controller = controller
+    def __init__(self):
+        """(The model's dynamics with the estimate in force come with each call: Dynamics.)"""
         self.reset()
 
     def reset(self) -> None:
@@ -123,11 +123,7 @@ class DelayPredictor:
                                                # the model and the observer did not know| (one
                                                # run; None until a sample taught it)
 
-    def acceleration(self, R: np.ndarray, Omega: np.ndarray, moment: np.ndarray) -> np.ndarray:
-        """The model's angular acceleration at (R, Omega) under the rotors' moment."""
-        return self.controller.model_acceleration(R, Omega, moment)
-
-    def observe(self, R: np.ndarray, Omega: np.ndarray, captured: Any,
+    def observe(self, model: Dynamics, R: np.ndarray, Omega: np.ndarray, captured: Any,
                 history: 'CommandHistory') -> None:
         """Learn the model's error from a rate sample captured at ``captured`` (a time on the
         history's clock; one per run of a batch). A sample no newer than the last (a stall
@@ -142,8 +138,8 @@ class DelayPredictor:
             interval = float(captured) - float(last[0])
             if not (1e-6 < interval <= OBSERVE_GAP_MAX_S and last[0] >= history.first):
                 return
-            modelled = self.acceleration(R, 0.5 * (Omega + last[1]),
-                                         history.at(last[0] + 0.5 * interval))
+            modelled = model.acceleration(R, 0.5 * (Omega + last[1]),
+                                          history.at(last[0] + 0.5 * interval))
             innovation = modelled - (Omega - last[1]) / interval - self.acc_error
             self.residual = np.sqrt(so3.dot(innovation, innovation))
             self.acc_error = self.acc_error + innovation * (
@@ -155,16 +151,17 @@ class DelayPredictor:
             return
         span = np.where(usable, interval, 1.0)
         mid_rate = 0.5 * (Omega + last[1])
-        modelled = self.acceleration(R, mid_rate, history.at(last[0] + 0.5 * span))
+        modelled = model.acceleration(R, mid_rate, history.at(last[0] + 0.5 * span))
         measured = ((Omega - last[1]).T / span).T
         weight = np.where(usable, span / (PREDICT_SLOW_S + span), 0.0)
         self.acc_error = self.acc_error + ((modelled - measured - self.acc_error).T * weight).T
 
-    def __call__(self, R, Omega, age_R, age_Omega, history, now, lead=0.0) -> tuple:
+    def __call__(self, model, R, Omega, age_R, age_Omega, history, now, lead=0.0) -> tuple:
         """The attitude and rate at ``now`` and at ``now + lead``, ((R, Omega) at now, (R, Omega)
         at now + lead), from measurements age_R and age_Omega seconds old at ``now`` (scalars,
-        or one per run of a batch), given the moments commanded before now (a CommandHistory on
-        the same clock as now). Ages and lead of 0 return the measurements unchanged.
+        or one per run of a batch), given the model's dynamics with the estimate in force
+        (``Dynamics``) and the moments commanded before now (a CommandHistory on the same clock
+        as now). Ages and lead of 0 return the measurements unchanged.
 
         Only the part of the window since the first command held is predicted (none at the
         first tick after the take-over). The window from the older measurement to now is
@@ -174,7 +171,7 @@ class DelayPredictor:
         the piece), and the lead after it in pieces of its own.
         """
         captured = now - age_Omega               # when the rate sample was captured
-        self.observe(R, Omega, captured, history)
+        self.observe(model, R, Omega, captured, history)
         # nothing is predicted from before the first command held: what moved the vehicle then
         # (its stops, a hand) is not in the model
         known = max(now - history.first, 0.0)
@@ -191,15 +188,16 @@ class DelayPredictor:
             horizon = np.maximum(age_R, age_Omega)
         if float(np.max(horizon)) > 0.0:
             moment_now = history.at(captured)     # (the moment then, before any clipping)
-            acc0 = self.acceleration(R, Omega, moment_now)
-            R, Omega = self._integrate(R, Omega, now - age_R, now - age_Omega, history,
+            acc0 = model.acceleration(R, Omega, moment_now)
+            R, Omega = self._integrate(model, R, Omega, now - age_R, now - age_Omega, history,
                                        now - horizon, horizon, (acc0, moment_now), scalar)
         at_now = (R, Omega)
         if lead > 0.0:
-            R, Omega = self._integrate(R, Omega, now, now, history, now, lead, None, True)
+            R, Omega = self._integrate(model, R, Omega, now, now, history, now, lead, None, True)
         return at_now, (R, Omega)
 
-    def _integrate(self, R, Omega, moved_R, moved_Omega, history, start, span, first, scalar):
+    def _integrate(self, model, R, Omega, moved_R, moved_Omega, history, start, span, first,
+                   scalar):
         """Integrate the model from ``start`` over ``span`` (s; one per run of a batch unless
         scalar) in equal pieces of at most SUBSTEP_MAX_S, each under the moment in force at its
         midpoint, less the observed error: the rate only after moved_Omega, the attitude only
@@ -212,7 +210,7 @@ class DelayPredictor:
             h = span / pieces
             for j in range(pieces):
                 mid = start + (j + 0.5) * h
-                acc = self._piece_acceleration(j, R, Omega, history.at(mid), first) - error
+                acc = self._piece_acceleration(model, j, R, Omega, history.at(mid), first) - error
                 Omega_next = Omega + acc * h if mid > moved_Omega else Omega
                 if mid > moved_R:
                     R = so3.matmul(R, so3.exp((0.5 * (Omega + Omega_next)) * h))
@@ -225,7 +223,7 @@ class DelayPredictor:
         for j in range(int(np.max(pieces))):
             h = np.where(j < pieces, h_run, 0.0)
             mid = start + (j + 0.5) * h_run
-            acc = self._piece_acceleration(j, R, Omega, history.at(mid), first) - error
+            acc = self._piece_acceleration(model, j, R, Omega, history.at(mid), first) - error
             # each measurement moves only after its own capture time
             hw = np.where(mid > moved_Omega, h, 0.0)
             hr = np.where(mid > moved_R, h, 0.0)
@@ -234,7 +232,7 @@ class DelayPredictor:
             Omega = Omega_next
         return R, Omega
 
-    def _piece_acceleration(self, j, R, Omega, moment, first):
+    def _piece_acceleration(self, model, j, R, Omega, moment, first):
         """The model's acceleration in piece j under moment. The first piece starts at the
         measured state, where it is acc0 under moment_now (``first``): under another moment it
         differs by J^-1 times the difference (it is linear in the moment), which saves a model
@@ -242,5 +240,5 @@ class DelayPredictor:
         """
         if j == 0 and first is not None:
             acc0, moment_now = first
-            return acc0 + matvec(self.controller.J_inv, moment - moment_now)
-        return self.acceleration(R, Omega, moment)
+            return acc0 + matvec(model.J_inv, moment - moment_now)
+        return model.acceleration(R, Omega, moment)

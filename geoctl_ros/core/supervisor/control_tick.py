@@ -92,7 +92,7 @@ class ControlTick:
         the inputs' latency (s) that the prediction makes up for, on top of their age.
         """
         self.controller = controller
-        self.predict = DelayPredictor(controller)
+        self.predict = DelayPredictor()
         self.mixer = mixer
         self.measurement_delay = measurement_delay
         # what the rotors were told to produce, with when (the prediction's input)
@@ -167,7 +167,8 @@ class ControlTick:
         R_b, W_b = R, Omega
         if predict:
             # with a model of the motors' lag, the law aims at the middle of the command's hold
-            (R_b, W_b), (R, Omega) = self.predict(R, Omega, d + ages[0], d + ages[1],
+            (R_b, W_b), (R, Omega) = self.predict(self.controller.dynamics, R, Omega,
+                                                  d + ages[0], d + ages[1],
                                                   self.history, t,
                                                   0.5 * dt if mixer.lag > 0.0 else 0.0)
         blind = self.blind = blind_time(d, ages, dt, held)
