@@ -317,7 +317,8 @@ def test_a_batch_of_one_commands_what_the_control_loop_does_tick_for_tick():
     controller = AttitudeController(replace(setup.config, cones=one))
     controller.R_d = setup.setpoint[None]
     controller.delta_bar = np.zeros((1, setup.config.n_params))
-    batch = ControlTick(controller, setup.mixer, setup.loop.measurement_delay)
+    batch = ControlTick(controller, setup.mixer)
+    d = setup.loop.measurement_delay          # (what the loop's streams add to an age)
     dt = 1.0 / sc.controller['rate_hz']
     # armed first, the rotors spool up while the vehicle is held where the flight starts
     spool = setup.mixer.spool_ticks(dt)
@@ -332,7 +333,7 @@ def test_a_batch_of_one_commands_what_the_control_loop_does_tick_for_tick():
             assert loop.arm(t).ok
         tick = loop.tick(t, dt)
         out, motors = batch(so3.quat_to_rot(q[k])[None], w[k][None], dt, now=t,
-                            ages=(0.003, 0.001))[:2]
+                            ages=(d + 0.003, d + 0.001))[:2]
         assert np.array_equal(motors.commands[0], tick.motors.commands), k
         assert np.allclose(out.u[0], tick.control.u, rtol=0, atol=1e-12), k
         assert np.allclose(out.delta_bar[0], tick.control.delta_bar, rtol=0, atol=1e-12), k

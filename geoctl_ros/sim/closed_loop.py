@@ -165,9 +165,11 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     runs = np.arange(n)
 
     # each sample received at its step: its age the latency from its stamp (age_from_stamps),
-    # else the measurement_delay the controller assumes; stalled, older by the wait since
+    # else the measurement_delay the controller assumes; stalled, older by the wait since (the
+    # ages a node's input streams give its tick: core.supervisor.safety.Stream)
     stamped = setup.loop.age_from_stamps
-    tick = ControlTick(controller, setup.mixer, 0.0 if stamped else setup.loop.measurement_delay)
+    assumed_age = setup.loop.measurement_delay
+    tick = ControlTick(controller, setup.mixer)
     # the closest approach: the largest cosine to each cone's axis after any integration step
     # (arccos decreases), taken over each control step's steps at once
     R_0, W_0 = bed.state()
@@ -175,7 +177,8 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     # what the arming check says of each run's start (its measurements the latency old)
     arming = (np.degrees(tick.takeover_margins(R_0, W_0, delay * h, dt))
               if controller.brake is not None else None)
-    takeover, max_cos = _spool_up(bed, tick, dt, n_sub, h, max_cos)
+    takeover, max_cos = _spool_up(bed, tick, dt, n_sub, h, max_cos,
+                                  (0.0, 0.0) if stamped else (assumed_age, assumed_age))
     R_now, W_now = bed.state()
     # latency: a ring of the last states, one per integration step
     ring = int(delay.max()) + 1
@@ -184,7 +187,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
     stalled = np.stack([o.stalled(times) for o in bed.options], axis=1)
     any_stall = bool(stalled.any())
     receipt = np.zeros(n)
-    ages = (delay * h,) * 2 if stamped else (0.0, 0.0)
+    ages = (delay * h,) * 2 if stamped else (assumed_age, assumed_age)
     R_seen, W_seen = R_now, W_now
     held = np.empty((int(holds.max()) if steps else 0,) + R_now.shape)   # a step's attitudes
     margin_series = np.empty((steps, n)) if series else None
@@ -218,7 +221,7 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
             W_seen = np.where(fresh[:, None], W_new, W_seen)
             receipt = np.where(fresh, t, receipt)
             waited = np.maximum(t - receipt, 0.0)
-            age = delay * h + waited if stamped else waited
+            age = delay * h + waited if stamped else assumed_age + waited
             ages = (age, age)
         else:
             R_seen, W_seen = R_new, W_new
@@ -270,9 +273,10 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
 
 
 def _spool_up(bed: Testbeds, tick: ControlTick, dt: float, n_sub: int, h: float,
-              max_cos: np.ndarray) -> tuple:
+              max_cos: np.ndarray, ages: tuple) -> tuple:
     """Arm the runs and spool their rotors up before the take-over (``Mixer.spools``: ticks as
-    late as the flight's, each vehicle seen as it is), held still (``start: held``) or resting
+    late as the flight's, each vehicle seen as it is, its inputs taken as ``ages`` old: 0 from
+    their stamps, else the assumed measurement_delay), held still (``start: held``) or resting
     where gravity and the stops take it (``resting``). Returns (the tick clock's time of the
     take-over, the closest approach's cosines so far).
     """
@@ -284,7 +288,7 @@ def _spool_up(bed: Testbeds, tick: ControlTick, dt: float, n_sub: int, h: float,
     now, before = 0.0, None
     while tick.mixer.spools(None if before is None else now - before, dt):
         R, W = bed.state()
-        out, motors = tick(R, W, dt, now)[:2]
+        out, motors = tick(R, W, dt, now, ages)[:2]
         command = out.u if bed.actuator is None else motors.commands
         hold = next(holds)
         for _ in range(hold):

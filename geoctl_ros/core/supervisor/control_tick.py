@@ -19,14 +19,14 @@ ON_TIME_S = 1e-6       # a step less late than this is on time (the clock's roun
 HISTORY_TICKS = 128    # the commands remembered for prediction (1.28 s at 100 Hz, 0.26 at 500)
 
 
-def blind_time(delay: float, ages: Tuple[Any, Any], dt: float, held: Optional[float]) -> Any:
+def blind_time(ages: Tuple[Any, Any], dt: float, held: Optional[float]) -> Any:
     """How long the loop is blind beyond its nominal period (s; one per run of a batch): the age
-    of its older input (measurement_delay plus the ages from capture) plus how much later than
+    of its older input (from its stamp, or the assumed measurement_delay) plus how much later than
     the period this step comes. The barrier widens each cone by the sensor's travel towards it
     over this time (``core.law.configuration_error.blind_widening``); it is 0 for fresh inputs on
     time.
     """
-    age = delay + np.maximum(ages[0], ages[1])
+    age = np.maximum(ages[0], ages[1])
     if held is None or held - dt < ON_TIME_S:
         return age
     return age + (held - dt)
@@ -87,14 +87,14 @@ class ControlTick:
     (the lag compensation's real hold).
     """
 
-    def __init__(self, controller, mixer, measurement_delay):
-        """controller: AttitudeController (one run or a batch); mixer: Mixer; measurement_delay:
-        the inputs' latency (s) that the prediction makes up for, on top of their age.
+    def __init__(self, controller, mixer):
+        """controller: AttitudeController (one run or a batch); mixer: Mixer. (The inputs' ages
+        come with each tick, the assumed ``measurement_delay`` already in them where a stamp
+        does not tell: ``core.supervisor.safety.Stream`` for the node, the closed loop alike.)
         """
         self.controller = controller
         self.predict = DelayPredictor()
         self.mixer = mixer
-        self.measurement_delay = measurement_delay
         # what the rotors were told to produce, with when (the prediction's input)
         self.history = CommandHistory(HISTORY_TICKS, mixer.lag)
         self._last_now = None
@@ -104,9 +104,9 @@ class ControlTick:
         self._ticked = False
         self.flying = False             # armed and past the spool-up
 
-    def reconfigure(self, mixer: Mixer, measurement_delay: float) -> None:
-        """A new mixer (that has adopted the old one's lag model) and delay, at run time."""
-        self.mixer, self.measurement_delay = mixer, measurement_delay
+    def reconfigure(self, mixer: Mixer) -> None:
+        """A new mixer (that has adopted the old one's lag model), at run time."""
+        self.mixer = mixer
         self.history.lag = mixer.lag
 
     def _held(self, now):
@@ -135,8 +135,9 @@ class ControlTick:
 
         dt: the control period (how long this command is expected to be held); now: the tick's
         time on the loop's clock (None: every tick on time, as in a batch); ages: how old the
-        attitude and rate measurements are (s), besides measurement_delay; predict: bring the
-        measurements forward by their age and the delay (off for a state that is already
+        attitude and rate measurements are (s; from their stamps, or the assumed
+        measurement_delay plus any wait); predict: bring the
+        measurements forward by their age (off for a state that is already
         propagated, as a gap's); adapt: let the estimate learn from this step.
 
         Armed, the rotors first spool up (``Mixer.spools``: SPOOL_LAGS motor time constants)
@@ -163,20 +164,18 @@ class ControlTick:
                 self.history.push(t, made[0], made[1])
             self.predict.reset()
             self.controller.replan()           # guidance's way from where the vehicle is
-        d = self.measurement_delay
         R_b, W_b = R, Omega
         if predict:
             # with a model of the motors' lag, the law aims at the middle of the command's hold
-            (R_b, W_b), (R, Omega) = self.predict(self.controller.dynamics, R, Omega,
-                                                  d + ages[0], d + ages[1],
-                                                  self.history, t,
+            (R_b, W_b), (R, Omega) = self.predict(self.controller.dynamics, R, Omega, ages[0],
+                                                  ages[1], self.history, t,
                                                   0.5 * dt if mixer.lag > 0.0 else 0.0)
-        blind = self.blind = blind_time(d, ages, dt, held)
+        blind = self.blind = blind_time(ages, dt, held)
         controller = self.controller
         gain_scale = self.degraded.scale(blind, dt if held is None else held)
         brake = None
         if controller.brake is not None and self.flying:
-            brake = self.brake_inputs(R_b, W_b, d + np.maximum(ages[0], ages[1]),
+            brake = self.brake_inputs(R_b, W_b, np.maximum(ages[0], ages[1]),
                                       mixer.design_hold_for(dt, held), t,
                                       mixer.thrust_offsets(dt if held is None else held))
         out = controller.step(R, Omega, dt, adapt=adapt and self.flying, blind=blind,

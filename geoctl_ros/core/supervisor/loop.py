@@ -83,7 +83,7 @@ class ControlLoop:
         self._pose_stamp = None         # the last accepted pose's stamp, as given
         self.last_tick = None
         # (the inputs' ages, measurement_delay included, are the streams': see tick)
-        self.step = ControlTick(self.controller, setup.mixer, 0.0)
+        self.step = ControlTick(self.controller, setup.mixer)
         self._schedule_index = -1
         # per diagnostics window: input ages at the ticks, armed ticks saturated / bridging
         self.pose_age = WindowStats()
@@ -256,7 +256,7 @@ class ControlLoop:
         self.setup = setup
         self.unlearnt_bound = _unlearnt_bound(self.controller)
         self.agreement.configure(setup.agreement)
-        self.step.reconfigure(setup.mixer, 0.0)
+        self.step.reconfigure(setup.mixer)
         s = setup.loop
         self.pose.fallback_delay = self.rate.fallback_delay = s.measurement_delay
         self.pose.age_from_stamps = self.rate.age_from_stamps = s.age_from_stamps
