@@ -171,9 +171,9 @@ class AttitudeController:
              gain_scale: Any = 1.0) -> ControlOutput:
         """One control step at attitude R and body angular velocity Omega, by the configured law
         (``config.law``, one of ``LAWS``): its configuration error (``terms``, with the cones'
-        barrier or without), the geometric moment with the estimate advanced (``moment``), and
-        the law's filter of that moment, if it has one (a pure function of the step's terms and
-        the model: ``core.law.step_types.Law``).
+        barrier or without), the geometric moment with the estimate in force (``moment``), the
+        estimate's step (``adapt``), and the law's filter of the moment, if it has one (a pure
+        function of the step's terms and the model: ``core.law.step_types.Law``).
 
         dt is the time until the next step (the control period); adapt=False holds the estimate
         (e.g. while disarmed). blind: the time (s; one per run of a batch) over which the loop
@@ -194,7 +194,8 @@ class AttitudeController:
             psi, e_R = with_cones(terms.A, terms.e_RA, terms.cones)
         else:
             psi, e_R = terms.A[..., 0], terms.e_RA
-        out = self.moment(R, Omega, dt, adapt, terms, psi, e_R, law.barrier, gain_scale)
+        out = self.moment(R, Omega, adapt, terms, psi, e_R, law.barrier, gain_scale)
+        self.adapt(out, terms.W, dt)
         if law.filter is None:
             return out
         return law.filter(out, terms, R, Omega, self.law_model,
@@ -229,12 +230,13 @@ class AttitudeController:
         ev = cfg.cones.evaluate_terms(sc, widened)
         return StepTerms(y[..., 0:1], y[..., 1:4], ev, y[..., -3:], self.regressor(R))
 
-    def moment(self, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool, terms: StepTerms,
+    def moment(self, R: np.ndarray, Omega: np.ndarray, adapt: bool, terms: StepTerms,
                psi: Any, e_R: np.ndarray, barrier: bool = True,
                gain_scale: Any = 1.0) -> ControlOutput:
-        """The geometric law's moment for the configuration error (psi, e_R), with the adaptive
-        estimate advanced: ``ControlOutput``. barrier: the error carries the cones' barrier
-        (the estimate then freezes where a barrier saturates); gain_scale: as ``step``'s.
+        """The geometric law's moment for the configuration error (psi, e_R) with the estimate in
+        force, and whether the estimate adapts this step (``adapting``, per run: adapt, and no
+        barrier saturated where the error carries the barrier): ``ControlOutput``. gain_scale:
+        as ``step``'s. The estimate itself moves in ``adapt``.
         """
         cfg = self.config
         ev = terms.cones
@@ -259,19 +261,28 @@ class AttitudeController:
             u -= terms.M_g
         saturated = ev.any_saturated if barrier else np.zeros_like(ev.any_saturated)
         adapting = adapt and cfg.adaptive and ~saturated      # a flag per run
-        if adapting is not False and any_flag(adapting):
-            v = e_Omega + cfg.c * e_R
-            rate = (dt * cfg.k_Delta) * v if W is None else dt * (
-                self._gamma * matvec(transpose(W), v))
-            if rate.ndim > 1:                   # a batch: only the runs that adapt
-                rate *= adapting[..., None]
-            self.delta_bar += rate
-            self._project()
         # violated implies saturated (the floor band lies outside every cone)
         violated = (ev.violated.any(axis=-1) if any_flag(ev.any_saturated)
                     else ev.any_saturated)
         return ControlOutput(u, e_R, e_Omega, psi, delta_bar, violated, saturated,
                              adapting, ev, cfg.cones.theta_deg)
+
+    def adapt(self, out: ControlOutput, W: Optional[np.ndarray], dt: float) -> None:
+        """The adaptive law's step (eq. 39), explicit Euler over dt: Delta_bar += dt Gamma W^T
+        (e_Omega + c e_R) for the runs that adapt (``out.adapting``; W the step's regressor,
+        None for the constant model), then projected onto its balls.
+        """
+        adapting = out.adapting
+        if adapting is False or not any_flag(adapting):
+            return
+        cfg = self.config
+        v = out.e_Omega + cfg.c * out.e_R
+        rate = (dt * cfg.k_Delta) * v if W is None else dt * (
+            self._gamma * matvec(transpose(W), v))
+        if rate.ndim > 1:                       # a batch: only the runs that adapt
+            rate *= adapting[..., None]
+        self.delta_bar += rate
+        self._project()
 
     def _project(self):
         """Project each block of the estimate onto its ball (bounds of 0 mean unbounded)."""

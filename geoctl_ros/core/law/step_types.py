@@ -32,7 +32,7 @@ class ControlOutput(NamedTuple):
     delta_bar: np.ndarray    # estimate used for this u
     violated: bool           # sensor on or inside a cone
     saturated: bool          # some barrier in its floor band (repulsion saturated)
-    adapting: bool           # the estimate was advanced this step
+    adapting: Any            # the estimate advances this step (a flag, per run of a batch)
     cones: Any = None        # the ConeEval the step used
     half_angles_deg: Optional[np.ndarray] = None
     braking: Any = False     # the approach brake changed the law's moment
