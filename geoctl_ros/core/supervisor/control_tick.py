@@ -10,10 +10,11 @@ from typing import Any, NamedTuple, Optional, Tuple
 
 import numpy as np
 
-from geoctl_ros.core.actuation.motors import Mixer
+from geoctl_ros.core.actuation.motors import Mixer, MotorOutput
 from geoctl_ros.core.geometry.so3 import matvec
 from geoctl_ros.core.law.brake import BrakeInputs, rows
 from geoctl_ros.core.law.prediction import CommandHistory, DelayPredictor
+from geoctl_ros.core.law.step_types import ControlOutput
 
 ON_TIME_S = 1e-6       # a step less late than this is on time (the clock's rounding)
 HISTORY_TICKS = 128    # the commands remembered for prediction (1.28 s at 100 Hz, 0.26 at 500)
@@ -75,8 +76,8 @@ class DegradedMode:
 class Command(NamedTuple):
     """What one control tick commands."""
 
-    control: object     # ControlOutput of the step, or None when its moment was not finite
-    motors: object      # MotorOutput: zero commands unless armed
+    control: Optional[ControlOutput]   # the step's; None when its moment was not finite
+    motors: MotorOutput      # zero commands unless armed
     spooling: bool = False   # armed, the rotors spooling up (the vehicle held, not yet flown)
     took_over: bool = False  # the first tick the controller flies after the spool-up
 

@@ -2,8 +2,12 @@
 result; and the period of a step that a sample starts.
 """
 from dataclasses import dataclass
+from typing import Optional, Tuple
 
 import numpy as np
+
+from geoctl_ros.core.actuation.motors import MotorOutput
+from geoctl_ros.core.law.step_types import ControlOutput
 
 
 def step_period(since: float, period: float) -> float:
@@ -42,17 +46,18 @@ class LoopSettings:
 class LoopTick:
     """One control tick's results: everything the node publishes and logs."""
 
-    control: object          # ControlOutput, or None before the first pose and rate
-    motors: object           # MotorOutput (zero commands unless armed)
+    control: Optional[ControlOutput]   # None before the first pose and rate
+    motors: MotorOutput      # zero commands unless armed
     armed: bool
     stamp: object            # stamp of the pose the step used, as offer_pose was given it
                              # (the node's header stamp, for exact-time matching; or None)
-    pose_receipt: float      # when that pose was received, on the loop's clock (or None)
+    pose_receipt: Optional[float]   # when that pose was received, on the loop's clock (or None)
     state: str               # the supervisor's state: 'armed', or why not
     failed: bool             # disarmed by a failsafe
-    sources: tuple           # (attitude source, rate source): POSE/GYRO, or a gap's stand-ins
+    sources: Tuple[str, str]   # (attitude source, rate source): POSE/GYRO, or a gap's stand-ins
     setpoint: np.ndarray     # R_d being flown (the same object until a new one is adopted)
     bridging: bool = False   # a gap is being ridden through (see geoctl_ros.core.supervisor.gaps)
-    measured: object = None  # (R, Omega) the step flew on, in the package's frames (a gap's
-                             # stand-ins while bridging), or None before the first
+    # (R, Omega) the step flew on, in the package's frames (a gap's stand-ins while bridging), or
+    # None before the first
+    measured: Optional[Tuple[np.ndarray, np.ndarray]] = None
 
