@@ -20,7 +20,7 @@ import pytest
 
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.law.cones import ConeSet
-from geoctl_ros.core.law.configuration_error import attractive_error, linear_terms, with_cones
+from geoctl_ros.core.law.configuration_error import attractive_error, with_cones
 from geoctl_ros.core.law.control import AttitudeController, SetpointRejected
 from geoctl_ros.core.law.feasibility import holding_clearance_deg, holding_moment
 from geoctl_ros.core.law.mechanics import gravity_moment
@@ -241,9 +241,26 @@ def test_the_control_step_equals_a_plain_transcription_of_the_paper():
 
 
 @odroid
+def _terms_by_definition(R, R_d, cfg):
+    """The step's affine terms written here from their definitions, with plain matrix products:
+    A = 1/2 tr(G (I - R_d^T R)) (eq. 13), e_RA = 1/2 vee(G R_d^T R - R^T R_d G) (eq. 15), for each
+    cone r . (R^T v_i) and (R^T v_i) x r, and the gravity moment m rho x (R^T g).
+    """
+    G = np.diag(cfg.G)
+    A = 0.5 * np.trace(G @ (np.eye(3) - R_d.T @ R))
+    M = G @ R_d.T @ R - R.T @ R_d @ G
+    parts = [[A], 0.5 * np.array([M[2, 1], M[0, 2], M[1, 0]])]
+    for v in cfg.cones.V:
+        b = R.T @ v
+        parts += [[float(b @ cfg.cones.r)], np.cross(b, cfg.cones.r)]
+    parts.append(np.cross(cfg.m_rho, R.T @ cfg.gravity))
+    return np.concatenate(parts)
+
+
 def test_the_linear_map_of_the_step_reproduces_the_formulas_single_and_batched():
     """The step reads A, e_RA, every cone's terms and M_g from one precomputed matrix: they are
-    affine in R, so at any attitude the map must give what the formulas give, and a batch of
+    affine in R, so at any attitude the map must give what their definitions give (written in
+    the test, ``_terms_by_definition``), and a batch of
     runs (each with its own cones and set point) must step as each run alone does.
     """
     cones = four_cones()
@@ -251,7 +268,8 @@ def test_the_linear_map_of_the_step_reproduces_the_formulas_single_and_batched()
     ctrl = AttitudeController(cfg)
     ctrl.set_setpoint(so3.axis_angle([0.3, -0.2, 1.0], 0.5))
     for R in random_attitudes(20):
-        assert np.allclose(ctrl._linear(R), linear_terms(R, ctrl.R_d, cfg), rtol=0, atol=1e-14)
+        assert np.allclose(ctrl._linear(R), _terms_by_definition(R, ctrl.R_d, cfg), rtol=0,
+                           atol=1e-12)
     n = 5
     V = rng.normal(size=(n, 4, 3))
     theta = np.radians(rng.uniform(10.0, 30.0, size=(n, 4)))
