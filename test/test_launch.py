@@ -43,6 +43,7 @@ def ros():
 
 @needs_launch
 @pytest.mark.realtime
+@pytest.mark.rtchain
 @pytest.mark.parametrize('law', ['delay_robust', 'cbf'])
 def test_sil_launch_flies_each_law_on_loopback_and_keeps_the_cone(
         installed, ros, tmp_path, law):

@@ -149,7 +149,7 @@ def rotation(mon, t):
 
 
 @pytest.mark.realtime
-@pytest.mark.runbook
+@pytest.mark.rtchain
 @pytest.mark.parametrize('world', sorted(LABS))
 def test_the_runbook_flies_a_first_flight(installed, tmp_path, world):
     env, prefix = installed
