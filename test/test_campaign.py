@@ -76,12 +76,12 @@ def test_a_run_written_out_replays_to_the_same_figures(tmp_path):
     base = load_parameter_file(TESTBED)
     indices = [i for i in range(30) if manoeuvres.cone_count(1, i) == 2][:6]
     runner = pytest.importorskip('geoctl_ros.campaign.runner', reason=NO_EXTRA)
-    figures = runner.fly_batch((base, 1, 3.0, manoeuvres.DISTURBANCE_MAX, 1, {}, indices, 2,
+    figures = runner.fly_batch((base, 1, 2.0, manoeuvres.DISTURBANCE_MAX, 1, {}, indices, 2,
                                 'all'))
     assert list(figures['run']) == indices and set(figures['cones']) == {2}
     i = indices[4]
     path = tmp_path / 'run.yaml'
-    manoeuvres.write_scenario_file(sections(i, duration=3.0), str(path))
+    manoeuvres.write_scenario_file(sections(i, duration=2.0), str(path))
     again = fly([scenario.load(str(path))])                      # alone, from the file
     assert again.min_margin_deg[0].min() == figures['closest_deg'][4]
     assert again.final_error_deg[0] == figures['final_error_deg'][4]
@@ -90,7 +90,7 @@ def test_a_run_written_out_replays_to_the_same_figures(tmp_path):
     assert len(figures['worst']) == 2
     closest, _, worst, margins, sensor, _ = figures['worst'][0]
     assert closest == figures['closest_deg'].min()
-    alone = fly([scenario.from_sections(sections(worst, duration=3.0), 'w')], series=True)
+    alone = fly([scenario.from_sections(sections(worst, duration=2.0), 'w')], series=True)
     assert np.array_equal(alone.margin_series[:, 0], margins)
     assert np.array_equal(alone.sensor_series[:, 0], sensor)
 

@@ -90,7 +90,7 @@ def test_a_short_falsification_writes_its_table_and_a_worst_flight_that_replays_
     steps taken here) is the search's.
     """
     out = tmp_path / 'f'
-    code = falsify_cli.main(['--budget', '16', '--duration', '1.5', '--out', str(out),
+    code = falsify_cli.main(['--budget', '16', '--duration', '1.0', '--out', str(out),
                              '--requirements', 'safety,assumed', '--scheduler', dask_scheduler])
     printed = capsys.readouterr()
     summary = (out / 'summary.md').read_text()
