@@ -259,6 +259,8 @@ def test_in_flight_an_imu_90_deg_off_in_yaw_fails_safe_naming_it_and_a_true_one_
         assert failed_at is None and most == 0, loop.supervisor.reason
 
 
+# (headless flights of the testbed: in ./run test's headless stream, which balances phase 1)
+@pytest.mark.headless
 @pytest.mark.parametrize('yaw', [30.0, 45.0, 135.0])
 def test_in_flight_an_imu_turned_20_to_160_deg_in_yaw_is_named_by_the_yaw_it_measures(yaw):
     """An IMU turned yaw deg in yaw (set up with the defaults) over the testbed's yaw past the
