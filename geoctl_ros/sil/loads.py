@@ -29,8 +29,8 @@ from geoctl_ros.sil.rosenv import cli_env, node_env
 
 CLI_LOOP = r"""
 while true; do
-  timeout 4 ros2 topic echo /cone_margins > /dev/null
-  timeout 4 ros2 topic hz /pose > /dev/null
+  timeout -k 2 4 ros2 topic echo /cone_margins > /dev/null
+  timeout -k 2 4 ros2 topic hz /pose > /dev/null
   ros2 param dump /controller > /dev/null
   ros2 param dump /sim > /dev/null
   ros2 param get /controller k_R > /dev/null
@@ -40,7 +40,7 @@ while true; do
   ros2 service call /sim/get_parameters rcl_interfaces/srv/GetParameters \
     "{names: [mass]}" > /dev/null
   ros2 service list > /dev/null
-  timeout 3 ros2 topic echo /diagnostics > /dev/null
+  timeout -k 2 3 ros2 topic echo /diagnostics > /dev/null
 done
 """
 
