@@ -53,7 +53,6 @@ from geoctl_ros.core.law.dynamics import Dynamics
 from geoctl_ros.core.law.feasibility import setpoint_problem
 from geoctl_ros.core.law.guidance import Guidance
 from geoctl_ros.core.law.laws import LAWS
-from geoctl_ros.core.law.mechanics import gravity_moment
 from geoctl_ros.core.law.step_types import ControlOutput, LawModel, StepTerms
 
 __all__ = ['DISTURBANCE_MODELS', 'AttitudeController', 'ControlOutput', 'ControllerConfig',
@@ -149,7 +148,7 @@ class AttitudeController:
 
     def gravity_moment(self, R: np.ndarray) -> np.ndarray:
         """The model's gravity moment at R (about the pivot, body frame)."""
-        return gravity_moment(R, self.config.m_rho, self.config.gravity)
+        return self.dynamics.gravity_moment(R)
 
     def model_moment(self, R: np.ndarray, Omega: np.ndarray, M_g: Optional[np.ndarray] = None,
                      W: Any = False, delta_bar: Optional[np.ndarray] = None) -> np.ndarray:
