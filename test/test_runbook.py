@@ -104,14 +104,15 @@ def quaternion_of_yaw(yaw_deg):
 
 class Command:
     """A runbook command (argv starting with ros2) in the lab's folder, in a process group of its
-    own; nodes with the loopback profile (env), the plain `ros2` verbs as a lab's shell has them.
+    own (in this session: see workspace.Launch); nodes with the loopback profile (env), the plain
+    `ros2` verbs as a lab's shell has them.
     """
 
     def __init__(self, argv, env, lab, log=None):
         assert argv[0] == 'ros2', argv
         self.log = open(log, 'w+') if log else None
         self.proc = subprocess.Popen(
-            [ROS2] + argv[1:], env=env, cwd=str(lab), text=True, start_new_session=True,
+            [ROS2] + argv[1:], env=env, cwd=str(lab), text=True, process_group=0,
             stdout=self.log or subprocess.PIPE, stderr=subprocess.STDOUT)
 
     def answer(self, mon, timeout=40.0):
