@@ -132,6 +132,7 @@ def free_udp_port():
 
 
 @needs_launch
+@pytest.mark.rtchain       # its controller and bridge run SCHED_FIFO (the launch's prefix)
 def test_testbed_launch_remaps_prefix_and_law_reach_the_controller(installed, ros, tmp_path):
     """The runbook's launch: one controller on the file and then the calibration (its gyro bias
     in effect), the bridge on the link and signing key given; each in the real-time class at its

@@ -25,8 +25,10 @@ class Workspace:
 
     def __init__(self, path):
         self.path = path
+        # (not the byte code either: ./run's .pycache/ is some 140 MB, whose copy to disk, beside
+        # the flights, stalled the sim of one for 0.3 s)
         skip = shutil.ignore_patterns('.venv*', 'build', 'install', 'log', '.git', '__pycache__',
-                                      'out')
+                                      '.pycache', 'out')
         shutil.copytree(ROOT, os.path.join(path, 'src', 'geoctl_ros'), ignore=skip)
         self.env = dict(os.environ, PATH=BIN + os.pathsep + os.environ['PATH'])
         self.prefix = os.path.join(path, 'install', 'geoctl_ros')
