@@ -106,7 +106,10 @@ class DelayPredictor:
     middle, under the moment in force then; the difference, low-passed over ``PREDICT_SLOW_S``,
     is taken off every piece of the prediction. At rest this is the whole model acceleration (the
     true one is zero); while manoeuvring, only the model's error, so a vehicle that really
-    accelerates is predicted to.
+    accelerates is predicted to. After a reset the low-pass starts as the mean of the samples
+    learnt so far (its time constant is the time learnt, up to PREDICT_SLOW_S): the take-over's
+    error (a wrong m rho spooled into the rotors' gravity compensation) is known from the first
+    sample learnt, not a time constant later (docs/safety.md, "The take-over").
     """
 
     def __init__(self):
@@ -118,6 +121,7 @@ class DelayPredictor:
         hand is not its error).
         """
         self.acc_error = 0.0          # rad/s^2: model minus measured acceleration, low-passed
+        self.learnt: Any = 0.0        # s: the time learnt since the reset (one per run)
         self._last: Optional[tuple] = None    # (capture time, Omega) of the last rate sample
         self.residual: Any = None     # rad/s^2: the last rate sample's |acceleration
                                                # the model and the observer did not know| (one
@@ -143,7 +147,8 @@ class DelayPredictor:
             innovation = modelled - (Omega - last[1]) / interval - self.acc_error
             self.residual = np.sqrt(so3.dot(innovation, innovation))
             self.acc_error = self.acc_error + innovation * (
-                interval / (PREDICT_SLOW_S + interval))
+                interval / (min(self.learnt, PREDICT_SLOW_S) + interval))
+            self.learnt += interval
             return
         interval = captured - last[0]
         usable = (interval > 1e-6) & (interval <= OBSERVE_GAP_MAX_S) & (last[0] >= history.first)
@@ -153,8 +158,9 @@ class DelayPredictor:
         mid_rate = 0.5 * (Omega + last[1])
         modelled = model.acceleration(R, mid_rate, history.at(last[0] + 0.5 * span))
         measured = ((Omega - last[1]).T / span).T
-        weight = np.where(usable, span / (PREDICT_SLOW_S + span), 0.0)
+        weight = np.where(usable, span / (np.minimum(self.learnt, PREDICT_SLOW_S) + span), 0.0)
         self.acc_error = self.acc_error + ((modelled - measured - self.acc_error).T * weight).T
+        self.learnt = self.learnt + np.where(usable, span, 0.0)
 
     def __call__(self, model, R, Omega, age_R, age_Omega, history, now, lead=0.0) -> tuple:
         """The attitude and rate at ``now`` and at ``now + lead``, ((R, Omega) at now, (R, Omega)
