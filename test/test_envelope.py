@@ -4,6 +4,9 @@ stamps that step), the arming checks, cone entries latched, and the ESCs' health
 """
 import math
 import os
+import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -427,3 +430,34 @@ def test_a_lost_esc_fails_safe_and_arming_names_it_and_a_silent_esc_node_too():
     assert 'esc_i2c silent for 2.' in loop.arm(t[0]).message
     assert loop.offer_esc_health(240, [0, 7, 0, 0, 0, 0], t[0]) == (
         'expected 6 ESC health codes of 0-3, got [0, 7, 0, 0, 0, 0]')
+
+
+def _safety_snippets():
+    """The `./run shell - <<'EOF'` blocks of docs/safety.md, as Python source."""
+    with open(os.path.join(ROOT, 'docs', 'safety.md')) as fh:
+        text = fh.read()
+    return ['\n'.join(line[4:] for line in block.split('\n')) for block in
+            re.findall(r"\n    \./run shell - <<'EOF'\n(.*?)\n    EOF\n", text, re.S)], text
+
+
+def test_the_safety_docs_snippets_run_and_the_take_over_table_is_what_its_snippet_prints():
+    """Every snippet docs/safety.md gives a reader runs (one once broke on a changed signature,
+    unseen), and the take-over check's table is, row by row, what its snippet prints.
+    """
+    snippets, text = _safety_snippets()
+    assert len(snippets) >= 2
+    printed = {}
+    for source in snippets:
+        r = subprocess.run([sys.executable, '-'], input=source, cwd=ROOT, text=True,
+                           capture_output=True, timeout=300)
+        assert r.returncode == 0, r.stdout + r.stderr
+        if 'takeover_margins' in source:
+            for m in re.finditer(r'age +(\d+) ms, tilt +(\d+) deg: from [^:]*: (\S+) / (\S+) / '
+                                 r'(\S+) deg', r.stdout):
+                printed[(int(m.group(1)), int(m.group(2)))] = [float(x) for x in m.groups()[2:]]
+    tilts = {'level': 0, '20 deg': 20, '45 deg (on the stops)': 45}
+    table = {}
+    for m in re.finditer(r'\n\| (\d+) ms, ([^|]+?) \| (\S+)(?: \(refused\))? / (\S+)'
+                         r'(?: \(refused\))? / (\S+?)(?: deg)? \|', text):
+        table[(int(m.group(1)), tilts[m.group(2)])] = [float(x) for x in m.groups()[2:]]
+    assert len(printed) == 6 and table == printed, (table, printed)
