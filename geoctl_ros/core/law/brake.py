@@ -61,6 +61,7 @@ from typing import Any, NamedTuple, Optional
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.so3 import BoolArray, FloatArray
 from geoctl_ros.core.law.projection import TOL, project, slack_of
 
 SIGMAS = 3.0      # the measurement errors are bounded at this many standard deviations
@@ -114,7 +115,7 @@ class ApproachBrake:
         return math.exp(-hold / self.lag) if self.lag > 0.0 else 0.0
 
 
-def unmodelled_acceleration(moment_bound: float, J: np.ndarray) -> float:
+def unmodelled_acceleration(moment_bound: float, J: FloatArray) -> float:
     """a_u: the largest angular acceleration (rad/s^2) an unlearnt moment of moment_bound (N m)
     gives, over the smallest principal inertia of J.
     """
@@ -289,10 +290,10 @@ class BrakeRows(NamedTuple):
     derivation (``BrakeTerms.weak``).
     """
 
-    A: np.ndarray
-    beta: np.ndarray
-    margin: np.ndarray
-    weak: np.ndarray
+    A: FloatArray
+    beta: FloatArray
+    margin: FloatArray
+    weak: BoolArray
 
 
 class BrakeInputs(NamedTuple):
@@ -305,17 +306,17 @@ class BrakeInputs(NamedTuple):
     (``Mixer.thrust_offsets``; None: no lag model).
     """
 
-    R: np.ndarray
-    Omega: np.ndarray
+    R: FloatArray
+    Omega: FloatArray
     age: Any
     hold: float
-    rotors: np.ndarray
-    f: np.ndarray
-    gravity: np.ndarray
-    thrusts: Optional[np.ndarray] = None
+    rotors: FloatArray
+    f: FloatArray
+    gravity: FloatArray
+    thrusts: Optional[FloatArray] = None
 
 
-def opening(cones: Any, R: np.ndarray, Omega: np.ndarray) -> tuple:
+def opening(cones: Any, R: FloatArray, Omega: FloatArray) -> tuple:
     """Per cone at (R, Omega): (gap (rad, phi - theta), n (the opening direction, body, unit),
     w (the approach rate, rad/s), kin (the approach's kinematic term, rad/s^2)): with
     b = R^T v, c = b x r, n = c / |c|, w = -n . Omega, and dw/dt = kin - n . Omega' where
@@ -344,22 +345,22 @@ class BrakeTerms(NamedTuple):
     and where that is too weak for the derivation (``NET_SHARE_MIN``).
     """
 
-    gap: np.ndarray
-    n: np.ndarray
-    w: np.ndarray
-    kin: np.ndarray
-    A: np.ndarray
-    f_along: np.ndarray
-    D_s: np.ndarray
-    authority: np.ndarray
-    weak: np.ndarray
+    gap: FloatArray
+    n: FloatArray
+    w: FloatArray
+    kin: FloatArray
+    A: FloatArray
+    f_along: FloatArray
+    D_s: FloatArray
+    authority: FloatArray
+    weak: BoolArray
 
-    def model_rate_change(self, moment: np.ndarray) -> np.ndarray:
+    def model_rate_change(self, moment: FloatArray) -> FloatArray:
         """dw/dt by the brake's model, frozen at the tick, under the rotors' moment."""
         return self.kin - so3.dot(self.A, moment[..., None, :]) - self.f_along
 
 
-def brake_terms(brake: ApproachBrake, cones: Any, J_inv: np.ndarray,
+def brake_terms(brake: ApproachBrake, cones: Any, J_inv: FloatArray,
                 x: BrakeInputs) -> BrakeTerms:
     """``BrakeTerms`` at the tick of x (see the module)."""
     gap, n, w, kin = opening(cones, x.R, x.Omega)
@@ -380,7 +381,7 @@ def brake_terms(brake: ApproachBrake, cones: Any, J_inv: np.ndarray,
     return BrakeTerms(gap, n, w, kin, A, f_along, D_s, authority, weak)
 
 
-def rows(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, x: BrakeInputs,
+def rows(brake: ApproachBrake, cones: Any, J_inv: FloatArray, x: BrakeInputs,
          terms: Optional[BrakeTerms] = None, worst: Optional[tuple] = None) -> BrakeRows:
     """The brake's condition at a tick for every cone (``BrakeRows``; see the module); terms:
     ``brake_terms`` of x, worst: ``_worst_at`` of them, where already computed.
@@ -392,7 +393,7 @@ def rows(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, x: BrakeInputs,
 
 
 def law_meets(brake: ApproachBrake, cones: Any, t: BrakeTerms, x: BrakeInputs,
-              u: np.ndarray) -> tuple:
+              u: FloatArray) -> tuple:
     """(...,) bool: whether the law's moment u meets every cone's condition at the tick of x
     (``meets``, on the law's own deceleration along each cone; no search), and ``_worst`` of
     every cone there (for the rows: once a tick), the law's travel integrated with it.
@@ -413,7 +414,7 @@ SIN_PHI_MIN = math.sin(math.radians(5.0))   # sin phi below which the rate error
                                             # this (deep inside a cone, or opposite it)
 
 
-def _spin(cones: Any, t: BrakeTerms, x: BrakeInputs) -> np.ndarray:
+def _spin(cones: Any, t: BrakeTerms, x: BrakeInputs) -> FloatArray:
     """|Omega| / sin phi per run and cone (``ApproachBrake.uncertainty``)."""
     sin_phi = np.maximum(np.sin(t.gap + cones.theta), SIN_PHI_MIN)
     return np.sqrt(so3.dot(x.Omega, x.Omega))[..., None] / sin_phi
@@ -424,8 +425,8 @@ def _age(x: BrakeInputs) -> Any:
     return np.asarray(x.age, dtype=float)[..., None] if np.ndim(x.age) else x.age
 
 
-def brake_authority(vertices: np.ndarray, J_inv: np.ndarray, m_rho: np.ndarray,
-                    gravity: np.ndarray, tilt_max: float, r: np.ndarray,
+def brake_authority(vertices: FloatArray, J_inv: FloatArray, m_rho: FloatArray,
+                    gravity: FloatArray, tilt_max: float, r: FloatArray,
                     directions: int = 720) -> float:
     """a_b (rad/s^2): the least, over the opening directions n (every unit n perpendicular to
     the sensor axis r: a cone is opened by turning r), of the deceleration along n that the
@@ -453,7 +454,7 @@ def brake_authority(vertices: np.ndarray, J_inv: np.ndarray, m_rho: np.ndarray,
     return float((support - worst).min())
 
 
-def covered(ok: np.ndarray, safe: np.ndarray, lead: int) -> np.ndarray:
+def covered(ok: BoolArray, safe: BoolArray, lead: int) -> BoolArray:
     """(steps, runs) bool: whether the derivation speaks of each control step: some step j at
     or before it had a safe state (``safe``: Phi >= 0 of the true state, every cone) and the
     bounds held (``ok``) at every step from ``lead`` steps before j (the measurements j used)
@@ -477,12 +478,12 @@ class Braked(NamedTuple):
     reach this hold, or its bounds were too weak for it (``unmet``: outside the derivation).
     """
 
-    u: np.ndarray
+    u: FloatArray
     braking: Any
     unmet: Any
 
 
-def reachable(polytope: Any, keep: float, offsets: Optional[np.ndarray]) -> tuple:
+def reachable(polytope: Any, keep: float, offsets: Optional[FloatArray]) -> tuple:
     """The moments the lagged rotors reach by the end of a hold from where they are now, within
     their polytope A M >= beta (each rotor j between its limits: lo <= base_j + P_j M <= hi):
     each rotor's thrust reaches a f0_j + (1 - a) [lo, hi] (keep: a = exp(-h / tau)), so
@@ -495,8 +496,8 @@ def reachable(polytope: Any, keep: float, offsets: Optional[np.ndarray]) -> tupl
         (offsets, -offsets), axis=-1)
 
 
-def braked(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, polytope: Any,
-           x: BrakeInputs, u: np.ndarray, extra: Optional[tuple] = None) -> Braked:
+def braked(brake: ApproachBrake, cones: Any, J_inv: FloatArray, polytope: Any,
+           x: BrakeInputs, u: FloatArray, extra: Optional[tuple] = None) -> Braked:
     """The brake stage: u (the law's moment; one per run of a batch) where it meets every cone's
     condition (``rows``) within the rotors' reach this hold (``reachable``), else the closest
     moment that does (``core.law.projection.project``); where none does, the closest that meets
@@ -539,8 +540,8 @@ def braked(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, polytope: Any,
     return Braked(out, braking, unmet)
 
 
-def _compromise(u: np.ndarray, A: np.ndarray, beta: np.ndarray, rows_: int,
-                rotors: np.ndarray, iterations: int = 30) -> np.ndarray:
+def _compromise(u: FloatArray, A: FloatArray, beta: FloatArray, rows_: int,
+                rotors: FloatArray, iterations: int = 30) -> FloatArray:
     """Where the first ``rows_`` rows (the cones') cannot all be met within the rest (the
     rotors' reach): the moment closest to u that meets them all relaxed by the least common
     amount e (rad/s^2 of deceleration: A_i u >= beta_i - e), found by bisection on e, so that no

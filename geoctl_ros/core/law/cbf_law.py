@@ -6,13 +6,13 @@ from typing import Optional
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.core.geometry.so3 import cross, matvec
+from geoctl_ros.core.geometry.so3 import FloatArray, cross, matvec
 from geoctl_ros.core.law.brake import BrakeInputs, braked
 from geoctl_ros.core.law.projection import closest_admissible
 from geoctl_ros.core.law.step_types import ControlOutput, Law, LawModel, StepTerms
 
 
-def pointing_cbf(model: LawModel, R: np.ndarray, Omega: np.ndarray, terms: StepTerms) -> tuple:
+def pointing_cbf(model: LawModel, R: FloatArray, Omega: FloatArray, terms: StepTerms) -> tuple:
     """Each cone as a pointing constraint of relative degree 2, as the rows of A u >= beta.
 
     h_i = cos(theta_i + guard) - (R^T v_i) . r >= 0 (the sensor outside the guarded cone). With
@@ -43,7 +43,7 @@ def pointing_cbf(model: LawModel, R: np.ndarray, Omega: np.ndarray, terms: StepT
     return A, beta, h, h_dot, b, f
 
 
-def cbf_filter(out: ControlOutput, terms: StepTerms, R: np.ndarray, Omega: np.ndarray,
+def cbf_filter(out: ControlOutput, terms: StepTerms, R: FloatArray, Omega: FloatArray,
                model: LawModel, brake: Optional[BrakeInputs]) -> ControlOutput:
     """Lee's geometric moment (``out``, the attractive error alone; the estimate adapts as the
     baseline's) filtered by a control-barrier-function QP on SO(3): the moment closest to it that

@@ -42,10 +42,10 @@ from typing import Any, Optional, Tuple
 import numpy as np
 
 from geoctl_ros.core.geometry.flags import any_flag
-from geoctl_ros.core.geometry.so3 import hat, matmul, vecmat
+from geoctl_ros.core.geometry.so3 import FloatArray, hat, matmul, vecmat
 
 
-def angle_deg(s: np.ndarray) -> np.ndarray:
+def angle_deg(s: FloatArray) -> FloatArray:
     """The angle (degrees) whose cosine is s = r^T R^T v_i (clipped to [-1, 1] against
     round-off).
     """
@@ -71,19 +71,19 @@ class ConeEval:
         self._e_RB = e_RB
 
     @property
-    def e_RB(self) -> np.ndarray:
+    def e_RB(self) -> FloatArray:
         if self._e_RB is None:
             self._e_RB = self.cross * self.weight[..., None]
         return self._e_RB
 
     @property
-    def e_RB_sum(self) -> np.ndarray:
+    def e_RB_sum(self) -> FloatArray:
         """sum_i e_RB,i (per run of a batch)."""
         if self._e_RB is None:
             return vecmat(self.weight, self.cross)
         return self._e_RB.sum(axis=-2)
 
-    def margins_deg(self, half_angles_deg: np.ndarray) -> np.ndarray:
+    def margins_deg(self, half_angles_deg: FloatArray) -> FloatArray:
         """Angle between R r and v_i minus theta_i, degrees (negative inside the cone)."""
         return angle_deg(self.s) - half_angles_deg
 
@@ -140,19 +140,19 @@ class ConeSet:
         """
         return math.degrees(self.guard + self.floor)
 
-    def axes_in_body(self, R: np.ndarray) -> np.ndarray:
+    def axes_in_body(self, R: FloatArray) -> FloatArray:
         """The cones' axes in the body frame at R: rows b_i = R^T v_i ((..., n, 3); per run of a
         batch), the same float operations for one run and a batch (no BLAS).
         """
         return vecmat(self.V, R[..., None, :, :])
 
-    def terms(self, R: np.ndarray) -> np.ndarray:
+    def terms(self, R: FloatArray) -> FloatArray:
         """(n, 4) per cone: s_i = r^T R^T v_i, then (R^T v_i) x r; both linear in R (the control
         step evaluates them as part of one precomputed linear map, see ``core.law.control``).
         """
         return matmul(self.V, matmul(R, self._r_cols))
 
-    def evaluate(self, R: np.ndarray) -> 'ConeEval':
+    def evaluate(self, R: FloatArray) -> 'ConeEval':
         """Barrier values, gradients and flags at attitude R."""
         return self.evaluate_terms(self.terms(R))
 
@@ -167,7 +167,7 @@ class ConeSet:
         return (cos_theta, g0, 1.0 + np.log(1.0 + cos_theta) / self.alpha,
                 1.0 / (self.alpha * g0), np.sin(theta_b) / (self.alpha * g0))
 
-    def evaluate_terms(self, sc: np.ndarray, widened: Optional[tuple] = None) -> 'ConeEval':
+    def evaluate_terms(self, sc: FloatArray, widened: Optional[tuple] = None) -> 'ConeEval':
         """Barrier values, gradients and flags from ``terms(R)``; widened: None, or the constants
         of ``widened(extra)`` for a barrier on wider cones (margins and violations are still
         against the real cones).
@@ -206,7 +206,7 @@ class ConeSet:
                         self._r_perp[None, :])
         return -unit * magnitude[:, None]
 
-    def cosines(self, R: np.ndarray) -> np.ndarray:
+    def cosines(self, R: FloatArray) -> FloatArray:
         """s_i = v_i . R r per cone: the cosine of the angle between the sensor's world direction
         and each cone's axis, for R or a stack of them (any leading axes before the batch's).
 
@@ -221,17 +221,17 @@ class ConeSet:
         return (V[..., 0] * d[..., None, 0] + V[..., 1] * d[..., None, 1]
                 + V[..., 2] * d[..., None, 2])
 
-    def angles_deg(self, R: np.ndarray) -> np.ndarray:
+    def angles_deg(self, R: FloatArray) -> FloatArray:
         """Angle between the sensor's world direction R r and each cone axis, degrees."""
         return angle_deg(self.cosines(R))
 
-    def closest(self, margins_deg: np.ndarray) -> Tuple[str, float]:
+    def closest(self, margins_deg: FloatArray) -> Tuple[str, float]:
         """The cone the sensor is closest to, by its margins (deg, one per cone; one run), and
         that margin: (name, margin).
         """
         i = int(np.argmin(margins_deg))
         return self.names[i], float(margins_deg[i])
 
-    def margins_deg(self, R: np.ndarray) -> np.ndarray:
+    def margins_deg(self, R: FloatArray) -> FloatArray:
         """Cone margins (angle to axis minus half-angle, degrees) at attitude R."""
         return self.angles_deg(R) - self.theta_deg

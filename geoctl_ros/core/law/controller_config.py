@@ -5,8 +5,7 @@ from dataclasses import dataclass, field
 import math
 from typing import Any, Optional
 
-import numpy as np
-
+from geoctl_ros.core.geometry.so3 import FloatArray
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.mechanics import first_moment, pivot_inertia
 
@@ -24,12 +23,12 @@ class ControllerConfig:
     k_Omega: float
     k_Delta: float
     c: float
-    G: np.ndarray                    # (3,) diagonal weights g1, g2, g3
+    G: FloatArray                    # (3,) diagonal weights g1, g2, g3
     cones: ConeSet
-    inertia: np.ndarray              # (3, 3) about the centre of mass, kg m^2
+    inertia: FloatArray              # (3, 3) about the centre of mass, kg m^2
     mass: float                      # kg
-    cog_offset: np.ndarray           # pivot -> centre of mass, body frame, m
-    gravity: np.ndarray              # world frame, m/s^2
+    cog_offset: FloatArray           # pivot -> centre of mass, body frame, m
+    gravity: FloatArray              # world frame, m/s^2
     adaptive: bool = True
     gravity_compensation: bool = True
     disturbance_model: str = 'constant'
@@ -54,8 +53,8 @@ class ControllerConfig:
     moment_limits: Optional[Any] = None   # MomentPolytope: the moments the rotors make
                                           # unsaturated (``Allocator.moment_polytope``); the
                                           # brake and the cbf law's QP keep them
-    J: np.ndarray = field(init=False, repr=False)        # inertia about the pivot
-    m_rho: np.ndarray = field(init=False, repr=False)    # mass times pivot -> centre of mass
+    J: FloatArray = field(init=False, repr=False)        # inertia about the pivot
+    m_rho: FloatArray = field(init=False, repr=False)    # mass times pivot -> centre of mass
 
     def __post_init__(self):
         object.__setattr__(self, 'J', pivot_inertia(self.inertia, self.mass, self.cog_offset))

@@ -5,13 +5,12 @@ time and the brake off it is the paper's.
 """
 from typing import Optional
 
-import numpy as np
-
+from geoctl_ros.core.geometry.so3 import FloatArray
 from geoctl_ros.core.law.brake import BrakeInputs, braked
 from geoctl_ros.core.law.step_types import ControlOutput, Law, LawModel, StepTerms
 
 
-def approach_brake(out: ControlOutput, terms: StepTerms, R: np.ndarray, Omega: np.ndarray,
+def approach_brake(out: ControlOutput, terms: StepTerms, R: FloatArray, Omega: FloatArray,
                    model: LawModel, brake: Optional[BrakeInputs]) -> ControlOutput:
     """The law's moment kept by the approach brake (``core.law.brake.braked``: every cone's
     sampled-data condition, within the rotors' limits; brake: its inputs of the tick, or None).

@@ -7,8 +7,10 @@ from typing import Any, Optional
 
 import numpy as np
 
+from geoctl_ros.core.geometry.so3 import FloatArray
 
-def smallest_pair_sum(G: np.ndarray) -> float:
+
+def smallest_pair_sum(G: FloatArray) -> float:
     """min_{i != j} (g_i + g_j): the least A can grow per (1 - cos) of a rotation's angle,
     A = (1 - cos phi) (tr G - n^T G n) / 2 (the paper's h_1).
     """
@@ -16,7 +18,7 @@ def smallest_pair_sum(G: np.ndarray) -> float:
     return float(g[0] + g[1])
 
 
-def holding_moment(config: Any, cones: Any, R_d: np.ndarray) -> np.ndarray:
+def holding_moment(config: Any, cones: Any, R_d: FloatArray) -> FloatArray:
     """Per cone: the largest moment its barrier can oppose near the cone, with the set point R_d.
 
     The repulsion k_R A e_RB,i is largest in the floor band (and inside, where it keeps the band's
@@ -35,7 +37,7 @@ def holding_moment(config: Any, cones: Any, R_d: np.ndarray) -> np.ndarray:
     return config.k_R * A_min * np.sin(cones.theta_b) / (cones.alpha * cones.g0)
 
 
-def holding_clearance_deg(config: Any, cones: Any, moment: float) -> np.ndarray:
+def holding_clearance_deg(config: Any, cones: Any, moment: float) -> FloatArray:
     """Per cone: the set point's clearance (degrees from the real cone) at which
     ``holding_moment`` equals moment.
     """
@@ -44,7 +46,7 @@ def holding_clearance_deg(config: Any, cones: Any, moment: float) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(1.0 - x, -1.0, 1.0)) + cones.guard)
 
 
-def setpoint_problem(config: Any, cones: Any, R_d: np.ndarray) -> Optional[str]:
+def setpoint_problem(config: Any, cones: Any, R_d: FloatArray) -> Optional[str]:
     """Why R_d cannot be a set point with these cones (a sentence), or None if it can."""
     if not np.all(np.isfinite(R_d)):
         return 'setpoint is not finite'

@@ -21,7 +21,7 @@ from typing import Any, Optional
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.core.geometry.so3 import matvec
+from geoctl_ros.core.geometry.so3 import FloatArray, matvec
 from geoctl_ros.core.law.dynamics import Dynamics
 
 PREDICT_SLOW_S = 0.25    # s, the observer's low-pass of the model's error
@@ -64,7 +64,7 @@ class CommandHistory:
         """When the oldest command held was sent (inf: none yet)."""
         return self.times[-self.count] if self.count else math.inf
 
-    def push(self, t: float, end: np.ndarray, start: Optional[np.ndarray] = None) -> None:
+    def push(self, t: float, end: FloatArray, start: Optional[FloatArray] = None) -> None:
         end = np.asarray(end, dtype=float)
         if self.end is None or self.end.shape[1:] != end.shape:
             self.start = np.zeros((self.size,) + end.shape)
@@ -77,7 +77,7 @@ class CommandHistory:
         self.times[:-1] = self.times[1:]
         self.times[-1] = t
 
-    def at(self, t: Any) -> np.ndarray:
+    def at(self, t: Any) -> FloatArray:
         """The moment in force at times t (a scalar, or one per run of a batch: (N,))."""
         if self.end is None:
             return np.zeros(3)
@@ -127,7 +127,7 @@ class DelayPredictor:
                                                # the model and the observer did not know| (one
                                                # run; None until a sample taught it)
 
-    def observe(self, model: Dynamics, R: np.ndarray, Omega: np.ndarray, captured: Any,
+    def observe(self, model: Dynamics, R: FloatArray, Omega: FloatArray, captured: Any,
                 history: 'CommandHistory') -> None:
         """Learn the model's error from a rate sample captured at ``captured`` (a time on the
         history's clock; one per run of a batch). A sample no newer than the last (a stall

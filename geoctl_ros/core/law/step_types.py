@@ -5,8 +5,7 @@ step's terms and the model, never the controller.
 """
 from typing import Any, Callable, NamedTuple, Optional
 
-import numpy as np
-
+from geoctl_ros.core.geometry.so3 import FloatArray
 from geoctl_ros.core.law.brake import ApproachBrake, BrakeInputs
 from geoctl_ros.core.law.cones import ConeEval
 from geoctl_ros.core.law.controller_config import ControllerConfig
@@ -15,32 +14,32 @@ from geoctl_ros.core.law.controller_config import ControllerConfig
 class StepTerms(NamedTuple):
     """What a step computes from the attitude before any law's choice (one per run of a batch)."""
 
-    A: np.ndarray        # attractive error A, with a trailing axis of 1
-    e_RA: np.ndarray     # its gradient
+    A: FloatArray        # attractive error A, with a trailing axis of 1
+    e_RA: FloatArray     # its gradient
     cones: ConeEval      # the cones at R (widened by the blind time, if any)
-    M_g: np.ndarray      # the model's gravity moment
-    W: Optional[np.ndarray]   # the regressor W(R) (None for the constant model, W = I)
+    M_g: FloatArray      # the model's gravity moment
+    W: Optional[FloatArray]   # the regressor W(R) (None for the constant model, W = I)
 
 
 class ControlOutput(NamedTuple):
     """One control step's results."""
 
-    u: np.ndarray            # control moment about the pivot, body frame, N m
-    e_R: np.ndarray
-    e_Omega: np.ndarray
+    u: FloatArray            # control moment about the pivot, body frame, N m
+    e_R: FloatArray
+    e_Omega: FloatArray
     psi: float
-    delta_bar: np.ndarray    # estimate used for this u
+    delta_bar: FloatArray    # estimate used for this u
     violated: bool           # sensor on or inside a cone
     saturated: bool          # some barrier in its floor band (repulsion saturated)
     adapting: Any            # the estimate advances this step (a flag, per run of a batch)
     cones: Any = None        # the ConeEval the step used
-    half_angles_deg: Optional[np.ndarray] = None
+    half_angles_deg: Optional[FloatArray] = None
     braking: Any = False     # the approach brake changed the law's moment
     brake_unmet: Any = False  # no moment within the rotors' limits met the brake's condition
     # (in a batch, each field has the batch axis first: psi, violated, ... one per run)
 
     @property
-    def margins_deg(self) -> np.ndarray:
+    def margins_deg(self) -> FloatArray:
         """Per cone: angle between the sensor and the cone's axis minus its half-angle, degrees
         (computed when asked: the node publishes the motor commands first).
         """
@@ -53,13 +52,13 @@ class LawModel(NamedTuple):
     """
 
     config: ControllerConfig
-    J_inv: np.ndarray
+    J_inv: FloatArray
     brake: Optional[ApproachBrake]
 
 
 # A law's filter: (the geometric moment's output, the step's terms, R, Omega, the model, the
 # approach brake's inputs of the tick or None) -> the output with the moment the law commands
-LawFilter = Callable[[ControlOutput, StepTerms, np.ndarray, np.ndarray, LawModel,
+LawFilter = Callable[[ControlOutput, StepTerms, FloatArray, FloatArray, LawModel,
                       Optional[BrakeInputs]], ControlOutput]
 
 

@@ -11,7 +11,7 @@ from typing import Any, NamedTuple, Optional, Tuple
 import numpy as np
 
 from geoctl_ros.core.actuation.motors import Mixer, MotorOutput
-from geoctl_ros.core.geometry.so3 import matvec
+from geoctl_ros.core.geometry.so3 import FloatArray, matvec
 from geoctl_ros.core.law.brake import BrakeInputs, rows
 from geoctl_ros.core.law.prediction import CommandHistory, DelayPredictor
 from geoctl_ros.core.law.step_types import ControlOutput
@@ -192,8 +192,8 @@ class ControlTick:
         self.history.push(t, *self._produced(motors, armed))
         return Command(out, motors, spooling, took_over)
 
-    def brake_inputs(self, R: np.ndarray, Omega: np.ndarray, age: Any, hold: float,
-                     t: float, thrusts: Optional[np.ndarray] = None) -> BrakeInputs:
+    def brake_inputs(self, R: FloatArray, Omega: FloatArray, age: Any, hold: float,
+                     t: float, thrusts: Optional[FloatArray] = None) -> BrakeInputs:
         """The approach brake's inputs at the tick (``core.law.brake.BrakeInputs``): the state
         predicted at the tick, the measurements' age, the hold, the moment the rotors make now
         (the command history's lag model) and the model's other moments there, its observed
@@ -207,7 +207,7 @@ class ControlTick:
             f = f - matvec(controller.config.J, error)
         return BrakeInputs(R, Omega, age, hold, self.history.at(t), f, M_g, thrusts)
 
-    def takeover_inputs(self, R: np.ndarray, Omega: np.ndarray, age: Any,
+    def takeover_inputs(self, R: FloatArray, Omega: FloatArray, age: Any,
                         dt: float) -> BrakeInputs:
         """The approach brake's inputs as they will be at the take-over after an arming now,
         the vehicle held or resting where it is: the rotors spooled up to the feed-forward for
@@ -221,8 +221,8 @@ class ControlTick:
         return BrakeInputs(R, Omega, age, dt, spooled * controller.feedforward(R),
                            controller.model_moment(R, Omega, M_g), M_g)
 
-    def takeover_margins(self, R: np.ndarray, Omega: np.ndarray, age: Any,
-                         dt: float) -> np.ndarray:
+    def takeover_margins(self, R: FloatArray, Omega: FloatArray, age: Any,
+                         dt: float) -> FloatArray:
         """Per cone (one row per run of a batch), the approach brake's margin Phi (rad) at the
         take-over after an arming now (``takeover_inputs``; core.law.brake): below 0, the brake
         could not keep the cone in the worst case of the spool-up and its bounds.

@@ -27,6 +27,7 @@ from typing import Optional, Tuple
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.so3 import FloatArray
 
 POSE_HISTORY = 64    # poses kept for the rate estimate (320 ms at 200 Hz)
 
@@ -67,7 +68,7 @@ class GapBridge:
         self.attitude_source = POSE
         self.rate_source = GYRO
 
-    def pose(self, R: np.ndarray, stamp: float, receipt: float) -> None:
+    def pose(self, R: FloatArray, stamp: float, receipt: float) -> None:
         """An accepted pose."""
         self._head = (self._head + 1) % POSE_HISTORY
         self._t[self._head] = stamp
@@ -75,11 +76,11 @@ class GapBridge:
         self._R_meas = R
         self._pose_receipt = receipt
 
-    def gyro(self, w: np.ndarray) -> None:
+    def gyro(self, w: FloatArray) -> None:
         """An accepted angular velocity."""
         self._w_meas = w
 
-    def pose_rate(self) -> Optional[np.ndarray]:
+    def pose_rate(self) -> Optional[FloatArray]:
         """Body rate from the newest pose and the one closest to rate_window before it, or None
         when no such pair exists (fewer than two poses, or none within 3 windows).
         """
@@ -94,7 +95,7 @@ class GapBridge:
         return so3.log(so3.matmul(so3.transpose(self._R[k]), self._R[self._head])) / dt[k]
 
     def update(self, now: float, pose_fresh: bool,
-               gyro_fresh: bool) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+               gyro_fresh: bool) -> Optional[Tuple[FloatArray, FloatArray]]:
         """The (R, Omega) to use at time now, given which streams are fresh; None before the first
         pose and the first rate (gyro or poses).
         """

@@ -8,11 +8,9 @@ adaptation, the diagnostics level and its reasons) is made here, so it is tested
 import math
 from typing import Any, List, Optional, Sequence
 
-import numpy as np
-
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.quaternions import quaternion_problem
-from geoctl_ros.core.geometry.so3 import Vector
+from geoctl_ros.core.geometry.so3 import FloatArray, Vector
 from geoctl_ros.core.law.control import AttitudeController, SetpointRejected
 from geoctl_ros.core.law.hold import hold_attitude
 from geoctl_ros.core.sensors.consistency import SensorAgreement
@@ -44,7 +42,7 @@ def _unlearnt_bound(controller: AttitudeController) -> float:
     return math.inf if controller.brake is None else controller.brake.unmodelled
 
 
-def spool_movement(R_armed: np.ndarray, R: np.ndarray) -> Optional[str]:
+def spool_movement(R_armed: FloatArray, R: FloatArray) -> Optional[str]:
     """Why the spool-up must stop (the vehicle moved more than SPOOL_MOVE_DEG from where it was
     armed: it was neither held nor resting on its stops, and the brake's take-over did not
     reckon with the fall), or None.
@@ -183,7 +181,7 @@ class ControlLoop:
             return 'no pose received yet'
         return self._adopt(R_hold)
 
-    def hold_attitude(self) -> Optional[np.ndarray]:
+    def hold_attitude(self) -> Optional[FloatArray]:
         """The attitude a hold flies now (``core.law.hold.hold_attitude`` of the attitude
         measured last), or None before the first pose.
         """
@@ -192,7 +190,7 @@ class ControlLoop:
         config = self.controller.config
         return hold_attitude(self.R, config.gravity, config.tilt_max)
 
-    def _adopt(self, R_d: np.ndarray) -> Optional[str]:
+    def _adopt(self, R_d: FloatArray) -> Optional[str]:
         """Fly R_d from now on, if the controller takes it; else why not."""
         try:
             self.controller.set_setpoint(R_d)

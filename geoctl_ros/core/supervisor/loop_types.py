@@ -4,9 +4,8 @@ result; and the period of a step that a sample starts.
 from dataclasses import dataclass
 from typing import Optional, Tuple
 
-import numpy as np
-
 from geoctl_ros.core.actuation.motors import MotorOutput
+from geoctl_ros.core.geometry.so3 import FloatArray
 from geoctl_ros.core.law.step_types import ControlOutput
 
 
@@ -55,9 +54,9 @@ class LoopTick:
     state: str               # the supervisor's state: 'armed', or why not
     failed: bool             # disarmed by a failsafe
     sources: Tuple[str, str]   # (attitude source, rate source): POSE/GYRO, or a gap's stand-ins
-    setpoint: np.ndarray     # R_d being flown (the same object until a new one is adopted)
+    setpoint: FloatArray     # R_d being flown (the same object until a new one is adopted)
     bridging: bool = False   # a gap is being ridden through (see geoctl_ros.core.supervisor.gaps)
     # (R, Omega) the step flew on, in the package's frames (a gap's stand-ins while bridging), or
     # None before the first
-    measured: Optional[Tuple[np.ndarray, np.ndarray]] = None
+    measured: Optional[Tuple[FloatArray, FloatArray]] = None
 

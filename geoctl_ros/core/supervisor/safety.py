@@ -30,14 +30,14 @@ import numpy as np
 from geoctl_ros.core.actuation.esc_wire import EscHealth, EscStatus
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.quaternions import quaternion_problem
-from geoctl_ros.core.geometry.so3 import Vector
+from geoctl_ros.core.geometry.so3 import FloatArray, Vector
 from geoctl_ros.core.telemetry.diagnostics import StampTrust, failsafe
 from geoctl_ros.core.telemetry.stats import WindowStats
 
 SPECIFIC_FORCE_MAX = 2000.0     # m/s^2: beyond any IMU's range (about 200 g)
 
 
-def attitude_of(q: Vector) -> Tuple[Optional[np.ndarray], Optional[str]]:
+def attitude_of(q: Vector) -> Tuple[Optional[FloatArray], Optional[str]]:
     """(R, None) for an acceptable attitude quaternion q (x, y, z, w), else (None, why): what
     the bridge and the view take from a pose or a set point.
     """
