@@ -1,7 +1,7 @@
 """The geometric baseline filtered by a control-barrier-function QP: each cone a pointing
 constraint of relative degree 2, solved exactly by its active set every step.
 """
-from typing import Optional
+from typing import Optional, Tuple
 
 import numpy as np
 
@@ -12,7 +12,9 @@ from geoctl_ros.core.law.projection import closest_admissible
 from geoctl_ros.core.law.step_types import ControlOutput, Law, LawModel, StepTerms
 
 
-def pointing_cbf(model: LawModel, R: FloatArray, Omega: FloatArray, terms: StepTerms) -> tuple:
+def pointing_cbf(model: LawModel, R: FloatArray, Omega: FloatArray,
+                 terms: StepTerms) -> Tuple[FloatArray, FloatArray, FloatArray, FloatArray,
+                                            FloatArray, FloatArray]:
     """Each cone as a pointing constraint of relative degree 2, as the rows of A u >= beta.
 
     h_i = cos(theta_i + guard) - (R^T v_i) . r >= 0 (the sensor outside the guarded cone). With

@@ -34,14 +34,14 @@ and model are shared by the batch. (``x.T`` on a stack of vectors puts the batch
 ``(x.T * a).T`` scales each run's vector by its own scalar and a single vector by a scalar.)
 """
 import math
-from typing import Any, Optional
+from typing import Literal, Optional, Union, cast
 
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.flags import any_flag
-from geoctl_ros.core.geometry.so3 import FloatArray, cross, matvec, transpose
-from geoctl_ros.core.law.brake import ApproachBrake
+from geoctl_ros.core.geometry.so3 import BoolArray, FloatArray, Scalars, cross, matvec, transpose
+from geoctl_ros.core.law.brake import ApproachBrake, BrakeInputs
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.configuration_error import (
     LinearMap,
@@ -65,7 +65,7 @@ class SetpointRejected(ValueError):
 class AttitudeController:
     """The controller's state (estimate, set point) and its pure-math step."""
 
-    def __init__(self, config):
+    def __init__(self, config: ControllerConfig) -> None:
         self._set_config(config)
         self.delta_bar = np.zeros(config.n_params)
         self.R_d = np.eye(3)
@@ -84,7 +84,7 @@ class AttitudeController:
     def R_d(self, R_d: FloatArray) -> None:
         self._R_d = R_d
         self._linear = LinearMap(R_d, self.config)
-        self._carrot = None
+        self._carrot: Optional[FloatArray] = None
         if self.guidance is not None:
             self.guidance.reset()
 
@@ -151,7 +151,8 @@ class AttitudeController:
         return self.dynamics.gravity_moment(R)
 
     def model_moment(self, R: FloatArray, Omega: FloatArray, M_g: Optional[FloatArray] = None,
-                     W: Any = False, delta_bar: Optional[FloatArray] = None) -> FloatArray:
+                     W: Union[Literal[False], Optional[FloatArray]] = False,
+                     delta_bar: Optional[FloatArray] = None) -> FloatArray:
         """The model's moment about the pivot besides the rotors': ``Dynamics.moment``."""
         return self.dynamics.moment(R, Omega, M_g, W, delta_bar)
 
@@ -166,8 +167,8 @@ class AttitudeController:
         return -held
 
     def step(self, R: FloatArray, Omega: FloatArray, dt: float, adapt: bool = True,
-             blind: Any = 0.0, brake: Any = None, guide: bool = True,
-             gain_scale: Any = 1.0) -> ControlOutput:
+             blind: Scalars = 0.0, brake: Optional[BrakeInputs] = None, guide: bool = True,
+             gain_scale: Scalars = 1.0) -> ControlOutput:
         """One control step at attitude R and body angular velocity Omega, by the configured law
         (``config.law``, one of ``LAWS``): its configuration error (``terms``, with the cones'
         barrier or without), the geometric moment with the estimate in force (``moment``), the
@@ -213,7 +214,7 @@ class AttitudeController:
             self._carrot = carrot.copy()
 
     # --- the pieces every law is made of -------------------------------------------------------
-    def terms(self, R: FloatArray, Omega: FloatArray, blind: Any = 0.0) -> StepTerms:
+    def terms(self, R: FloatArray, Omega: FloatArray, blind: Scalars = 0.0) -> StepTerms:
         """The step's terms at (R, Omega): ``StepTerms`` (the attractive error, the cones
         evaluated, widened by the blind time when it is given, and the gravity moment).
         """
@@ -230,8 +231,8 @@ class AttitudeController:
         return StepTerms(y[..., 0:1], y[..., 1:4], ev, y[..., -3:], self.regressor(R))
 
     def moment(self, R: FloatArray, Omega: FloatArray, adapt: bool, terms: StepTerms,
-               psi: Any, e_R: FloatArray, barrier: bool = True,
-               gain_scale: Any = 1.0) -> ControlOutput:
+               psi: Scalars, e_R: FloatArray, barrier: bool = True,
+               gain_scale: Scalars = 1.0) -> ControlOutput:
         """The geometric law's moment for the configuration error (psi, e_R) with the estimate in
         force, and whether the estimate adapts this step (``adapting``, per run: adapt, and no
         barrier saturated where the error carries the barrier): ``ControlOutput``. gain_scale:
@@ -248,8 +249,11 @@ class AttitudeController:
         W = terms.W
         delta_bar = self.delta_bar.copy()
         g = gain_scale                          # past the delay bound, below 1 (DegradedMode)
+        k_R: Scalars
+        k_Omega: Scalars
         if np.ndim(g):                          # one per run of a batch
-            k_R, k_Omega = (cfg.k_R * g * g)[..., None], (cfg.k_Omega * g)[..., None]
+            k_R, k_Omega = (cast(FloatArray, cfg.k_R * g * g)[..., None],
+                            cast(FloatArray, cfg.k_Omega * g)[..., None])
         else:
             k_R, k_Omega = cfg.k_R * g * g, cfg.k_Omega * g
         u = cross(Omega, matvec(cfg.J, Omega)) - k_R * e_R - k_Omega * e_Omega
@@ -279,11 +283,11 @@ class AttitudeController:
         rate = (dt * cfg.k_Delta) * v if W is None else dt * (
             self._gamma * matvec(transpose(W), v))
         if rate.ndim > 1:                       # a batch: only the runs that adapt
-            rate *= adapting[..., None]
+            rate *= cast(BoolArray, adapting)[..., None]
         self.delta_bar += rate
         self._project()
 
-    def _project(self):
+    def _project(self) -> None:
         """Project each block of the estimate onto its ball (bounds of 0 mean unbounded)."""
         for block, bound in self._balls:
             part = self.delta_bar[..., block]
@@ -291,7 +295,7 @@ class AttitudeController:
             if any_flag(n2 > bound * bound):
                 part *= (bound / np.maximum(np.sqrt(n2), bound))[..., None]
 
-    def _set_config(self, config):
+    def _set_config(self, config: ControllerConfig) -> None:
         self.config = config
         g = math.sqrt(so3.dot(config.gravity, config.gravity))
         self.guidance = (Guidance(config.guidance_lookahead, config.guidance_clearance,

@@ -3,8 +3,9 @@ and validated by ``geoctl_ros.params``; notation as ``geoctl_ros.core.law.contro
 """
 from dataclasses import dataclass, field
 import math
-from typing import Any, Optional
+from typing import Optional
 
+from geoctl_ros.core.actuation.allocation import MomentPolytope
 from geoctl_ros.core.geometry.so3 import FloatArray
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.mechanics import first_moment, pivot_inertia
@@ -50,13 +51,13 @@ class ControllerConfig:
     gyro_noise: float = 0.0           # rad/s, the gyro's standard deviation
     tilt_max: float = math.pi         # rad, the joint's tilt limit (its stops)
     motor_lag: float = 0.0            # s, the rotors' thrust time constant the mixer models
-    moment_limits: Optional[Any] = None   # MomentPolytope: the moments the rotors make
-                                          # unsaturated (``Allocator.moment_polytope``); the
-                                          # brake and the cbf law's QP keep them
+    moment_limits: Optional[MomentPolytope] = None   # the moments the rotors make unsaturated
+                                          # (``Allocator.moment_polytope``); the brake and the
+                                          # cbf law's QP keep them
     J: FloatArray = field(init=False, repr=False)        # inertia about the pivot
     m_rho: FloatArray = field(init=False, repr=False)    # mass times pivot -> centre of mass
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         object.__setattr__(self, 'J', pivot_inertia(self.inertia, self.mass, self.cog_offset))
         object.__setattr__(self, 'm_rho', first_moment(self.mass, self.cog_offset))
 

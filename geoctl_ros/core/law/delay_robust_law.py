@@ -3,10 +3,11 @@ each cone's barrier widened by what the sensor travels towards it over the blind
 ``blind_guard_max_deg`` (docs/safety.md, "Delay"), and the approach brake. With fresh inputs on
 time and the brake off it is the paper's.
 """
-from typing import Optional
+from typing import Optional, cast
 
 from geoctl_ros.core.geometry.so3 import FloatArray
 from geoctl_ros.core.law.brake import BrakeInputs, braked
+from geoctl_ros.core.law.cones import ConeEval
 from geoctl_ros.core.law.step_types import ControlOutput, Law, LawModel, StepTerms
 
 
@@ -15,7 +16,7 @@ def approach_brake(out: ControlOutput, terms: StepTerms, R: FloatArray, Omega: F
     """The law's moment kept by the approach brake (``core.law.brake.braked``: every cone's
     sampled-data condition, within the rotors' limits; brake: its inputs of the tick, or None).
     """
-    if brake is None or model.brake is None or not out.cones.s.shape[-1]:
+    if brake is None or model.brake is None or not cast(ConeEval, out.cones).s.shape[-1]:
         return out
     cfg = model.config
     b = braked(model.brake, cfg.cones, model.J_inv, cfg.moment_limits, brake, out.u)

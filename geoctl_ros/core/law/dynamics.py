@@ -3,7 +3,7 @@
 Delta_bar in force. The control step's feed-forward and the delay prediction both evaluate it;
 neither needs the controller for it. Notation as ``geoctl_ros.core.law.control``'s.
 """
-from typing import Any, NamedTuple, Optional
+from typing import Literal, NamedTuple, Optional, Union
 
 import numpy as np
 
@@ -38,7 +38,8 @@ class Dynamics(NamedTuple):
         return gravity_moment(R, self.config.m_rho, self.config.gravity)
 
     def moment(self, R: FloatArray, Omega: FloatArray, M_g: Optional[FloatArray] = None,
-               W: Any = False, delta_bar: Optional[FloatArray] = None) -> FloatArray:
+               W: Union[Literal[False], Optional[FloatArray]] = False,
+               delta_bar: Optional[FloatArray] = None) -> FloatArray:
         """The model's moment about the pivot besides the rotors': M_g(R) + W Delta_bar -
         Omega x J Omega (``delta_bar``: this estimate instead of the one in force). M_g, W: the
         gravity moment and regressor at R when the step has them (``StepTerms``; W False: not
@@ -54,7 +55,7 @@ class Dynamics(NamedTuple):
 
     def acceleration(self, R: FloatArray, Omega: FloatArray, moment: FloatArray,
                      delta_bar: Optional[FloatArray] = None, M_g: Optional[FloatArray] = None,
-                     W: Any = False) -> FloatArray:
+                     W: Union[Literal[False], Optional[FloatArray]] = False) -> FloatArray:
         """The model's angular acceleration at (R, Omega) under the rotors' moment (about the
         pivot): J^-1 (moment + ``moment``'s).
         """

@@ -5,27 +5,29 @@ of mass in the body frame; g_w is the gravity vector in the world frame (REP-103
 [0, 0, -9.81]). Every function also takes stacks (a leading batch axis: one testbed per run of a
 campaign) and works on each.
 """
-from typing import Any
+
+from typing import cast
 
 import numpy as np
 
-from geoctl_ros.core.geometry.so3 import FloatArray, cross, hat, vecmat
+from geoctl_ros.core.geometry.so3 import FloatArray, Scalars, cross, hat, vecmat
 
 
-def pivot_inertia(inertia_cm: FloatArray, mass: Any, rho: FloatArray) -> FloatArray:
+def pivot_inertia(inertia_cm: FloatArray, mass: Scalars, rho: FloatArray) -> FloatArray:
     """Inertia about the pivot (parallel-axis theorem): J_cm + m (|rho|^2 I - rho rho^T)."""
     rho = np.asarray(rho, dtype=float)
     m = np.asarray(mass, dtype=float)[..., None, None]
-    rr = np.einsum('...i,...i->...', rho, rho)[..., None, None]
+    rr: FloatArray = np.einsum('...i,...i->...', rho, rho)[..., None, None]
     return np.asarray(inertia_cm, dtype=float) + m * (rr * np.eye(3)
                                                       - rho[..., :, None] * rho[..., None, :])
 
 
-def first_moment(mass: Any, rho: FloatArray) -> FloatArray:
+def first_moment(mass: Scalars, rho: FloatArray) -> FloatArray:
     """m rho, the mass times the pivot -> centre of mass vector: what the gravity moment (and the
     constant+cog estimate) is linear in.
     """
-    return np.asarray(mass, dtype=float)[..., None] * np.asarray(rho, dtype=float)
+    return cast(FloatArray,
+                np.asarray(mass, dtype=float)[..., None] * np.asarray(rho, dtype=float))
 
 
 def gravity_moment(R: FloatArray, m_rho: FloatArray, g_w: FloatArray) -> FloatArray:

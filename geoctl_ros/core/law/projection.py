@@ -6,7 +6,7 @@ Solved exactly by Goldfarb and Idnani's dual active-set method, in floats (a few
 numbers: numpy's overhead, and BLAS's CPU-dependent rounding, cost more than the arithmetic).
 """
 import math
-from typing import Any, List, Optional, Sequence, Tuple
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -38,7 +38,8 @@ def _solve(G: List[List[float]], rhs: List[float]) -> List[float]:
     return x
 
 
-def project(u0: Any, A: Any, beta: Any, tol: float = TOL) -> Tuple[FloatArray, bool]:
+def project(u0: FloatArray, A: FloatArray, beta: FloatArray,
+            tol: float = TOL) -> Tuple[FloatArray, bool]:
     """The point closest to u0 with A u >= beta (one run: u0 (3,), A (m, 3), beta (m,)),
     exactly, by Goldfarb and Idnani's dual active-set method (Math. Programming 27, 1983) with
     the identity for its Hessian: from u0, the most violated constraint is added at a time, each
@@ -93,7 +94,7 @@ def project(u0: Any, A: Any, beta: Any, tol: float = TOL) -> Tuple[FloatArray, b
 
 
 def closest_admissible(u0: FloatArray, A: FloatArray, beta: FloatArray,
-                       limits: Optional[tuple] = None) -> FloatArray:
+                       limits: Optional[Tuple[FloatArray, ...]] = None) -> FloatArray:
     """The moment closest to u0 with A u >= beta (``project``) and, given limits =
     (A_m, beta_m), within the moments the rotors make unsaturated
     (``Allocator.moment_polytope``). u0 itself where it is admissible. Where the rows and the

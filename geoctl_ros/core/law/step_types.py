@@ -3,9 +3,10 @@ before any law's choice, what a law's filter knows of the model, a law itself (i
 error and its filter), and the step's output. A law is data and a pure function: it takes the
 step's terms and the model, never the controller.
 """
-from typing import Any, Callable, NamedTuple, Optional
+from typing import Callable, Literal, NamedTuple, Optional, Union, cast
 
-from geoctl_ros.core.geometry.so3 import FloatArray
+from geoctl_ros.core.geometry.flags import Flags
+from geoctl_ros.core.geometry.so3 import FloatArray, Scalars
 from geoctl_ros.core.law.brake import ApproachBrake, BrakeInputs
 from geoctl_ros.core.law.cones import ConeEval
 from geoctl_ros.core.law.controller_config import ControllerConfig
@@ -27,15 +28,17 @@ class ControlOutput(NamedTuple):
     u: FloatArray            # control moment about the pivot, body frame, N m
     e_R: FloatArray
     e_Omega: FloatArray
-    psi: float
+    psi: Scalars
     delta_bar: FloatArray    # estimate used for this u
-    violated: bool           # sensor on or inside a cone
-    saturated: bool          # some barrier in its floor band (repulsion saturated)
-    adapting: Any            # the estimate advances this step (a flag, per run of a batch)
-    cones: Any = None        # the ConeEval the step used
+    violated: Flags          # sensor on or inside a cone
+    saturated: Flags         # some barrier in its floor band (repulsion saturated)
+    adapting: Union[Literal[False], Flags]   # the estimate advances this step (a flag, per run
+                                             # of a batch)
+    cones: Optional[ConeEval] = None   # the ConeEval the step used
     half_angles_deg: Optional[FloatArray] = None
-    braking: Any = False     # the approach brake changed the law's moment
-    brake_unmet: Any = False  # no moment within the rotors' limits met the brake's condition
+    braking: Union[bool, Flags] = False      # the approach brake changed the law's moment
+    brake_unmet: Union[bool, Flags] = False  # no moment within the rotors' limits met the
+                                             # brake's condition
     # (in a batch, each field has the batch axis first: psi, violated, ... one per run)
 
     @property
@@ -43,7 +46,7 @@ class ControlOutput(NamedTuple):
         """Per cone: angle between the sensor and the cone's axis minus its half-angle, degrees
         (computed when asked: the node publishes the motor commands first).
         """
-        return self.cones.margins_deg(self.half_angles_deg)
+        return cast(ConeEval, self.cones).margins_deg(cast(FloatArray, self.half_angles_deg))
 
 
 class LawModel(NamedTuple):
