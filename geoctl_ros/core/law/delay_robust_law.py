@@ -5,6 +5,7 @@ time and the brake off it is the paper's.
 """
 from typing import Optional, cast
 
+from geoctl_ros.core.actuation.allocation import MomentPolytope
 from geoctl_ros.core.geometry.so3 import FloatArray
 from geoctl_ros.core.law.brake import BrakeInputs, braked
 from geoctl_ros.core.law.cones import ConeEval
@@ -19,7 +20,9 @@ def approach_brake(out: ControlOutput, terms: StepTerms, R: FloatArray, Omega: F
     if brake is None or model.brake is None or not cast(ConeEval, out.cones).s.shape[-1]:
         return out
     cfg = model.config
-    b = braked(model.brake, cfg.cones, model.J_inv, cfg.moment_limits, brake, out.u)
+    # (a brake is built only with the rotors' limits: ``ApproachBrake`` in ``core.law.control``)
+    b = braked(model.brake, cfg.cones, model.J_inv, cast(MomentPolytope, cfg.moment_limits),
+               brake, out.u)
     return out._replace(u=b.u, braking=b.braking, brake_unmet=b.unmet)
 
 
