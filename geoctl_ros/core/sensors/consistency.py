@@ -191,7 +191,7 @@ class _Accumulator:
         self.settings = settings
         self.up_world = -settings.gravity / _norm(settings.gravity)
 
-    def _restart(self, R, stamp, receipt):
+    def _restart(self, R: FloatArray, stamp: float, receipt: float) -> None:
         self.Rs[0] = R
         self.ts[0] = stamp
         self.n, self.t0, self.t_last = 1, stamp, stamp

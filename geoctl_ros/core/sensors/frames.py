@@ -28,7 +28,7 @@ their inverses, which the simulator uses to emulate such sources.
 """
 from dataclasses import dataclass, field
 import math
-from typing import Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -95,7 +95,7 @@ class InputFrames:
     imu_identity: bool = field(init=False, repr=False)
     bias_zero: bool = field(init=False, repr=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         T, B = WORLD_FRAMES[self.world], BODY_FRAMES[self.body]
         set_ = object.__setattr__
         set_(self, 'pose_left', T)
@@ -158,5 +158,5 @@ class InputFrames:
         return '; '.join(words)
 
 
-def _deg(v):
+def _deg(v: Iterable[float]) -> str:
     return '[%s]' % ', '.join('%.1f' % a for a in v)
