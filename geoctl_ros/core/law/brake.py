@@ -60,13 +60,12 @@ from typing import NamedTuple, Optional, Tuple, cast
 
 import numpy as np
 
-from geoctl_ros.core.actuation.allocation import MomentPolytope
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.flags import Flags
 from geoctl_ros.core.geometry.so3 import BoolArray, FloatArray, Scalars
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.controller_config import ControllerConfig
-from geoctl_ros.core.law.projection import TOL, project, slack_of
+from geoctl_ros.core.law.projection import TOL, Polytope, project, slack_of
 
 # ``_worst``: per cone G0, w0, the rotors' deceleration, the backup's first command, Phi (and
 # with a law's deceleration, the travel after it)
@@ -496,7 +495,7 @@ class Braked(NamedTuple):
     unmet: Flags
 
 
-def reachable(polytope: MomentPolytope, keep: float,
+def reachable(polytope: Polytope, keep: float,
               offsets: Optional[FloatArray]) -> Tuple[FloatArray, FloatArray]:
     """The moments the lagged rotors reach by the end of a hold from where they are now, within
     their polytope A M >= beta (each rotor j between its limits: lo <= base_j + P_j M <= hi):
@@ -510,7 +509,7 @@ def reachable(polytope: MomentPolytope, keep: float,
         (offsets, -offsets), axis=-1)
 
 
-def braked(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray, polytope: MomentPolytope,
+def braked(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray, polytope: Polytope,
            x: BrakeInputs, u: FloatArray,
            extra: Optional[Tuple[FloatArray, FloatArray]] = None) -> Braked:
     """The brake stage: u (the law's moment; one per run of a batch) where it meets every cone's

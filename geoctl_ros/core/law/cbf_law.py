@@ -5,11 +5,10 @@ from typing import Optional, Tuple, cast
 
 import numpy as np
 
-from geoctl_ros.core.actuation.allocation import MomentPolytope
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.so3 import FloatArray, cross, matvec
 from geoctl_ros.core.law.brake import BrakeInputs, braked
-from geoctl_ros.core.law.projection import closest_admissible
+from geoctl_ros.core.law.projection import Polytope, closest_admissible
 from geoctl_ros.core.law.step_types import ControlOutput, Law, LawModel, StepTerms
 
 
@@ -61,7 +60,7 @@ def cbf_filter(out: ControlOutput, terms: StepTerms, R: FloatArray, Omega: Float
     A, beta = pointing_cbf(model, R, Omega, terms)[:2]
     if brake is None or model.brake is None:
         return out._replace(u=closest_admissible(out.u, A, beta, cfg.moment_limits))
-    b = braked(model.brake, cfg.cones, model.J_inv, cast(MomentPolytope, cfg.moment_limits),
+    b = braked(model.brake, cfg.cones, model.J_inv, cast(Polytope, cfg.moment_limits),
                brake, out.u, (A, beta))
     return out._replace(u=b.u, braking=b.braking, brake_unmet=b.unmet)
 

@@ -5,10 +5,10 @@ from dataclasses import dataclass, field
 import math
 from typing import Optional
 
-from geoctl_ros.core.actuation.allocation import MomentPolytope
 from geoctl_ros.core.geometry.so3 import FloatArray
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.mechanics import first_moment, pivot_inertia
+from geoctl_ros.core.law.projection import Polytope
 
 # Disturbance models: name -> number of estimated parameters (the columns of W).
 #   constant:      W = I,                     Delta = a constant moment (the paper's case)
@@ -51,7 +51,7 @@ class ControllerConfig:
     gyro_noise: float = 0.0           # rad/s, the gyro's standard deviation
     tilt_max: float = math.pi         # rad, the joint's tilt limit (its stops)
     motor_lag: float = 0.0            # s, the rotors' thrust time constant the mixer models
-    moment_limits: Optional[MomentPolytope] = None   # the moments the rotors make unsaturated
+    moment_limits: Optional[Polytope] = None   # the moments the rotors make unsaturated
                                           # (``Allocator.moment_polytope``); the brake and the
                                           # cbf law's QP keep them
     J: FloatArray = field(init=False, repr=False)        # inertia about the pivot

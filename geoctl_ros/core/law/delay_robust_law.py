@@ -5,10 +5,10 @@ time and the brake off it is the paper's.
 """
 from typing import Optional, cast
 
-from geoctl_ros.core.actuation.allocation import MomentPolytope
 from geoctl_ros.core.geometry.so3 import FloatArray
 from geoctl_ros.core.law.brake import BrakeInputs, braked
 from geoctl_ros.core.law.cones import ConeEval
+from geoctl_ros.core.law.projection import Polytope
 from geoctl_ros.core.law.step_types import ControlOutput, Law, LawModel, StepTerms
 
 
@@ -21,7 +21,7 @@ def approach_brake(out: ControlOutput, terms: StepTerms, R: FloatArray, Omega: F
         return out
     cfg = model.config
     # (a brake is built only with the rotors' limits: ``ApproachBrake`` in ``core.law.control``)
-    b = braked(model.brake, cfg.cones, model.J_inv, cast(MomentPolytope, cfg.moment_limits),
+    b = braked(model.brake, cfg.cones, model.J_inv, cast(Polytope, cfg.moment_limits),
                brake, out.u)
     return out._replace(u=b.u, braking=b.braking, brake_unmet=b.unmet)
 

@@ -6,11 +6,27 @@ Solved exactly by Goldfarb and Idnani's dual active-set method, in floats (a few
 numbers: numpy's overhead, and BLAS's CPU-dependent rounding, cost more than the arithmetic).
 """
 import math
-from typing import List, Optional, Sequence, Tuple
+from typing import List, Optional, Protocol, Sequence, Tuple
 
 import numpy as np
 
 from geoctl_ros.core.geometry.so3 import FloatArray
+
+
+class Polytope(Protocol):
+    """The moments A M >= beta (A (m, 3), beta (m,)), also as (A, beta, ...): what the law
+    knows of ``core.actuation.allocation.MomentPolytope`` (actuation is above the law).
+    """
+
+    @property
+    def A(self) -> FloatArray: ...
+
+    @property
+    def beta(self) -> FloatArray: ...
+
+    def __getitem__(self, i: int) -> FloatArray: ...
+
+    def __len__(self) -> int: ...
 
 TOL = 1e-9
 
@@ -94,7 +110,7 @@ def project(u0: FloatArray, A: FloatArray, beta: FloatArray,
 
 
 def closest_admissible(u0: FloatArray, A: FloatArray, beta: FloatArray,
-                       limits: Optional[Tuple[FloatArray, ...]] = None) -> FloatArray:
+                       limits: Optional[Polytope] = None) -> FloatArray:
     """The moment closest to u0 with A u >= beta (``project``) and, given limits =
     (A_m, beta_m), within the moments the rotors make unsaturated
     (``Allocator.moment_polytope``). u0 itself where it is admissible. Where the rows and the
