@@ -72,7 +72,7 @@ class Allocator:
                  failed: Sequence[int] = ()) -> None:
         B = np.asarray(B, dtype=float)
         n = B.shape[1]
-        self.count = n
+        self.count: int = n
         self.alive = [i for i in range(n) if i + 1 not in set(failed)]
         self.B_full = B
         self.B = self.B_full[:, self.alive]
