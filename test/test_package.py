@@ -488,7 +488,9 @@ def test_the_linter_finds_what_the_rules_forbid():
 
 @odroid
 def test_the_rclpy_free_layers_are_clean_under_mypy(tmp_path):
-    """mypy (mypy.ini: core, params, sim and esc) finds no type error; a planted one it finds."""
+    """mypy (mypy.ini: core, params, sim, esc and falsify; core/ strictly, with --strict's
+    per-module flags) finds no type error; a planted one it finds.
+    """
     if importlib.util.find_spec('mypy') is None:
         pytest.skip('mypy is installed on the development stack only (requirements.txt)')
     r = subprocess.run([sys.executable, '-m', 'mypy', '--no-incremental', '--cache-dir',

@@ -5,7 +5,7 @@ airframe that must produce every moment).
 import collections
 from dataclasses import dataclass, fields, replace
 import math
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple, cast
 
 import numpy as np
 
@@ -257,7 +257,9 @@ def controller_setup(values: dict) -> 'ControllerSetup':
                            % (timeout, values[timeout])))
     if errors:
         raise ConfigError(errors)
-    return ControllerSetup(config, mix, R_d, SetpointSchedule(times, rotations),
+    # (every rotation is one here: a set point without one raised ConfigError above)
+    return ControllerSetup(config, mix, R_d,
+                           SetpointSchedule(times, cast(List[so3.FloatArray], rotations)),
                            loop_settings(values), input_frames(values),
                            agreement_settings(values))
 

@@ -24,10 +24,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 import time
-from typing import Any, Callable, List, Optional
+from typing import Any, Callable, List, Optional, Tuple, cast
 
 import numpy as np
 
+from geoctl_ros.core.actuation.motors import MotorOutput
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.law.brake import (
     ApproachBrake,
@@ -226,7 +227,9 @@ def fly(scenarios: List[Scenario], progress: Optional[Callable[[float], None]] =
         else:
             R_seen, W_seen = R_new, W_new
         max_rate = np.maximum(max_rate, np.sqrt(so3.dot(W_seen, W_seen)))
-        out, motors = tick(R_seen, W_seen, dt, takeover + t, ages)[:2]
+        # (a batch raises FloatingPointError rather than return no control: ControlTick)
+        out, motors = cast(Tuple[ControlOutput, MotorOutput],
+                           tick(R_seen, W_seen, dt, takeover + t, ages)[:2])
         saturated += motors.allocation.saturated
         effort += np.sqrt(so3.dot(out.u, out.u)) * (holds[k] * h)
         error = _error(controller.R_d, R_now)
@@ -288,7 +291,8 @@ def _spool_up(bed: Testbeds, tick: ControlTick, dt: float, n_sub: int, h: float,
     now, before = 0.0, None
     while tick.mixer.spools(None if before is None else now - before, dt):
         R, W = bed.state()
-        out, motors = tick(R, W, dt, now, ages)[:2]
+        out, motors = cast(Tuple[ControlOutput, MotorOutput],   # (a batch: never no control)
+                           tick(R, W, dt, now, ages)[:2])
         command = out.u if bed.actuator is None else motors.commands
         hold = next(holds)
         for _ in range(hold):

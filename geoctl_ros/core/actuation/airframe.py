@@ -23,9 +23,11 @@ The lab's hexrotor (``tilted_ring`` layout, the defaults), seen from above, nose
 """
 from dataclasses import dataclass
 import math
-from typing import Any
+from typing import List, Sequence
 
 import numpy as np
+
+from geoctl_ros.core.geometry.so3 import FloatArray
 
 
 class AirframeError(ValueError):
@@ -38,9 +40,9 @@ class RotorGeometry:
     spins (n,) of +-1, and the yaw-reaction coefficient (m).
     """
 
-    positions: np.ndarray
-    axes: np.ndarray
-    spins: np.ndarray
+    positions: FloatArray
+    axes: FloatArray
+    spins: FloatArray
     yaw_coefficient: float
 
     @property
@@ -66,7 +68,7 @@ def tilted_ring(count: int = 6, arm_length: float = 0.31, tilt_deg: float = 15.0
     return RotorGeometry(positions, axes, spins, float(yaw_coefficient))
 
 
-def effectiveness(geometry: RotorGeometry, rho: np.ndarray) -> np.ndarray:
+def effectiveness(geometry: RotorGeometry, rho: FloatArray) -> FloatArray:
     """The 6 x n matrix mapping rotor thrusts to [force; moment about the pivot] (body frame);
     a stack of them for a stack of centre-of-mass offsets rho (batch, 3).
     """
@@ -84,11 +86,11 @@ class AirframeHealth:
     rank: int               # of the 6 x n effectiveness (6: fully actuated)
     moment_rank: int        # of its moment rows (must be 3)
     condition: float        # of the allocated rows [F_z; M]
-    alive: list             # 1-based numbers of the rotors in use
-    warnings: list
+    alive: List[int]        # 1-based numbers of the rotors in use
+    warnings: List[str]
 
 
-def check(B: np.ndarray, alive: Any) -> 'AirframeHealth':
+def check(B: FloatArray, alive: Sequence[int]) -> 'AirframeHealth':
     """Check an effectiveness matrix (6 x n_alive); raises AirframeError when a moment cannot be
     produced, returns AirframeHealth with warnings for what is merely degraded.
     """

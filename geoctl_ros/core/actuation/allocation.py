@@ -7,14 +7,14 @@ down only as far as needed, and the moment not delivered is reported.
 """
 from dataclasses import dataclass
 import math
-from typing import Any, NamedTuple
+from typing import List, NamedTuple, Sequence, Tuple
 
 import numpy as np
 
 from geoctl_ros.core.actuation.airframe import AirframeError, check
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.core.geometry.flags import all_flag
-from geoctl_ros.core.geometry.so3 import matvec
+from geoctl_ros.core.geometry.flags import Flags, all_flag
+from geoctl_ros.core.geometry.so3 import FloatArray, Scalars, matvec
 
 
 class MomentPolytope(NamedTuple):
@@ -22,16 +22,16 @@ class MomentPolytope(NamedTuple):
     (A (m, 3), beta (m,)), and its vertices (k, 3).
     """
 
-    A: np.ndarray
-    beta: np.ndarray
-    vertices: np.ndarray
+    A: FloatArray
+    beta: FloatArray
+    vertices: FloatArray
 
 
-def polytope_vertices(A: np.ndarray, beta: np.ndarray) -> np.ndarray:
+def polytope_vertices(A: FloatArray, beta: FloatArray) -> FloatArray:
     """The vertices of the bounded polytope A x >= beta in 3-D: every point where three of its
     planes meet and that keeps the others (to rounding), each once.
     """
-    found: list = []
+    found: List[FloatArray] = []
     m = len(beta)
     for i in range(m):
         for j in range(i + 1, m):
@@ -50,12 +50,12 @@ def polytope_vertices(A: np.ndarray, beta: np.ndarray) -> np.ndarray:
 class Allocation:
     """One allocation's result (for a batch of moments: each field with the batch axis first)."""
 
-    thrusts: np.ndarray        # N, one per rotor (failed rotors: 0)
-    moment: np.ndarray         # moment the thrusts produce about the pivot
-    collective: float          # thrust they produce along body z
-    moment_lost: np.ndarray    # requested minus produced moment
-    saturated: bool            # the request was not met exactly
-    valid: bool                # False: the request was not finite (thrusts at thrust_min)
+    thrusts: FloatArray        # N, one per rotor (failed rotors: 0)
+    moment: FloatArray         # moment the thrusts produce about the pivot
+    collective: Scalars        # thrust they produce along body z
+    moment_lost: FloatArray    # requested minus produced moment
+    saturated: Flags           # the request was not met exactly
+    valid: Flags               # False: the request was not finite (thrusts at thrust_min)
 
 
 class Allocator:
@@ -68,10 +68,11 @@ class Allocator:
 
     INSET = 1e-6      # N kept from either thrust limit in ``moment_polytope``
 
-    def __init__(self, B, thrust_min, thrust_max, failed=()):
+    def __init__(self, B: FloatArray, thrust_min: float, thrust_max: float,
+                 failed: Sequence[int] = ()) -> None:
         B = np.asarray(B, dtype=float)
         n = B.shape[1]
-        self.count = n
+        self.count: int = n
         self.alive = [i for i in range(n) if i + 1 not in set(failed)]
         self.B_full = B
         self.B = self.B_full[:, self.alive]
@@ -102,12 +103,12 @@ class Allocator:
         beta = np.concatenate((self.lo + self.INSET - base, base - self.hi + self.INSET))
         return MomentPolytope(A, beta, polytope_vertices(A, beta))
 
-    def allocate(self, moment: np.ndarray, collective: Any) -> Allocation:
+    def allocate(self, moment: FloatArray, collective: float) -> Allocation:
         """Allocation for the desired moment (3,) about the pivot and collective thrust (N); a
         stack of moments (batch, 3) gives one allocation per row.
         """
         moment = np.asarray(moment, dtype=float)
-        valid: Any                          # a flag, or one per row
+        valid: Flags                        # a flag, or one per row
         if moment.ndim == 1:                # one moment: its check in floats
             valid = np.bool_(math.isfinite(collective)
                              and all(map(math.isfinite, moment.tolist())))
@@ -140,12 +141,12 @@ class Allocator:
             moment = np.where(np.asarray(valid)[..., None], moment, 0.0)
         return self._result(f, moment, saturated=~met | ~valid, valid=valid)
 
-    def _t_interval(self, base):
+    def _t_interval(self, base: FloatArray) -> Tuple[FloatArray, FloatArray]:
         """The collective levels t with lo <= t d + base <= hi for every rotor."""
         return (np.max((self.lo - base) * self._inv_d, axis=-1),
                 np.min((self.hi - base) * self._inv_d, axis=-1))
 
-    def _max_scale(self, base, a):
+    def _max_scale(self, base: FloatArray, a: FloatArray) -> FloatArray:
         """Largest s in [0, 1] such that some t gives lo <= t d + base + s a <= hi per rotor.
 
         Per rotor, L_i - s A_i <= t <= H_i - s A_i; some t exists iff for every pair (i, j)
@@ -160,7 +161,8 @@ class Allocator:
         return np.where((N < -1e-12).any(axis=(-2, -1)), 0.0,
                         np.minimum(np.maximum(ratio, 0.0), 1.0))
 
-    def _result(self, f_alive, moment, saturated, valid):
+    def _result(self, f_alive: FloatArray, moment: FloatArray, saturated: Flags,
+                valid: Flags) -> Allocation:
         """The Allocation of the alive rotors' thrusts; moment is the request (0 where invalid)."""
         if len(self.alive) == self.count:
             thrusts = f_alive

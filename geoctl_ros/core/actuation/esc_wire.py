@@ -7,7 +7,7 @@ importing the supervisor.
 """
 from enum import IntEnum
 import math
-from typing import NamedTuple, Optional
+from typing import NamedTuple, Optional, Tuple
 
 from geoctl_ros.core.geometry.so3 import Vector
 
@@ -36,7 +36,7 @@ class EscStatus(NamedTuple):
     """The ESC node's last report: its motor.command_max, each ESC's EscHealth, when received."""
 
     command_max: int
-    escs: tuple
+    escs: Tuple['EscHealth', ...]
     receipt: float
 
 

@@ -3,12 +3,13 @@ commands (allocation, the lag compensation, the curve).
 """
 from dataclasses import dataclass, field
 import math
-from typing import Any, Optional
+from typing import Optional, Tuple, Union, cast
 
 import numpy as np
 
-from geoctl_ros.core.actuation.allocation import Allocation
-from geoctl_ros.core.geometry.so3 import matvec
+from geoctl_ros.core.actuation.allocation import Allocation, Allocator
+from geoctl_ros.core.geometry.flags import Flags
+from geoctl_ros.core.geometry.so3 import FloatArray, IntArray, matvec
 
 
 @dataclass(frozen=True)
@@ -17,24 +18,24 @@ class ThrustCurve:
     integer command in 0..command_max (the lab's BL-Ctrl 2.0 fit by default).
     """
 
-    a: np.ndarray
-    b: np.ndarray
-    c: np.ndarray
+    a: FloatArray
+    b: FloatArray
+    c: FloatArray
     voltage_scale: float
     command_max: int
     # the command's constants, folded once (__post_init__)
-    _disc0: np.ndarray = field(init=False, repr=False, compare=False)
-    _four_a: np.ndarray = field(init=False, repr=False, compare=False)
-    _k: np.ndarray = field(init=False, repr=False, compare=False)
-    _k0: np.ndarray = field(init=False, repr=False, compare=False)
-    _zero_up_to: np.ndarray = field(init=False, repr=False, compare=False)
+    _disc0: FloatArray = field(init=False, repr=False, compare=False)
+    _four_a: FloatArray = field(init=False, repr=False, compare=False)
+    _k: FloatArray = field(init=False, repr=False, compare=False)
+    _k0: FloatArray = field(init=False, repr=False, compare=False)
+    _zero_up_to: FloatArray = field(init=False, repr=False, compare=False)
 
-    def thrust(self, command: np.ndarray) -> np.ndarray:
+    def thrust(self, command: IntArray) -> FloatArray:
         """Thrust (N) of integer commands (n,); never negative."""
         x = self.voltage_scale * np.asarray(command, dtype=float)
         return np.maximum(self.a * x * x + self.b * x + self.c, 0.0)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         # command(f) = ceil(x / voltage_scale) with x the root of a x^2 + b x + c = f, i.e.
         # ceil(sqrt(b^2 - 4 a c + 4 a f) / (2 a vs) - b / (2 a vs)), constants folded once
         k = 1.0 / (2.0 * self.a * self.voltage_scale)
@@ -43,22 +44,22 @@ class ThrustCurve:
                             ('_k0', -self.b * k - 1e-9), ('_zero_up_to', np.maximum(self.c, 0.0))):
             object.__setattr__(self, name, value)
 
-    def command(self, thrust: np.ndarray) -> np.ndarray:
+    def command(self, thrust: FloatArray) -> IntArray:
         """Smallest integer command whose thrust is at least the requested one (the lab's ceil),
         clipped to 0..command_max; negative thrust counts as 0, and a request that command 0
         already meets (the curve is clipped at 0 N) gives 0.
         """
         f = np.maximum(np.asarray(thrust, dtype=float), 0.0)
         x = np.sqrt(self._disc0 + self._four_a * f) * self._k + self._k0     # x / vs, less 1e-9
-        cmd = np.minimum(np.maximum(np.ceil(x), 0.0), self.command_max).astype(int)
+        cmd: IntArray = np.minimum(np.maximum(np.ceil(x), 0.0), self.command_max).astype(int)
         cmd[f <= self._zero_up_to] = 0
         return cmd
 
-    def max_thrust(self) -> np.ndarray:
+    def max_thrust(self) -> FloatArray:
         """Thrust of each motor at command_max."""
         return self.thrust(np.full(len(self.a), self.command_max))
 
-    def normalised(self, command: np.ndarray) -> np.ndarray:
+    def normalised(self, command: IntArray) -> FloatArray:
         """Command as a fraction of command_max, in [0, 1]."""
         return np.asarray(command, dtype=float) / self.command_max
 
@@ -67,14 +68,15 @@ class ThrustCurve:
 class MotorOutput:
     """What the mixer sends to the motors for one control step."""
 
-    commands: np.ndarray     # integer ESC commands, 0..command_max
-    normalised: np.ndarray   # commands / command_max, in [0, 1]
+    commands: IntArray       # integer ESC commands, 0..command_max
+    normalised: FloatArray   # commands / command_max, in [0, 1]
     allocation: Allocation
-    clipped: Any = False     # the lag compensation was cut at a thrust limit (the rotors do not
-                             # reach the allocation by the end of the hold: a saturation too)
+    clipped: Union[bool, Flags] = False   # the lag compensation was cut at a thrust limit (the
+                                          # rotors do not reach the allocation by the end of the
+                                          # hold: a saturation too)
 
     @property
-    def saturated(self) -> Any:
+    def saturated(self) -> Flags:
         """The rotors do not make the moment asked by the end of the hold: the allocation
         saturated, or the lag compensation was clipped (one flag per run of a batch).
         """
@@ -116,7 +118,8 @@ class Mixer:
     HOLD_MEMORY = 1.0     # s: how long a late step keeps the compensation designed for its hold
     SPOOL_LAGS = 2.0      # time constants after arming without compensation
 
-    def __init__(self, allocator, curve, collective_thrust, lag=0.0):
+    def __init__(self, allocator: Allocator, curve: ThrustCurve, collective_thrust: float,
+                 lag: float = 0.0) -> None:
         self.allocator = allocator
         self.curve = curve
         self.collective_thrust = float(collective_thrust)
@@ -124,9 +127,9 @@ class Mixer:
         self._dead = np.array([i for i in range(allocator.count) if i not in allocator.alive],
                               dtype=int)
         # the lag model's thrusts at the last command (None: at rest)
-        self.modelled_thrusts = None
-        self.sent_thrusts = None         # the thrusts the last command asked for
-        self.design_hold = None          # H of the last command (s)
+        self.modelled_thrusts: Optional[FloatArray] = None
+        self.sent_thrusts: Optional[FloatArray] = None   # the thrusts the last command asked for
+        self.design_hold: Optional[float] = None         # H of the last command (s)
         self.spool_left = 0.0            # s of spooling up left after arming
 
     def adopt_state(self, other: 'Mixer') -> None:
@@ -135,12 +138,12 @@ class Mixer:
         """
         if other.modelled_thrusts is not None:
             self.modelled_thrusts = other.modelled_thrusts.copy()
-            self.sent_thrusts = other.sent_thrusts.copy()
+            self.sent_thrusts = cast(FloatArray, other.sent_thrusts).copy()
             self.design_hold = other.design_hold
             self.spool_left = other.spool_left
 
-    def mix(self, moment: np.ndarray, armed: Any = True, dt: Any = None,
-            held: Any = None) -> 'MotorOutput':
+    def mix(self, moment: FloatArray, armed: bool = True, dt: Optional[float] = None,
+            held: Optional[float] = None) -> 'MotorOutput':
         """Motor commands for the moment (or a stack of them); all zero when not armed.
 
         dt: how long this command is expected to be held (the control period); held: how long the
@@ -154,7 +157,7 @@ class Mixer:
             self.modelled_thrusts = self.sent_thrusts = self.design_hold = None
             return MotorOutput(zero, np.zeros(zero.shape), allocation)
         compensate = self.lag > 0.0 and dt is not None and dt > 0.0
-        clipped: Any = False
+        clipped: Union[bool, Flags] = False
         if compensate:
             model = self.modelled_thrusts
             if model is None or model.shape != thrusts.shape:
@@ -162,12 +165,12 @@ class Mixer:
                 model = np.zeros_like(thrusts)
                 self.spool_left = self.SPOOL_LAGS * self.lag
             else:
-                held = dt if held is None else max(held, 0.0)
-                sent = self.sent_thrusts
+                held = cast(float, dt) if held is None else max(held, 0.0)
+                sent = cast(FloatArray, self.sent_thrusts)
                 model = sent + math.exp(-held / self.lag) * (model - sent)
                 if self.spool_left > 0.0:
                     self.spool_left -= held
-            hold = self.design_hold_for(dt, held)
+            hold = self.design_hold_for(cast(float, dt), held)
             if self.spool_left <= 0.0:
                 a = math.exp(-hold / self.lag)
                 wanted = (thrusts - a * model) / (1.0 - a)
@@ -198,7 +201,7 @@ class Mixer:
             hold = max(hold, dt + (self.design_hold - dt) * math.exp(-held / self.HOLD_MEMORY))
         return hold
 
-    def moments(self, held: float = 0.0) -> Optional[tuple]:
+    def moments(self, held: float = 0.0) -> Optional[Tuple[FloatArray, FloatArray]]:
         """The moments about the pivot the rotors make by the lag model (None: no model kept, at
         rest or uncompensated): (the one they settle to under the last command, the one they
         make ``held`` s after it).
@@ -206,11 +209,11 @@ class Mixer:
         if self.sent_thrusts is None:
             return None
         B = self.allocator.B_full[3:]
-        sent, model = self.sent_thrusts, self.modelled_thrusts
+        sent, model = self.sent_thrusts, cast(FloatArray, self.modelled_thrusts)
         now = model if held <= 0.0 else sent + math.exp(-held / self.lag) * (model - sent)
         return matvec(B, sent), matvec(B, now)
 
-    def thrust_offsets(self, held: float) -> Any:
+    def thrust_offsets(self, held: float) -> Optional[FloatArray]:
         """Each alive rotor's thrust by the lag model, held s after the last command, less its
         share of the collective thrust (N; the allocation's base): where the rotors are now
         within the moment polytope's frame (``Allocator.moment_polytope``); None without a
@@ -218,7 +221,7 @@ class Mixer:
         """
         if self.sent_thrusts is None:
             return None
-        sent, model = self.sent_thrusts, self.modelled_thrusts
+        sent, model = self.sent_thrusts, cast(FloatArray, self.modelled_thrusts)
         now = model if held <= 0.0 else sent + math.exp(-held / self.lag) * (model - sent)
         return now[..., self.allocator.alive] - self.collective_thrust * self.allocator.base_share
 

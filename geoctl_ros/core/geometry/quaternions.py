@@ -7,13 +7,18 @@ import math
 from typing import Optional, Sequence, Union
 
 import numpy as np
+import numpy.typing as npt
 
-Vector = Union[Sequence[float], np.ndarray]     # a vector given as a list or an array
+FloatArray = npt.NDArray[np.float64]    # an array of floats: a vector, a matrix, or a stack
+BoolArray = npt.NDArray[np.bool_]       # an array of flags (one per run of a batch)
+IntArray = npt.NDArray[np.int_]         # an array of integers (ESC commands, indices)
+Scalars = Union[float, FloatArray]      # one run's number, or one per run of a batch
+Vector = Union[Sequence[float], FloatArray]     # a vector given as a list or an array
 
 QUATERNION_TOLERANCE = 1e-3     # |q| off 1 by more than this: not a unit quaternion
 
 
-def quat_to_rot(q: Vector) -> np.ndarray:
+def quat_to_rot(q: Vector) -> FloatArray:
     """Rotation matrix of a quaternion in ROS order (x, y, z, w); q is normalised first."""
     x, y, z, w = (float(v) for v in q)
     n = math.sqrt(x * x + y * y + z * z + w * w)
@@ -25,7 +30,7 @@ def quat_to_rot(q: Vector) -> np.ndarray:
     ])
 
 
-def rot_to_quat(R: np.ndarray) -> np.ndarray:
+def rot_to_quat(R: FloatArray) -> FloatArray:
     """Unit quaternion (x, y, z, w) of R with w >= 0 (Shepperd's method, stable for any R)."""
     tr = R[0, 0] + R[1, 1] + R[2, 2]
     i = int(np.argmax([tr, R[0, 0], R[1, 1], R[2, 2]]))

@@ -15,18 +15,22 @@ numpy 1.26 (Ubuntu 24.04's) has no ``ndarray.mT`` nor ``np.matvec``/``vecmat``/`
 products here are the package's own (``test_package.py`` fails on a numpy name 1.26 lacks).
 """
 import math
-from typing import Any, Sequence, Tuple, Union
+from typing import Any, Sequence, Tuple, cast
 
 import numpy as np
 
-from geoctl_ros.core.geometry.quaternions import Vector as Vector  # (so3's own names)
+from geoctl_ros.core.geometry.quaternions import BoolArray as BoolArray  # (so3's own names)
+from geoctl_ros.core.geometry.quaternions import FloatArray as FloatArray
+from geoctl_ros.core.geometry.quaternions import IntArray as IntArray
+from geoctl_ros.core.geometry.quaternions import Scalars as Scalars
+from geoctl_ros.core.geometry.quaternions import Vector as Vector
 from geoctl_ros.core.geometry.quaternions import quat_to_rot as quat_to_rot
 from geoctl_ros.core.geometry.quaternions import rot_to_quat as rot_to_quat
 
 _I3 = np.eye(3)
 
 
-def hat(x: np.ndarray) -> np.ndarray:
+def hat(x: FloatArray) -> FloatArray:
     """The skew-symmetric matrix of x: ``hat(x) @ y == cross(x, y)``."""
     x = np.asarray(x, dtype=float)
     if x.ndim == 1:
@@ -38,7 +42,7 @@ def hat(x: np.ndarray) -> np.ndarray:
     return H - np.swapaxes(H, -1, -2)
 
 
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def cross(a: FloatArray, b: FloatArray) -> FloatArray:
     """Cross product of 3-vectors, or of stacks of them (np.cross: 10x the time for one pair)."""
     if a.ndim == 1 and b.ndim == 1:      # one pair: float arithmetic beats array indexing
         return np.array(cross_floats(a.tolist(), b.tolist()))
@@ -49,12 +53,12 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
                      a[0] * b[1] - a[1] * b[0]]).T
 
 
-def cross_floats(a: Sequence[float], b: Sequence[float]) -> list:
+def cross_floats(a: Sequence[float], b: Sequence[float]) -> list[float]:
     """a x b for two 3-vectors as lists of floats (the formula of a stack's entries)."""
     return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 
 
-def vee(M: np.ndarray) -> np.ndarray:
+def vee(M: FloatArray) -> FloatArray:
     """Inverse of :func:`hat`: the vector of a skew-symmetric matrix (or of each of a stack)."""
     M = M.T
     return np.array([M[1, 2], M[2, 0], M[0, 1]]).T
@@ -69,13 +73,13 @@ SMALL = 18
 ONE, ONE_M = (1, 3), (1, 3, 3)
 
 
-def matvec_floats(M: Sequence[Sequence[float]], v: Sequence[float]) -> list:
+def matvec_floats(M: Sequence[Sequence[float]], v: Sequence[float]) -> list[float]:
     """M v for rows of 3 and a 3-vector as lists of floats (sums left to right, as a stack's)."""
     x0, x1, x2 = v
     return [r[0] * x0 + r[1] * x1 + r[2] * x2 for r in M]
 
 
-def _float_matvec(M, v):
+def _float_matvec(M: FloatArray, v: FloatArray) -> FloatArray:
     x = v.tolist()
     if len(x) == 3:
         return np.array(matvec_floats(M.tolist(), x))
@@ -88,7 +92,7 @@ def _float_matvec(M, v):
     return np.array(out, dtype=float)
 
 
-def matmul(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+def matmul(A: FloatArray, B: FloatArray) -> FloatArray:
     """A B for two matrices, or for each pair of stacks of them (broadcasting)."""
     if A.ndim == 2 and B.ndim == 2:
         if A.shape == (3, 3) and B.shape == (3, 3):
@@ -107,7 +111,7 @@ def matmul(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     return out
 
 
-def matvec(M: np.ndarray, v: np.ndarray) -> np.ndarray:
+def matvec(M: FloatArray, v: FloatArray) -> FloatArray:
     """M v for a matrix and a vector, or for each of a stack of them (broadcasting)."""
     if M.ndim <= 2 and v.ndim == 1:
         return _float_matvec(M, v) if M.size <= SMALL else M @ v
@@ -124,7 +128,7 @@ def matvec(M: np.ndarray, v: np.ndarray) -> np.ndarray:
     return out
 
 
-def vecmat(v: np.ndarray, M: np.ndarray) -> np.ndarray:
+def vecmat(v: FloatArray, M: FloatArray) -> FloatArray:
     """v^T M (= M^T v) for a vector and a matrix, or for each of a stack of them."""
     if v.ndim == 1 and M.ndim <= 2:
         return v @ M
@@ -142,7 +146,7 @@ def vecmat(v: np.ndarray, M: np.ndarray) -> np.ndarray:
     return out
 
 
-def dot(a: np.ndarray, b: np.ndarray) -> Any:
+def dot(a: FloatArray, b: FloatArray) -> Any:
     """a . b for two vectors (a numpy float), or for each pair of two stacks of them (an array)."""
     if not a.shape[-1]:
         return np.zeros(np.broadcast_shapes(a.shape[:-1], b.shape[:-1]))[()]
@@ -164,12 +168,12 @@ def dot(a: np.ndarray, b: np.ndarray) -> Any:
     return out
 
 
-def transpose(M: np.ndarray) -> np.ndarray:
+def transpose(M: FloatArray) -> FloatArray:
     """M^T for a matrix, or for each of a stack of them (a view)."""
     return M.swapaxes(-1, -2)
 
 
-def exp(w: np.ndarray) -> np.ndarray:
+def exp(w: FloatArray) -> FloatArray:
     """The rotation matrix exp of hat(w) (Rodrigues), accurate for small angles; a stack (..., 3)
     gives a stack of rotations.
 
@@ -177,6 +181,8 @@ def exp(w: np.ndarray) -> np.ndarray:
     for a stack in whole-array operations (no 3x3 products): each entry of a stack is then rounded
     as the same entry of a single-rotation stack, whatever the stack's size.
     """
+    a: Scalars      # (floats for one rotation, arrays for a stack)
+    b: Scalars
     w = np.asarray(w, dtype=float)
     if w.ndim == 1:       # one rotation, in floats
         x, y, z = w.tolist()
@@ -201,10 +207,12 @@ def exp(w: np.ndarray) -> np.ndarray:
     return out
 
 
-def exp_apply(w: np.ndarray, v: np.ndarray) -> np.ndarray:
+def exp_apply(w: FloatArray, v: FloatArray) -> FloatArray:
     """exp(hat(w)) v without forming the matrix: v + a w x v + b w x (w x v) (Rodrigues), for one
     pair or stacks of them; equal to matvec(exp(w), v) to rounding.
     """
+    a: Scalars      # (floats for one pair, arrays for stacks)
+    b: Scalars
     if w.ndim == 1 and v.ndim == 1:
         a, b = rodrigues_ab(*w.tolist())
     elif w.shape == ONE and v.shape == ONE:
@@ -233,7 +241,7 @@ def rodrigues_ab(x: float, y: float, z: float) -> Tuple[float, float]:
     return float(np.sin(theta)) / theta, (1.0 - float(np.cos(theta))) / theta2
 
 
-def _rodrigues(theta2, theta):
+def _rodrigues(theta2: FloatArray, theta: FloatArray) -> Tuple[FloatArray, FloatArray]:
     """sin(t)/t and (1 - cos t)/t^2 for arrays, entry by entry, by their Taylor series to O(t^4)
     where t^2 < 1e-8 (error below 1e-20); ``rodrigues_ab`` is the same for one. (A stack with no
     small angle, or only small ones, skips the other branch: the same bits.)
@@ -249,7 +257,7 @@ def _rodrigues(theta2, theta):
             np.where(small, taylor[1], (1.0 - np.cos(theta)) / np.where(small, 1.0, theta2)))
 
 
-def log(R: np.ndarray) -> np.ndarray:
+def log(R: FloatArray) -> FloatArray:
     """Rotation vector w with |w| <= pi and exp(w) == R; accurate near 0 and near pi.
 
     The angle comes from atan2(sin, cos), so it keeps full precision near pi, where
@@ -270,31 +278,32 @@ def log(R: np.ndarray) -> np.ndarray:
     n = nn[:, k] / math.sqrt(max(nn[k, k], 1e-300))
     if float(n @ skew) < 0.0:
         n = -n
-    return theta * n
+    return cast(FloatArray, theta * n)
 
 
-def angle(R: np.ndarray) -> Union[float, np.ndarray]:
+def angle(R: FloatArray) -> Scalars:
     """Geodesic rotation angle of R in [0, pi] (radians); of each rotation of a stack (..., 3, 3)
     as an array.
     """
     if np.ndim(R) == 2:
-        skew_norm = 0.5 * math.sqrt((R[2, 1] - R[1, 2]) ** 2 + (R[0, 2] - R[2, 0]) ** 2
+        skew_norm: Scalars = 0.5 * math.sqrt((R[2, 1] - R[1, 2]) ** 2 + (R[0, 2] - R[2, 0]) ** 2
                                     + (R[1, 0] - R[0, 1]) ** 2)
         return math.atan2(skew_norm, 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0))
     skew_norm = 0.5 * np.sqrt((R[..., 2, 1] - R[..., 1, 2]) ** 2
                               + (R[..., 0, 2] - R[..., 2, 0]) ** 2
                               + (R[..., 1, 0] - R[..., 0, 1]) ** 2)
-    return np.arctan2(skew_norm, 0.5 * (R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2] - 1.0))
+    return cast(FloatArray,
+                np.arctan2(skew_norm, 0.5 * (R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2] - 1.0)))
 
 
-def project(M: np.ndarray) -> np.ndarray:
+def project(M: FloatArray) -> FloatArray:
     """The rotation closest to M in the Frobenius norm (polar decomposition via SVD)."""
     U, _, Vt = np.linalg.svd(M)
     d = 1.0 if np.linalg.det(U @ Vt) > 0.0 else -1.0
-    return U @ np.diag([1.0, 1.0, d]) @ Vt
+    return cast(FloatArray, U @ np.diag([1.0, 1.0, d]) @ Vt)
 
 
-def axis_angle(axis: Vector, angle_rad: float) -> np.ndarray:
+def axis_angle(axis: Vector, angle_rad: float) -> FloatArray:
     """Rotation by angle_rad about a (not necessarily unit) axis."""
     a = np.asarray(axis, dtype=float)
     return exp(a * (angle_rad / np.linalg.norm(a)))
@@ -305,7 +314,7 @@ def axis_angle(axis: Vector, angle_rad: float) -> np.ndarray:
 # differently, and the constants they give (the model's J^-1, the allocation's pseudo-inverse)
 # would carry those bits into every flight.
 
-def inverse3(M: np.ndarray) -> np.ndarray:
+def inverse3(M: FloatArray) -> FloatArray:
     """M^-1 for a 3x3 matrix or each of a stack, by its adjugate over its determinant (the
     same formula entry by entry, for one in floats).
     """
@@ -328,7 +337,7 @@ def inverse3(M: np.ndarray) -> np.ndarray:
     return A / det[..., None, None]
 
 
-def symmetric_eigenvalues(M: np.ndarray) -> Tuple[float, float, float]:
+def symmetric_eigenvalues(M: FloatArray) -> Tuple[float, float, float]:
     """The eigenvalues of a symmetric 3x3 matrix, smallest first, in closed form (Smith 1961:
     the trigonometric solution of its characteristic cubic).
     """
@@ -350,7 +359,7 @@ def symmetric_eigenvalues(M: np.ndarray) -> Tuple[float, float, float]:
     return lo, 3.0 * q - hi - lo, hi
 
 
-def right_inverse(A: np.ndarray) -> np.ndarray:
+def right_inverse(A: FloatArray) -> FloatArray:
     """The minimum-norm right inverse A^T (A A^T)^-1 of a matrix of full row rank (m x n, m <= n),
     by Gauss-Jordan elimination with partial pivoting in floats: ``np.linalg.pinv`` of it, in
     the same arithmetic on every CPU.

@@ -5,17 +5,17 @@ import math
 
 import numpy as np
 
-from geoctl_ros.core.geometry.so3 import cross
+from geoctl_ros.core.geometry.so3 import FloatArray, cross
 
 _I3 = np.eye(3)
 
 
-def unit(v: np.ndarray) -> np.ndarray:
+def unit(v: FloatArray) -> FloatArray:
     """v scaled to unit length (v not zero)."""
     return v / math.sqrt(float(v @ v))
 
 
-def direction(axis: np.ndarray, angle: float, azimuth: float) -> np.ndarray:
+def direction(axis: FloatArray, angle: float, azimuth: float) -> FloatArray:
     """The unit vector at angle from the unit vector axis, at azimuth round it."""
     e1 = unit(cross(axis, _I3[int(np.argmin(np.abs(axis)))]))
     e2 = cross(axis, e1)
@@ -23,7 +23,7 @@ def direction(axis: np.ndarray, angle: float, azimuth: float) -> np.ndarray:
             + math.sin(angle) * (math.cos(azimuth) * e1 + math.sin(azimuth) * e2))
 
 
-def angle_between_deg(a: np.ndarray, b: np.ndarray) -> float:
+def angle_between_deg(a: FloatArray, b: FloatArray) -> float:
     """The angle between two vectors of any length (deg, from atan2: exact near 0 and 180); 180
     if either is zero.
     """

@@ -56,12 +56,20 @@ designed hold, and the state is safe (Phi >= 0) at the start.
 """
 from dataclasses import dataclass
 import math
-from typing import Any, NamedTuple, Optional
+from typing import NamedTuple, Optional, Tuple, cast
 
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.core.law.projection import TOL, project, slack_of
+from geoctl_ros.core.geometry.flags import Flags
+from geoctl_ros.core.geometry.so3 import BoolArray, FloatArray, Scalars
+from geoctl_ros.core.law.cones import ConeSet
+from geoctl_ros.core.law.controller_config import ControllerConfig
+from geoctl_ros.core.law.projection import TOL, Polytope, project, slack_of
+
+# ``_worst``: per cone G0, w0, the rotors' deceleration, the backup's first command, Phi (and
+# with a law's deceleration, the travel after it)
+Worst = Tuple[Scalars, ...]
 
 SIGMAS = 3.0      # the measurement errors are bounded at this many standard deviations
 NET_SHARE_MIN = 0.25   # the backup must out-brake a_u by at least this share of a_b
@@ -82,12 +90,12 @@ class ApproachBrake:
     lag: float              # s, tau: the rotors' thrust time constant (0: none modelled)
 
     @classmethod
-    def of(cls, config: Any) -> Optional['ApproachBrake']:
+    def of(cls, config: ControllerConfig) -> Optional['ApproachBrake']:
         """The brake of a ControllerConfig, or None when it is off."""
         return cls.bounds_of(config) if config.approach_brake else None
 
     @classmethod
-    def bounds_of(cls, config: Any) -> 'ApproachBrake':
+    def bounds_of(cls, config: ControllerConfig) -> 'ApproachBrake':
         """The brake's bounds of a ControllerConfig, whether or not its law brakes (what a
         flight is judged against: ``covered``).
         """
@@ -96,7 +104,7 @@ class ApproachBrake:
                    SIGMAS * config.attitude_noise, SIGMAS * config.gyro_noise,
                    config.motor_lag)
 
-    def uncertainty(self, T_b: Any, spin: Any) -> tuple:
+    def uncertainty(self, T_b: Scalars, spin: Scalars) -> Tuple[Scalars, Scalars]:
         """(dg, dw): how far the predicted gap (rad) and approach rate (rad/s) can be from the
         truth, with measurements T_b old (s) and spin = |Omega| / sin phi (rad/s; phi the
         sensor's angle to the cone's axis: an attitude error e turns the opening direction n by
@@ -114,14 +122,14 @@ class ApproachBrake:
         return math.exp(-hold / self.lag) if self.lag > 0.0 else 0.0
 
 
-def unmodelled_acceleration(moment_bound: float, J: np.ndarray) -> float:
+def unmodelled_acceleration(moment_bound: float, J: FloatArray) -> float:
     """a_u: the largest angular acceleration (rad/s^2) an unlearnt moment of moment_bound (N m)
     gives, over the smallest principal inertia of J.
     """
     return moment_bound / so3.symmetric_eigenvalues(J)[0]
 
 
-def _stops(x: Any, w: Any, acc0: Any, c: Any, T: Any) -> Any:
+def _stops(x: Scalars, w: Scalars, acc0: Scalars, c: Scalars, T: Scalars) -> Scalars:
     """The travel at the stop within each phase that starts at travel x and rate w, its
     acceleration acc0 + 2 c t for t in [0, T] (where w falls through 0 within it, w > 0 > the
     rate at T; else x): the root of w + acc0 t + c t^2.
@@ -138,7 +146,7 @@ def _stops(x: Any, w: Any, acc0: Any, c: Any, T: Any) -> Any:
     return np.where(turn, x + (w + (0.5 * acc0 + c * t / 3.0) * t) * t, x)
 
 
-def _shares(spans: tuple) -> tuple:
+def _shares(spans: Tuple[float, ...]) -> Tuple[float, ...]:
     """The share of the backup's deficit left at the start of each span and after the last
     (exp of minus the spans so far, multiplied in turn).
     """
@@ -151,8 +159,8 @@ def _shares(spans: tuple) -> tuple:
 SHARES = _shares(BACKUP_SPANS)
 
 
-def backup_travel(brake: ApproachBrake, w0: Any, D_s: Any, D: Any, authority: Any,
-                  hold: float) -> Any:
+def backup_travel(brake: ApproachBrake, w0: Scalars, D_s: Scalars, D: Scalars, authority: Scalars,
+                  hold: float) -> Scalars:
     """The farthest (rad) the sensor travels towards the cone in the worst case from a tick with
     the approach w0 (rad/s) and the rotors at D_s: a command reaching D at the end of its hold
     (the deceleration over it at least min(D_s, D)), then the backup (see the module) to
@@ -185,12 +193,12 @@ def backup_travel(brake: ApproachBrake, w0: Any, D_s: Any, D: Any, authority: An
     best = np.maximum(np.maximum(_stops(x[:-1], w[:-1], acc0, c, T), x[1:]).max(axis=0),
                       0.0 * w0)
     final = level[-1]                                       # (< 0: see NET_SHARE_MIN)
-    return np.maximum(best, x[-1] + np.maximum(w[-1], 0.0) ** 2
-                      / (2.0 * np.maximum(-final, 1e-9)))
+    return cast(Scalars, np.maximum(best, x[-1] + np.maximum(w[-1], 0.0) ** 2
+                                    / (2.0 * np.maximum(-final, 1e-9))))
 
 
-def backup_margin(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, authority: Any,
-                  hold: float) -> Any:
+def backup_margin(brake: ApproachBrake, gap: Scalars, w: Scalars, D_s: Scalars, authority: Scalars,
+                  hold: float) -> Scalars:
     """Phi (rad): the gap left when the backup stops an approach w (rad/s) with the rotors at
     D_s now (taken at most a_b): >= 0 on the safe set.
     """
@@ -199,7 +207,7 @@ def backup_margin(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, authority: A
     return gap - backup_travel(brake, w, Ds, first, authority, hold)
 
 
-def backup_first(brake: ApproachBrake, D_s: Any, authority: Any, hold: float) -> Any:
+def backup_first(brake: ApproachBrake, D_s: Scalars, authority: Scalars, hold: float) -> Scalars:
     """D_1: where the backup's first command takes the rotors by the end of the hold, a D_s +
     (1 - a) a_b (their reach in one hold towards a_b).
     """
@@ -207,8 +215,9 @@ def backup_first(brake: ApproachBrake, D_s: Any, authority: Any, hold: float) ->
     return keep * D_s + (1.0 - keep) * authority
 
 
-def _worst(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: Any, spin: Any,
-           authority: Any, hold: float, law: Any = None) -> tuple:
+def _worst(brake: ApproachBrake, gap: Scalars, w: Scalars, D_s: Scalars, age: Scalars,
+           spin: Scalars, authority: Scalars, hold: float,
+           law: Optional[FloatArray] = None) -> Worst:
     """The worst state of the uncertainty box and the backup from it, per cone: (G0, w0, the
     rotors' deceleration now taken at most a_b, the backup's first command, Phi); with law (a
     deceleration per cone: the law's), also the worst-case travel after a command reaching it,
@@ -220,21 +229,22 @@ def _worst(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: Any, spin: Any
     first = backup_first(brake, Ds, authority, hold)
     if law is None:
         return G0, w0, Ds, first, G0 - backup_travel(brake, w0, Ds, first, authority, hold)
-    travel = backup_travel(brake, w0, Ds, np.stack(np.broadcast_arrays(first, law)),
-                           authority, hold)
+    travel = cast(FloatArray, backup_travel(brake, w0, Ds,
+                                            np.stack(np.broadcast_arrays(first, law)),
+                                            authority, hold))
     return G0, w0, Ds, first, G0 - travel[0], travel[1]
 
 
-def _met(margin: Any, first: Any, D: Any, travel: Any, G0: Any) -> Any:
+def _met(margin: Scalars, first: Scalars, D: Scalars, travel: Scalars, G0: Scalars) -> Scalars:
     """``meets`` from the worst state's margin, the backup's first command, D and the
     worst-case travel after a command reaching D.
     """
     return np.where(margin < 0.0, D >= first, travel <= G0)
 
 
-def least_deceleration(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: Any,
-                       spin: Any, authority: Any, hold: float,
-                       worst: Optional[tuple] = None) -> tuple:
+def least_deceleration(brake: ApproachBrake, gap: Scalars, w: Scalars, D_s: Scalars, age: Scalars,
+                       spin: Scalars, authority: Scalars, hold: float,
+                       worst: Optional[Worst] = None) -> Tuple[FloatArray, Scalars]:
     """(D, Phi) per cone: the least deceleration D (rad/s^2) the command must reach at the end of
     its hold for the condition, and the backup's margin Phi (rad) now. Where Phi < 0, D is the
     backup's own first command (past the curve: brake as hard as the lag lets).
@@ -253,8 +263,9 @@ def least_deceleration(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: An
     # that does (the backup's own first), keeping the one that does
     lo = np.minimum(Ds, 0.0) - 4.0 * authority
     hi = first
-    f_lo, f_hi = backup_travel(brake, w0, Ds, np.stack(np.broadcast_arrays(lo, hi)),
-                               authority, hold) - G0
+    f_lo, f_hi = cast(FloatArray, backup_travel(brake, w0, Ds,
+                                                np.stack(np.broadcast_arrays(lo, hi)),
+                                                authority, hold)) - G0
     fine = f_lo <= 0.0                     # (even the low end meets it: a far cone)
     hi = np.where(fine, lo, hi)
     fixed = fine | past                    # (past: the backup's first, whatever the search)
@@ -270,8 +281,9 @@ def least_deceleration(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: An
     return np.where(past, first, hi), margin
 
 
-def meets(brake: ApproachBrake, gap: Any, w: Any, D_s: Any, age: Any, spin: Any,
-          authority: Any, hold: float, D: Any, worst: Optional[tuple] = None) -> Any:
+def meets(brake: ApproachBrake, gap: Scalars, w: Scalars, D_s: Scalars, age: Scalars,
+          spin: Scalars, authority: Scalars, hold: float, D: Scalars,
+          worst: Optional[Worst] = None) -> Scalars:
     """Per cone, whether a command reaching the deceleration D (rad/s^2) at the end of its hold
     meets the condition (``least_deceleration``'s, without its search): its worst-case travel
     peaks within the gap or, past the curve, D is at least the backup's own first command.
@@ -289,10 +301,10 @@ class BrakeRows(NamedTuple):
     derivation (``BrakeTerms.weak``).
     """
 
-    A: np.ndarray
-    beta: np.ndarray
-    margin: np.ndarray
-    weak: np.ndarray
+    A: FloatArray
+    beta: FloatArray
+    margin: FloatArray
+    weak: BoolArray
 
 
 class BrakeInputs(NamedTuple):
@@ -305,17 +317,18 @@ class BrakeInputs(NamedTuple):
     (``Mixer.thrust_offsets``; None: no lag model).
     """
 
-    R: np.ndarray
-    Omega: np.ndarray
-    age: Any
+    R: FloatArray
+    Omega: FloatArray
+    age: Scalars
     hold: float
-    rotors: np.ndarray
-    f: np.ndarray
-    gravity: np.ndarray
-    thrusts: Optional[np.ndarray] = None
+    rotors: FloatArray
+    f: FloatArray
+    gravity: FloatArray
+    thrusts: Optional[FloatArray] = None
 
 
-def opening(cones: Any, R: np.ndarray, Omega: np.ndarray) -> tuple:
+def opening(cones: ConeSet, R: FloatArray,
+            Omega: FloatArray) -> Tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Per cone at (R, Omega): (gap (rad, phi - theta), n (the opening direction, body, unit),
     w (the approach rate, rad/s), kin (the approach's kinematic term, rad/s^2)): with
     b = R^T v, c = b x r, n = c / |c|, w = -n . Omega, and dw/dt = kin - n . Omega' where
@@ -344,22 +357,22 @@ class BrakeTerms(NamedTuple):
     and where that is too weak for the derivation (``NET_SHARE_MIN``).
     """
 
-    gap: np.ndarray
-    n: np.ndarray
-    w: np.ndarray
-    kin: np.ndarray
-    A: np.ndarray
-    f_along: np.ndarray
-    D_s: np.ndarray
-    authority: np.ndarray
-    weak: np.ndarray
+    gap: FloatArray
+    n: FloatArray
+    w: FloatArray
+    kin: FloatArray
+    A: FloatArray
+    f_along: FloatArray
+    D_s: FloatArray
+    authority: FloatArray
+    weak: BoolArray
 
-    def model_rate_change(self, moment: np.ndarray) -> np.ndarray:
+    def model_rate_change(self, moment: FloatArray) -> FloatArray:
         """dw/dt by the brake's model, frozen at the tick, under the rotors' moment."""
-        return self.kin - so3.dot(self.A, moment[..., None, :]) - self.f_along
+        return cast(FloatArray, self.kin - so3.dot(self.A, moment[..., None, :]) - self.f_along)
 
 
-def brake_terms(brake: ApproachBrake, cones: Any, J_inv: np.ndarray,
+def brake_terms(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray,
                 x: BrakeInputs) -> BrakeTerms:
     """``BrakeTerms`` at the tick of x (see the module)."""
     gap, n, w, kin = opening(cones, x.R, x.Omega)
@@ -380,19 +393,19 @@ def brake_terms(brake: ApproachBrake, cones: Any, J_inv: np.ndarray,
     return BrakeTerms(gap, n, w, kin, A, f_along, D_s, authority, weak)
 
 
-def rows(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, x: BrakeInputs,
-         terms: Optional[BrakeTerms] = None, worst: Optional[tuple] = None) -> BrakeRows:
+def rows(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray, x: BrakeInputs,
+         terms: Optional[BrakeTerms] = None, worst: Optional[Worst] = None) -> BrakeRows:
     """The brake's condition at a tick for every cone (``BrakeRows``; see the module); terms:
     ``brake_terms`` of x, worst: ``_worst_at`` of them, where already computed.
     """
     t = brake_terms(brake, cones, J_inv, x) if terms is None else terms
     D, margin = least_deceleration(brake, t.gap, t.w, t.D_s, _age(x), _spin(cones, t, x),
                                    t.authority, x.hold, worst)
-    return BrakeRows(t.A, D - t.f_along + t.kin, margin, t.weak)
+    return BrakeRows(t.A, D - t.f_along + t.kin, cast(FloatArray, margin), t.weak)
 
 
-def law_meets(brake: ApproachBrake, cones: Any, t: BrakeTerms, x: BrakeInputs,
-              u: np.ndarray) -> tuple:
+def law_meets(brake: ApproachBrake, cones: ConeSet, t: BrakeTerms, x: BrakeInputs,
+              u: FloatArray) -> Tuple[BoolArray, Worst]:
     """(...,) bool: whether the law's moment u meets every cone's condition at the tick of x
     (``meets``, on the law's own deceleration along each cone; no search), and ``_worst`` of
     every cone there (for the rows: once a tick), the law's travel integrated with it.
@@ -404,7 +417,7 @@ def law_meets(brake: ApproachBrake, cones: Any, t: BrakeTerms, x: BrakeInputs,
             (G0, w0, Ds, first, margin))
 
 
-def _worst_at(brake: ApproachBrake, cones: Any, t: BrakeTerms, x: BrakeInputs) -> tuple:
+def _worst_at(brake: ApproachBrake, cones: ConeSet, t: BrakeTerms, x: BrakeInputs) -> Worst:
     """``_worst`` of every cone at the tick of x (its terms t)."""
     return _worst(brake, t.gap, t.w, t.D_s, _age(x), _spin(cones, t, x), t.authority, x.hold)
 
@@ -413,19 +426,19 @@ SIN_PHI_MIN = math.sin(math.radians(5.0))   # sin phi below which the rate error
                                             # this (deep inside a cone, or opposite it)
 
 
-def _spin(cones: Any, t: BrakeTerms, x: BrakeInputs) -> np.ndarray:
+def _spin(cones: ConeSet, t: BrakeTerms, x: BrakeInputs) -> FloatArray:
     """|Omega| / sin phi per run and cone (``ApproachBrake.uncertainty``)."""
     sin_phi = np.maximum(np.sin(t.gap + cones.theta), SIN_PHI_MIN)
-    return np.sqrt(so3.dot(x.Omega, x.Omega))[..., None] / sin_phi
+    return cast(FloatArray, np.sqrt(so3.dot(x.Omega, x.Omega))[..., None] / sin_phi)
 
 
-def _age(x: BrakeInputs) -> Any:
+def _age(x: BrakeInputs) -> Scalars:
     """T_b per run, one axis for the cones (a float where one for all)."""
     return np.asarray(x.age, dtype=float)[..., None] if np.ndim(x.age) else x.age
 
 
-def brake_authority(vertices: np.ndarray, J_inv: np.ndarray, m_rho: np.ndarray,
-                    gravity: np.ndarray, tilt_max: float, r: np.ndarray,
+def brake_authority(vertices: FloatArray, J_inv: FloatArray, m_rho: FloatArray,
+                    gravity: FloatArray, tilt_max: float, r: FloatArray,
                     directions: int = 720) -> float:
     """a_b (rad/s^2): the least, over the opening directions n (every unit n perpendicular to
     the sensor axis r: a cone is opened by turning r), of the deceleration along n that the
@@ -453,7 +466,7 @@ def brake_authority(vertices: np.ndarray, J_inv: np.ndarray, m_rho: np.ndarray,
     return float((support - worst).min())
 
 
-def covered(ok: np.ndarray, safe: np.ndarray, lead: int) -> np.ndarray:
+def covered(ok: BoolArray, safe: BoolArray, lead: int) -> BoolArray:
     """(steps, runs) bool: whether the derivation speaks of each control step: some step j at
     or before it had a safe state (``safe``: Phi >= 0 of the true state, every cone) and the
     bounds held (``ok``) at every step from ``lead`` steps before j (the measurements j used)
@@ -477,12 +490,13 @@ class Braked(NamedTuple):
     reach this hold, or its bounds were too weak for it (``unmet``: outside the derivation).
     """
 
-    u: np.ndarray
-    braking: Any
-    unmet: Any
+    u: FloatArray
+    braking: Flags
+    unmet: Flags
 
 
-def reachable(polytope: Any, keep: float, offsets: Optional[np.ndarray]) -> tuple:
+def reachable(polytope: Polytope, keep: float,
+              offsets: Optional[FloatArray]) -> Tuple[FloatArray, FloatArray]:
     """The moments the lagged rotors reach by the end of a hold from where they are now, within
     their polytope A M >= beta (each rotor j between its limits: lo <= base_j + P_j M <= hi):
     each rotor's thrust reaches a f0_j + (1 - a) [lo, hi] (keep: a = exp(-h / tau)), so
@@ -495,8 +509,9 @@ def reachable(polytope: Any, keep: float, offsets: Optional[np.ndarray]) -> tupl
         (offsets, -offsets), axis=-1)
 
 
-def braked(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, polytope: Any,
-           x: BrakeInputs, u: np.ndarray, extra: Optional[tuple] = None) -> Braked:
+def braked(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray, polytope: Polytope,
+           x: BrakeInputs, u: FloatArray,
+           extra: Optional[Tuple[FloatArray, FloatArray]] = None) -> Braked:
     """The brake stage: u (the law's moment; one per run of a batch) where it meets every cone's
     condition (``rows``) within the rotors' reach this hold (``reachable``), else the closest
     moment that does (``core.law.projection.project``); where none does, the closest that meets
@@ -539,8 +554,8 @@ def braked(brake: ApproachBrake, cones: Any, J_inv: np.ndarray, polytope: Any,
     return Braked(out, braking, unmet)
 
 
-def _compromise(u: np.ndarray, A: np.ndarray, beta: np.ndarray, rows_: int,
-                rotors: np.ndarray, iterations: int = 30) -> np.ndarray:
+def _compromise(u: FloatArray, A: FloatArray, beta: FloatArray, rows_: int,
+                rotors: FloatArray, iterations: int = 30) -> FloatArray:
     """Where the first ``rows_`` rows (the cones') cannot all be met within the rest (the
     rotors' reach): the moment closest to u that meets them all relaxed by the least common
     amount e (rad/s^2 of deceleration: A_i u >= beta_i - e), found by bisection on e, so that no

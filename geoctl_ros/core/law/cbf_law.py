@@ -1,18 +1,20 @@
 """The geometric baseline filtered by a control-barrier-function QP: each cone a pointing
 constraint of relative degree 2, solved exactly by its active set every step.
 """
-from typing import Optional
+from typing import Optional, Tuple, cast
 
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.core.geometry.so3 import cross, matvec
+from geoctl_ros.core.geometry.so3 import FloatArray, cross, matvec
 from geoctl_ros.core.law.brake import BrakeInputs, braked
-from geoctl_ros.core.law.projection import closest_admissible
+from geoctl_ros.core.law.projection import Polytope, closest_admissible
 from geoctl_ros.core.law.step_types import ControlOutput, Law, LawModel, StepTerms
 
 
-def pointing_cbf(model: LawModel, R: np.ndarray, Omega: np.ndarray, terms: StepTerms) -> tuple:
+def pointing_cbf(model: LawModel, R: FloatArray, Omega: FloatArray,
+                 terms: StepTerms) -> Tuple[FloatArray, FloatArray, FloatArray, FloatArray,
+                                            FloatArray, FloatArray]:
     """Each cone as a pointing constraint of relative degree 2, as the rows of A u >= beta.
 
     h_i = cos(theta_i + guard) - (R^T v_i) . r >= 0 (the sensor outside the guarded cone). With
@@ -43,7 +45,7 @@ def pointing_cbf(model: LawModel, R: np.ndarray, Omega: np.ndarray, terms: StepT
     return A, beta, h, h_dot, b, f
 
 
-def cbf_filter(out: ControlOutput, terms: StepTerms, R: np.ndarray, Omega: np.ndarray,
+def cbf_filter(out: ControlOutput, terms: StepTerms, R: FloatArray, Omega: FloatArray,
                model: LawModel, brake: Optional[BrakeInputs]) -> ControlOutput:
     """Lee's geometric moment (``out``, the attractive error alone; the estimate adapts as the
     baseline's) filtered by a control-barrier-function QP on SO(3): the moment closest to it that
@@ -58,7 +60,8 @@ def cbf_filter(out: ControlOutput, terms: StepTerms, R: np.ndarray, Omega: np.nd
     A, beta = pointing_cbf(model, R, Omega, terms)[:2]
     if brake is None or model.brake is None:
         return out._replace(u=closest_admissible(out.u, A, beta, cfg.moment_limits))
-    b = braked(model.brake, cfg.cones, model.J_inv, cfg.moment_limits, brake, out.u, (A, beta))
+    b = braked(model.brake, cfg.cones, model.J_inv, cast(Polytope, cfg.moment_limits),
+               brake, out.u, (A, beta))
     return out._replace(u=b.u, braking=b.braking, brake_unmet=b.unmet)
 
 

@@ -37,19 +37,23 @@ ConeSet with axes (batch, n, 3) and half-angles (batch, n); it evaluates a stack
 (batch, 3, 3) with the same formulas.
 """
 import math
-from typing import Any, Optional, Tuple
+from typing import Iterable, Optional, Tuple, cast
 
 import numpy as np
+import numpy.typing as npt
 
-from geoctl_ros.core.geometry.flags import any_flag
-from geoctl_ros.core.geometry.so3 import hat, matmul, vecmat
+from geoctl_ros.core.geometry.flags import Flags, any_flag
+from geoctl_ros.core.geometry.so3 import BoolArray, FloatArray, Scalars, hat, matmul, vecmat
+
+# ``ConeSet.widened``: cos, floor gap, B offset, 1 / (alpha g0), the inside field's magnitude
+Widened = Tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
 
 
-def angle_deg(s: np.ndarray) -> np.ndarray:
+def angle_deg(s: FloatArray) -> FloatArray:
     """The angle (degrees) whose cosine is s = r^T R^T v_i (clipped to [-1, 1] against
     round-off).
     """
-    return np.degrees(np.arccos(np.clip(s, -1.0, 1.0)))
+    return cast(FloatArray, np.degrees(np.arccos(np.clip(s, -1.0, 1.0))))
 
 
 class ConeEval:
@@ -65,25 +69,27 @@ class ConeEval:
 
     __slots__ = ('s', 'B', 'cross', 'weight', 'violated', 'saturated', 'any_saturated', '_e_RB')
 
-    def __init__(self, s, B, cross, weight, violated, saturated, any_saturated, e_RB=None):
+    def __init__(self, s: FloatArray, B: FloatArray, cross: FloatArray, weight: FloatArray,
+                 violated: BoolArray, saturated: BoolArray, any_saturated: Flags,
+                 e_RB: Optional[FloatArray] = None) -> None:
         self.s, self.B, self.cross, self.weight = s, B, cross, weight
         self.violated, self.saturated, self.any_saturated = violated, saturated, any_saturated
         self._e_RB = e_RB
 
     @property
-    def e_RB(self) -> np.ndarray:
+    def e_RB(self) -> FloatArray:
         if self._e_RB is None:
             self._e_RB = self.cross * self.weight[..., None]
         return self._e_RB
 
     @property
-    def e_RB_sum(self) -> np.ndarray:
+    def e_RB_sum(self) -> FloatArray:
         """sum_i e_RB,i (per run of a batch)."""
         if self._e_RB is None:
             return vecmat(self.weight, self.cross)
-        return self._e_RB.sum(axis=-2)
+        return cast(FloatArray, self._e_RB.sum(axis=-2))
 
-    def margins_deg(self, half_angles_deg: np.ndarray) -> np.ndarray:
+    def margins_deg(self, half_angles_deg: FloatArray) -> FloatArray:
         """Angle between R r and v_i minus theta_i, degrees (negative inside the cone)."""
         return angle_deg(self.s) - half_angles_deg
 
@@ -91,8 +97,9 @@ class ConeEval:
 class ConeSet:
     """Any number of forbidden cones (possibly none) for one body-fixed sensor axis."""
 
-    def __init__(self, sensor_axis, axes, half_angles_rad, alpha, floor_rad, names=None,
-                 guard_rad=0.0):
+    def __init__(self, sensor_axis: npt.ArrayLike, axes: npt.ArrayLike,
+                 half_angles_rad: npt.ArrayLike, alpha: float, floor_rad: float,
+                 names: Optional[Iterable[str]] = None, guard_rad: float = 0.0) -> None:
         """Build the set; inputs are assumed validated (see ``geoctl_ros.params``).
 
         sensor_axis: r, body frame (normalised here). axes: (n, 3) world-frame cone axes
@@ -123,14 +130,14 @@ class ConeSet:
         self._B_offset = 1.0 + np.log(self.log_scale) / self.alpha
         self._inv_alpha = 1.0 / self.alpha
         self._inv_alpha_g0 = 1.0 / (self.alpha * self.g0)
-        self.theta_deg = np.degrees(self.theta)
+        self.theta_deg: FloatArray = np.degrees(self.theta)
         self.e_RB_inside = np.sin(self.theta_b) / (self.alpha * self.g0)   # |e_RB,i| in cone i
         least = int(np.argmin(np.abs(self.r)))
         perp = np.cross(self.r, np.eye(3)[least])
         self._r_perp = perp / np.linalg.norm(perp)  # fallback direction on a cone's axis
 
-    def __len__(self):
-        return self.theta.shape[-1]
+    def __len__(self) -> int:
+        return cast(int, self.theta.shape[-1])
 
     @property
     def band_deg(self) -> float:
@@ -140,23 +147,23 @@ class ConeSet:
         """
         return math.degrees(self.guard + self.floor)
 
-    def axes_in_body(self, R: np.ndarray) -> np.ndarray:
+    def axes_in_body(self, R: FloatArray) -> FloatArray:
         """The cones' axes in the body frame at R: rows b_i = R^T v_i ((..., n, 3); per run of a
         batch), the same float operations for one run and a batch (no BLAS).
         """
         return vecmat(self.V, R[..., None, :, :])
 
-    def terms(self, R: np.ndarray) -> np.ndarray:
+    def terms(self, R: FloatArray) -> FloatArray:
         """(n, 4) per cone: s_i = r^T R^T v_i, then (R^T v_i) x r; both linear in R (the control
         step evaluates them as part of one precomputed linear map, see ``core.law.control``).
         """
         return matmul(self.V, matmul(R, self._r_cols))
 
-    def evaluate(self, R: np.ndarray) -> 'ConeEval':
+    def evaluate(self, R: FloatArray) -> 'ConeEval':
         """Barrier values, gradients and flags at attitude R."""
         return self.evaluate_terms(self.terms(R))
 
-    def widened(self, extra_rad: Any) -> tuple:
+    def widened(self, extra_rad: Scalars) -> Widened:
         """The barrier's constants for every cone widened by extra_rad more (an array of one
         angle per cone, or per run and cone): cos, floor gap, B offset, 1 / (alpha g0) and the
         inside field's magnitude, as ``evaluate_terms`` takes them.
@@ -167,7 +174,7 @@ class ConeSet:
         return (cos_theta, g0, 1.0 + np.log(1.0 + cos_theta) / self.alpha,
                 1.0 / (self.alpha * g0), np.sin(theta_b) / (self.alpha * g0))
 
-    def evaluate_terms(self, sc: np.ndarray, widened: Optional[tuple] = None) -> 'ConeEval':
+    def evaluate_terms(self, sc: FloatArray, widened: Optional[Widened] = None) -> 'ConeEval':
         """Barrier values, gradients and flags from ``terms(R)``; widened: None, or the constants
         of ``widened(extra)`` for a barrier on wider cones (margins and violations are still
         against the real cones).
@@ -199,14 +206,14 @@ class ConeSet:
                     else s >= self.cos_real)
         return ConeEval(s, B, cross, weight, violated, saturated, any_saturated, e_RB)
 
-    def _inside_field(self, cross, magnitude):
+    def _inside_field(self, cross: FloatArray, magnitude: FloatArray) -> FloatArray:
         """e_RB for cones the sensor is in: the boundary's magnitude, away from the axis."""
         n = np.linalg.norm(cross, axis=-1)
-        unit = np.where((n > 1e-12)[:, None], cross / np.maximum(n, 1e-12)[:, None],
+        unit: FloatArray = np.where((n > 1e-12)[:, None], cross / np.maximum(n, 1e-12)[:, None],
                         self._r_perp[None, :])
         return -unit * magnitude[:, None]
 
-    def cosines(self, R: np.ndarray) -> np.ndarray:
+    def cosines(self, R: FloatArray) -> FloatArray:
         """s_i = v_i . R r per cone: the cosine of the angle between the sensor's world direction
         and each cone's axis, for R or a stack of them (any leading axes before the batch's).
 
@@ -218,20 +225,20 @@ class ConeSet:
         r = self.r
         d = R[..., :, 0] * r[0] + R[..., :, 1] * r[1] + R[..., :, 2] * r[2]     # R r
         V = self.V
-        return (V[..., 0] * d[..., None, 0] + V[..., 1] * d[..., None, 1]
-                + V[..., 2] * d[..., None, 2])
+        return cast(FloatArray, V[..., 0] * d[..., None, 0] + V[..., 1] * d[..., None, 1]
+                    + V[..., 2] * d[..., None, 2])
 
-    def angles_deg(self, R: np.ndarray) -> np.ndarray:
+    def angles_deg(self, R: FloatArray) -> FloatArray:
         """Angle between the sensor's world direction R r and each cone axis, degrees."""
         return angle_deg(self.cosines(R))
 
-    def closest(self, margins_deg: np.ndarray) -> Tuple[str, float]:
+    def closest(self, margins_deg: FloatArray) -> Tuple[str, float]:
         """The cone the sensor is closest to, by its margins (deg, one per cone; one run), and
         that margin: (name, margin).
         """
         i = int(np.argmin(margins_deg))
         return self.names[i], float(margins_deg[i])
 
-    def margins_deg(self, R: np.ndarray) -> np.ndarray:
+    def margins_deg(self, R: FloatArray) -> FloatArray:
         """Cone margins (angle to axis minus half-angle, degrees) at attitude R."""
         return self.angles_deg(R) - self.theta_deg

@@ -3,17 +3,19 @@ attractive error A and its gradient e_RA, the cones' barrier folded in (Psi, e_R
 linear map of R, and the barrier's widening by the blind time.
 """
 
-from typing import Any, Optional, Tuple
+from typing import Optional, Tuple, cast
 
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.core.geometry.so3 import matvec, transpose, vee
+from geoctl_ros.core.geometry.so3 import FloatArray, Scalars, matvec, transpose, vee
 from geoctl_ros.core.law.cones import ConeEval
+from geoctl_ros.core.law.controller_config import ControllerConfig
 from geoctl_ros.core.law.mechanics import gravity_moment
 
 
-def attractive_error(R: np.ndarray, R_d: np.ndarray, G: np.ndarray) -> Tuple[Any, np.ndarray]:
+def attractive_error(R: FloatArray, R_d: FloatArray,
+                     G: FloatArray) -> Tuple[Scalars, FloatArray]:
     """A (eq. 13) and e_RA (eq. 15) for the diagonal weights G (3,)."""
     RdtR = so3.matmul(transpose(R_d), R)
     A = 0.5 * so3.dot(1.0 - np.diagonal(RdtR, 0, -2, -1), G)
@@ -21,7 +23,7 @@ def attractive_error(R: np.ndarray, R_d: np.ndarray, G: np.ndarray) -> Tuple[Any
     return A, 0.5 * vee(M - transpose(M))
 
 
-def with_cones(A: Any, e_RA: np.ndarray, ev: ConeEval) -> Tuple[Any, np.ndarray]:
+def with_cones(A: FloatArray, e_RA: FloatArray, ev: ConeEval) -> Tuple[Scalars, FloatArray]:
     """Psi = A (1 + sum_i (B_i - 1)) and e_R = e_RA (1 + sum_i (B_i - 1)) + A sum_i e_RB,i from
     A (with a trailing axis of 1), e_RA and the cones' evaluation.
     """
@@ -36,33 +38,33 @@ def with_cones(A: Any, e_RA: np.ndarray, ev: ConeEval) -> Tuple[Any, np.ndarray]
 _BASIS = np.eye(9).reshape(9, 3, 3)       # the unit matrices E_jk
 
 
-def linear_terms(R: np.ndarray, R_d: np.ndarray, config: Any) -> np.ndarray:
+def linear_terms(R: FloatArray, R_d: FloatArray, config: ControllerConfig) -> FloatArray:
     """The parts of the law that are affine in R, side by side (..., 5 + 4 n): A, e_RA (3), for
     each cone s_i and (R^T v_i) x r (``ConeSet.terms``), and the gravity moment M_g (3).
     """
     A, e_RA = attractive_error(R, R_d, config.G)
     sc = config.cones.terms(R)
     M_g = gravity_moment(R, config.m_rho, config.gravity)
-    parts = [A[..., None], e_RA, sc.reshape(sc.shape[:-2] + (-1,)), M_g]
+    parts = [cast(FloatArray, A)[..., None], e_RA, sc.reshape(sc.shape[:-2] + (-1,)), M_g]
     batch = np.broadcast_shapes(*(p.shape[:-1] for p in parts))
     return np.concatenate([np.broadcast_to(p, batch + p.shape[-1:]) for p in parts], axis=-1)
 
 
-def approach_rates(sc: np.ndarray, Omega: np.ndarray) -> np.ndarray:
+def approach_rates(sc: FloatArray, Omega: FloatArray) -> FloatArray:
     """Per cone, how fast the sensor's angle to the cone's axis is closing (rad/s; negative when
     it opens), from ``ConeSet.terms`` (s_i, (R^T v_i) x r) and Omega: with s_i = cos(phi_i),
     d/dt s_i = -Omega . ((R^T v_i) x r) and sin(phi_i) = |(R^T v_i) x r|.
     """
     cross = sc[..., 1:]
     sin_phi = np.sqrt(so3.dot(cross, cross))
-    return -so3.dot(cross, Omega[..., None, :]) / np.maximum(sin_phi, 1e-9)
+    return cast(FloatArray, -so3.dot(cross, Omega[..., None, :]) / np.maximum(sin_phi, 1e-9))
 
 
 WIDEN_GAP_SHARE = 0.5     # the widening takes at most this share of the gap to a cone's barrier
 
 
-def blind_widening(sc: np.ndarray, Omega: np.ndarray, blind: Any, widening_max: float,
-                   theta_b: Optional[np.ndarray] = None) -> np.ndarray:
+def blind_widening(sc: FloatArray, Omega: FloatArray, blind: Scalars, widening_max: float,
+                   theta_b: Optional[FloatArray] = None) -> FloatArray:
     """How much wider (rad) the barrier's cones are for a loop blind for ``blind`` seconds (one
     per run of a batch): what the sensor travels towards each cone in that time at its present
     approach rate, at most widening_max and, given the barrier's half-angles theta_b, at most
@@ -74,7 +76,7 @@ def blind_widening(sc: np.ndarray, Omega: np.ndarray, blind: Any, widening_max: 
     if theta_b is not None:
         gap = np.arccos(np.clip(sc[..., 0], -1.0, 1.0)) - theta_b
         travel = np.minimum(travel, WIDEN_GAP_SHARE * gap)
-    return np.clip(travel, 0.0, widening_max)
+    return cast(FloatArray, np.clip(travel, 0.0, widening_max))
 
 
 class LinearMap:
@@ -85,7 +87,7 @@ class LinearMap:
     instead of a dozen numpy calls (docs/speed.md).
     """
 
-    def __init__(self, R_d, config):
+    def __init__(self, R_d: FloatArray, config: ControllerConfig) -> None:
         lead = np.broadcast_shapes(R_d.shape[:-2], config.cones.V.shape[:-2])     # the batch
         self.y0 = linear_terms(np.zeros((3, 3)), R_d, config)
         basis = _BASIS.reshape((9,) + (1,) * len(lead) + (3, 3))
@@ -93,11 +95,11 @@ class LinearMap:
         self.L = np.ascontiguousarray(np.moveaxis(terms, 0, -1))
         self.n_cones = len(config.cones)
 
-    def __call__(self, R):
+    def __call__(self, R: FloatArray) -> FloatArray:
         """The terms y = linear_terms(R, R_d, config), to rounding."""
         return matvec(self.L, R.reshape(R.shape[:-2] + (9,))) + self.y0
 
-    def retargeted(self, R_d: np.ndarray, G: np.ndarray) -> 'LinearMap':
+    def retargeted(self, R_d: FloatArray, G: FloatArray) -> 'LinearMap':
         """This map for another set point R_d (guidance's next): only A and e_RA, its first four
         rows, depend on the set point, so only they are evaluated again, by ``attractive_error``
         on the same basis (the same bits as a map built anew, at a third of the cost).

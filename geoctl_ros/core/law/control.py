@@ -34,14 +34,14 @@ and model are shared by the batch. (``x.T`` on a stack of vectors puts the batch
 ``(x.T * a).T`` scales each run's vector by its own scalar and a single vector by a scalar.)
 """
 import math
-from typing import Any, Optional
+from typing import Literal, Optional, Union, cast
 
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.flags import any_flag
-from geoctl_ros.core.geometry.so3 import cross, matvec, transpose
-from geoctl_ros.core.law.brake import ApproachBrake
+from geoctl_ros.core.geometry.so3 import BoolArray, FloatArray, Scalars, cross, matvec, transpose
+from geoctl_ros.core.law.brake import ApproachBrake, BrakeInputs
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.configuration_error import (
     LinearMap,
@@ -65,7 +65,7 @@ class SetpointRejected(ValueError):
 class AttitudeController:
     """The controller's state (estimate, set point) and its pure-math step."""
 
-    def __init__(self, config):
+    def __init__(self, config: ControllerConfig) -> None:
         self._set_config(config)
         self.delta_bar = np.zeros(config.n_params)
         self.R_d = np.eye(3)
@@ -74,17 +74,17 @@ class AttitudeController:
         self._tracking = False      # Omega_d or its derivative nonzero
 
     @property
-    def R_d(self) -> np.ndarray:
+    def R_d(self) -> FloatArray:
         """The desired attitude (a stack of them for a batch); setting it rebuilds the linear
         map.
         """
         return self._R_d
 
     @R_d.setter
-    def R_d(self, R_d: np.ndarray) -> None:
+    def R_d(self, R_d: FloatArray) -> None:
         self._R_d = R_d
         self._linear = LinearMap(R_d, self.config)
-        self._carrot = None
+        self._carrot: Optional[FloatArray] = None
         if self.guidance is not None:
             self.guidance.reset()
 
@@ -96,14 +96,14 @@ class AttitudeController:
             self._carrot = None
 
     # --- configuration-time operations -------------------------------------------------------
-    def setpoint_problem(self, R_d: np.ndarray, cones: Optional[ConeSet] = None) -> Optional[str]:
+    def setpoint_problem(self, R_d: FloatArray, cones: Optional[ConeSet] = None) -> Optional[str]:
         """Why R_d cannot be a set point (a sentence), or None if it can (with this
         configuration's cones, or the given ones).
         """
         return setpoint_problem(self.config, self.config.cones if cones is None else cones, R_d)
 
-    def set_setpoint(self, R_d: np.ndarray, Omega_d: Optional[np.ndarray] = None,
-                     dOmega_d: Optional[np.ndarray] = None) -> None:
+    def set_setpoint(self, R_d: FloatArray, Omega_d: Optional[FloatArray] = None,
+                     dOmega_d: Optional[FloatArray] = None) -> None:
         """Set the desired attitude (and optionally its angular velocity and acceleration, body
         frame of R_d). Raises SetpointRejected with the reason; the old set point then stays.
         """
@@ -142,20 +142,21 @@ class AttitudeController:
         """The model's dynamics with the estimate in force (``core.law.dynamics``)."""
         return Dynamics(self.config, self.J_inv, self.delta_bar)
 
-    def regressor(self, R: np.ndarray) -> Optional[np.ndarray]:
+    def regressor(self, R: FloatArray) -> Optional[FloatArray]:
         """W(R): ``Dynamics.regressor``."""
         return self.dynamics.regressor(R)
 
-    def gravity_moment(self, R: np.ndarray) -> np.ndarray:
+    def gravity_moment(self, R: FloatArray) -> FloatArray:
         """The model's gravity moment at R (about the pivot, body frame)."""
         return self.dynamics.gravity_moment(R)
 
-    def model_moment(self, R: np.ndarray, Omega: np.ndarray, M_g: Optional[np.ndarray] = None,
-                     W: Any = False, delta_bar: Optional[np.ndarray] = None) -> np.ndarray:
+    def model_moment(self, R: FloatArray, Omega: FloatArray, M_g: Optional[FloatArray] = None,
+                     W: Union[Literal[False], Optional[FloatArray]] = False,
+                     delta_bar: Optional[FloatArray] = None) -> FloatArray:
         """The model's moment about the pivot besides the rotors': ``Dynamics.moment``."""
         return self.dynamics.moment(R, Omega, M_g, W, delta_bar)
 
-    def feedforward(self, R: np.ndarray) -> np.ndarray:
+    def feedforward(self, R: FloatArray) -> FloatArray:
         """The moment that holds the model at rest at R: -(M_g(R) + W Delta_bar) (the law's
         feed-forward; the rotors spool up to it while the vehicle is held).
         """
@@ -165,9 +166,9 @@ class AttitudeController:
             held = held + self.gravity_moment(R)
         return -held
 
-    def step(self, R: np.ndarray, Omega: np.ndarray, dt: float, adapt: bool = True,
-             blind: Any = 0.0, brake: Any = None, guide: bool = True,
-             gain_scale: Any = 1.0) -> ControlOutput:
+    def step(self, R: FloatArray, Omega: FloatArray, dt: float, adapt: bool = True,
+             blind: Scalars = 0.0, brake: Optional[BrakeInputs] = None, guide: bool = True,
+             gain_scale: Scalars = 1.0) -> ControlOutput:
         """One control step at attitude R and body angular velocity Omega, by the configured law
         (``config.law``, one of ``LAWS``): its configuration error (``terms``, with the cones'
         barrier or without), the geometric moment with the estimate in force (``moment``), the
@@ -200,7 +201,7 @@ class AttitudeController:
         return law.filter(out, terms, R, Omega, self.law_model,
                           brake if self.brake is not None else None)
 
-    def _follow(self, R: np.ndarray) -> None:
+    def _follow(self, R: FloatArray) -> None:
         """Move the law's set point along guidance's path (``core.law.guidance``): its linear map
         is rebuilt only when the set point moves. (By the set point itself, not its index on the
         path: a path planned again can put another set point at the same index.)
@@ -213,7 +214,7 @@ class AttitudeController:
             self._carrot = carrot.copy()
 
     # --- the pieces every law is made of -------------------------------------------------------
-    def terms(self, R: np.ndarray, Omega: np.ndarray, blind: Any = 0.0) -> StepTerms:
+    def terms(self, R: FloatArray, Omega: FloatArray, blind: Scalars = 0.0) -> StepTerms:
         """The step's terms at (R, Omega): ``StepTerms`` (the attractive error, the cones
         evaluated, widened by the blind time when it is given, and the gravity moment).
         """
@@ -229,9 +230,9 @@ class AttitudeController:
         ev = cfg.cones.evaluate_terms(sc, widened)
         return StepTerms(y[..., 0:1], y[..., 1:4], ev, y[..., -3:], self.regressor(R))
 
-    def moment(self, R: np.ndarray, Omega: np.ndarray, adapt: bool, terms: StepTerms,
-               psi: Any, e_R: np.ndarray, barrier: bool = True,
-               gain_scale: Any = 1.0) -> ControlOutput:
+    def moment(self, R: FloatArray, Omega: FloatArray, adapt: bool, terms: StepTerms,
+               psi: Scalars, e_R: FloatArray, barrier: bool = True,
+               gain_scale: Scalars = 1.0) -> ControlOutput:
         """The geometric law's moment for the configuration error (psi, e_R) with the estimate in
         force, and whether the estimate adapts this step (``adapting``, per run: adapt, and no
         barrier saturated where the error carries the barrier): ``ControlOutput``. gain_scale:
@@ -248,8 +249,11 @@ class AttitudeController:
         W = terms.W
         delta_bar = self.delta_bar.copy()
         g = gain_scale                          # past the delay bound, below 1 (DegradedMode)
+        k_R: Scalars
+        k_Omega: Scalars
         if np.ndim(g):                          # one per run of a batch
-            k_R, k_Omega = (cfg.k_R * g * g)[..., None], (cfg.k_Omega * g)[..., None]
+            k_R, k_Omega = (cast(FloatArray, cfg.k_R * g * g)[..., None],
+                            cast(FloatArray, cfg.k_Omega * g)[..., None])
         else:
             k_R, k_Omega = cfg.k_R * g * g, cfg.k_Omega * g
         u = cross(Omega, matvec(cfg.J, Omega)) - k_R * e_R - k_Omega * e_Omega
@@ -266,7 +270,7 @@ class AttitudeController:
         return ControlOutput(u, e_R, e_Omega, psi, delta_bar, violated, saturated,
                              adapting, ev, cfg.cones.theta_deg)
 
-    def adapt(self, out: ControlOutput, W: Optional[np.ndarray], dt: float) -> None:
+    def adapt(self, out: ControlOutput, W: Optional[FloatArray], dt: float) -> None:
         """The adaptive law's step (eq. 39), explicit Euler over dt: Delta_bar += dt Gamma W^T
         (e_Omega + c e_R) for the runs that adapt (``out.adapting``; W the step's regressor,
         None for the constant model), then projected onto its balls.
@@ -279,11 +283,11 @@ class AttitudeController:
         rate = (dt * cfg.k_Delta) * v if W is None else dt * (
             self._gamma * matvec(transpose(W), v))
         if rate.ndim > 1:                       # a batch: only the runs that adapt
-            rate *= adapting[..., None]
+            rate *= cast(BoolArray, adapting)[..., None]
         self.delta_bar += rate
         self._project()
 
-    def _project(self):
+    def _project(self) -> None:
         """Project each block of the estimate onto its ball (bounds of 0 mean unbounded)."""
         for block, bound in self._balls:
             part = self.delta_bar[..., block]
@@ -291,7 +295,7 @@ class AttitudeController:
             if any_flag(n2 > bound * bound):
                 part *= (bound / np.maximum(np.sqrt(n2), bound))[..., None]
 
-    def _set_config(self, config):
+    def _set_config(self, config: ControllerConfig) -> None:
         self.config = config
         g = math.sqrt(so3.dot(config.gravity, config.gravity))
         self.guidance = (Guidance(config.guidance_lookahead, config.guidance_clearance,

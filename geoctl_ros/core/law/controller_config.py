@@ -3,12 +3,12 @@ and validated by ``geoctl_ros.params``; notation as ``geoctl_ros.core.law.contro
 """
 from dataclasses import dataclass, field
 import math
-from typing import Any, Optional
+from typing import Optional
 
-import numpy as np
-
+from geoctl_ros.core.geometry.so3 import FloatArray
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.mechanics import first_moment, pivot_inertia
+from geoctl_ros.core.law.projection import Polytope
 
 # Disturbance models: name -> number of estimated parameters (the columns of W).
 #   constant:      W = I,                     Delta = a constant moment (the paper's case)
@@ -24,12 +24,12 @@ class ControllerConfig:
     k_Omega: float
     k_Delta: float
     c: float
-    G: np.ndarray                    # (3,) diagonal weights g1, g2, g3
+    G: FloatArray                    # (3,) diagonal weights g1, g2, g3
     cones: ConeSet
-    inertia: np.ndarray              # (3, 3) about the centre of mass, kg m^2
+    inertia: FloatArray              # (3, 3) about the centre of mass, kg m^2
     mass: float                      # kg
-    cog_offset: np.ndarray           # pivot -> centre of mass, body frame, m
-    gravity: np.ndarray              # world frame, m/s^2
+    cog_offset: FloatArray           # pivot -> centre of mass, body frame, m
+    gravity: FloatArray              # world frame, m/s^2
     adaptive: bool = True
     gravity_compensation: bool = True
     disturbance_model: str = 'constant'
@@ -51,13 +51,13 @@ class ControllerConfig:
     gyro_noise: float = 0.0           # rad/s, the gyro's standard deviation
     tilt_max: float = math.pi         # rad, the joint's tilt limit (its stops)
     motor_lag: float = 0.0            # s, the rotors' thrust time constant the mixer models
-    moment_limits: Optional[Any] = None   # MomentPolytope: the moments the rotors make
-                                          # unsaturated (``Allocator.moment_polytope``); the
-                                          # brake and the cbf law's QP keep them
-    J: np.ndarray = field(init=False, repr=False)        # inertia about the pivot
-    m_rho: np.ndarray = field(init=False, repr=False)    # mass times pivot -> centre of mass
+    moment_limits: Optional[Polytope] = None   # the moments the rotors make unsaturated
+                                          # (``Allocator.moment_polytope``); the brake and the
+                                          # cbf law's QP keep them
+    J: FloatArray = field(init=False, repr=False)        # inertia about the pivot
+    m_rho: FloatArray = field(init=False, repr=False)    # mass times pivot -> centre of mass
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         object.__setattr__(self, 'J', pivot_inertia(self.inertia, self.mass, self.cog_offset))
         object.__setattr__(self, 'm_rho', first_moment(self.mass, self.cog_offset))
 

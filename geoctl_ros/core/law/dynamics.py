@@ -3,11 +3,11 @@
 Delta_bar in force. The control step's feed-forward and the delay prediction both evaluate it;
 neither needs the controller for it. Notation as ``geoctl_ros.core.law.control``'s.
 """
-from typing import Any, NamedTuple, Optional
+from typing import Literal, NamedTuple, Optional, Union
 
 import numpy as np
 
-from geoctl_ros.core.geometry.so3 import cross, matvec
+from geoctl_ros.core.geometry.so3 import FloatArray, cross, matvec
 from geoctl_ros.core.law.controller_config import ControllerConfig
 from geoctl_ros.core.law.mechanics import cog_regressor, gravity_moment
 
@@ -19,10 +19,10 @@ class Dynamics(NamedTuple):
     """The model's dynamics with an estimate (see the module)."""
 
     config: ControllerConfig
-    J_inv: np.ndarray
-    delta_bar: np.ndarray         # the estimate in force (the controller's own array)
+    J_inv: FloatArray
+    delta_bar: FloatArray         # the estimate in force (the controller's own array)
 
-    def regressor(self, R: np.ndarray) -> Optional[np.ndarray]:
+    def regressor(self, R: FloatArray) -> Optional[FloatArray]:
         """W(R): 3 x n_params (a stack of them for a batch); None for the constant model, where
         W = I.
         """
@@ -33,12 +33,13 @@ class Dynamics(NamedTuple):
             return np.concatenate((_EYE3, Y), axis=1)
         return np.concatenate((np.broadcast_to(_EYE3, Y.shape), Y), axis=-1)
 
-    def gravity_moment(self, R: np.ndarray) -> np.ndarray:
+    def gravity_moment(self, R: FloatArray) -> FloatArray:
         """The model's gravity moment at R (about the pivot, body frame)."""
         return gravity_moment(R, self.config.m_rho, self.config.gravity)
 
-    def moment(self, R: np.ndarray, Omega: np.ndarray, M_g: Optional[np.ndarray] = None,
-               W: Any = False, delta_bar: Optional[np.ndarray] = None) -> np.ndarray:
+    def moment(self, R: FloatArray, Omega: FloatArray, M_g: Optional[FloatArray] = None,
+               W: Union[Literal[False], Optional[FloatArray]] = False,
+               delta_bar: Optional[FloatArray] = None) -> FloatArray:
         """The model's moment about the pivot besides the rotors': M_g(R) + W Delta_bar -
         Omega x J Omega (``delta_bar``: this estimate instead of the one in force). M_g, W: the
         gravity moment and regressor at R when the step has them (``StepTerms``; W False: not
@@ -52,9 +53,9 @@ class Dynamics(NamedTuple):
         return M_g + (d if W is None else matvec(W, d)) - cross(Omega,
                                                                 matvec(self.config.J, Omega))
 
-    def acceleration(self, R: np.ndarray, Omega: np.ndarray, moment: np.ndarray,
-                     delta_bar: Optional[np.ndarray] = None, M_g: Optional[np.ndarray] = None,
-                     W: Any = False) -> np.ndarray:
+    def acceleration(self, R: FloatArray, Omega: FloatArray, moment: FloatArray,
+                     delta_bar: Optional[FloatArray] = None, M_g: Optional[FloatArray] = None,
+                     W: Union[Literal[False], Optional[FloatArray]] = False) -> FloatArray:
         """The model's angular acceleration at (R, Omega) under the rotors' moment (about the
         pivot): J^-1 (moment + ``moment``'s).
         """

@@ -3,12 +3,16 @@ cone that its barrier can hold the largest unmodelled moment near the goal (``se
 which the controller asks at every set point and reconfiguration, never on the hot path).
 """
 import math
-from typing import Any, Optional
+from typing import Optional, cast
 
 import numpy as np
 
+from geoctl_ros.core.geometry.so3 import FloatArray
+from geoctl_ros.core.law.cones import ConeSet
+from geoctl_ros.core.law.controller_config import ControllerConfig
 
-def smallest_pair_sum(G: np.ndarray) -> float:
+
+def smallest_pair_sum(G: FloatArray) -> float:
     """min_{i != j} (g_i + g_j): the least A can grow per (1 - cos) of a rotation's angle,
     A = (1 - cos phi) (tr G - n^T G n) / 2 (the paper's h_1).
     """
@@ -16,7 +20,7 @@ def smallest_pair_sum(G: np.ndarray) -> float:
     return float(g[0] + g[1])
 
 
-def holding_moment(config: Any, cones: Any, R_d: np.ndarray) -> np.ndarray:
+def holding_moment(config: ControllerConfig, cones: ConeSet, R_d: FloatArray) -> FloatArray:
     """Per cone: the largest moment its barrier can oppose near the cone, with the set point R_d.
 
     The repulsion k_R A e_RB,i is largest in the floor band (and inside, where it keeps the band's
@@ -35,16 +39,18 @@ def holding_moment(config: Any, cones: Any, R_d: np.ndarray) -> np.ndarray:
     return config.k_R * A_min * np.sin(cones.theta_b) / (cones.alpha * cones.g0)
 
 
-def holding_clearance_deg(config: Any, cones: Any, moment: float) -> np.ndarray:
+def holding_clearance_deg(config: ControllerConfig, cones: ConeSet,
+                          moment: float) -> FloatArray:
     """Per cone: the set point's clearance (degrees from the real cone) at which
     ``holding_moment`` equals moment.
     """
     x = (2.0 * moment * cones.alpha * cones.g0
          / (config.k_R * smallest_pair_sum(config.G) * np.sin(cones.theta_b)))
-    return np.degrees(np.arccos(np.clip(1.0 - x, -1.0, 1.0)) + cones.guard)
+    return cast(FloatArray, np.degrees(np.arccos(np.clip(1.0 - x, -1.0, 1.0)) + cones.guard))
 
 
-def setpoint_problem(config: Any, cones: Any, R_d: np.ndarray) -> Optional[str]:
+def setpoint_problem(config: ControllerConfig, cones: ConeSet,
+                     R_d: FloatArray) -> Optional[str]:
     """Why R_d cannot be a set point with these cones (a sentence), or None if it can."""
     if not np.all(np.isfinite(R_d)):
         return 'setpoint is not finite'

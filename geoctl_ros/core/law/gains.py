@@ -3,10 +3,10 @@ second bound) on the operating domain of Prop. 4: checked at configuration, repo
 """
 from dataclasses import dataclass
 import math
-from typing import Any
 
 import numpy as np
 
+from geoctl_ros.core.law.controller_config import ControllerConfig
 from geoctl_ros.core.law.feasibility import smallest_pair_sum
 
 
@@ -37,7 +37,7 @@ class GainCheck:
                                     self.c_max_dissertation, self.psi_max, self.margin_deg))
 
 
-def gain_condition(config: Any, margin_deg: float = 5.0) -> 'GainCheck':
+def gain_condition(config: ControllerConfig, margin_deg: float = 5.0) -> 'GainCheck':
     """Evaluate the bound on c of Prop. 5 (eq. 40 with "4k - R" read as 4 k_R, and the
     dissertation's second bound) on the domain D of Prop. 4.
 

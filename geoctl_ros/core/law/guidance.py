@@ -33,11 +33,13 @@ every run's set point at once.
 """
 import heapq
 import math
-from typing import Any, List, Optional
+from typing import List, Optional, Tuple, cast
 
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.so3 import FloatArray, IntArray, Scalars
+from geoctl_ros.core.law.cones import ConeSet
 
 RIM_POINTS = 48             # points on each cone's widened rim (7.5 deg apart)
 RIM_SLACK = math.radians(1.0)   # the rim's points lie this far outside the widened cone, so that
@@ -50,7 +52,7 @@ CAP_SLACK = math.radians(0.5)   # a joint cap keeps this far from a path's end i
 CAP_CLEARANCE = math.radians(2.0)   # the path keeps this far from the joint's caps
 
 
-def arc_clearance(a: np.ndarray, b: np.ndarray, axes: np.ndarray) -> np.ndarray:
+def arc_clearance(a: FloatArray, b: FloatArray, axes: FloatArray) -> FloatArray:
     """The smallest angle (rad) between each axis and the short great-circle arc from a to b:
     a and b unit vectors (..., 3) that broadcast together, axes unit (..., C, 3) broadcasting
     against them; returns (..., C).
@@ -72,21 +74,21 @@ def arc_clearance(a: np.ndarray, b: np.ndarray, axes: np.ndarray) -> np.ndarray:
     mid = np.arcsin(np.clip(np.abs(vn), 0.0, 1.0))
     ends = np.minimum(np.arccos(np.clip(so3.dot(a, axes), -1.0, 1.0)),
                       np.arccos(np.clip(so3.dot(b, axes), -1.0, 1.0)))
-    return np.where(inside, mid, ends)
+    return cast(FloatArray, np.where(inside, mid, ends))
 
 
-def _rim(axis: np.ndarray, radius: float, count: int) -> np.ndarray:
+def _rim(axis: FloatArray, radius: float, count: int) -> FloatArray:
     """count points at angle radius round the unit axis."""
     e1 = np.cross(axis, np.eye(3)[int(np.argmin(np.abs(axis)))])
     e1 /= math.sqrt(so3.dot(e1, e1))
     e2 = np.cross(axis, e1)
     phi = np.linspace(0.0, 2.0 * math.pi, count, endpoint=False)
-    return (math.cos(radius) * axis + math.sin(radius)
-            * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2))
+    return cast(FloatArray, math.cos(radius) * axis + math.sin(radius)
+                * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2))
 
 
-def sensor_path(d0: np.ndarray, d1: np.ndarray, axes: np.ndarray, rims: np.ndarray,
-                clearance: Any) -> Optional[List[np.ndarray]]:
+def sensor_path(d0: FloatArray, d1: FloatArray, axes: FloatArray, rims: FloatArray,
+                clearance: Scalars) -> Optional[List[FloatArray]]:
     """The shortest way on the sphere from d0 to d1 that keeps every cone i (unit axis axes[i],
     the barrier's half-angle rims[i]) at least rims[i] + clearance away (one clearance, or one
     per cone): the corner points, d0
@@ -118,14 +120,14 @@ def sensor_path(d0: np.ndarray, d1: np.ndarray, axes: np.ndarray, rims: np.ndarr
     return [X[0]] + way[::-1]
 
 
-def _cosines(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+def _cosines(X: FloatArray, Y: FloatArray) -> FloatArray:
     """X Y^T for unit vectors X (N, 3) and Y (C, 3): (N, C), entry by entry (not through BLAS,
     whose kernels round by the CPU: a plan, and every decision on it, would differ by machine).
     """
-    return so3.dot(X[:, None, :], Y[None, :, :])
+    return cast(FloatArray, so3.dot(X[:, None, :], Y[None, :, :]))
 
 
-def _dijkstra(cost: np.ndarray, start: int) -> np.ndarray:
+def _dijkstra(cost: FloatArray, start: int) -> IntArray:
     """The predecessor of each node on its shortest way from start (-1: no way) on the dense
     cost matrix (inf: no edge).
     """
@@ -149,7 +151,7 @@ def _dijkstra(cost: np.ndarray, start: int) -> np.ndarray:
     return previous
 
 
-def upright(d: np.ndarray, r: np.ndarray, up: np.ndarray) -> np.ndarray:
+def upright(d: FloatArray, r: FloatArray, up: FloatArray) -> FloatArray:
     """The attitude that points the body-fixed r along the unit d with the body's z axis as
     near up as it can be (R r = d, R e3 on the cone of half-angle angle(r, e3) round d, on the
     side of up): its tilt is |elevation of d - elevation of r in the body|, the least any
@@ -178,7 +180,7 @@ def upright(d: np.ndarray, r: np.ndarray, up: np.ndarray) -> np.ndarray:
                       for j in range(3)] for i in range(3)])
 
 
-def _turn_about(d: np.ndarray, R: np.ndarray, base: np.ndarray) -> float:
+def _turn_about(d: FloatArray, R: FloatArray, base: FloatArray) -> float:
     """The angle psi (rad, in (-pi, pi]) with R = exp(psi d) base, for attitudes R and base that
     both point the sensor along d (their difference is a turn about d).
     """
@@ -186,9 +188,9 @@ def _turn_about(d: np.ndarray, R: np.ndarray, base: np.ndarray) -> float:
     return float(so3.dot(w, d))
 
 
-def attitude_path(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray,
-                  corners: List[np.ndarray], up: np.ndarray,
-                  tilt_max: float = math.pi) -> np.ndarray:
+def attitude_path(R0: FloatArray, R_goal: FloatArray, r: FloatArray,
+                  corners: List[FloatArray], up: FloatArray,
+                  tilt_max: float = math.pi) -> FloatArray:
     """The attitudes along the sensor's path through corners (unit vectors, R0 r first and
     R_goal r last), at most PATH_STEP apart: (K, 3, 3), R0 first and R_goal last. At each point
     the most upright attitude (``upright``), turned about the sensor by the start's turn from
@@ -228,7 +230,7 @@ def attitude_path(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray,
     return _filled(path)
 
 
-def _filled(path: np.ndarray) -> np.ndarray:
+def _filled(path: FloatArray) -> FloatArray:
     """The path with attitudes put in, PATH_STEP apart at most, along the shortest turn between
     neighbours more than twice that apart (where the stops' limit on the turn about the sensor
     changes the turn faster than the sensor moves: the lift off the stops at the start), so that
@@ -243,8 +245,8 @@ def _filled(path: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
-def twist_within(bases: List[np.ndarray], d: np.ndarray, up: np.ndarray,
-                 tilt: float) -> np.ndarray:
+def twist_within(bases: List[FloatArray], d: FloatArray, up: FloatArray,
+                 tilt: float) -> FloatArray:
     """The largest turn psi (rad, >= 0) about each sensor direction d[k] that keeps the body's
     z axis of exp(+-psi d[k]) bases[k] within tilt (rad) of up; 0 where even the upright
     attitude bases[k] (``upright``) is tilted further. With z = bases[k] e3 split into a part
@@ -258,10 +260,11 @@ def twist_within(bases: List[np.ndarray], d: np.ndarray, up: np.ndarray,
     gap = math.cos(tilt) - a
     # (b = 0: d along up, the tilt the same at every turn: any turn, or none)
     c = np.where(b > 1e-12, gap / np.maximum(b, 1e-12), np.where(gap <= 0.0, -1.0, 1.0))
-    return np.arccos(np.clip(c, -1.0, 1.0))
+    return cast(FloatArray, np.arccos(np.clip(c, -1.0, 1.0)))
 
 
-def joint_caps(up: np.ndarray, r: np.ndarray, tilt_max: float, ends: np.ndarray) -> tuple:
+def joint_caps(up: FloatArray, r: FloatArray, tilt_max: float,
+               ends: FloatArray) -> Tuple[FloatArray, FloatArray]:
     """The sensor directions the joint's stops keep the body from (its z axis at most tilt_max
     from up): above the elevation of r in the body plus tilt_max and below it less tilt_max, as
     two cones round up and down for the planner ((axes (k, 3), half-angles (k,)); none where the
@@ -282,9 +285,9 @@ def joint_caps(up: np.ndarray, r: np.ndarray, tilt_max: float, ends: np.ndarray)
     return np.array(axes).reshape(-1, 3), np.array(rims)
 
 
-def plan(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray, axes: np.ndarray,
-         rims: np.ndarray, clearance: float, up: Optional[np.ndarray] = None,
-         tilt_max: float = math.pi) -> np.ndarray:
+def plan(R0: FloatArray, R_goal: FloatArray, r: FloatArray, axes: FloatArray,
+         rims: FloatArray, clearance: float, up: Optional[FloatArray] = None,
+         tilt_max: float = math.pi) -> FloatArray:
     """The attitudes from R0 to R_goal round the cones (``sensor_path``, ``attitude_path``) and
     within the joint's stops (``joint_caps``: up, the world's up; tilt_max, rad); where no way
     round exists, the goal alone (the law's barrier then decides).
@@ -306,7 +309,7 @@ def plan(R0: np.ndarray, R_goal: np.ndarray, r: np.ndarray, axes: np.ndarray,
     return attitude_path(R0, R_goal, r, corners, up, tilt_max)
 
 
-def _enters(corners: List[np.ndarray], axes: np.ndarray, rims: np.ndarray) -> bool:
+def _enters(corners: List[FloatArray], axes: FloatArray, rims: FloatArray) -> bool:
     """Whether the way through corners passes within CAP_CLEARANCE of a cap (axes, half-angles
     rims): each leg's closest approach to each cap's axis (``arc_clearance``).
     """
@@ -317,7 +320,7 @@ def _enters(corners: List[np.ndarray], axes: np.ndarray, rims: np.ndarray) -> bo
 class Guidance:
     """The set point fed along the planned path, for one run or a batch (see the module)."""
 
-    def __init__(self, lookahead: float, clearance: float, up: Optional[np.ndarray] = None,
+    def __init__(self, lookahead: float, clearance: float, up: Optional[FloatArray] = None,
                  tilt_max: float = math.pi):
         """lookahead: rad, how far ahead of the vehicle the set point may be; clearance: rad,
         how far outside each cone's barrier the path keeps; up: the world's up (unit); tilt_max:
@@ -331,17 +334,17 @@ class Guidance:
         # the path's points within the lookahead lie at most this many places ahead (its steps
         # turn the sensor at least PATH_STEP / 2, and the body at least as far)
         self.window = 2 * int(math.ceil(lookahead / PATH_STEP)) + 2
-        self.paths: Optional[np.ndarray] = None   # (runs, K, 3, 3), each padded with its goal
-        self.sensor: Optional[np.ndarray] = None  # (runs, K, 3): the sensor's direction on it
-        self.last: Optional[np.ndarray] = None    # (runs,): the goal's place on each path
-        self.sight: Optional[np.ndarray] = None   # (runs, K): the furthest point each one sees
-        self.index: Optional[np.ndarray] = None   # (runs,), the set point's place on its path
+        self.paths: Optional[FloatArray] = None   # (runs, K, 3, 3), each padded with its goal
+        self.sensor: Optional[FloatArray] = None  # (runs, K, 3): the sensor's direction on it
+        self.last: Optional[IntArray] = None      # (runs,): the goal's place on each path
+        self.sight: Optional[IntArray] = None     # (runs, K): the furthest point each one sees
+        self.index: Optional[IntArray] = None     # (runs,), the set point's place on its path
 
     def reset(self) -> None:
         """Forget the plan: the next set point is planned from where the vehicle is then."""
         self.paths = self.sensor = self.last = self.sight = self.index = None
 
-    def carrot(self, R: np.ndarray, R_goal: np.ndarray, cones: Any) -> np.ndarray:
+    def carrot(self, R: FloatArray, R_goal: FloatArray, cones: ConeSet) -> FloatArray:
         """The set point for the measured attitude R (one (3, 3) or a stack), with the goal
         R_goal and the ConeSet cones: from the path's point nearest the vehicle (its sensor's),
         the furthest point within the lookahead that the path's point sees (``_sight``), so that
@@ -359,13 +362,14 @@ class Guidance:
         far = np.flatnonzero(cos_now < self.cos_replan)
         if len(far):
             self._plan(Rs, goals, cones, far)
-        moving = np.flatnonzero(self.index < self.last)        # (the others hold their goal)
+        # (the others hold their goal)
+        moving = np.flatnonzero(self.index < cast(IntArray, self.last))
         if len(moving):
             self._advance(Rs[moving], moving, cones)
         P = self.paths[runs, self.index]
         return P[0] if single else P
 
-    def _advance(self, Rs, runs, cones):
+    def _advance(self, Rs: FloatArray, runs: IntArray, cones: ConeSet) -> None:
         """Move the set points of the runs (indices) along their paths (see ``carrot``). Near a
         cone the lookahead shrinks to LOOKAHEAD_PER_GAP times the sensor's gap to the cone's
         barrier rim (down to LOOKAHEAD_MIN): the pull, and with it the speed, falls as the sensor
@@ -391,14 +395,15 @@ class Guidance:
         # (never past its own goal, into the padding up to the batch's longest path: a shorter
         # plan of another run would leave it off the end)
         self.index[runs] = np.minimum(np.minimum(furthest, self.sight[runs, near]),
-                                      self.last[runs])
+                                      cast(IntArray, self.last)[runs])
 
-    def _plan(self, Rs, goals, cones, runs):
+    def _plan(self, Rs: FloatArray, goals: FloatArray, cones: ConeSet,
+              runs: IntArray) -> None:
         """Plan the paths of the runs (indices) from the attitudes Rs to their goals."""
         V, rims = _cone_rows(cones, np.arange(len(Rs)))
         new = {i: plan(Rs[i], goals[i], cones.r, V[i], rims[i], self.clearance, self.up,
                        self.tilt_max) for i in runs}
-        old = [] if self.paths is None else [self.paths[i, :self.last[i] + 1]
+        old = [] if self.paths is None else [self.paths[i, :cast(IntArray, self.last)[i] + 1]
                                              for i in range(len(Rs))]
         paths = [new[i] if i in new else old[i] for i in range(len(Rs))]
         K = max(len(p) for p in paths)
@@ -419,8 +424,8 @@ class Guidance:
         self.index = index
 
 
-def _sight(D: np.ndarray, V: np.ndarray, rims: np.ndarray, window: int,
-           clearance: float) -> np.ndarray:
+def _sight(D: FloatArray, V: FloatArray, rims: FloatArray, window: int,
+           clearance: float) -> IntArray:
     """Per run and path point k (D: the paths' sensor directions, (n, K, 3)), the furthest point
     j of the path within window places that k sees: the straight way from k to each point up to
     j keeps every cone (axes V (n, C, 3), barrier half-angles rims (n, C)) at its rim plus half
@@ -434,10 +439,10 @@ def _sight(D: np.ndarray, V: np.ndarray, rims: np.ndarray, window: int,
                    >= need[:, :, None] - 1e-9, axis=-1)                         # (n, K, W-1)
     blocked = np.cumsum(~clear, axis=-1) > 0          # from the first point it does not see
     seen = np.sum(~blocked, axis=-1)                  # how many points ahead it sees
-    return np.minimum(np.arange(K)[None, :] + np.maximum(seen, 1), K - 1)
+    return cast(IntArray, np.minimum(np.arange(K)[None, :] + np.maximum(seen, 1), K - 1))
 
 
-def _cone_rows(cones: Any, runs: np.ndarray) -> tuple:
+def _cone_rows(cones: ConeSet, runs: IntArray) -> Tuple[FloatArray, FloatArray]:
     """The cones' axes (m, C, 3) and barrier half-angles (m, C) of the runs (indices) of a
     batched ConeSet, or of its one set for each.
     """

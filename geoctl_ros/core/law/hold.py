@@ -12,19 +12,20 @@ import math
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.so3 import FloatArray
 
 # rad: how far inside the stops a hold keeps the body's z axis (a choice, not derived: clear of
 # the stops' spring, which a resting vehicle sinks into, and of the attitude's noise)
 STOP_CLEARANCE = math.radians(5.0)
 
 
-def tilt(R: np.ndarray, up: np.ndarray) -> float:
+def tilt(R: FloatArray, up: FloatArray) -> float:
     """The angle (rad) of the body's z axis (R e3) from up (unit, world frame)."""
     z = R[:, 2]
     return math.atan2(float(np.linalg.norm(so3.cross(z, up))), float(so3.dot(z, up)))
 
 
-def hold_attitude(R: np.ndarray, gravity: np.ndarray, tilt_max: float) -> np.ndarray:
+def hold_attitude(R: FloatArray, gravity: FloatArray, tilt_max: float) -> FloatArray:
     """The attitude to hold from the measured R: R itself within tilt_max - STOP_CLEARANCE of
     upright (up: against gravity, world frame), else R turned towards upright by the excess
     about the horizontal axis z x up (z = R e3). tilt_max of pi (or more): no stops, R itself.

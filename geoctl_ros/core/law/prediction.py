@@ -16,12 +16,12 @@ not yet learnt). Predicting with a constant rate, or with only the last moment, 
 50 ms delay tip the testbed over (docs/safety.md, "Delay").
 """
 import math
-from typing import Any, Optional
+from typing import Optional, Tuple, Union, cast
 
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.core.geometry.so3 import matvec
+from geoctl_ros.core.geometry.so3 import FloatArray, Scalars, matvec
 from geoctl_ros.core.law.dynamics import Dynamics
 
 PREDICT_SLOW_S = 0.25    # s, the observer's low-pass of the model's error
@@ -43,10 +43,12 @@ class CommandHistory:
     in their slots: the k-th oldest entry is in slot (newest + 1 + k) % size.
     """
 
-    def __init__(self, size, lag=0.0):
+    def __init__(self, size: int, lag: float = 0.0) -> None:
         self.size = int(size)
         self.lag = float(lag)
         self.times = np.full(self.size, -math.inf)    # oldest first; -inf: empty
+        self.start: Optional[FloatArray]         # (the two are set together)
+        self.end: Optional[FloatArray]
         self.start = self.end = None
         self._newest = -1                             # the slot of the newest entry
         self.count = 0                                # entries held
@@ -56,7 +58,7 @@ class CommandHistory:
         self.times[:] = -math.inf
         self.count = 0
         if self.end is not None:
-            self.start[:] = 0.0
+            cast(FloatArray, self.start)[:] = 0.0
             self.end[:] = 0.0
 
     @property
@@ -64,7 +66,7 @@ class CommandHistory:
         """When the oldest command held was sent (inf: none yet)."""
         return self.times[-self.count] if self.count else math.inf
 
-    def push(self, t: float, end: np.ndarray, start: Optional[np.ndarray] = None) -> None:
+    def push(self, t: float, end: FloatArray, start: Optional[FloatArray] = None) -> None:
         end = np.asarray(end, dtype=float)
         if self.end is None or self.end.shape[1:] != end.shape:
             self.start = np.zeros((self.size,) + end.shape)
@@ -73,12 +75,14 @@ class CommandHistory:
         self._newest = w = (self._newest + 1) % self.size
         self.count = min(self.count + 1, self.size)
         self.end[w] = end
-        self.start[w] = end if start is None else start
+        cast(FloatArray, self.start)[w] = end if start is None else start
         self.times[:-1] = self.times[1:]
         self.times[-1] = t
 
-    def at(self, t: Any) -> np.ndarray:
+    def at(self, t: Scalars) -> FloatArray:
         """The moment in force at times t (a scalar, or one per run of a batch: (N,))."""
+        start: FloatArray
+        end: FloatArray
         if self.end is None:
             return np.zeros(3)
         # (before the first entry: an empty slot, all zeros, of time -inf; before a full ring's
@@ -86,10 +90,10 @@ class CommandHistory:
         i = np.maximum(np.searchsorted(self.times, t, side='right') - 1, 0)
         slot = (self._newest + 1 + i) % self.size
         if np.ndim(t) == 0:
-            start, end = self.start[slot], self.end[slot]
+            start, end = cast(FloatArray, self.start)[slot], self.end[slot]
         else:                                                       # each run its own entry
             runs = np.arange(len(slot))
-            start, end = self.start[slot, runs], self.end[slot, runs]
+            start, end = cast(FloatArray, self.start)[slot, runs], self.end[slot, runs]
         if self.lag <= 0.0:
             return end
         decay = np.exp(-np.maximum(t - self.times[i], 0.0) / self.lag)
@@ -112,7 +116,7 @@ class DelayPredictor:
     sample learnt, not a time constant later (docs/safety.md, "The take-over").
     """
 
-    def __init__(self):
+    def __init__(self) -> None:
         """(The model's dynamics with the estimate in force come with each call: Dynamics.)"""
         self.reset()
 
@@ -120,20 +124,22 @@ class DelayPredictor:
         """Forget the observer (at the take-over: what held the vehicle on its stops or in a
         hand is not its error).
         """
-        self.acc_error = 0.0          # rad/s^2: model minus measured acceleration, low-passed
-        self.learnt: Any = 0.0        # s: the time learnt since the reset (one per run)
-        self._last: Optional[tuple] = None    # (capture time, Omega) of the last rate sample
-        self.residual: Any = None     # rad/s^2: the last rate sample's |acceleration
+        self.acc_error: Scalars = 0.0     # rad/s^2: model minus measured acceleration, low-passed
+        self.learnt: Scalars = 0.0    # s: the time learnt since the reset (one per run)
+        self._last: Optional[Tuple[Scalars, FloatArray]] = None   # (capture time, Omega) of the
+                                                                  # last rate sample
+        self.residual: Optional[float] = None     # rad/s^2: the last rate sample's |acceleration
                                                # the model and the observer did not know| (one
                                                # run; None until a sample taught it)
 
-    def observe(self, model: Dynamics, R: np.ndarray, Omega: np.ndarray, captured: Any,
+    def observe(self, model: Dynamics, R: FloatArray, Omega: FloatArray, captured: Scalars,
                 history: 'CommandHistory') -> None:
         """Learn the model's error from a rate sample captured at ``captured`` (a time on the
         history's clock; one per run of a batch). A sample no newer than the last (a stall
         repeats it), one more than ``OBSERVE_GAP_MAX_S`` after it, or an interval that starts
         before the first command held teaches nothing.
         """
+        interval: Scalars               # (a float for one run, an array for a batch)
         last, self._last = self._last, (captured, Omega)
         self.residual = None
         if last is None:
@@ -162,7 +168,9 @@ class DelayPredictor:
         self.acc_error = self.acc_error + ((modelled - measured - self.acc_error).T * weight).T
         self.learnt = self.learnt + np.where(usable, span, 0.0)
 
-    def __call__(self, model, R, Omega, age_R, age_Omega, history, now, lead=0.0) -> tuple:
+    def __call__(self, model: Dynamics, R: FloatArray, Omega: FloatArray, age_R: Scalars,
+                 age_Omega: Scalars, history: CommandHistory, now: float, lead: float = 0.0
+                 ) -> Tuple[Tuple[FloatArray, FloatArray], Tuple[FloatArray, FloatArray]]:
         """The attitude and rate at ``now`` and at ``now + lead``, ((R, Omega) at now, (R, Omega)
         at now + lead), from measurements age_R and age_Omega seconds old at ``now`` (scalars,
         or one per run of a batch), given the model's dynamics with the estimate in force
@@ -176,6 +184,7 @@ class DelayPredictor:
         capture, the attitude only after its own, with the mean of the rates at either end of
         the piece), and the lead after it in pieces of its own.
         """
+        horizon: Scalars
         captured = now - age_Omega               # when the rate sample was captured
         self.observe(model, R, Omega, captured, history)
         # nothing is predicted from before the first command held: what moved the vehicle then
@@ -202,14 +211,17 @@ class DelayPredictor:
             R, Omega = self._integrate(model, R, Omega, now, now, history, now, lead, None, True)
         return at_now, (R, Omega)
 
-    def _integrate(self, model, R, Omega, moved_R, moved_Omega, history, start, span, first,
-                   scalar):
+    def _integrate(self, model: Dynamics, R: FloatArray, Omega: FloatArray, moved_R: Scalars,
+                   moved_Omega: Scalars, history: CommandHistory, start: Scalars, span: Scalars,
+                   first: Optional[Tuple[FloatArray, FloatArray]],
+                   scalar: bool) -> Tuple[FloatArray, FloatArray]:
         """Integrate the model from ``start`` over ``span`` (s; one per run of a batch unless
         scalar) in equal pieces of at most SUBSTEP_MAX_S, each under the moment in force at its
         midpoint, less the observed error: the rate only after moved_Omega, the attitude only
         after moved_R (their capture times). first: (the model's acceleration at the start,
         the moment then) to save the first piece's evaluation, or None.
         """
+        pieces: Union[int, FloatArray]  # (one count, or one per run)
         error = self.acc_error
         if scalar:
             pieces = max(math.ceil(span / SUBSTEP_MAX_S - 1e-9), 1)
@@ -238,7 +250,9 @@ class DelayPredictor:
             Omega = Omega_next
         return R, Omega
 
-    def _piece_acceleration(self, model, j, R, Omega, moment, first):
+    def _piece_acceleration(self, model: Dynamics, j: int, R: FloatArray, Omega: FloatArray,
+                            moment: FloatArray,
+                            first: Optional[Tuple[FloatArray, FloatArray]]) -> FloatArray:
         """The model's acceleration in piece j under moment. The first piece starts at the
         measured state, where it is acc0 under moment_now (``first``): under another moment it
         differs by J^-1 times the difference (it is linear in the moment), which saves a model

@@ -6,9 +6,27 @@ Solved exactly by Goldfarb and Idnani's dual active-set method, in floats (a few
 numbers: numpy's overhead, and BLAS's CPU-dependent rounding, cost more than the arithmetic).
 """
 import math
-from typing import Any, List, Optional, Sequence, Tuple
+from typing import List, Optional, Protocol, Sequence, Tuple
 
 import numpy as np
+
+from geoctl_ros.core.geometry.so3 import FloatArray
+
+
+class Polytope(Protocol):
+    """The moments A M >= beta (A (m, 3), beta (m,)), also as (A, beta, ...): what the law
+    knows of ``core.actuation.allocation.MomentPolytope`` (actuation is above the law).
+    """
+
+    @property
+    def A(self) -> FloatArray: ...
+
+    @property
+    def beta(self) -> FloatArray: ...
+
+    def __getitem__(self, i: int) -> FloatArray: ...
+
+    def __len__(self) -> int: ...
 
 TOL = 1e-9
 
@@ -36,7 +54,8 @@ def _solve(G: List[List[float]], rhs: List[float]) -> List[float]:
     return x
 
 
-def project(u0: Any, A: Any, beta: Any, tol: float = TOL) -> Tuple[np.ndarray, bool]:
+def project(u0: FloatArray, A: FloatArray, beta: FloatArray,
+            tol: float = TOL) -> Tuple[FloatArray, bool]:
     """The point closest to u0 with A u >= beta (one run: u0 (3,), A (m, 3), beta (m,)),
     exactly, by Goldfarb and Idnani's dual active-set method (Math. Programming 27, 1983) with
     the identity for its Hessian: from u0, the most violated constraint is added at a time, each
@@ -90,8 +109,8 @@ def project(u0: Any, A: Any, beta: Any, tol: float = TOL) -> Tuple[np.ndarray, b
     return np.array(start), False
 
 
-def closest_admissible(u0: np.ndarray, A: np.ndarray, beta: np.ndarray,
-                       limits: Optional[tuple] = None) -> np.ndarray:
+def closest_admissible(u0: FloatArray, A: FloatArray, beta: FloatArray,
+                       limits: Optional[Polytope] = None) -> FloatArray:
     """The moment closest to u0 with A u >= beta (``project``) and, given limits =
     (A_m, beta_m), within the moments the rotors make unsaturated
     (``Allocator.moment_polytope``). u0 itself where it is admissible. Where the rows and the
@@ -122,7 +141,7 @@ def closest_admissible(u0: np.ndarray, A: np.ndarray, beta: np.ndarray,
     return out
 
 
-def slack_of(A: np.ndarray, u: np.ndarray, beta: np.ndarray) -> np.ndarray:
+def slack_of(A: FloatArray, u: FloatArray, beta: FloatArray) -> FloatArray:
     """A u - beta, entry by entry (the same bits for a run alone and in a batch)."""
     u = u[..., None, :]
     return A[..., 0] * u[..., 0] + A[..., 1] * u[..., 1] + A[..., 2] * u[..., 2] - beta

@@ -32,6 +32,7 @@ from typing import Optional
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.so3 import FloatArray
 from geoctl_ros.core.sensors.frames import (
     BODY_FRAMES,
     WORLD_FRAMES,
@@ -54,9 +55,9 @@ class CalibrationError(ValueError):
 class Calibration:
     """The parameters it measured, and the figures it measured them from."""
 
-    gyro_bias: np.ndarray            # rad/s, the IMU's axes
-    marker_rotation_deg: np.ndarray  # roll, pitch, yaw
-    imu_rotation_deg: np.ndarray     # roll, pitch, yaw (yaw as configured)
+    gyro_bias: FloatArray            # rad/s, the IMU's axes
+    marker_rotation_deg: FloatArray  # roll, pitch, yaw
+    imu_rotation_deg: FloatArray     # roll, pitch, yaw (yaw as configured)
     attitude_noise_deg: float
     gyro_noise: float
     accelerometer_noise: float
@@ -76,7 +77,7 @@ def airframe_yaw_deg(heading_deg: float, world: str) -> float:
     return float(heading_deg) + world_x_yaw_deg(world)
 
 
-def calibrate(poses: np.ndarray, gyros: np.ndarray, forces: np.ndarray, frames: InputFrames,
+def calibrate(poses: FloatArray, gyros: FloatArray, forces: FloatArray, frames: InputFrames,
               gravity: float, heading_deg: Optional[float] = None) -> Calibration:
     """The calibration of poses (n, 3, 3; as the source streams them), gyro readings and specific
     forces (m, 3; as the IMU gives them) taken level and at rest (module docstring).

@@ -44,6 +44,7 @@ from typing import List, NamedTuple, Optional, Tuple
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.so3 import FloatArray
 from geoctl_ros.core.geometry.sphere import angle_between_deg
 from geoctl_ros.core.sensors.frames import (
     BODY_FRAMES,
@@ -84,18 +85,18 @@ class AgreementSettings:
     gyro_noise: float            # rad/s per axis and sample
     accelerometer_noise: float   # m/s^2 per axis and sample
     alignment_tolerance: float   # rad: the angle a calibrated installation keeps
-    gravity: np.ndarray          # the world's gravity (m/s^2)
+    gravity: FloatArray          # the world's gravity (m/s^2)
 
 
 class Window(NamedTuple):
     """One closed window: the means and what they disagree by."""
 
     end: float                   # receipt of the pose that closed it (the loop's clock)
-    gyro: np.ndarray             # the gyro's mean (rad/s, body)
-    poses_rate: np.ndarray       # the poses' rate (rad/s, body)
+    gyro: FloatArray             # the gyro's mean (rad/s, body)
+    poses_rate: FloatArray       # the poses' rate (rad/s, body)
     rate_tolerance: float        # rad/s: SIGMAS sigmas of their difference
-    up: np.ndarray               # the poses' mean up, R^T e_up
-    force: Optional[np.ndarray]  # the IMU's mean specific force (None: none came)
+    up: FloatArray               # the poses' mean up, R^T e_up
+    force: Optional[FloatArray]  # the IMU's mean specific force (None: none came)
     tilt_tolerance: float        # rad: SIGMAS sigmas of the angle between up and force
     poses: int
     gyros: int
@@ -126,18 +127,18 @@ class Window(NamedTuple):
         return self.turning > self.rate_tolerance or self.gyro_spread > self.spread_tolerance
 
 
-def _norm(v: np.ndarray) -> float:
+def _norm(v: FloatArray) -> float:
     """|v| of a 3-vector, in floats (no BLAS kernel's rounding)."""
     return math.sqrt(float(so3.dot(v, v)))
 
 
-def _yaw_between(a: np.ndarray, b: np.ndarray) -> float:
+def _yaw_between(a: FloatArray, b: FloatArray) -> float:
     """The yaw psi (deg) that turns a's horizontal part (x, y) onto b's: Rz(psi) a ~ b."""
     ax, ay, bx, by = float(a[0]), float(a[1]), float(b[0]), float(b[1])
     return math.degrees(math.atan2(ax * by - ay * bx, ax * bx + ay * by))
 
 
-def _log_stack(M: np.ndarray) -> np.ndarray:
+def _log_stack(M: FloatArray) -> FloatArray:
     """Rotation vectors of a stack of rotations (n, 3, 3), each turned by less than pi (a
     window's own motion: ``so3.log``'s formula away from pi, for the stack at once).
     """
@@ -190,7 +191,7 @@ class _Accumulator:
         self.settings = settings
         self.up_world = -settings.gravity / _norm(settings.gravity)
 
-    def _restart(self, R, stamp, receipt):
+    def _restart(self, R: FloatArray, stamp: float, receipt: float) -> None:
         self.Rs[0] = R
         self.ts[0] = stamp
         self.n, self.t0, self.t_last = 1, stamp, stamp
@@ -201,7 +202,7 @@ class _Accumulator:
         self.nw = self.nf = 0
         self.cut = False
 
-    def imu(self, w: np.ndarray, f: Optional[np.ndarray], stamp: float, receipt: float) -> None:
+    def imu(self, w: FloatArray, f: Optional[FloatArray], stamp: float, receipt: float) -> None:
         """A gyro sample w and specific force f (or None) of stamp, received at receipt."""
         last, self.imu_stamp = self.imu_stamp, stamp
         if not self.n or self.cut:
@@ -222,7 +223,7 @@ class _Accumulator:
             self.f += f
             self.nf += 1
 
-    def pose(self, R: np.ndarray, stamp: float, receipt: float) -> Optional[Window]:
+    def pose(self, R: FloatArray, stamp: float, receipt: float) -> Optional[Window]:
         if not self.n or stamp < self.t0 or self.cut:
             self._restart(R, stamp, receipt)
             return None
@@ -304,9 +305,9 @@ class SensorAgreement:
         self.yaw_named = 0            # in-flight windows in a row after which it is named
         self.flight_note: Optional[str] = None    # why, once FLIGHT_WINDOWS in a row did
         self.rest_problems: Optional[List[str]] = None   # the last rest window's verdict
-        self.raw_pose: Optional[np.ndarray] = None    # the newest pose as the source streamed it
+        self.raw_pose: Optional[FloatArray] = None    # the newest pose as the source streamed it
 
-    def imu(self, w: np.ndarray, f: Optional[np.ndarray], stamp: float, receipt: float) -> None:
+    def imu(self, w: FloatArray, f: Optional[FloatArray], stamp: float, receipt: float) -> None:
         """A converted gyro sample and specific force (None: the IMU gave none) of stamp (s,
         the IMU's clock: only the time between its samples is used), received at receipt (the
         loop's clock).
@@ -314,8 +315,8 @@ class SensorAgreement:
         self.rest.imu(w, f, stamp, receipt)
         self.flight.imu(w, f, stamp, receipt)
 
-    def pose(self, R: np.ndarray, stamp: float, receipt: float,
-             raw: Optional[np.ndarray] = None) -> None:
+    def pose(self, R: FloatArray, stamp: float, receipt: float,
+             raw: Optional[FloatArray] = None) -> None:
         """A converted pose R of stamp (s), received at receipt (the loop's clock); raw: the
         pose as the source streamed it (to name a likely cause).
         """

@@ -28,11 +28,11 @@ their inverses, which the simulator uses to emulate such sources.
 """
 from dataclasses import dataclass, field
 import math
-from typing import Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 
-from geoctl_ros.core.geometry.so3 import Vector
+from geoctl_ros.core.geometry.so3 import FloatArray, Vector
 
 # the source's world -> ENU
 WORLD_FRAMES = {
@@ -56,7 +56,7 @@ def world_x_yaw_deg(world: str) -> float:
     return math.degrees(math.atan2(float(T[1, 0]), float(T[0, 0])))
 
 
-def rpy_matrix(rpy_deg: Sequence[float]) -> np.ndarray:
+def rpy_matrix(rpy_deg: Sequence[float]) -> FloatArray:
     """Rotation of roll, pitch, yaw (deg), applied z-y-x: Rz(yaw) Ry(pitch) Rx(roll)."""
     r, p, y = (math.radians(float(a)) for a in rpy_deg)
     cr, sr, cp, sp, cy, sy = (math.cos(r), math.sin(r), math.cos(p), math.sin(p),
@@ -68,7 +68,7 @@ def rpy_matrix(rpy_deg: Sequence[float]) -> np.ndarray:
     ])
 
 
-def matrix_rpy(R: np.ndarray) -> np.ndarray:
+def matrix_rpy(R: FloatArray) -> FloatArray:
     """Roll, pitch, yaw (deg) of R (``rpy_matrix``'s inverse; pitch in [-90, 90])."""
     pitch = math.asin(max(-1.0, min(1.0, -float(R[2, 0]))))
     roll = math.atan2(float(R[2, 1]), float(R[2, 2]))
@@ -84,18 +84,18 @@ class InputFrames:
 
     world: str = 'enu'
     body: str = 'flu'
-    marker_rotation: np.ndarray = field(default_factory=lambda: np.eye(3))   # R_am
-    imu_rotation: np.ndarray = field(default_factory=lambda: np.eye(3))      # R_ai
-    gyro_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))       # rad/s, IMU axes
+    marker_rotation: FloatArray = field(default_factory=lambda: np.eye(3))   # R_am
+    imu_rotation: FloatArray = field(default_factory=lambda: np.eye(3))      # R_ai
+    gyro_bias: FloatArray = field(default_factory=lambda: np.zeros(3))       # rad/s, IMU axes
     # derived: R = pose_left R_s pose_right; v_airframe = imu_map v
-    pose_left: np.ndarray = field(init=False, repr=False)
-    pose_right: np.ndarray = field(init=False, repr=False)
-    imu_map: np.ndarray = field(init=False, repr=False)
+    pose_left: FloatArray = field(init=False, repr=False)
+    pose_right: FloatArray = field(init=False, repr=False)
+    imu_map: FloatArray = field(init=False, repr=False)
     pose_identity: bool = field(init=False, repr=False)
     imu_identity: bool = field(init=False, repr=False)
     bias_zero: bool = field(init=False, repr=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         T, B = WORLD_FRAMES[self.world], BODY_FRAMES[self.body]
         set_ = object.__setattr__
         set_(self, 'pose_left', T)
@@ -116,18 +116,18 @@ class InputFrames:
                    np.array(gyro_bias, dtype=float))
 
     # --- source -> package ------------------------------------------------------------------
-    def attitude(self, R_source: np.ndarray) -> np.ndarray:
+    def attitude(self, R_source: FloatArray) -> FloatArray:
         """The airframe's attitude (ENU <- FLU) of a pose R_s as the source streams it."""
         if self.pose_identity:
             return R_source
         return self.pose_left @ R_source @ self.pose_right
 
-    def imu_vector(self, v: Vector) -> np.ndarray:
+    def imu_vector(self, v: Vector) -> FloatArray:
         """An IMU vector (its specific force) in the airframe's body axes."""
         a = np.asarray(v, dtype=float)
         return a if self.imu_identity else self.imu_map @ a
 
-    def angular_velocity(self, w: Vector) -> np.ndarray:
+    def angular_velocity(self, w: Vector) -> FloatArray:
         """The gyro's reading, less its bias, in the airframe's body axes."""
         a = np.asarray(w, dtype=float)
         if not self.bias_zero:
@@ -135,13 +135,13 @@ class InputFrames:
         return a if self.imu_identity else self.imu_map @ a
 
     # --- package -> source (what a source of these conventions streams: the simulator) ------
-    def source_attitude(self, R: np.ndarray) -> np.ndarray:
+    def source_attitude(self, R: FloatArray) -> FloatArray:
         """The pose such a source streams for the airframe's attitude R."""
         if self.pose_identity:
             return R
         return self.pose_left.T @ R @ self.pose_right.T
 
-    def source_vector(self, v: Vector) -> np.ndarray:
+    def source_vector(self, v: Vector) -> FloatArray:
         """An airframe body vector in such an IMU's axes (no bias)."""
         a = np.asarray(v, dtype=float)
         return a if self.imu_identity else self.imu_map.T @ a
@@ -158,5 +158,5 @@ class InputFrames:
         return '; '.join(words)
 
 
-def _deg(v):
+def _deg(v: Iterable[float]) -> str:
     return '[%s]' % ', '.join('%.1f' % a for a in v)

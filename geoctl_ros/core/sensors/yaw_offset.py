@@ -17,7 +17,7 @@ error is of the order of a radian, and nothing is named.
 """
 import math
 
-import numpy as np
+from geoctl_ros.core.geometry.so3 import FloatArray
 
 
 class YawOffset:
@@ -33,7 +33,7 @@ class YawOffset:
         self.variance = 0.0      # of Z's part across its direction
         self.windows = 0
 
-    def add(self, gyro: np.ndarray, poses_rate: np.ndarray, gyro_sigma: float,
+    def add(self, gyro: FloatArray, poses_rate: FloatArray, gyro_sigma: float,
             poses_sigma: float) -> None:
         """One window's mean gyro rate and poses' rate (body, rad/s), with their noise (one
         standard deviation per axis, rad/s).

@@ -6,13 +6,14 @@ closed loop of the scenario runner and the campaigns) both call :class:`ControlT
 core's formulas it takes one run (R (3, 3), Omega (3,)) or a batch of N ((N, 3, 3), (N, 3)).
 """
 import math
-from typing import Any, NamedTuple, Optional, Tuple
+from typing import NamedTuple, Optional, Tuple, cast
 
 import numpy as np
 
 from geoctl_ros.core.actuation.motors import Mixer, MotorOutput
-from geoctl_ros.core.geometry.so3 import matvec
-from geoctl_ros.core.law.brake import BrakeInputs, rows
+from geoctl_ros.core.geometry.so3 import FloatArray, Scalars, matvec
+from geoctl_ros.core.law.brake import ApproachBrake, BrakeInputs, rows
+from geoctl_ros.core.law.control import AttitudeController
 from geoctl_ros.core.law.prediction import CommandHistory, DelayPredictor
 from geoctl_ros.core.law.step_types import ControlOutput
 
@@ -20,7 +21,7 @@ ON_TIME_S = 1e-6       # a step less late than this is on time (the clock's roun
 HISTORY_TICKS = 128    # the commands remembered for prediction (1.28 s at 100 Hz, 0.26 at 500)
 
 
-def blind_time(ages: Tuple[Any, Any], dt: float, held: Optional[float]) -> Any:
+def blind_time(ages: Tuple[Scalars, Scalars], dt: float, held: Optional[float]) -> Scalars:
     """How long the loop is blind beyond its nominal period (s; one per run of a batch): the age
     of its older input (from its stamp, or the assumed measurement_delay) plus how much later than
     the period this step comes. The barrier widens each cone by the sensor's travel towards it
@@ -50,12 +51,12 @@ class DegradedMode:
     of a batch.
     """
 
-    def __init__(self):
-        self.sustained = 0.0        # s, the low-passed blind time
-        self.peak = 0.0             # s, the blind time held from its last peak
-        self.scale_now = 1.0
+    def __init__(self) -> None:
+        self.sustained: Scalars = 0.0   # s, the low-passed blind time
+        self.peak: Scalars = 0.0        # s, the blind time held from its last peak
+        self.scale_now: Scalars = 1.0
 
-    def scale(self, blind: Any, held: float) -> Any:
+    def scale(self, blind: Scalars, held: float) -> Scalars:
         """The gain scale s after a tick of blind time ``blind`` that came ``held`` s after the
         last.
         """
@@ -88,7 +89,7 @@ class ControlTick:
     (the lag compensation's real hold).
     """
 
-    def __init__(self, controller, mixer):
+    def __init__(self, controller: AttitudeController, mixer: Mixer) -> None:
         """controller: AttitudeController (one run or a batch); mixer: Mixer. (The inputs' ages
         come with each tick, the assumed ``measurement_delay`` already in them where a stamp
         does not tell: ``core.supervisor.safety.Stream`` for the node, the closed loop alike.)
@@ -98,8 +99,8 @@ class ControlTick:
         self.mixer = mixer
         # what the rotors were told to produce, with when (the prediction's input)
         self.history = CommandHistory(HISTORY_TICKS, mixer.lag)
-        self._last_now = None
-        self.blind = 0.0                # the last tick's blind time (blind_time)
+        self._last_now: Optional[float] = None
+        self.blind: Scalars = 0.0                # the last tick's blind time (blind_time)
         self.degraded = DegradedMode()
         self._clock = 0.0               # the tick's time: now, or (untimed) periods counted
         self._ticked = False
@@ -110,7 +111,7 @@ class ControlTick:
         self.mixer = mixer
         self.history.lag = mixer.lag
 
-    def _held(self, now):
+    def _held(self, now: Optional[float]) -> Optional[float]:
         """How long the last command was held: the time since the last tick, or None (a period)
         for ticks that are not timed (now None).
         """
@@ -119,7 +120,7 @@ class ControlTick:
             self._last_now = now
         return held
 
-    def _time(self, now, dt):
+    def _time(self, now: Optional[float], dt: float) -> float:
         """The tick's time on the history's clock: now, or for untimed ticks the periods so
         far.
         """
@@ -130,8 +131,9 @@ class ControlTick:
         self._ticked = True
         return self._clock
 
-    def __call__(self, R, Omega, dt, now=None, ages=(0.0, 0.0), armed=True, adapt=True,
-                 predict=True):
+    def __call__(self, R: FloatArray, Omega: FloatArray, dt: float, now: Optional[float] = None,
+                 ages: Tuple[Scalars, Scalars] = (0.0, 0.0), armed: bool = True,
+                 adapt: bool = True, predict: bool = True) -> Command:
         """Command the rotors from a measured attitude R and rate Omega.
 
         dt: the control period (how long this command is expected to be held); now: the tick's
@@ -179,6 +181,7 @@ class ControlTick:
             brake = self.brake_inputs(R_b, W_b, np.maximum(ages[0], ages[1]),
                                       mixer.design_hold_for(dt, held), t,
                                       mixer.thrust_offsets(dt if held is None else held))
+        out: Optional[ControlOutput]        # (None: a moment not finite, not commanded)
         out = controller.step(R, Omega, dt, adapt=adapt and self.flying, blind=blind,
                               brake=brake, guide=not spooling, gain_scale=gain_scale)
         if spooling:                        # the feed-forward alone, the vehicle held
@@ -192,8 +195,8 @@ class ControlTick:
         self.history.push(t, *self._produced(motors, armed))
         return Command(out, motors, spooling, took_over)
 
-    def brake_inputs(self, R: np.ndarray, Omega: np.ndarray, age: Any, hold: float,
-                     t: float, thrusts: Optional[np.ndarray] = None) -> BrakeInputs:
+    def brake_inputs(self, R: FloatArray, Omega: FloatArray, age: Scalars, hold: float,
+                     t: float, thrusts: Optional[FloatArray] = None) -> BrakeInputs:
         """The approach brake's inputs at the tick (``core.law.brake.BrakeInputs``): the state
         predicted at the tick, the measurements' age, the hold, the moment the rotors make now
         (the command history's lag model) and the model's other moments there, its observed
@@ -204,10 +207,10 @@ class ControlTick:
         f = controller.model_moment(R, Omega, M_g)
         error = self.predict.acc_error          # (0.0 until the observer has learnt)
         if np.ndim(error):
-            f = f - matvec(controller.config.J, error)
+            f = f - matvec(controller.config.J, cast(FloatArray, error))
         return BrakeInputs(R, Omega, age, hold, self.history.at(t), f, M_g, thrusts)
 
-    def takeover_inputs(self, R: np.ndarray, Omega: np.ndarray, age: Any,
+    def takeover_inputs(self, R: FloatArray, Omega: FloatArray, age: Scalars,
                         dt: float) -> BrakeInputs:
         """The approach brake's inputs as they will be at the take-over after an arming now,
         the vehicle held or resting where it is: the rotors spooled up to the feed-forward for
@@ -221,17 +224,19 @@ class ControlTick:
         return BrakeInputs(R, Omega, age, dt, spooled * controller.feedforward(R),
                            controller.model_moment(R, Omega, M_g), M_g)
 
-    def takeover_margins(self, R: np.ndarray, Omega: np.ndarray, age: Any,
-                         dt: float) -> np.ndarray:
+    def takeover_margins(self, R: FloatArray, Omega: FloatArray, age: Scalars,
+                         dt: float) -> FloatArray:
         """Per cone (one row per run of a batch), the approach brake's margin Phi (rad) at the
         take-over after an arming now (``takeover_inputs``; core.law.brake): below 0, the brake
         could not keep the cone in the worst case of the spool-up and its bounds.
         """
         controller = self.controller
         x = self.takeover_inputs(R, Omega, age, dt)
-        return rows(controller.brake, controller.config.cones, controller.J_inv, x).margin
+        return rows(cast(ApproachBrake, controller.brake), controller.config.cones,
+                    controller.J_inv, x).margin
 
-    def _produced(self, motors, armed):
+    def _produced(self, motors: MotorOutput,
+                  armed: bool) -> Tuple[FloatArray, Optional[FloatArray]]:
         """The moments the rotors make from this tick on: the one they settle to and the one they
         make now (by the mixer's lag model, if it keeps one: at arming, none, the rotors
         spooling up from rest), about the pivot.

@@ -22,11 +22,12 @@ mass above the pivot. So, while a stream is stale but not yet lost
 When a stream is fresh its measurement is used as it is: nothing here changes normal flight.
 """
 from enum import Enum
-from typing import Optional, Tuple
+from typing import Optional, Tuple, cast
 
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.so3 import FloatArray
 
 POSE_HISTORY = 64    # poses kept for the rate estimate (320 ms at 200 Hz)
 
@@ -53,21 +54,21 @@ GYRO, FROM_POSES, HELD = RateSource.GYRO, RateSource.FROM_POSES, RateSource.HELD
 class GapBridge:
     """The attitude and body rate the controller uses, from the latest measurements."""
 
-    def __init__(self, rate_window):
+    def __init__(self, rate_window: float) -> None:
         self.rate_window = float(rate_window)
         self._t = np.full(POSE_HISTORY, -np.inf)      # pose stamps, a ring
         self._R = np.zeros((POSE_HISTORY, 3, 3))
         self._head = -1
-        self._R_meas = None
-        self._pose_receipt = None
-        self._w_meas = None
-        self.R = None                 # the attitude in use
-        self.Omega = None             # the body rate in use
-        self._R_time = None           # the time R refers to
+        self._R_meas: Optional[FloatArray] = None
+        self._pose_receipt: Optional[float] = None
+        self._w_meas: Optional[FloatArray] = None
+        self.R: Optional[FloatArray] = None       # the attitude in use
+        self.Omega: Optional[FloatArray] = None   # the body rate in use
+        self._R_time: Optional[float] = None      # the time R refers to
         self.attitude_source = POSE
         self.rate_source = GYRO
 
-    def pose(self, R: np.ndarray, stamp: float, receipt: float) -> None:
+    def pose(self, R: FloatArray, stamp: float, receipt: float) -> None:
         """An accepted pose."""
         self._head = (self._head + 1) % POSE_HISTORY
         self._t[self._head] = stamp
@@ -75,11 +76,11 @@ class GapBridge:
         self._R_meas = R
         self._pose_receipt = receipt
 
-    def gyro(self, w: np.ndarray) -> None:
+    def gyro(self, w: FloatArray) -> None:
         """An accepted angular velocity."""
         self._w_meas = w
 
-    def pose_rate(self) -> Optional[np.ndarray]:
+    def pose_rate(self) -> Optional[FloatArray]:
         """Body rate from the newest pose and the one closest to rate_window before it, or None
         when no such pair exists (fewer than two poses, or none within 3 windows).
         """
@@ -91,10 +92,11 @@ class GapBridge:
         if not ok.any():
             return None
         k = int(np.argmin(np.where(ok, np.abs(dt - self.rate_window), np.inf)))
-        return so3.log(so3.matmul(so3.transpose(self._R[k]), self._R[self._head])) / dt[k]
+        return cast(FloatArray,
+                    so3.log(so3.matmul(so3.transpose(self._R[k]), self._R[self._head])) / dt[k])
 
     def update(self, now: float, pose_fresh: bool,
-               gyro_fresh: bool) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+               gyro_fresh: bool) -> Optional[Tuple[FloatArray, FloatArray]]:
         """The (R, Omega) to use at time now, given which streams are fresh; None before the first
         pose and the first rate (gyro or poses).
         """
@@ -112,7 +114,7 @@ class GapBridge:
         if pose_fresh or self.R is None:
             self.R, self._R_time, self.attitude_source = self._R_meas, self._pose_receipt, POSE
         else:
-            self.R = so3.matmul(self.R, so3.exp(self.Omega * (now - self._R_time)))
+            self.R = so3.matmul(self.R, so3.exp(self.Omega * (now - cast(float, self._R_time))))
             self._R_time, self.attitude_source = now, PROPAGATED
         return self.R, self.Omega
 

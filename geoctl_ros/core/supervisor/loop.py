@@ -6,20 +6,20 @@ adaptation, the diagnostics level and its reasons) is made here, so it is tested
 """
 
 import math
-from typing import Any, List, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence, Tuple, cast
 
-import numpy as np
-
+from geoctl_ros.core.actuation.motors import MotorOutput
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.quaternions import quaternion_problem
-from geoctl_ros.core.geometry.so3 import Vector
+from geoctl_ros.core.geometry.so3 import FloatArray, Vector
 from geoctl_ros.core.law.control import AttitudeController, SetpointRejected
 from geoctl_ros.core.law.hold import hold_attitude
+from geoctl_ros.core.law.step_types import ControlOutput
 from geoctl_ros.core.sensors.consistency import SensorAgreement
 from geoctl_ros.core.supervisor import loop_status, preflight
 from geoctl_ros.core.supervisor.control_tick import ControlTick
 from geoctl_ros.core.supervisor.gaps import GapBridge
-from geoctl_ros.core.supervisor.loop_types import LoopSettings, LoopTick
+from geoctl_ros.core.supervisor.loop_types import LoopSettings, LoopTick, Setup
 from geoctl_ros.core.supervisor.safety import (
     ArmResult,
     EscHealth,
@@ -44,7 +44,7 @@ def _unlearnt_bound(controller: AttitudeController) -> float:
     return math.inf if controller.brake is None else controller.brake.unmodelled
 
 
-def spool_movement(R_armed: np.ndarray, R: np.ndarray) -> Optional[str]:
+def spool_movement(R_armed: FloatArray, R: FloatArray) -> Optional[str]:
     """Why the spool-up must stop (the vehicle moved more than SPOOL_MOVE_DEG from where it was
     armed: it was neither held nor resting on its stops, and the brake's take-over did not
     reckon with the fall), or None.
@@ -60,7 +60,7 @@ def spool_movement(R_armed: np.ndarray, R: np.ndarray) -> Optional[str]:
 class ControlLoop:
     """State and decisions of the controller node."""
 
-    def __init__(self, setup, unconfigured=None):
+    def __init__(self, setup: Setup, unconfigured: Optional[str] = None) -> None:
         """unconfigured: None, or why the node has no configuration anyone gave (it then
         refuses every arm request with that reason).
         """
@@ -77,11 +77,11 @@ class ControlLoop:
         self.bridge = GapBridge(s.pose_rate_window)
         self.frames = setup.frames      # the inputs' conventions, applied as they come in
         self.agreement = SensorAgreement(setup.agreement, setup.frames)
-        self.R = None                   # last accepted measurements
-        self.Omega = None
-        self.setpoint_note = None       # last set-point refusal, for diagnostics
-        self._pose_stamp = None         # the last accepted pose's stamp, as given
-        self.last_tick = None
+        self.R: Optional[FloatArray] = None       # last accepted measurements
+        self.Omega: Optional[FloatArray] = None
+        self.setpoint_note: Optional[str] = None  # last set-point refusal, for diagnostics
+        self._pose_stamp: Any = None    # the last accepted pose's stamp, as given
+        self.last_tick: Optional[LoopTick] = None
         # (the inputs' ages, measurement_delay included, are the streams': see tick)
         self.step = ControlTick(self.controller, setup.mixer)
         self._schedule_index = -1
@@ -92,14 +92,16 @@ class ControlLoop:
         # the sensor inside a cone while armed, latched until the next arming: entries counted,
         # the deepest (cone name, depth deg)
         self.cone_entries = 0
-        self.entry = None
+        self.entry: Optional[Tuple[str, float]] = None
         self._inside = False
-        self.esc = None                 # the ESC node's last EscStatus (None: no ESC node)
-        self.gaps = {'pose': [0, 0.0], 'angular velocity': [0, 0.0]}   # count, longest (s)
+        self.esc: Optional[EscStatus] = None   # the ESC node's last report (None: no ESC node)
+        # count, longest (s)
+        self.gaps: Dict[str, List[float]] = {'pose': [0, 0.0], 'angular velocity': [0, 0.0]}
         # the acceleration the model did not know, against the approach brake's a_u
         self.unlearnt_bound = _unlearnt_bound(self.controller)
         self.unlearnt_over = 0          # rate samples past it since the take-over
-        self._spool_from = None         # the attitude at arming, while the rotors spool up
+        self._spool_from: Optional[FloatArray] = None   # the attitude at arming, while the
+                                                        # rotors spool up
 
     # --- inputs ------------------------------------------------------------------------------
     def offer_pose(self, q: Vector, stamp: float, receipt: float,
@@ -156,7 +158,7 @@ class ControlLoop:
         """Why the ESC node's report forbids flight now, or None (no ESC node: None)."""
         return esc_problem(self.esc, now, self.setup.mixer.curve.command_max)
 
-    def _end_gap(self, stream, previous, receipt):
+    def _end_gap(self, stream: Stream, previous: Optional[float], receipt: float) -> None:
         """Count a gap (a stale spell) of stream that the sample received at receipt ends."""
         if previous is not None:
             age = receipt - previous
@@ -183,7 +185,7 @@ class ControlLoop:
             return 'no pose received yet'
         return self._adopt(R_hold)
 
-    def hold_attitude(self) -> Optional[np.ndarray]:
+    def hold_attitude(self) -> Optional[FloatArray]:
         """The attitude a hold flies now (``core.law.hold.hold_attitude`` of the attitude
         measured last), or None before the first pose.
         """
@@ -192,7 +194,7 @@ class ControlLoop:
         config = self.controller.config
         return hold_attitude(self.R, config.gravity, config.tilt_max)
 
-    def _adopt(self, R_d: np.ndarray) -> Optional[str]:
+    def _adopt(self, R_d: FloatArray) -> Optional[str]:
         """Fly R_d from now on, if the controller takes it; else why not."""
         try:
             self.controller.set_setpoint(R_d)
@@ -241,7 +243,7 @@ class ControlLoop:
     def reset_adaptation(self) -> None:
         self.controller.reset_adaptation()
 
-    def reconfigure(self, setup: Any, setpoint_changed: bool = False,
+    def reconfigure(self, setup: Setup, setpoint_changed: bool = False,
                     schedule_changed: bool = False) -> Optional[str]:
         """Adopt a new setup (validated by params.controller_setup); None, or why not.
 
@@ -287,7 +289,7 @@ class ControlLoop:
             armed = False
         schedule = self.setup.schedule
         if armed and len(schedule) and not self.holds_at_arming:
-            i = schedule.due(now - self.supervisor.armed_since, self._schedule_index)
+            i = schedule.due(now - cast(float, self.supervisor.armed_since), self._schedule_index)
             if i >= 0:
                 self.controller.set_setpoint(schedule.rotations[i])   # checked at configuration
                 self._schedule_index = i
@@ -302,8 +304,9 @@ class ControlLoop:
             # again), but the loop is as blind as its last samples are old (the barrier's
             # blind widening and the bound's watch count it); a stream that never came counts
             # as fresh. The estimate learns only from measurements.
-            ages = tuple(0.0 if s.last_receipt is None else s.capture_age(now)
-                         for s in (self.pose, self.rate))
+            ages = cast(Tuple[float, float],
+                        tuple(0.0 if s.last_receipt is None else s.capture_age(now)
+                              for s in (self.pose, self.rate)))
             out, motors, spooling, took_over = self.step(
                 R, Omega, dt, now, ages, armed=armed, adapt=armed and not bridging,
                 predict=not bridging)
@@ -334,7 +337,7 @@ class ControlLoop:
         self.last_tick = tick
         return tick
 
-    def _note_entry(self, out):
+    def _note_entry(self, out: ControlOutput) -> None:
         """The sensor is inside a cone while armed: count the entry, keep the deepest (latched
         until the next arming).
         """
@@ -346,7 +349,8 @@ class ControlLoop:
         if self.entry is None or depth > self.entry[1]:
             self.entry = (name, depth)
 
-    def _result(self, out, motors, armed, bridging, state):
+    def _result(self, out: Optional[ControlOutput], motors: MotorOutput, armed: bool,
+                bridging: bool, state: Optional[Tuple[FloatArray, FloatArray]]) -> LoopTick:
         b = self.bridge
         return LoopTick(out, motors, armed, self._pose_stamp, self.pose.last_receipt,
                     self.supervisor.reason, self.supervisor.failed,
@@ -362,7 +366,7 @@ class ControlLoop:
     def rotor_count(self) -> int:
         return self.setup.mixer.allocator.count
 
-    def reconfiguration_problem(self, setup: Any) -> Optional[str]:
+    def reconfiguration_problem(self, setup: Setup) -> Optional[str]:
         """Why setup (validated on its own) cannot replace the running one, or None: the set
         point now being flown (it may have come in on the topic) against the new cones.
         """

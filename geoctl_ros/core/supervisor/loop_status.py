@@ -7,6 +7,8 @@ from typing import Any, List, Optional
 
 import numpy as np
 
+from geoctl_ros.core.geometry.flags import Flags
+from geoctl_ros.core.geometry.so3 import Scalars
 from geoctl_ros.core.supervisor.control_tick import BLIND_BOUND_S, SUSTAINED_BLIND_BOUND_S
 from geoctl_ros.core.supervisor.gaps import GYRO, POSE
 from geoctl_ros.core.telemetry.diagnostics import (
@@ -48,8 +50,8 @@ class Window:
         self.unlearnt_over += over
         return over
 
-    def note(self, armed: bool, saturated: Any, bridging: bool, blind_s: float,
-             gain_scale: Any) -> None:
+    def note(self, armed: bool, saturated: Flags, bridging: bool, blind_s: Scalars,
+             gain_scale: Scalars) -> None:
         """One tick: armed or not, its allocation saturated, riding a gap, its blind time (s)
         and the degraded mode's gain scale.
         """

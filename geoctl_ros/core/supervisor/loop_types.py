@@ -2,12 +2,16 @@
 result; and the period of a step that a sample starts.
 """
 from dataclasses import dataclass
-from typing import Optional, Tuple
+from typing import Optional, Protocol, Tuple
 
-import numpy as np
-
-from geoctl_ros.core.actuation.motors import MotorOutput
+from geoctl_ros.core.actuation.motors import Mixer, MotorOutput
+from geoctl_ros.core.geometry.so3 import FloatArray
+from geoctl_ros.core.law.controller_config import ControllerConfig
 from geoctl_ros.core.law.step_types import ControlOutput
+from geoctl_ros.core.sensors.consistency import AgreementSettings
+from geoctl_ros.core.sensors.frames import InputFrames
+from geoctl_ros.core.supervisor.gaps import AttitudeSource, RateSource
+from geoctl_ros.core.supervisor.safety import SetpointSchedule
 
 
 def step_period(since: float, period: float) -> float:
@@ -54,10 +58,38 @@ class LoopTick:
     pose_receipt: Optional[float]   # when that pose was received, on the loop's clock (or None)
     state: str               # the supervisor's state: 'armed', or why not
     failed: bool             # disarmed by a failsafe
-    sources: Tuple[str, str]   # (attitude source, rate source): POSE/GYRO, or a gap's stand-ins
-    setpoint: np.ndarray     # R_d being flown (the same object until a new one is adopted)
+    sources: Tuple[AttitudeSource, RateSource]   # (attitude source, rate source): POSE/GYRO, or
+                                                 # a gap's stand-ins
+    setpoint: FloatArray     # R_d being flown (the same object until a new one is adopted)
     bridging: bool = False   # a gap is being ridden through (see geoctl_ros.core.supervisor.gaps)
     # (R, Omega) the step flew on, in the package's frames (a gap's stand-ins while bridging), or
     # None before the first
-    measured: Optional[Tuple[np.ndarray, np.ndarray]] = None
+    measured: Optional[Tuple[FloatArray, FloatArray]] = None
 
+
+
+class Setup(Protocol):
+    """What the loop takes of a controller's setup (``geoctl_ros.params.build.ControllerSetup``,
+    which params builds: params is above core).
+    """
+
+    @property
+    def config(self) -> ControllerConfig: ...
+
+    @property
+    def mixer(self) -> Mixer: ...
+
+    @property
+    def setpoint(self) -> FloatArray: ...
+
+    @property
+    def schedule(self) -> SetpointSchedule: ...
+
+    @property
+    def loop(self) -> LoopSettings: ...
+
+    @property
+    def frames(self) -> InputFrames: ...
+
+    @property
+    def agreement(self) -> AgreementSettings: ...

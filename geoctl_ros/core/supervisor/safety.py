@@ -23,21 +23,22 @@ report.
 from dataclasses import dataclass
 import math
 import secrets
-from typing import List, Optional, Tuple
+from typing import Iterable, List, Optional, Sequence, Tuple, cast
 
 import numpy as np
 
-from geoctl_ros.core.actuation.esc_wire import EscHealth, EscStatus
+from geoctl_ros.core.actuation.esc_wire import EscHealth as EscHealth
+from geoctl_ros.core.actuation.esc_wire import EscStatus as EscStatus
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.quaternions import quaternion_problem
-from geoctl_ros.core.geometry.so3 import Vector
+from geoctl_ros.core.geometry.so3 import FloatArray, Vector
 from geoctl_ros.core.telemetry.diagnostics import StampTrust, failsafe
 from geoctl_ros.core.telemetry.stats import WindowStats
 
 SPECIFIC_FORCE_MAX = 2000.0     # m/s^2: beyond any IMU's range (about 200 g)
 
 
-def attitude_of(q: Vector) -> Tuple[Optional[np.ndarray], Optional[str]]:
+def attitude_of(q: Vector) -> Tuple[Optional[FloatArray], Optional[str]]:
     """(R, None) for an acceptable attitude quaternion q (x, y, z, w), else (None, why): what
     the bridge and the view take from a pose or a set point.
     """
@@ -93,15 +94,15 @@ class Stream:
     (``stamps``): what /diagnostics shows of the chain's latency and of the clocks.
     """
 
-    def __init__(self, name, timeout, ride_through=0.0, fallback_delay=0.0,
-                 age_from_stamps=True):
+    def __init__(self, name: str, timeout: float, ride_through: float = 0.0,
+                 fallback_delay: float = 0.0, age_from_stamps: bool = True) -> None:
         self.name = name
         self.timeout = timeout
         self.ride_through = ride_through
         self.fallback_delay = fallback_delay
         self.age_from_stamps = age_from_stamps
         self.last_stamp = -math.inf
-        self.last_receipt = None
+        self.last_receipt: Optional[float] = None
         self.last_delay = 0.0           # capture to receipt of the last accepted sample (s)
         self.accepted = 0
         self.refused = 0
@@ -110,7 +111,7 @@ class Stream:
         self._trusted = self._untrusted = 0     # this window: stamps trusted for the age, not
         self.reanchored = 0             # times the stream's clock was found to have stepped
         self._not_newer = 0             # good samples refused as not newer, in a row
-        self.recent_refusals = []     # distinct reasons since take_refusals(), at most 5
+        self.recent_refusals: List[str] = []   # distinct reasons since take_refusals(), at most 5
 
     def offer(self, stamp: float, receipt: float, problem: Optional[str] = None,
               delay: Optional[float] = None) -> Optional[str]:
@@ -172,7 +173,7 @@ class Stream:
         """How old the last accepted sample's content is at now (s): its delay from capture to
         receipt plus the time since receipt.
         """
-        return self.last_delay + max(now - self.last_receipt, 0.0)
+        return self.last_delay + max(now - cast(float, self.last_receipt), 0.0)
 
     def take_refusals(self) -> List[str]:
         """The distinct refusal reasons since the last call (and forget them)."""
@@ -247,10 +248,10 @@ class ArmResult:
 class Supervisor:
     """Armed/disarmed state with its reasons; decides whether the motors may turn."""
 
-    def __init__(self, streams):
+    def __init__(self, streams: Sequence[Stream]) -> None:
         self.streams = streams
         self.armed = False
-        self.armed_since = None
+        self.armed_since: Optional[float] = None
         self.reason = 'disarmed at start-up'
         self.failed = False          # disarmed by a failsafe (reason says why)
 
@@ -290,11 +291,11 @@ class Supervisor:
 class SetpointSchedule:
     """Set points at times (s) after arming, held until the next; empty means none."""
 
-    def __init__(self, times, rotations):
+    def __init__(self, times: Vector, rotations: Iterable[FloatArray]) -> None:
         self.times = np.asarray(times, dtype=float)
         self.rotations = list(rotations)
 
-    def __len__(self):
+    def __len__(self) -> int:
         return len(self.times)
 
     def index_at(self, t: float) -> int:

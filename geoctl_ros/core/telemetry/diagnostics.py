@@ -11,10 +11,11 @@ ROS-free: the nodes turn a DiagnosticStatus message into (level, message, pairs)
 from dataclasses import dataclass, fields, replace
 import math
 import re
-from typing import Any, Iterable, List, NamedTuple, Optional, Tuple
+from typing import Iterable, List, NamedTuple, Optional, Tuple
 
 import numpy as np
 
+from geoctl_ros.core.geometry.so3 import FloatArray
 from geoctl_ros.core.telemetry.codec import Codec, Key
 from geoctl_ros.core.telemetry.scheduling import Scheduling, scheduling_text, scheduling_value
 
@@ -48,7 +49,7 @@ class Window(NamedTuple):
     max: float
 
 
-def window(samples: np.ndarray) -> Optional['Window']:
+def window(samples: FloatArray) -> Optional['Window']:
     """The Window of an array of samples (seconds), or None when there are none."""
     if not len(samples):
         return None
@@ -68,7 +69,7 @@ def aggregate(windows: Iterable[Optional['Window']]) -> Optional['Window']:
                   float(np.percentile(rows[:, 2], 99)), float(rows[:, 3].max()))
 
 
-def aggregate_ms(statuses: Iterable[Any], name: str) -> Optional['Window']:
+def aggregate_ms(statuses: Iterable['Status'], name: str) -> Optional['Window']:
     """The windows of one Figures field (``loop_period``, ...) over several reports, as one
     (``aggregate``), in milliseconds; None when none has it.
     """
@@ -145,7 +146,7 @@ class Figures:
     cone_entries: int = 0          # times the sensor entered a cone since arming (latched)
     psi: Optional[float] = None
     min_cone_margin_deg: Optional[float] = None
-    motor_commands: Optional[tuple] = None
+    motor_commands: Optional[Tuple[int, ...]] = None
     unlearnt: Optional['Unlearnt'] = None   # the acceleration the model did not know (armed)
     # the node's own timing of the window
     loop_period: Optional[Window] = None
@@ -185,14 +186,14 @@ def window_value(text: str) -> Optional['Window']:
     return None if m is None else Window(*(1e-3 * float(x) for x in m.groups()))
 
 
-def _counts_value(text):
+def _counts_value(text: str) -> 'Counts':
     accepted, refused = text.split('/')
     return Counts(int(accepted), int(refused))
 
 
-def _gaps_value(text):
+def _gaps_value(text: str) -> 'Gaps':
     m = _GAPS.match(text)
-    return Gaps(int(m.group(1)), float(m.group(2)))
+    return Gaps(int(m.group(1)), float(m.group(2)))  # type: ignore[union-attr]  # (no match: raises)
 
 
 _STAMPS = re.compile(r'(?:trusted|not trusted|partly trusted) \((\d+) of (\d+) this window\)')
@@ -228,11 +229,11 @@ def _stamps_value(text: str) -> 'StampTrust':
     return StampTrust(True, trusted, n - trusted)
 
 
-def _margin_text(margin):
+def _margin_text(margin: Optional[float]) -> str:
     return 'no cones' if margin is None else '%.3f' % margin
 
 
-def _margin_value(text):
+def _margin_value(text: str) -> Optional[float]:
     return None if text == 'no cones' else float(text)
 
 
@@ -250,15 +251,15 @@ def _unlearnt_value(text: str) -> Optional['Unlearnt']:
                                            int(m.group(3)), int(m.group(4)))
 
 
-def _unlearnt_absent(figures):
+def _unlearnt_absent(figures: 'Figures') -> bool:
     return figures.unlearnt is None
 
 
-def _after_first_step(figures):
+def _after_first_step(figures: 'Figures') -> bool:
     return figures.psi is None
 
 
-def _bool(text):
+def _bool(text: str) -> bool:
     return text == 'True'
 
 
@@ -314,6 +315,7 @@ def from_values(pairs: Iterable[Tuple[str, str]]) -> 'Figures':
     dropped).
     """
     pairs = list(pairs)
+    figures: Figures
     figures, _ = CODEC.from_values(pairs)
     if not any(k == CODEC.key('failsafe') for k, _ in pairs):   # a record from before the key:
         figures = replace(figures, failsafe=figures.state.startswith(FAILSAFE))   # its words

@@ -9,13 +9,14 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from geoctl_ros.core.geometry.so3 import FloatArray
 from geoctl_ros.core.telemetry.diagnostics import Window, window
 
 
 class WindowStats:
     """Mean, standard deviation, 99th percentile and maximum of the samples since ``reset``."""
 
-    def __init__(self, capacity=2048):
+    def __init__(self, capacity: int = 2048) -> None:
         self._x = np.empty(capacity)
         self.n = 0
 
@@ -26,7 +27,7 @@ class WindowStats:
     def reset(self) -> None:
         self.n = 0
 
-    def samples(self) -> np.ndarray:
+    def samples(self) -> FloatArray:
         return self._x[:min(self.n, len(self._x))]
 
     def window(self) -> Optional[Window]:
