@@ -11,10 +11,11 @@ import ast
 import sys
 
 import numpy as np
+import numpy.typing  # noqa: F401  (imported by core/'s annotations: listed whatever was imported)
 
 # the submodules whose names are listed (what ``np.<sub>.<name>`` can reach)
 SUBMODULES = ('char', 'ctypeslib', 'dtypes', 'emath', 'exceptions', 'fft', 'lib', 'linalg', 'ma',
-              'polynomial', 'random', 'rec', 'testing')
+              'polynomial', 'random', 'rec', 'testing', 'typing')
 
 
 def names():
