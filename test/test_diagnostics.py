@@ -63,8 +63,10 @@ def test_a_reader_never_fails_on_text_it_does_not_understand():
     back = from_values([(key('armed'), 'True'), (key('ticks'), 'many'),
                         (key('pose_counts'), '1/2/3'), (key('pose_age_at_tick'), 'mean x'),
                         ('a key of a later version', '1'),
-                        (key('min_cone_margin_deg'), 'no cones')])
+                        (key('min_cone_margin_deg'), 'no cones'),
+                        (key('pose_gaps'), 'several, long ones')])
     assert back.armed and back.ticks == 0 and back.pose_counts == (0, 0)
+    assert back.pose_gaps == from_values([]).pose_gaps                # left at its default
     assert back.pose_age_at_tick is None and back.min_cone_margin_deg is None
 
 

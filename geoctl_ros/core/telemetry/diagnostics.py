@@ -193,7 +193,9 @@ def _counts_value(text: str) -> 'Counts':
 
 def _gaps_value(text: str) -> 'Gaps':
     m = _GAPS.match(text)
-    return Gaps(int(m.group(1)), float(m.group(2)))  # type: ignore[union-attr]  # (no match: raises)
+    if m is None:
+        raise ValueError(text)
+    return Gaps(int(m.group(1)), float(m.group(2)))
 
 
 _STAMPS = re.compile(r'(?:trusted|not trusted|partly trusted) \((\d+) of (\d+) this window\)')
