@@ -178,7 +178,7 @@ def test_the_mixers_lag_model_spools_up_from_rest_as_the_rotors_do():
         out = mixer.mix(moment, armed=True, dt=0.01, held=0.01)
         if k < 8:           # spooling up (two time constants): the allocation, not more
             assert np.all(mixer.curve.thrust(out.commands) <= out.allocation.thrusts + 0.05)
-        worst = max(worst, float(np.max(np.abs(mixer.modelled_thrusts - actuator.thrusts))))
+        worst = max(worst, float(np.max(np.abs(mixer.rotors.modelled - actuator.thrusts))))
         for _ in range(10):
             actuator.moment(out.commands, 1e-3)
     assert worst < 0.02 * hover, (worst, hover)

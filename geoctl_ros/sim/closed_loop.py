@@ -333,7 +333,7 @@ class _Judge:
         """
         tick, bed = self.tick, self.bed
         R, W = bed.state()
-        hold = dt if tick.mixer.design_hold is None else tick.mixer.design_hold
+        hold = dt if tick.mixer.rotors is None else tick.mixer.rotors.design_hold
         x = tick.brake_inputs(R, W, 0.0, hold, t)
         terms = self.terms = brake_terms(self.brake, bed.cones, tick.controller.J_inv, x)
         self.safe[k] = np.all(backup_margin(self.brake, terms.gap, terms.w, terms.D_s,

@@ -3,7 +3,7 @@ commands (allocation, the lag compensation, the curve).
 """
 from dataclasses import dataclass, field
 import math
-from typing import Optional, Tuple, Union, cast
+from typing import NamedTuple, Optional, Tuple, Union, cast
 
 import numpy as np
 
@@ -83,6 +83,24 @@ class MotorOutput:
         return self.allocation.saturated | self.clipped
 
 
+class RotorModel(NamedTuple):
+    """The lag compensation's model of the rotors between two commands (one row of thrusts per
+    run of a batch; the Mixer keeps None instead while the rotors are at rest: disarmed, or no
+    compensation).
+    """
+
+    sent: FloatArray        # N: the thrusts the last command asked for (the curve's, as sent)
+    modelled: FloatArray    # N: the thrusts the rotors made, by the model, when it was sent
+    design_hold: float      # s: the hold H the last command was designed for
+    spool_left: float       # s: of the spool-up left after arming (0 or less: over)
+
+    def after(self, held: float, lag: float) -> FloatArray:
+        """The thrusts the rotors make held s after the last command, by their first-order lag
+        (time constant lag, s).
+        """
+        return self.sent + math.exp(-held / lag) * (self.modelled - self.sent)
+
+
 class Mixer:
     """Moment about the pivot -> six motor commands: allocation, then the thrust curve.
 
@@ -126,21 +144,15 @@ class Mixer:
         self.lag = float(lag)
         self._dead = np.array([i for i in range(allocator.count) if i not in allocator.alive],
                               dtype=int)
-        # the lag model's thrusts at the last command (None: at rest)
-        self.modelled_thrusts: Optional[FloatArray] = None
-        self.sent_thrusts: Optional[FloatArray] = None   # the thrusts the last command asked for
-        self.design_hold: Optional[float] = None         # H of the last command (s)
-        self.spool_left = 0.0            # s of spooling up left after arming
+        self.rotors: Optional[RotorModel] = None   # the lag model (None: the rotors at rest)
 
     def adopt_state(self, other: 'Mixer') -> None:
         """Carry the lag model over from the mixer this one replaces (a run-time
         reconfiguration).
         """
-        if other.modelled_thrusts is not None:
-            self.modelled_thrusts = other.modelled_thrusts.copy()
-            self.sent_thrusts = cast(FloatArray, other.sent_thrusts).copy()
-            self.design_hold = other.design_hold
-            self.spool_left = other.spool_left
+        if other.rotors is not None:
+            self.rotors = other.rotors._replace(sent=other.rotors.sent.copy(),
+                                                modelled=other.rotors.modelled.copy())
 
     def mix(self, moment: FloatArray, armed: bool = True, dt: Optional[float] = None,
             held: Optional[float] = None) -> 'MotorOutput':
@@ -154,24 +166,24 @@ class Mixer:
         thrusts = allocation.thrusts
         if not armed:
             zero = np.zeros_like(thrusts, dtype=int)
-            self.modelled_thrusts = self.sent_thrusts = self.design_hold = None
+            self.rotors = None
             return MotorOutput(zero, np.zeros(zero.shape), allocation)
         compensate = self.lag > 0.0 and dt is not None and dt > 0.0
         clipped: Union[bool, Flags] = False
+        rotors = self.rotors
         if compensate:
-            model = self.modelled_thrusts
-            if model is None or model.shape != thrusts.shape:
+            if rotors is None or rotors.modelled.shape != thrusts.shape:
                 # arming: the rotors are at rest, and spool up to the allocation uncompensated
                 model = np.zeros_like(thrusts)
-                self.spool_left = self.SPOOL_LAGS * self.lag
+                spool_left = self.SPOOL_LAGS * self.lag
             else:
                 held = cast(float, dt) if held is None else max(held, 0.0)
-                sent = cast(FloatArray, self.sent_thrusts)
-                model = sent + math.exp(-held / self.lag) * (model - sent)
-                if self.spool_left > 0.0:
-                    self.spool_left -= held
+                model = rotors.after(held, self.lag)
+                spool_left = rotors.spool_left
+                if spool_left > 0.0:
+                    spool_left -= held
             hold = self.design_hold_for(cast(float, dt), held)
-            if self.spool_left <= 0.0:
+            if spool_left <= 0.0:
                 a = math.exp(-hold / self.lag)
                 wanted = (thrusts - a * model) / (1.0 - a)
                 thrusts = np.minimum(np.maximum(wanted, self.allocator.lo), self.allocator.hi)
@@ -180,11 +192,9 @@ class Mixer:
         if len(self._dead):
             commands[..., self._dead] = 0
         if compensate:
-            self.modelled_thrusts = model
-            self.sent_thrusts = self.curve.thrust(commands)
-            self.design_hold = hold
-        elif self.modelled_thrusts is not None:     # compensation turned off: a stale model
-            self.modelled_thrusts = self.sent_thrusts = self.design_hold = None   # is not kept
+            self.rotors = RotorModel(self.curve.thrust(commands), model, hold, spool_left)
+        else:                       # compensation turned off: a stale model is not kept
+            self.rotors = None
         return MotorOutput(commands, self.curve.normalised(commands), allocation, clipped)
 
     def design_hold_for(self, dt: float, held: Optional[float]) -> float:
@@ -193,12 +203,13 @@ class Mixer:
         step the longest recent hold, back to the period over about HOLD_MEMORY (the approach
         brake takes the same H for the hold its command is reached in).
         """
-        if self.modelled_thrusts is None or self.design_hold is None:
+        if self.rotors is None:
             return dt                          # arming
         held = dt if held is None else max(held, 0.0)
         hold = max(dt, held)
-        if self.design_hold > hold:               # a late step not long ago: back to dt slowly
-            hold = max(hold, dt + (self.design_hold - dt) * math.exp(-held / self.HOLD_MEMORY))
+        last = self.rotors.design_hold
+        if last > hold:                           # a late step not long ago: back to dt slowly
+            hold = max(hold, dt + (last - dt) * math.exp(-held / self.HOLD_MEMORY))
         return hold
 
     def moments(self, held: float = 0.0) -> Optional[Tuple[FloatArray, FloatArray]]:
@@ -206,12 +217,11 @@ class Mixer:
         rest or uncompensated): (the one they settle to under the last command, the one they
         make ``held`` s after it).
         """
-        if self.sent_thrusts is None:
+        if self.rotors is None:
             return None
         B = self.allocator.B_full[3:]
-        sent, model = self.sent_thrusts, cast(FloatArray, self.modelled_thrusts)
-        now = model if held <= 0.0 else sent + math.exp(-held / self.lag) * (model - sent)
-        return matvec(B, sent), matvec(B, now)
+        now = self.rotors.modelled if held <= 0.0 else self.rotors.after(held, self.lag)
+        return matvec(B, self.rotors.sent), matvec(B, now)
 
     def thrust_offsets(self, held: float) -> Optional[FloatArray]:
         """Each alive rotor's thrust by the lag model, held s after the last command, less its
@@ -219,10 +229,9 @@ class Mixer:
         within the moment polytope's frame (``Allocator.moment_polytope``); None without a
         lag model.
         """
-        if self.sent_thrusts is None:
+        if self.rotors is None:
             return None
-        sent, model = self.sent_thrusts, cast(FloatArray, self.modelled_thrusts)
-        now = model if held <= 0.0 else sent + math.exp(-held / self.lag) * (model - sent)
+        now = self.rotors.modelled if held <= 0.0 else self.rotors.after(held, self.lag)
         return now[..., self.allocator.alive] - self.collective_thrust * self.allocator.base_share
 
     def spool_ticks(self, dt: float) -> int:
@@ -244,6 +253,6 @@ class Mixer:
         """
         if self.lag <= 0.0 or dt <= 0.0:
             return False
-        if self.modelled_thrusts is None:
+        if self.rotors is None:
             return True
-        return self.spool_left - (dt if held is None else max(held, 0.0)) > 0.0
+        return self.rotors.spool_left - (dt if held is None else max(held, 0.0)) > 0.0
