@@ -6,7 +6,7 @@ adaptation, the diagnostics level and its reasons) is made here, so it is tested
 """
 
 import math
-from typing import Any, Dict, List, Optional, Sequence, Tuple, cast
+from typing import Dict, Generic, List, Optional, Sequence, Tuple, Union, cast
 
 from geoctl_ros.core.actuation.motors import MotorOutput
 from geoctl_ros.core.geometry import so3
@@ -19,7 +19,7 @@ from geoctl_ros.core.sensors.consistency import SensorAgreement
 from geoctl_ros.core.supervisor import loop_status, preflight
 from geoctl_ros.core.supervisor.control_tick import ControlTick
 from geoctl_ros.core.supervisor.gaps import GapBridge
-from geoctl_ros.core.supervisor.loop_types import LoopSettings, LoopTick, Setup
+from geoctl_ros.core.supervisor.loop_types import LoopSettings, LoopTick, Setup, StampT
 from geoctl_ros.core.supervisor.safety import (
     ArmResult,
     EscHealth,
@@ -57,8 +57,10 @@ def spool_movement(R_armed: FloatArray, R: FloatArray) -> Optional[str]:
                                                                              SPOOL_MOVE_DEG))
 
 
-class ControlLoop:
-    """State and decisions of the controller node."""
+class ControlLoop(Generic[StampT]):
+    """State and decisions of the controller node (StampT: the type of the stamps its caller
+    gives offer_pose in its own form, handed back on the ticks).
+    """
 
     def __init__(self, setup: Setup, unconfigured: Optional[str] = None) -> None:
         """unconfigured: None, or why the node has no configuration anyone gave (it then
@@ -80,8 +82,9 @@ class ControlLoop:
         self.R: Optional[FloatArray] = None       # last accepted measurements
         self.Omega: Optional[FloatArray] = None
         self.setpoint_note: Optional[str] = None  # last set-point refusal, for diagnostics
-        self._pose_stamp: Any = None    # the last accepted pose's stamp, as given
-        self.last_tick: Optional[LoopTick] = None
+        # the last accepted pose's stamp, as given
+        self._pose_stamp: Union[float, StampT, None] = None
+        self.last_tick: Optional[LoopTick[StampT]] = None
         # (the inputs' ages, measurement_delay included, are the streams': see tick)
         self.step = ControlTick(self.controller, setup.mixer)
         self._schedule_index = -1
@@ -105,7 +108,8 @@ class ControlLoop:
 
     # --- inputs ------------------------------------------------------------------------------
     def offer_pose(self, q: Vector, stamp: float, receipt: float,
-                   stamp_as_given: Any = None, delay: Optional[float] = None) -> Optional[str]:
+                   stamp_as_given: Optional[StampT] = None,
+                   delay: Optional[float] = None) -> Optional[str]:
         """A motion-capture attitude (x, y, z, w) of stamp (s) received at receipt (s, the loop's
         clock); None if accepted, else why it was refused. stamp_as_given: the stamp in the
         caller's own form, handed back on the ticks that use this pose (default: stamp). delay:
@@ -274,7 +278,7 @@ class ControlLoop:
         return None
 
     # --- the control tick --------------------------------------------------------------------
-    def tick(self, now: float, dt: float) -> LoopTick:
+    def tick(self, now: float, dt: float) -> LoopTick[StampT]:
         """One control step at time now (the node's clock); dt is the control period (the time
         the step's command is expected to be held).
         """
@@ -350,7 +354,8 @@ class ControlLoop:
             self.entry = (name, depth)
 
     def _result(self, out: Optional[ControlOutput], motors: MotorOutput, armed: bool,
-                bridging: bool, state: Optional[Tuple[FloatArray, FloatArray]]) -> LoopTick:
+                bridging: bool,
+                state: Optional[Tuple[FloatArray, FloatArray]]) -> LoopTick[StampT]:
         b = self.bridge
         return LoopTick(out, motors, armed, self._pose_stamp, self.pose.last_receipt,
                     self.supervisor.reason, self.supervisor.failed,

@@ -3,14 +3,17 @@ the level, the message's sentences and the typed figures, and the per-window cou
 """
 from dataclasses import dataclass
 import math
-from typing import Any, List, Optional
+from typing import Dict, List, Optional, Protocol, Tuple, cast
 
 import numpy as np
 
 from geoctl_ros.core.geometry.flags import Flags
 from geoctl_ros.core.geometry.so3 import Scalars
+from geoctl_ros.core.sensors.consistency import SensorAgreement
 from geoctl_ros.core.supervisor.control_tick import BLIND_BOUND_S, SUSTAINED_BLIND_BOUND_S
-from geoctl_ros.core.supervisor.gaps import GYRO, POSE
+from geoctl_ros.core.supervisor.gaps import GYRO, POSE, GapBridge
+from geoctl_ros.core.supervisor.loop_types import LoopTick, Setup, StampT
+from geoctl_ros.core.supervisor.safety import Stream, Supervisor
 from geoctl_ros.core.telemetry.diagnostics import (
     ERROR,
     OK,
@@ -21,6 +24,7 @@ from geoctl_ros.core.telemetry.diagnostics import (
     Status,
     Unlearnt,
 )
+from geoctl_ros.core.telemetry.stats import WindowStats
 
 NEAR_CONE_DEG = 2.0           # a cone margin below this is reported (WARN)
 
@@ -68,7 +72,66 @@ class Window:
             self.armed_ticks += 1
 
 
-def gap_notes(loop: Any, now: float) -> List[str]:
+class StatusLoop(Protocol[StampT]):
+    """What the diagnostics read of the loop (``core.supervisor.loop.ControlLoop``, which imports
+    this module).
+    """
+
+    @property
+    def bridge(self) -> GapBridge: ...
+
+    @property
+    def pose(self) -> Stream: ...
+
+    @property
+    def rate(self) -> Stream: ...
+
+    @property
+    def supervisor(self) -> Supervisor: ...
+
+    @property
+    def unconfigured(self) -> Optional[str]: ...
+
+    def esc_report_problem(self, now: float) -> Optional[str]: ...
+
+    @property
+    def agreement(self) -> SensorAgreement: ...
+
+    @property
+    def last_tick(self) -> Optional[LoopTick[StampT]]: ...
+
+    @property
+    def entry(self) -> Optional[Tuple[str, float]]: ...
+
+    @property
+    def cone_entries(self) -> int: ...
+
+    @property
+    def setup(self) -> Setup: ...
+
+    @property
+    def window(self) -> Window: ...
+
+    @property
+    def pose_age(self) -> WindowStats: ...
+
+    @property
+    def rate_age(self) -> WindowStats: ...
+
+    @property
+    def gaps(self) -> Dict[str, List[float]]: ...
+
+    @property
+    def unlearnt_bound(self) -> float: ...
+
+    @property
+    def unlearnt_over(self) -> int: ...
+
+    @property
+    def setpoint_note(self) -> Optional[str]: ...
+
+
+def gap_notes(loop: StatusLoop[StampT], now: float) -> List[str]:
     """Sentences for the gaps being ridden through (empty in normal flight)."""
     notes = []
     b = loop.bridge
@@ -81,7 +144,8 @@ def gap_notes(loop: Any, now: float) -> List[str]:
     return notes
 
 
-def status(loop: Any, now: float, other_commanders: Optional[str] = None) -> Status:
+def status(loop: StatusLoop[StampT], now: float,
+           other_commanders: Optional[str] = None) -> Status:
     """The diagnostics: level, message and figures. other_commanders is the node's sentence
     when another node publishes the motor commands (an error while armed).
     """
@@ -122,6 +186,7 @@ def status(loop: Any, now: float, other_commanders: Optional[str] = None) -> Sta
                          'y' if loop.cone_entries == 1 else 'ies'))
     cones = loop.setup.config.cones
     # (the last tick's cones: a reconfiguration since may have changed them until the next tick)
+    margin: Optional[float]     # the closest cone's margin (deg); then the figures' least
     if out is not None and len(cones) and len(out.margins_deg) == len(cones):
         name, margin = cones.closest(out.margins_deg)
         near = max(NEAR_CONE_DEG, cones.band_deg)
@@ -171,10 +236,14 @@ def status(loop: Any, now: float, other_commanders: Optional[str] = None) -> Sta
         pose_age_at_tick=loop.pose_age.window(), imu_age_at_tick=loop.rate_age.window(),
         pose_delay=loop.pose.delays.window(), imu_delay=loop.rate.delays.window(),
         pose_stamps=loop.pose.stamps(), imu_stamps=loop.rate.stamps(),
-        pose_gaps=Gaps(*loop.gaps['pose']), imu_gaps=Gaps(*loop.gaps['angular velocity']),
+        # (a gap record is [count, longest]: its count an int, which List[float] does not say)
+        pose_gaps=Gaps(*cast(Tuple[int, float], loop.gaps['pose'])),
+        imu_gaps=Gaps(*cast(Tuple[int, float], loop.gaps['angular velocity'])),
         ticks_bridging=w.bridging, ticks=w.ticks, cone_entries=loop.cone_entries,
         psi=None if out is None else float(out.psi), min_cone_margin_deg=margin,
-        motor_commands=None if out is None else tuple(int(c) for c in tick.motors.commands),
+        # (out is the last tick's control: not None, there is a last tick)
+        motor_commands=None if out is None else tuple(
+            int(c) for c in cast(LoopTick[StampT], tick).motors.commands),
         unlearnt=(Unlearnt(w.unlearnt, loop.unlearnt_bound, w.unlearnt_over,
                            loop.unlearnt_over)
                   if sup.armed and math.isfinite(loop.unlearnt_bound) else None))

@@ -2,7 +2,7 @@
 result; and the period of a step that a sample starts.
 """
 from dataclasses import dataclass
-from typing import Optional, Protocol, Tuple
+from typing import Generic, Optional, Protocol, Tuple, TypeVar, Union
 
 from geoctl_ros.core.actuation.motors import Mixer, MotorOutput
 from geoctl_ros.core.geometry.so3 import FloatArray
@@ -21,6 +21,11 @@ def step_period(since: float, period: float) -> float:
     it for the whole wait until the next sample.
     """
     return min(max(since, 0.5 * period), 2.0 * period)
+
+
+# the type of the stamps a loop's caller gives offer_pose in its own form (``stamp_as_given``) and
+# gets back on the ticks: the node's message header stamps; tests give none (the float stamp)
+StampT = TypeVar('StampT')
 
 
 @dataclass(frozen=True)
@@ -47,14 +52,15 @@ class LoopSettings:
 
 
 @dataclass
-class LoopTick:
+class LoopTick(Generic[StampT]):
     """One control tick's results: everything the node publishes and logs."""
 
     control: Optional[ControlOutput]   # None before the first pose and rate
     motors: MotorOutput      # zero commands unless armed
     armed: bool
-    stamp: object            # stamp of the pose the step used, as offer_pose was given it
-                             # (the node's header stamp, for exact-time matching; or None)
+    # stamp of the pose the step used, as offer_pose was given it (the node's header stamp, for
+    # exact-time matching; the float stamp when given none; None before the first pose)
+    stamp: Union[float, StampT, None]
     pose_receipt: Optional[float]   # when that pose was received, on the loop's clock (or None)
     state: str               # the supervisor's state: 'armed', or why not
     failed: bool             # disarmed by a failsafe

@@ -1,13 +1,63 @@
 """The arming checks (a preflight): every reason the controller must not arm now, as sentences."""
 import math
-from typing import Any, List, Optional
+from typing import List, Optional, Protocol, cast
 
 import numpy as np
 
+from geoctl_ros.core.geometry.so3 import FloatArray
 from geoctl_ros.core.law.brake import opening
+from geoctl_ros.core.law.control import AttitudeController
+from geoctl_ros.core.sensors.consistency import SensorAgreement
+from geoctl_ros.core.supervisor.control_tick import ControlTick
+from geoctl_ros.core.supervisor.loop_types import Setup
+from geoctl_ros.core.supervisor.safety import Stream, Supervisor
 
 
-def arm_problems(loop: Any, now: float, extra_problem: Optional[str] = None) -> List[str]:
+class PreflightLoop(Protocol):
+    """What the arming checks read of the loop (``core.supervisor.loop.ControlLoop``, which
+    imports this module).
+    """
+
+    @property
+    def unconfigured(self) -> Optional[str]: ...
+
+    def esc_report_problem(self, now: float) -> Optional[str]: ...
+
+    @property
+    def supervisor(self) -> Supervisor: ...
+
+    @property
+    def agreement(self) -> SensorAgreement: ...
+
+    @property
+    def holds_at_arming(self) -> bool: ...
+
+    def hold_attitude(self) -> Optional[FloatArray]: ...
+
+    @property
+    def controller(self) -> AttitudeController: ...
+
+    @property
+    def setup(self) -> Setup: ...
+
+    @property
+    def R(self) -> Optional[FloatArray]: ...
+
+    @property
+    def Omega(self) -> Optional[FloatArray]: ...
+
+    @property
+    def pose(self) -> Stream: ...
+
+    @property
+    def rate(self) -> Stream: ...
+
+    @property
+    def step(self) -> ControlTick: ...
+
+
+def arm_problems(loop: PreflightLoop, now: float,
+                 extra_problem: Optional[str] = None) -> List[str]:
     """Every reason not to arm now (sentences; empty: it may), as a preflight check names
     them: no configuration given, extra_problem (the caller's, e.g. another publisher of the
     motor commands), each stale input, the sensors' disagreement (``core.sensors.consistency``),
@@ -42,7 +92,7 @@ def arm_problems(loop: Any, now: float, extra_problem: Optional[str] = None) -> 
     return problems
 
 
-def takeover_problems(loop: Any, now: float) -> List[str]:
+def takeover_problems(loop: PreflightLoop, now: float) -> List[str]:
     """Where the approach brake could not keep a cone from the take-over after an arming now
     (``core.law.brake.rows``' margin of the state then, ``ControlTick.takeover_inputs``: the
     vehicle held or resting where it is while the rotors spool up, the gravity moment at its
@@ -54,10 +104,11 @@ def takeover_problems(loop: Any, now: float) -> List[str]:
     if controller.brake is None or loop.Omega is None:
         return []
     ages = [s.capture_age(now) for s in (loop.pose, loop.rate) if s.last_receipt is not None]
-    margin = loop.step.takeover_margins(loop.R, loop.Omega, max(ages, default=0.0),
-                                        1.0 / loop.setup.loop.rate_hz)
+    # (loop.R: arm_problems calls this only with a pose; see its check)
+    margin = loop.step.takeover_margins(cast(FloatArray, loop.R), loop.Omega,
+                                        max(ages, default=0.0), 1.0 / loop.setup.loop.rate_hz)
     cones = controller.config.cones
-    gap = np.degrees(opening(cones, loop.R, loop.Omega)[0])
+    gap = np.degrees(opening(cones, cast(FloatArray, loop.R), loop.Omega)[0])
     return ['the approach brake could not keep cone %r once the rotors have spooled up: '
             'predicted closest approach %.2f deg (from %.2f deg out, in the worst case of the '
             "spool-up and the brake's bounds): arm further from it, or level the vehicle"
