@@ -10,7 +10,7 @@ commands refused in the window; OK otherwise.
 """
 from dataclasses import dataclass
 import math
-from typing import Iterable, List, NamedTuple, Optional, Tuple
+from typing import Iterable, List, NamedTuple, Optional, Tuple, cast
 
 from geoctl_ros.core.actuation.esc_wire import EscHealth
 from geoctl_ros.core.telemetry.codec import Codec, Key
@@ -150,4 +150,4 @@ def to_values(figures: EscFigures) -> List[Tuple[str, str]]:
 
 def from_values(pairs: Iterable[Tuple[str, str]]) -> EscFigures:
     """The ESC node's figures from a status's key/value pairs (others' keys are dropped)."""
-    return CODEC.from_values(pairs)[0]
+    return cast(EscFigures, CODEC.from_values(pairs)[0])   # (they require no key: never None)

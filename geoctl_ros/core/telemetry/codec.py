@@ -7,12 +7,42 @@ tools, the tests). The controller's table is ``core/telemetry/diagnostics.py``'s
 bridge's ``mavlink/health.py``'s and the ESC node's ``esc/health.py``'s: renaming a key changes one
 line of one table. ROS-free: the nodes turn the pairs into KeyValue messages and back.
 """
-from dataclasses import fields
-from typing import Any, Callable, Dict, Iterable, List, NamedTuple, Optional, Tuple
+from dataclasses import Field, fields
+from typing import (
+    Any,
+    Callable,
+    ClassVar,
+    Dict,
+    Generic,
+    Iterable,
+    List,
+    NamedTuple,
+    Optional,
+    Protocol,
+    Tuple,
+    Type,
+    TypeVar,
+)
+
+
+class Dataclass(Protocol):
+    """A dataclass's instance (typeshed's ``_typeshed.DataclassInstance``, which is no module
+    to import at run time).
+    """
+
+    __dataclass_fields__: ClassVar[Dict[str, 'Field[object]']]
+
+
+# the figures' dataclass of one codec
+FiguresT = TypeVar('FiguresT', bound=Dataclass)
 
 
 class Key(NamedTuple):
-    """How one field of the figures is published."""
+    """How one field of the figures is published.
+
+    (text and parse take and give the field's value, of its own type in each table entry: Any,
+    as a table of mixed fields cannot say more; omit takes the figures.)
+    """
 
     key: str                                # the key; for an expanded field, its keys' prefix
     text: Callable[[Any], str] = str        # value -> text
@@ -24,10 +54,10 @@ class Key(NamedTuple):
     numbered: bool = False                  # an expanded tuple: entries named 1, 2, ...
 
 
-class Codec:
+class Codec(Generic[FiguresT]):
     """Figures of one dataclass to key/value pairs and back."""
 
-    def __init__(self, cls: type, table: Dict[str, Key], required: Tuple[str, ...] = ()):
+    def __init__(self, cls: Type[FiguresT], table: Dict[str, Key], required: Tuple[str, ...] = ()):
         """table: field -> Key, in the order published; required: the fields a status must
         carry to be one of these (``from_values`` gives None otherwise).
         """
@@ -40,7 +70,7 @@ class Codec:
         """The published key of a field (for a reader that wants the text itself)."""
         return self.table[name].key
 
-    def to_values(self, figures: Any) -> List[Tuple[str, str]]:
+    def to_values(self, figures: FiguresT) -> List[Tuple[str, str]]:
         """The figures as (key, text) pairs, in the table's order."""
         pairs = []
         for name, k in self.table.items():
@@ -55,7 +85,8 @@ class Codec:
                 pairs.append((k.key, k.text(value)))
         return pairs
 
-    def from_values(self, pairs: Iterable[Tuple[str, str]]) -> Tuple[Any, Dict[str, str]]:
+    def from_values(self, pairs: Iterable[Tuple[str, str]]
+                    ) -> Tuple[Optional[FiguresT], Dict[str, str]]:
         """(figures, the pairs that are not theirs) from a status's pairs; (None, all of them)
         when a required key is missing. Keys this version does not know are returned, and a
         value that does not parse is left at its default: a reader never fails on a report.

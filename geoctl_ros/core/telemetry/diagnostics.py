@@ -11,7 +11,7 @@ ROS-free: the nodes turn a DiagnosticStatus message into (level, message, pairs)
 from dataclasses import dataclass, fields, replace
 import math
 import re
-from typing import Iterable, List, NamedTuple, Optional, Tuple
+from typing import Dict, Iterable, List, NamedTuple, Optional, Tuple, cast
 
 import numpy as np
 
@@ -317,8 +317,8 @@ def from_values(pairs: Iterable[Tuple[str, str]]) -> 'Figures':
     dropped).
     """
     pairs = list(pairs)
-    figures: Figures
-    figures, _ = CODEC.from_values(pairs)
+    # (Figures require no key: never None)
+    figures, _ = cast(Tuple[Figures, Dict[str, str]], CODEC.from_values(pairs))
     if not any(k == CODEC.key('failsafe') for k, _ in pairs):   # a record from before the key:
         figures = replace(figures, failsafe=figures.state.startswith(FAILSAFE))   # its words
     return figures
