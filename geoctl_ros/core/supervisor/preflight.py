@@ -1,6 +1,6 @@
 """The arming checks (a preflight): every reason the controller must not arm now, as sentences."""
 import math
-from typing import List, Optional, Protocol, cast
+from typing import List, Optional, Protocol
 
 import numpy as np
 
@@ -101,14 +101,14 @@ def takeover_problems(loop: PreflightLoop, now: float) -> List[str]:
     approach.
     """
     controller = loop.controller
-    if controller.brake is None or loop.Omega is None:
-        return []
+    R, Omega = loop.R, loop.Omega
+    if controller.brake is None or R is None or Omega is None:
+        return []                       # (no state yet: arm_problems names the missing input)
     ages = [s.capture_age(now) for s in (loop.pose, loop.rate) if s.last_receipt is not None]
-    # (loop.R: arm_problems calls this only with a pose; see its check)
-    margin = loop.step.takeover_margins(cast(FloatArray, loop.R), loop.Omega,
-                                        max(ages, default=0.0), 1.0 / loop.setup.loop.rate_hz)
+    margin = loop.step.takeover_margins(R, Omega, max(ages, default=0.0),
+                                        1.0 / loop.setup.loop.rate_hz)
     cones = controller.config.cones
-    gap = np.degrees(opening(cones, cast(FloatArray, loop.R), loop.Omega)[0])
+    gap = np.degrees(opening(cones, R, Omega)[0])
     return ['the approach brake could not keep cone %r once the rotors have spooled up: '
             'predicted closest approach %.2f deg (from %.2f deg out, in the worst case of the '
             "spool-up and the brake's bounds): arm further from it, or level the vehicle"
