@@ -9,11 +9,10 @@ import numpy as np
 
 from geoctl_ros.core.geometry.flags import Flags
 from geoctl_ros.core.geometry.so3 import Scalars
-from geoctl_ros.core.sensors.consistency import SensorAgreement
 from geoctl_ros.core.supervisor.control_tick import BLIND_BOUND_S, SUSTAINED_BLIND_BOUND_S
 from geoctl_ros.core.supervisor.gaps import GYRO, POSE, GapBridge
-from geoctl_ros.core.supervisor.loop_types import LoopTick, Setup, StampT
-from geoctl_ros.core.supervisor.safety import Stream, Supervisor
+from geoctl_ros.core.supervisor.loop_types import LoopTick, StampT
+from geoctl_ros.core.supervisor.preflight import LoopInputs
 from geoctl_ros.core.telemetry.diagnostics import (
     ERROR,
     OK,
@@ -72,30 +71,13 @@ class Window:
             self.armed_ticks += 1
 
 
-class StatusLoop(Protocol[StampT]):
-    """What the diagnostics read of the loop (``core.supervisor.loop.ControlLoop``, which imports
-    this module).
+class StatusLoop(LoopInputs, Protocol[StampT]):
+    """What the diagnostics read of the loop besides its inputs (``LoopInputs``;
+    ``core.supervisor.loop.ControlLoop``, which imports this module).
     """
 
     @property
     def bridge(self) -> GapBridge: ...
-
-    @property
-    def pose(self) -> Stream: ...
-
-    @property
-    def rate(self) -> Stream: ...
-
-    @property
-    def supervisor(self) -> Supervisor: ...
-
-    @property
-    def unconfigured(self) -> Optional[str]: ...
-
-    def esc_report_problem(self, now: float) -> Optional[str]: ...
-
-    @property
-    def agreement(self) -> SensorAgreement: ...
 
     @property
     def last_tick(self) -> Optional[LoopTick[StampT]]: ...
@@ -105,9 +87,6 @@ class StatusLoop(Protocol[StampT]):
 
     @property
     def cone_entries(self) -> int: ...
-
-    @property
-    def setup(self) -> Setup: ...
 
     @property
     def window(self) -> Window: ...

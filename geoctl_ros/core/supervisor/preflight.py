@@ -13,9 +13,10 @@ from geoctl_ros.core.supervisor.loop_types import Setup
 from geoctl_ros.core.supervisor.safety import Stream, Supervisor
 
 
-class PreflightLoop(Protocol):
-    """What the arming checks read of the loop (``core.supervisor.loop.ControlLoop``, which
-    imports this module).
+class LoopInputs(Protocol):
+    """What the arming checks and the diagnostics (``core.supervisor.loop_status``) both read of
+    the loop (``core.supervisor.loop.ControlLoop``, which imports them): its configuration, its
+    input streams, its supervisor and the sensors' agreement.
     """
 
     @property
@@ -30,6 +31,19 @@ class PreflightLoop(Protocol):
     def agreement(self) -> SensorAgreement: ...
 
     @property
+    def setup(self) -> Setup: ...
+
+    @property
+    def pose(self) -> Stream: ...
+
+    @property
+    def rate(self) -> Stream: ...
+
+
+class PreflightLoop(LoopInputs, Protocol):
+    """What the arming checks read of the loop besides its inputs."""
+
+    @property
     def holds_at_arming(self) -> bool: ...
 
     def hold_attitude(self) -> Optional[FloatArray]: ...
@@ -38,19 +52,10 @@ class PreflightLoop(Protocol):
     def controller(self) -> AttitudeController: ...
 
     @property
-    def setup(self) -> Setup: ...
-
-    @property
     def R(self) -> Optional[FloatArray]: ...
 
     @property
     def Omega(self) -> Optional[FloatArray]: ...
-
-    @property
-    def pose(self) -> Stream: ...
-
-    @property
-    def rate(self) -> Stream: ...
 
     @property
     def step(self) -> ControlTick: ...
