@@ -34,7 +34,7 @@ and model are shared by the batch. (``x.T`` on a stack of vectors puts the batch
 ``(x.T * a).T`` scales each run's vector by its own scalar and a single vector by a scalar.)
 """
 import math
-from typing import Literal, Optional, Union, cast
+from typing import Optional, cast
 
 import numpy as np
 
@@ -149,12 +149,6 @@ class AttitudeController:
     def gravity_moment(self, R: FloatArray) -> FloatArray:
         """The model's gravity moment at R (about the pivot, body frame)."""
         return self.dynamics.gravity_moment(R)
-
-    def model_moment(self, R: FloatArray, Omega: FloatArray, M_g: Optional[FloatArray] = None,
-                     W: Union[Literal[False], Optional[FloatArray]] = False,
-                     delta_bar: Optional[FloatArray] = None) -> FloatArray:
-        """The model's moment about the pivot besides the rotors': ``Dynamics.moment``."""
-        return self.dynamics.moment(R, Omega, M_g, W, delta_bar)
 
     def feedforward(self, R: FloatArray) -> FloatArray:
         """The moment that holds the model at rest at R: -(M_g(R) + W Delta_bar) (the law's

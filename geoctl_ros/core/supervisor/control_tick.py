@@ -202,12 +202,12 @@ class ControlTick:
         (the command history's lag model) and the model's other moments there, its observed
         error included (the prediction's model is the brake's).
         """
-        controller = self.controller
-        M_g = controller.gravity_moment(R)
-        f = controller.model_moment(R, Omega, M_g)
+        model = self.controller.dynamics
+        M_g = model.gravity_moment(R)
+        f = model.moment(R, Omega, M_g)
         error = self.predict.acc_error          # (0.0 until the observer has learnt)
         if np.ndim(error):
-            f = f - matvec(controller.config.J, cast(FloatArray, error))
+            f = f - matvec(model.config.J, cast(FloatArray, error))
         return BrakeInputs(R, Omega, age, hold, self.history.at(t), f, M_g, thrusts)
 
     def takeover_inputs(self, R: FloatArray, Omega: FloatArray, age: Scalars,
@@ -220,9 +220,10 @@ class ControlTick:
         """
         controller = self.controller
         spooled = (1.0 - math.exp(-self.mixer.SPOOL_LAGS)) if self.mixer.lag > 0.0 else 1.0
-        M_g = controller.gravity_moment(R)
+        model = controller.dynamics
+        M_g = model.gravity_moment(R)
         return BrakeInputs(R, Omega, age, dt, spooled * controller.feedforward(R),
-                           controller.model_moment(R, Omega, M_g), M_g)
+                           model.moment(R, Omega, M_g), M_g)
 
     def takeover_margins(self, R: FloatArray, Omega: FloatArray, age: Scalars,
                          dt: float) -> FloatArray:
