@@ -55,12 +55,14 @@ make the moment commanded by the end of the hold), each command is held no longe
 designed hold, and the state is safe (Phi >= 0) at the start.
 """
 from dataclasses import dataclass
+import functools
 import math
-from typing import NamedTuple, Optional, Tuple, cast
+from typing import NamedTuple, Optional, Tuple, Union, cast
 
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.elementwise import Flag, Ops, Value, evaluate
 from geoctl_ros.core.geometry.flags import Flags
 from geoctl_ros.core.geometry.so3 import BoolArray, FloatArray, Scalars
 from geoctl_ros.core.law.cones import ConeSet
@@ -129,21 +131,23 @@ def unmodelled_acceleration(moment_bound: float, J: FloatArray) -> float:
     return moment_bound / so3.symmetric_eigenvalues(J)[0]
 
 
-def _stops(x: Scalars, w: Scalars, acc0: Scalars, c: Scalars, T: Scalars) -> Scalars:
-    """The travel at the stop within each phase that starts at travel x and rate w, its
+def _stop(ops: Ops, x: Value, w: Value, acc0: Value, c: Value, T: float) -> Value:
+    """The travel at the stop within a phase that starts at travel x and rate w, its
     acceleration acc0 + 2 c t for t in [0, T] (where w falls through 0 within it, w > 0 > the
-    rate at T; else x): the root of w + acc0 t + c t^2.
+    rate at T; else x): the root of w + acc0 t + c t^2. (An ``elementwise`` formula.)
     """
     w_T = w + (acc0 + c * T) * T
     turn = (w > 0.0) & (w_T < 0.0)
-    disc = np.maximum(acc0 * acc0 - 4.0 * c * w, 0.0)
-    linear = np.abs(c) < 1e-12
-    root = np.where(linear, -w / np.where(acc0 < 0.0, acc0, -1.0),
-                    (-acc0 - np.sqrt(disc)) / np.where(linear, 1.0, 2.0 * c))
-    root = np.where((root > 0.0) & (root < T), root, np.where(
-        linear, root, (-acc0 + np.sqrt(disc)) / np.where(linear, 1.0, 2.0 * c)))
-    t = np.clip(root, 0.0, T)
-    return np.where(turn, x + (w + (0.5 * acc0 + c * t / 3.0) * t) * t, x)
+    if not ops.some(turn):                 # (no stop within it anywhere: the choice's x)
+        return x
+    disc = ops.maximum(acc0 * acc0 - 4.0 * c * w, 0.0)
+    linear = (c < 1e-12) & (c > -1e-12)            # |c| < 1e-12
+    root = ops.where(linear, -w / ops.where(acc0 < 0.0, acc0, -1.0),
+                     (-acc0 - ops.sqrt(disc)) / ops.where(linear, 1.0, 2.0 * c))
+    root = ops.where((root > 0.0) & (root < T), root, ops.where(
+        linear, root, (-acc0 + ops.sqrt(disc)) / ops.where(linear, 1.0, 2.0 * c)))
+    t = ops.minimum(ops.maximum(root, 0.0), T)
+    return ops.where(turn, x + (w + (0.5 * acc0 + c * t / 3.0) * t) * t, x)
 
 
 def _shares(spans: Tuple[float, ...]) -> Tuple[float, ...]:
@@ -159,6 +163,49 @@ def _shares(spans: Tuple[float, ...]) -> Tuple[float, ...]:
 SHARES = _shares(BACKUP_SPANS)
 
 
+class Phases(NamedTuple):
+    """What the backup's travel integrates, the same at every tick of a flight: a_u, the
+    phases' durations (the hold, then each of ``BACKUP_SPANS`` in time constants; s) and the
+    share of the backup's deficit left at each span's ends (``SHARES``).
+    """
+
+    unmodelled: float
+    durations: Tuple[float, ...]
+    shares: Tuple[float, ...]
+
+
+@functools.lru_cache(maxsize=64)
+def phases(brake: 'ApproachBrake', hold: float) -> Phases:
+    """The backup's ``Phases`` for a brake and a hold."""
+    spans = BACKUP_SPANS if brake.lag > 0.0 else ()
+    return Phases(brake.unmodelled, (hold,) + tuple(span * brake.lag for span in spans),
+                  SHARES[:len(spans) + 1])
+
+
+def _travel(ops: Ops, p: Phases, w0: Value, D_s: Value, D: Value, authority: Value) -> Value:
+    """``backup_travel`` of one element (an ``elementwise`` formula)."""
+    a_u = p.unmodelled
+    low = a_u - ops.minimum(D_s, D)
+    nil = 0.0 * low
+    gap_left = authority - ops.minimum(D, authority)        # the backup's deficit to a_b
+    level = [a_u - (authority - share * gap_left) for share in p.shares]  # at each span's ends
+    w = w0 + nil
+    x = 0.0 * w0 + nil
+    best = x
+    for k, T in enumerate(p.durations):
+        acc0 = low if k == 0 else level[k - 1] + nil
+        acc1 = low if k == 0 else level[k] + nil
+        c = 0.5 * (acc1 - acc0) / T
+        x_T = x + (w + (0.5 * acc0 + c * T / 3.0) * T) * T
+        peak = ops.maximum(_stop(ops, x, w, acc0, c, T), x_T)
+        best = peak if k == 0 else ops.maximum(best, peak)
+        w, x = w + (acc0 + c * T) * T, x_T
+    best = ops.maximum(best, 0.0 * w0)
+    final = level[-1]                                       # (< 0: see NET_SHARE_MIN)
+    rising = ops.maximum(w, 0.0)
+    return ops.maximum(best, x + rising * rising / (2.0 * ops.maximum(-final, 1e-9)))
+
+
 def backup_travel(brake: ApproachBrake, w0: Scalars, D_s: Scalars, D: Scalars, authority: Scalars,
                   hold: float) -> Scalars:
     """The farthest (rad) the sensor travels towards the cone in the worst case from a tick with
@@ -169,32 +216,12 @@ def backup_travel(brake: ApproachBrake, w0: Scalars, D_s: Scalars, D: Scalars, a
     most each hold follow their lag exactly), so over each of ``BACKUP_SPANS`` its chord is a
     lower bound of it; after them it stays at the level reached. Floats or arrays alike.
 
-    The phases (the hold, then the spans) are integrated at once along a leading axis: each
-    phase's acceleration goes linearly from acc0 to acc1 over its T, so its rate and travel at
-    its end are the start's plus (acc0 + c T) T and (w + (acc0 / 2 + c T / 3) T) T
-    (c = (acc1 - acc0) / 2 T), summed in turn (``np.cumsum``), and the farthest point is a
-    phase's end or the stop within one (``_stops``).
+    The phases (the hold, then the spans) are integrated in turn: each phase's acceleration
+    goes linearly from acc0 to acc1 over its T, so its rate and travel at its end are the
+    start's plus (acc0 + c T) T and (w + (acc0 / 2 + c T / 3) T) T (c = (acc1 - acc0) / 2 T),
+    and the farthest point is a phase's end or the stop within one (``_stop``).
     """
-    a_u = brake.unmodelled
-    low = a_u - np.minimum(D_s, D)
-    spans = BACKUP_SPANS if brake.lag > 0.0 else ()
-    shares = np.array(SHARES[:len(spans) + 1])
-    gap_left = authority - np.minimum(D, authority)        # the backup's deficit to a_b
-    shape = (-1,) + (1,) * np.ndim(gap_left)
-    level = a_u - (authority - shares.reshape(shape) * gap_left)   # at each span's ends
-    acc0 = np.concatenate((low[None] if np.ndim(low) else np.array([low]),
-                           level[:-1] + 0.0 * low))
-    acc1 = np.concatenate((acc0[:1], level[1:] + 0.0 * low))
-    T = np.array((hold,) + tuple(span * brake.lag for span in spans)).reshape(shape)
-    c = 0.5 * (acc1 - acc0) / T
-    w = np.cumsum(np.concatenate(((w0 + 0.0 * low)[None], (acc0 + c * T) * T)), axis=0)
-    x = np.cumsum(np.concatenate(((0.0 * w0 + 0.0 * low)[None],
-                                  (w[:-1] + (0.5 * acc0 + c * T / 3.0) * T) * T)), axis=0)
-    best = np.maximum(np.maximum(_stops(x[:-1], w[:-1], acc0, c, T), x[1:]).max(axis=0),
-                      0.0 * w0)
-    final = level[-1]                                       # (< 0: see NET_SHARE_MIN)
-    return cast(Scalars, np.maximum(best, x[-1] + np.maximum(w[-1], 0.0) ** 2
-                                    / (2.0 * np.maximum(-final, 1e-9))))
+    return evaluate(_travel, (phases(brake, hold),), w0, D_s, D, authority)
 
 
 def backup_margin(brake: ApproachBrake, gap: Scalars, w: Scalars, D_s: Scalars, authority: Scalars,
@@ -215,36 +242,80 @@ def backup_first(brake: ApproachBrake, D_s: Scalars, authority: Scalars, hold: f
     return keep * D_s + (1.0 - keep) * authority
 
 
-def _worst(brake: ApproachBrake, gap: Scalars, w: Scalars, D_s: Scalars, age: Scalars,
-           spin: Scalars, authority: Scalars, hold: float,
-           law: Optional[FloatArray] = None) -> Worst:
-    """The worst state of the uncertainty box and the backup from it, per cone: (G0, w0, the
-    rotors' deceleration now taken at most a_b, the backup's first command, Phi); with law (a
-    deceleration per cone: the law's), also the worst-case travel after a command reaching it,
-    integrated with the backup's in one ``backup_travel``.
-    """
+def _worst_state(ops: Ops, brake: ApproachBrake, p: Phases, keep: float, gap: Value, w: Value,
+                 D_s: Value, age: Value, spin: Value, authority: Value) -> Worst:
+    """``_worst`` of one element without a law (an ``elementwise`` formula)."""
     dg, dw = brake.uncertainty(age, spin)
     G0, w0 = gap - dg, w + dw
-    Ds = np.minimum(D_s, authority)
-    first = backup_first(brake, Ds, authority, hold)
-    if law is None:
-        return G0, w0, Ds, first, G0 - backup_travel(brake, w0, Ds, first, authority, hold)
-    travel = cast(FloatArray, backup_travel(brake, w0, Ds,
-                                            np.stack(np.broadcast_arrays(first, law)),
-                                            authority, hold))
-    return G0, w0, Ds, first, G0 - travel[0], travel[1]
+    Ds = ops.minimum(D_s, authority)
+    first = keep * Ds + (1.0 - keep) * authority        # backup_first
+    return G0, w0, Ds, first, G0 - _travel(ops, p, w0, Ds, first, authority)
 
 
-def _met(margin: Scalars, first: Scalars, D: Scalars, travel: Scalars, G0: Scalars) -> Scalars:
-    """``meets`` from the worst state's margin, the backup's first command, D and the
-    worst-case travel after a command reaching D.
+def _worst_with_law(ops: Ops, brake: ApproachBrake, p: Phases, keep: float, gap: Value,
+                    w: Value, D_s: Value, age: Value, spin: Value, authority: Value,
+                    law: Value) -> Tuple[Union[Value, Flag], ...]:
+    """``_worst`` of one element with the law's deceleration, and whether the law meets the
+    condition there (``_met``; an ``elementwise`` formula).
     """
-    return np.where(margin < 0.0, D >= first, travel <= G0)
+    G0, w0, Ds, first, margin = _worst_state(ops, brake, p, keep, gap, w, D_s, age, spin,
+                                             authority)
+    travel = _travel(ops, p, w0, Ds, law, authority)
+    return G0, w0, Ds, first, margin, travel, _met(margin, first, law, travel, G0)
+
+
+def _worst(brake: ApproachBrake, gap: Scalars, w: Scalars, D_s: Scalars, age: Scalars,
+           spin: Scalars, authority: Scalars, hold: float,
+           law: Optional[Scalars] = None) -> Worst:
+    """The worst state of the uncertainty box and the backup from it, per cone: (G0, w0, the
+    rotors' deceleration now taken at most a_b, the backup's first command, Phi); with law (a
+    deceleration per cone: the law's), also the worst-case travel after a command reaching it
+    and whether the law meets the condition (``_met``).
+    """
+    consts = (brake, phases(brake, hold), brake.keep(hold))
+    if law is None:
+        return evaluate(_worst_state, consts, gap, w, D_s, age, spin, authority)
+    return cast(Worst, evaluate(_worst_with_law, consts, gap, w, D_s, age, spin, authority,
+                                law))      # (its last: flags)
+
+
+def _met(margin: Value, first: Value, D: Value, travel: Value, G0: Value) -> Flag:
+    """``meets`` from the worst state's margin, the backup's first command, D and the
+    worst-case travel after a command reaching D (an ``elementwise`` formula: past the curve,
+    Phi < 0, D at least the backup's first; else the travel within G0).
+    """
+    return ((margin < 0.0) & (D >= first)) | ((margin >= 0.0) & (travel <= G0))
+
+
+def _least(ops: Ops, p: Phases, G0: Value, w0: Value, Ds: Value, first: Value, margin: Value,
+           authority: Value) -> Value:
+    """``least_deceleration``'s D of one element (an ``elementwise`` formula)."""
+    past = margin < 0.0
+    # regula falsi (Illinois) between a deceleration that does not meet the condition and one
+    # that does (the backup's own first), keeping the one that does
+    lo = ops.minimum(Ds, 0.0) - 4.0 * authority
+    hi = first
+    f_lo = _travel(ops, p, w0, Ds, lo, authority) - G0
+    f_hi = _travel(ops, p, w0, Ds, hi, authority) - G0
+    fine = f_lo <= 0.0                     # (even the low end meets it: a far cone)
+    hi = ops.where(fine, lo, hi)
+    fixed = fine | past                    # (past: the backup's first, whatever the search)
+    if not ops.every(fixed):               # (where fixed, the steps leave hi as it is)
+        f_lo, f_hi = ops.where(fixed, 1.0, f_lo), ops.where(fixed, -1.0, f_hi)
+        for _ in range(FALSI_STEPS):
+            mid = ops.where(fixed, hi, hi - f_hi * (hi - lo) / ops.minimum(f_hi - f_lo, -1e-12))
+            f_mid = _travel(ops, p, w0, Ds, mid, authority) - G0
+            ok = f_mid <= 0.0
+            f_lo = ops.where(ok, f_lo * 0.5, f_mid)
+            lo = ops.where(ok, lo, mid)
+            f_hi = ops.where(ok, f_mid, f_hi)
+            hi = ops.where(ok, mid, hi)
+    return ops.where(past, first, hi)
 
 
 def least_deceleration(brake: ApproachBrake, gap: Scalars, w: Scalars, D_s: Scalars, age: Scalars,
                        spin: Scalars, authority: Scalars, hold: float,
-                       worst: Optional[Worst] = None) -> Tuple[FloatArray, Scalars]:
+                       worst: Optional[Worst] = None) -> Tuple[Scalars, Scalars]:
     """(D, Phi) per cone: the least deceleration D (rad/s^2) the command must reach at the end of
     its hold for the condition, and the backup's margin Phi (rad) now. Where Phi < 0, D is the
     backup's own first command (past the curve: brake as hard as the lag lets).
@@ -257,41 +328,18 @@ def least_deceleration(brake: ApproachBrake, gap: Scalars, w: Scalars, D_s: Scal
     computed.
     """
     G0, w0, Ds, first, margin = (_worst(brake, gap, w, D_s, age, spin, authority, hold)
-                                 if worst is None else worst)
-    past = margin < 0.0
-    # regula falsi (Illinois) between a deceleration that does not meet the condition and one
-    # that does (the backup's own first), keeping the one that does
-    lo = np.minimum(Ds, 0.0) - 4.0 * authority
-    hi = first
-    f_lo, f_hi = cast(FloatArray, backup_travel(brake, w0, Ds,
-                                                np.stack(np.broadcast_arrays(lo, hi)),
-                                                authority, hold)) - G0
-    fine = f_lo <= 0.0                     # (even the low end meets it: a far cone)
-    hi = np.where(fine, lo, hi)
-    fixed = fine | past                    # (past: the backup's first, whatever the search)
-    f_lo, f_hi = np.where(fixed, 1.0, f_lo), np.where(fixed, -1.0, f_hi)
-    for _ in range(FALSI_STEPS):
-        mid = np.where(fixed, hi, hi - f_hi * (hi - lo) / np.minimum(f_hi - f_lo, -1e-12))
-        f_mid = backup_travel(brake, w0, Ds, mid, authority, hold) - G0
-        ok = f_mid <= 0.0
-        f_lo = np.where(ok, f_lo * 0.5, f_mid)
-        lo = np.where(ok, lo, mid)
-        f_hi = np.where(ok, f_mid, f_hi)
-        hi = np.where(ok, mid, hi)
-    return np.where(past, first, hi), margin
+                                 if worst is None else worst)[:5]
+    D = evaluate(_least, (phases(brake, hold),), G0, w0, Ds, first, margin, authority)
+    return D, margin
 
 
 def meets(brake: ApproachBrake, gap: Scalars, w: Scalars, D_s: Scalars, age: Scalars,
-          spin: Scalars, authority: Scalars, hold: float, D: Scalars,
-          worst: Optional[Worst] = None) -> Scalars:
+          spin: Scalars, authority: Scalars, hold: float, D: Scalars) -> Scalars:
     """Per cone, whether a command reaching the deceleration D (rad/s^2) at the end of its hold
     meets the condition (``least_deceleration``'s, without its search): its worst-case travel
     peaks within the gap or, past the curve, D is at least the backup's own first command.
-    worst: ``_worst`` of the same arguments, where already computed.
     """
-    G0, w0, Ds, first, margin = (_worst(brake, gap, w, D_s, age, spin, authority, hold)
-                                 if worst is None else worst)
-    return _met(margin, first, D, backup_travel(brake, w0, Ds, D, authority, hold), G0)
+    return _worst(brake, gap, w, D_s, age, spin, authority, hold, D)[-1]
 
 
 class BrakeRows(NamedTuple):
@@ -411,10 +459,9 @@ def law_meets(brake: ApproachBrake, cones: ConeSet, t: BrakeTerms, x: BrakeInput
     every cone there (for the rows: once a tick), the law's travel integrated with it.
     """
     law = so3.dot(t.A, u[..., None, :]) + t.f_along - t.kin
-    G0, w0, Ds, first, margin, travel = _worst(brake, t.gap, t.w, t.D_s, _age(x),
-                                               _spin(cones, t, x), t.authority, x.hold, law)
-    return (np.all(_met(margin, first, law, travel, G0), axis=-1),
-            (G0, w0, Ds, first, margin))
+    worst = _worst(brake, t.gap, t.w, t.D_s, _age(x), _spin(cones, t, x), t.authority, x.hold,
+                   law)
+    return np.all(worst[-1], axis=-1), worst[:5]
 
 
 def _worst_at(brake: ApproachBrake, cones: ConeSet, t: BrakeTerms, x: BrakeInputs) -> Worst:
