@@ -247,7 +247,7 @@ def test_several_cones_are_one_qp_and_a_corridor_is_shared_not_given_up():
     R = so3.exp(np.array([0.0, 0.0, az]))
     Omega = np.array([0.0, 0.0, -2.5])                 # yawing towards the cone
     M_g = ctl.gravity_moment(R)
-    x = BrakeInputs(R, Omega, 0.03, 0.01, np.zeros(3), ctl.dynamics.moment(R, Omega, M_g), M_g,
+    x = BrakeInputs(R, Omega, 0.03, 0.01, np.zeros(3), ctl.dynamics.moment(R, Omega), M_g,
                     np.zeros(6))                 # (the rotors at the hover allocation)
     b = braked(ctl.brake, cones, ctl.J_inv, cfg.moment_limits, x, np.zeros(3))
     r = rows(ctl.brake, cones, ctl.J_inv, x)
@@ -381,7 +381,7 @@ def _flown(T_b):
                                            0.5 * HOLD)
         M_g = ctl.gravity_moment(R_b)
         x = BrakeInputs(R_b, W_b, T_b, mixer.design_hold_for(HOLD, HOLD), history.at(t),
-                        ctl.dynamics.moment(R_b, W_b, M_g), M_g, mixer.thrust_offsets(HOLD))
+                        ctl.dynamics.moment(R_b, W_b), M_g, mixer.thrust_offsets(HOLD))
         out = ctl.step(R_l, W_l, HOLD, adapt=False, brake=x)
         motors = mixer.mix(out.u, armed=True, dt=HOLD, held=HOLD)
         assert not motors.saturated, (T_b, t)            # (within the assumptions)

@@ -75,3 +75,35 @@ def _array(elements: Sequence[Any], shape: Tuple[int, ...]) -> FloatArray:
     """Elements (floats, or flags) as an array of shape."""
     return np.array(elements, dtype=bool if isinstance(elements[0], bool) else float
                     ).reshape(shape)
+
+
+# Vectors and matrices by their components: a formula over the components of 3-vectors and 3x3
+# matrices (nested lists: v[i], M[i][j]) runs on one run's floats and on a batch's arrays alike,
+# with the operations of the stacked products (``so3.matvec``: sums of products in index order).
+
+def one_run(M: FloatArray) -> bool:
+    """Whether a stack of matrices (..., n, m) is one run's: one matrix, or a batch of one."""
+    return M.ndim == 2 or M.shape[:-2] == (1,)
+
+
+def vector_parts(v: FloatArray, one: bool) -> List[Value]:
+    """A vector's components (..., n): floats for one run (``one``), else arrays (views)."""
+    if one:
+        return cast('List[Value]', (v if v.ndim == 1 else v[0]).tolist())
+    return [v[..., k] for k in range(v.shape[-1])]
+
+
+def matrix_parts(M: FloatArray, one: bool) -> List[List[Value]]:
+    """A matrix's components (..., n, m) as rows: floats for one run, else arrays (views)."""
+    if one:
+        return cast('List[List[Value]]', (M if M.ndim == 2 else M[0]).tolist())
+    return [[M[..., i, j] for j in range(M.shape[-1])] for i in range(M.shape[-2])]
+
+
+def joined(parts: Sequence[Value], lead: Tuple[int, ...], one: bool) -> FloatArray:
+    """A vector from its components: of shape lead + (n,) for one run (lead () or (1,)), else
+    stacked on a last axis.
+    """
+    if one:
+        return np.array(parts if not lead else [parts], dtype=float)
+    return np.stack(np.broadcast_arrays(*parts), axis=-1)

@@ -49,7 +49,7 @@ from geoctl_ros.core.law.configuration_error import (
     with_cones,
 )
 from geoctl_ros.core.law.controller_config import DISTURBANCE_MODELS, ControllerConfig
-from geoctl_ros.core.law.dynamics import Dynamics
+from geoctl_ros.core.law.dynamics import Dynamics, ModelParts
 from geoctl_ros.core.law.feasibility import setpoint_problem
 from geoctl_ros.core.law.guidance import Guidance
 from geoctl_ros.core.law.laws import LAWS
@@ -140,7 +140,7 @@ class AttitudeController:
     @property
     def dynamics(self) -> Dynamics:
         """The model's dynamics with the estimate in force (``core.law.dynamics``)."""
-        return Dynamics(self.config, self.J_inv, self.delta_bar)
+        return Dynamics(self.config, self.J_inv, self.delta_bar, self.model_parts)
 
     def regressor(self, R: FloatArray) -> Optional[FloatArray]:
         """W(R): ``Dynamics.regressor``."""
@@ -299,6 +299,7 @@ class AttitudeController:
         # (the brake needs the rotors' limits: a configuration built without them has none)
         self.brake = ApproachBrake.of(config) if config.moment_limits is not None else None
         self.J_inv = so3.inverse3(config.J)      # the model's, for the prediction too
+        self.model_parts = ModelParts.of(config, self.J_inv)
         self.law_model = LawModel(config, self.J_inv, self.brake)     # what a law's filter knows
         self._gamma = np.array([config.k_Delta] * 3 + [config.k_Delta_cog] * 3)[:config.n_params]
         self._balls = [(block, bound) for block, bound in ((slice(0, 3), config.delta_bar_max),

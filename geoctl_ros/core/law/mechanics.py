@@ -6,11 +6,21 @@ of mass in the body frame; g_w is the gravity vector in the world frame (REP-103
 campaign) and works on each.
 """
 
-from typing import cast
+from typing import List, Sequence, cast
 
 import numpy as np
 
-from geoctl_ros.core.geometry.so3 import FloatArray, Scalars, cross, hat, vecmat
+from geoctl_ros.core.geometry.elementwise import (
+    Value,
+    joined,
+    matrix_parts,
+    one_run,
+    vector_parts,
+)
+from geoctl_ros.core.geometry.so3 import FloatArray, Scalars, cross
+
+Parts = Sequence[Value]                  # a 3-vector's components (floats, or one per run)
+Rows = Sequence[Sequence[Value]]         # a 3x3 matrix's, by rows
 
 
 def pivot_inertia(inertia_cm: FloatArray, mass: Scalars, rho: FloatArray) -> FloatArray:
@@ -36,7 +46,31 @@ def gravity_moment(R: FloatArray, m_rho: FloatArray, g_w: FloatArray) -> FloatAr
     With the centre of mass above the pivot this moment tips the body further over (an inverted
     pendulum). It is linear in m_rho = m * rho: gravity_moment = cog_regressor(R, g_w) @ m_rho.
     """
-    return body_gravity_moment(m_rho, vecmat(g_w, R))       # g_w^T R = (R^T g_w)^T
+    m_rho, g_w = np.asarray(m_rho, dtype=float), np.asarray(g_w, dtype=float)
+    one = one_run(R) and m_rho.size == 3 and g_w.size == 3
+    lead = np.broadcast_shapes(R.shape[:-2], m_rho.shape[:-1], g_w.shape[:-1])
+    return joined(gravity_moment_parts(matrix_parts(R, one), vector_parts(m_rho, one),
+                                       vector_parts(g_w, one)), lead, one)
+
+
+def body_gravity_parts(R: Rows, g_w: Parts) -> List[Value]:
+    """g_b = R^T g_w by components (the sums in index order, as every product here)."""
+    return [R[0][j] * g_w[0] + R[1][j] * g_w[1] + R[2][j] * g_w[2] for j in range(3)]
+
+
+def cross_parts(a: Parts, b: Parts) -> List[Value]:
+    """a x b by components."""
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+def gravity_moment_parts(R: Rows, m_rho: Parts, g_w: Parts) -> List[Value]:
+    """``gravity_moment`` by components: (m rho) x (R^T g_w)."""
+    return cross_parts(m_rho, body_gravity_parts(R, g_w))
+
+
+def cog_regressor_parts(g_b: Parts) -> List[List[Value]]:
+    """``cog_regressor`` by components from g_b = R^T g_w: -hat(g_b), by rows."""
+    return [[-0.0, g_b[2], -g_b[1]], [-g_b[2], -0.0, g_b[0]], [g_b[1], -g_b[0], -0.0]]
 
 
 def body_gravity_moment(m_rho: FloatArray, g_b: FloatArray) -> FloatArray:
@@ -46,4 +80,9 @@ def body_gravity_moment(m_rho: FloatArray, g_b: FloatArray) -> FloatArray:
 
 def cog_regressor(R: FloatArray, g_w: FloatArray) -> FloatArray:
     """The 3x3 matrix Y with gravity_moment(R, m_rho, g_w) == Y @ m_rho, i.e. -hat(R^T g_w)."""
-    return -hat(vecmat(g_w, R))
+    g_w = np.asarray(g_w, dtype=float)
+    one = one_run(R) and g_w.size == 3
+    Y = cog_regressor_parts(body_gravity_parts(matrix_parts(R, one), vector_parts(g_w, one)))
+    if one:
+        return np.array(Y, dtype=float).reshape(R.shape)
+    return np.stack([np.stack(np.broadcast_arrays(*row), axis=-1) for row in Y], axis=-2)

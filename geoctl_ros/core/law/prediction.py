@@ -15,6 +15,7 @@ measurements: at rest the true acceleration is zero, while the model's is J^-1 t
 not yet learnt). Predicting with a constant rate, or with only the last moment, is what let a
 50 ms delay tip the testbed over (docs/safety.md, "Delay").
 """
+import bisect
 import math
 from typing import Optional, Tuple, Union, cast
 
@@ -47,6 +48,7 @@ class CommandHistory:
         self.size = int(size)
         self.lag = float(lag)
         self.times = np.full(self.size, -math.inf)    # oldest first; -inf: empty
+        self._times = self.times.tolist()             # the same as floats (one run's lookup)
         self.start: Optional[FloatArray]         # (the two are set together)
         self.end: Optional[FloatArray]
         self.start = self.end = None
@@ -56,6 +58,7 @@ class CommandHistory:
     def clear(self) -> None:
         """Forget every command (at arming: the rotors were off, the vehicle on its stops)."""
         self.times[:] = -math.inf
+        self._times = self.times.tolist()
         self.count = 0
         if self.end is not None:
             cast(FloatArray, self.start)[:] = 0.0
@@ -72,12 +75,15 @@ class CommandHistory:
             self.start = np.zeros((self.size,) + end.shape)
             self.end = np.zeros((self.size,) + end.shape)
             self.times[:] = -math.inf
+            self._times = self.times.tolist()
         self._newest = w = (self._newest + 1) % self.size
         self.count = min(self.count + 1, self.size)
         self.end[w] = end
         cast(FloatArray, self.start)[w] = end if start is None else start
         self.times[:-1] = self.times[1:]
         self.times[-1] = t
+        del self._times[0]
+        self._times.append(float(t))
 
     def at(self, t: Scalars) -> FloatArray:
         """The moment in force at times t (a scalar, or one per run of a batch: (N,))."""
@@ -87,17 +93,23 @@ class CommandHistory:
             return np.zeros(3)
         # (before the first entry: an empty slot, all zeros, of time -inf; before a full ring's
         # oldest: i = -1, that oldest)
-        i = np.maximum(np.searchsorted(self.times, t, side='right') - 1, 0)
-        slot = (self._newest + 1 + i) % self.size
-        if np.ndim(t) == 0:
+        if isinstance(t, float) or np.ndim(t) == 0:    # one time (the node's; a batch's tick)
+            t = float(t)
+            k = max(bisect.bisect_right(self._times, t) - 1, 0)
+            slot = (self._newest + 1 + k) % self.size
             start, end = cast(FloatArray, self.start)[slot], self.end[slot]
-        else:                                                       # each run its own entry
-            runs = np.arange(len(slot))
-            start, end = cast(FloatArray, self.start)[slot, runs], self.end[slot, runs]
+            if self.lag <= 0.0:
+                return end
+            decay: Scalars = np.exp(-max(t - self._times[k], 0.0) / self.lag)
+            return end + decay * (start - end)
+        i = np.maximum(np.searchsorted(self.times, t, side='right') - 1, 0)
+        slots = (self._newest + 1 + i) % self.size
+        runs = np.arange(len(slots))                         # each run its own entry
+        start, end = cast(FloatArray, self.start)[slots, runs], self.end[slots, runs]
         if self.lag <= 0.0:
             return end
-        decay = np.exp(-np.maximum(t - self.times[i], 0.0) / self.lag)
-        return end + (decay * (start - end).T).T
+        decays: FloatArray = np.exp(-np.maximum(t - self.times[i], 0.0) / self.lag)
+        return end + (decays * (start - end).T).T
 
 
 class DelayPredictor:

@@ -203,8 +203,7 @@ class ControlTick:
         error included (the prediction's model is the brake's).
         """
         model = self.controller.dynamics
-        M_g = model.gravity_moment(R)
-        f = model.moment(R, Omega, M_g)
+        M_g, f = model.moments(R, Omega)
         error = self.predict.acc_error          # (0.0 until the observer has learnt)
         if np.ndim(error):
             f = f - matvec(model.config.J, cast(FloatArray, error))
@@ -220,10 +219,8 @@ class ControlTick:
         """
         controller = self.controller
         spooled = (1.0 - math.exp(-self.mixer.SPOOL_LAGS)) if self.mixer.lag > 0.0 else 1.0
-        model = controller.dynamics
-        M_g = model.gravity_moment(R)
-        return BrakeInputs(R, Omega, age, dt, spooled * controller.feedforward(R),
-                           model.moment(R, Omega, M_g), M_g)
+        M_g, f = controller.dynamics.moments(R, Omega)
+        return BrakeInputs(R, Omega, age, dt, spooled * controller.feedforward(R), f, M_g)
 
     def takeover_margins(self, R: FloatArray, Omega: FloatArray, age: Scalars,
                          dt: float) -> FloatArray:

@@ -308,9 +308,8 @@ class ControlLoop(Generic[StampT]):
             # again), but the loop is as blind as its last samples are old (the barrier's
             # blind widening and the bound's watch count it); a stream that never came counts
             # as fresh. The estimate learns only from measurements.
-            ages = cast(Tuple[float, float],
-                        tuple(0.0 if s.last_receipt is None else s.capture_age(now)
-                              for s in (self.pose, self.rate)))
+            ages = (0.0 if self.pose.last_receipt is None else self.pose.capture_age(now),
+                    0.0 if self.rate.last_receipt is None else self.rate.capture_age(now))
             out, motors, spooling, took_over = self.step(
                 R, Omega, dt, now, ages, armed=armed, adapt=armed and not bridging,
                 predict=not bridging)
