@@ -58,23 +58,33 @@ def evaluate(formula: Callable[..., ResultT], consts: Tuple[object, ...],
     """
     if all(isinstance(v, float) for v in values):
         return formula(FLOATS, *consts, *(float(v) for v in values))
-    arrays = [np.asarray(v, dtype=float) for v in values]
-    shape = np.broadcast_shapes(*(a.shape for a in arrays))
+    arrays = [np.asarray(v, dtype=float) for v in values if not isinstance(v, float)]
+    shape = arrays[0].shape
+    if any(a.shape != shape for a in arrays):
+        shape = np.broadcast_shapes(*(a.shape for a in arrays))
     size = math.prod(shape)
     if size > FLOATS_MAX or not size:
-        return formula(ARRAYS, *consts, *arrays)
-    columns = [(a.ravel() if a.shape == shape else np.broadcast_to(a, shape).ravel()).tolist()
-               for a in arrays]
+        return formula(ARRAYS, *consts, *(v if isinstance(v, float) else np.asarray(v, dtype=float)
+                                          for v in values))
+    columns = [[float(v)] * size if isinstance(v, float) else _elements(v, shape)
+               for v in values]
     results: List[Any] = [formula(FLOATS, *consts, *element) for element in zip(*columns)]
     if not isinstance(results[0], tuple):
         return cast(ResultT, _array(results, shape))
     return cast(ResultT, tuple(_array(part, shape) for part in zip(*results)))
 
 
+def _elements(v: Union[Value, Flag], shape: Tuple[int, ...]) -> List[float]:
+    """An array's elements broadcast to shape, as floats."""
+    a = np.asarray(v, dtype=float)
+    return cast('List[float]', (a if a.shape == shape else np.broadcast_to(a, shape)).ravel()
+                .tolist())
+
+
 def _array(elements: Sequence[Any], shape: Tuple[int, ...]) -> FloatArray:
     """Elements (floats, or flags) as an array of shape."""
-    return np.array(elements, dtype=bool if isinstance(elements[0], bool) else float
-                    ).reshape(shape)
+    out = np.array(elements, dtype=bool if isinstance(elements[0], bool) else float)
+    return out if len(shape) == 1 else out.reshape(shape)
 
 
 # Vectors and matrices by their components: a formula over the components of 3-vectors and 3x3

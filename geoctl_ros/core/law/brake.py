@@ -131,15 +131,12 @@ def unmodelled_acceleration(moment_bound: float, J: FloatArray) -> float:
     return moment_bound / so3.symmetric_eigenvalues(J)[0]
 
 
-def _stop(ops: Ops, x: Value, w: Value, acc0: Value, c: Value, T: float) -> Value:
+def _stop(ops: Ops, turn: Flag, x: Value, w: Value, acc0: Value, c: Value, T: float) -> Value:
     """The travel at the stop within a phase that starts at travel x and rate w, its
-    acceleration acc0 + 2 c t for t in [0, T] (where w falls through 0 within it, w > 0 > the
-    rate at T; else x): the root of w + acc0 t + c t^2. (An ``elementwise`` formula.)
+    acceleration acc0 + 2 c t for t in [0, T] (where w falls through 0 within it, ``turn``:
+    w > 0 > the rate at T; else x): the root of w + acc0 t + c t^2. (An ``elementwise``
+    formula.)
     """
-    w_T = w + (acc0 + c * T) * T
-    turn = (w > 0.0) & (w_T < 0.0)
-    if not ops.some(turn):                 # (no stop within it anywhere: the choice's x)
-        return x
     disc = ops.maximum(acc0 * acc0 - 4.0 * c * w, 0.0)
     linear = (c < 1e-12) & (c > -1e-12)            # |c| < 1e-12
     root = ops.where(linear, -w / ops.where(acc0 < 0.0, acc0, -1.0),
@@ -197,9 +194,11 @@ def _travel(ops: Ops, p: Phases, w0: Value, D_s: Value, D: Value, authority: Val
         acc1 = low if k == 0 else level[k] + nil
         c = 0.5 * (acc1 - acc0) / T
         x_T = x + (w + (0.5 * acc0 + c * T / 3.0) * T) * T
-        peak = ops.maximum(_stop(ops, x, w, acc0, c, T), x_T)
+        w_T = w + (acc0 + c * T) * T
+        turn = (w > 0.0) & (w_T < 0.0)           # (a stop within it: its travel there)
+        peak = ops.maximum(_stop(ops, turn, x, w, acc0, c, T) if ops.some(turn) else x, x_T)
         best = peak if k == 0 else ops.maximum(best, peak)
-        w, x = w + (acc0 + c * T) * T, x_T
+        w, x = w_T, x_T
     best = ops.maximum(best, 0.0 * w0)
     final = level[-1]                                       # (< 0: see NET_SHARE_MIN)
     rising = ops.maximum(w, 0.0)
