@@ -38,35 +38,42 @@ class Telemetry:
 
     def publish(self, tick):
         """The monitoring topics of a LoopTick (none before the first pose and rate: a rate
-        from the poses counts), and the set point when a new one is flown.
+        from the poses counts), and the set point when a new one is flown. A topic nobody
+        subscribes to is not filled or published (about 8 us a topic, against 0.5 us to ask).
         """
         out = tick.control
         if out is not None:
             stamp = tick.stamp
             R, Omega = tick.measured
-            self.attitude.header.stamp = stamp
-            set_quaternion(self.attitude.quaternion, so3.rot_to_quat(R))
-            self.pub_attitude.publish(self.attitude)
-            self.rate.header.stamp = stamp
-            set_vector(self.rate.vector, Omega)
-            self.pub_rate.publish(self.rate)
-            w = self.wrench
-            w.header.stamp = stamp
-            set_vector(w.wrench.torque, out.u)
-            set_vector(w.wrench.force, (0.0, 0.0, tick.motors.allocation.collective))
-            self.pub_wrench.publish(w)
-            self.eR.header.stamp = stamp
-            set_vector(self.eR.vector, out.e_R)
-            self.pub_eR.publish(self.eR)
-            self.eW.header.stamp = stamp
-            set_vector(self.eW.vector, out.e_Omega)
-            self.pub_eW.publish(self.eW)
-            self.psi.data = float(out.psi)
-            self.pub_psi.publish(self.psi)
-            self.dbar.data = out.delta_bar.tolist()
-            self.pub_dbar.publish(self.dbar)
-            self.margins.data = out.margins_deg.tolist()
-            self.pub_margins.publish(self.margins)
+            if self.pub_attitude.get_subscription_count():
+                self.attitude.header.stamp = stamp
+                set_quaternion(self.attitude.quaternion, so3.rot_to_quat(R))
+                self.pub_attitude.publish(self.attitude)
+            if self.pub_rate.get_subscription_count():
+                self.rate.header.stamp = stamp
+                set_vector(self.rate.vector, Omega)
+                self.pub_rate.publish(self.rate)
+            if self.pub_wrench.get_subscription_count():
+                w = self.wrench
+                w.header.stamp = stamp
+                set_vector(w.wrench.torque, out.u)
+                set_vector(w.wrench.force, (0.0, 0.0, tick.motors.allocation.collective))
+                self.pub_wrench.publish(w)
+            for pub, msg, vector in ((self.pub_eR, self.eR, out.e_R),
+                                     (self.pub_eW, self.eW, out.e_Omega)):
+                if pub.get_subscription_count():
+                    msg.header.stamp = stamp
+                    set_vector(msg.vector, vector)
+                    pub.publish(msg)
+            if self.pub_psi.get_subscription_count():
+                self.psi.data = float(out.psi)
+                self.pub_psi.publish(self.psi)
+            if self.pub_dbar.get_subscription_count():
+                self.dbar.data = out.delta_bar.tolist()
+                self.pub_dbar.publish(self.dbar)
+            if self.pub_margins.get_subscription_count():
+                self.margins.data = out.margins_deg.tolist()
+                self.pub_margins.publish(self.margins)
         R_d = tick.setpoint
         if R_d is not self._published_R_d:      # a new set point (set_setpoint copies)
             self._published_R_d = R_d
