@@ -14,11 +14,11 @@ from typing import Any, Callable, List, Sequence, Tuple, TypeVar, Union, cast
 
 import numpy as np
 
-from geoctl_ros.core.geometry.quaternions import BoolArray, FloatArray
+from geoctl_ros.core.geometry.quaternions import BoolArray, FloatArray, Scalars
 
 FLOATS_MAX = 16        # elements up to which a formula runs element by element in floats
 
-Value = Union[float, FloatArray]     # one element's value, or one per element of a batch
+Value = Scalars                      # one element's value, or one per element of a batch
 Flag = Union[bool, BoolArray]        # one element's flag, or one per element of a batch
 ResultT = TypeVar('ResultT')
 
@@ -117,3 +117,13 @@ def joined(parts: Sequence[Value], lead: Tuple[int, ...], one: bool) -> FloatArr
     if one:
         return np.array(parts if not lead else [parts], dtype=float)
     return np.stack(np.broadcast_arrays(*parts), axis=-1)
+
+
+def joined_matrix(rows: Sequence[Sequence[Value]], lead: Tuple[int, ...],
+                  one: bool) -> FloatArray:
+    """A matrix from its components by rows: of shape lead + (n, m) for one run, else stacked
+    on the last two axes.
+    """
+    if one:
+        return np.array(rows if not lead else [rows], dtype=float)
+    return np.stack([np.stack(np.broadcast_arrays(*row), axis=-1) for row in rows], axis=-2)

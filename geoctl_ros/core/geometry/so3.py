@@ -15,7 +15,7 @@ numpy 1.26 (Ubuntu 24.04's) has no ``ndarray.mT`` nor ``np.matvec``/``vecmat``/`
 products here are the package's own (``test_package.py`` fails on a numpy name 1.26 lacks).
 """
 import math
-from typing import Any, Sequence, Tuple, cast
+from typing import Any, List, Sequence, Tuple, cast
 
 import numpy as np
 
@@ -205,6 +205,36 @@ def exp(w: FloatArray) -> FloatArray:
     out[..., 1, 0], out[..., 1, 1], out[..., 1, 2] = bxy + az, 1.0 - b * (xx + zz), byz - ax
     out[..., 2, 0], out[..., 2, 1], out[..., 2, 2] = bxz - ay, byz + ax, 1.0 - b * (xx + yy)
     return out
+
+
+def exp_parts(x: Scalars, y: Scalars, z: Scalars) -> List[List[Scalars]]:
+    """``exp`` by components (floats for one rotation, arrays for a stack), by rows: the same
+    operations as ``exp``'s on either.
+    """
+    a: Scalars
+    b: Scalars
+    xx: Scalars
+    yy: Scalars
+    zz: Scalars
+    if isinstance(x, float):             # (y, z: floats as x)
+        a, b = rodrigues_ab(x, cast(float, y), cast(float, z))
+        xx, yy, zz = x * x, y * y, z * z
+    else:
+        X, Y, Z = x, cast(FloatArray, y), cast(FloatArray, z)
+        xx, yy, zz = X * X, Y * Y, Z * Z
+        theta2 = xx + yy + zz
+        a, b = _rodrigues(theta2, np.sqrt(theta2))
+    bx, by = b * x, b * y
+    bxy, bxz, byz, ax, ay, az = bx * y, bx * z, by * z, a * x, a * y, a * z
+    return [[1.0 - b * (yy + zz), bxy - az, bxz + ay],
+            [bxy + az, 1.0 - b * (xx + zz), byz - ax],
+            [bxz - ay, byz + ax, 1.0 - b * (xx + yy)]]
+
+
+def matmul_parts(A: Sequence[Sequence[Scalars]],
+                 B: Sequence[Sequence[Scalars]]) -> List[List[Scalars]]:
+    """A B for 3x3 matrices by components (sums in index order, as ``matmul``'s)."""
+    return [[r[0] * B[0][j] + r[1] * B[1][j] + r[2] * B[2][j] for j in range(3)] for r in A]
 
 
 def exp_apply(w: FloatArray, v: FloatArray) -> FloatArray:

@@ -118,10 +118,17 @@ class Dynamics(NamedTuple):
         pivot): J^-1 (moment + f).
         """
         one = one_run(R)
-        m = vector_parts(moment, one)
-        _, f = _moments(self.parts, matrix_parts(R, one), vector_parts(Omega, one),
-                        vector_parts(self.delta_bar, one))
-        total = [m[i] + f[i] for i in range(3)]
+        return joined(self.acceleration_parts(
+            matrix_parts(R, one), vector_parts(Omega, one), vector_parts(moment, one),
+            vector_parts(self.delta_bar, one)), R.shape[:-2], one)
+
+    def acceleration_parts(self, R: Rows, Omega: Parts, moment: Parts,
+                           delta_bar: Parts) -> List[Value]:
+        """``acceleration`` by components (with the estimate's)."""
+        _, f = _moments(self.parts, R, Omega, delta_bar)
+        return self.J_inv_times([moment[i] + f[i] for i in range(3)])
+
+    def J_inv_times(self, v: Parts) -> List[Value]:
+        """J^-1 v by components."""
         Ji = self.parts.J_inv
-        return joined([Ji[i][0] * total[0] + Ji[i][1] * total[1] + Ji[i][2] * total[2]
-                       for i in range(3)], R.shape[:-2], one)
+        return [Ji[i][0] * v[0] + Ji[i][1] * v[1] + Ji[i][2] * v[2] for i in range(3)]

@@ -17,12 +17,20 @@ not yet learnt). Predicting with a constant rate, or with only the last moment, 
 """
 import bisect
 import math
-from typing import Optional, Tuple, Union, cast
+from typing import Optional, Tuple, cast
 
 import numpy as np
 
-from geoctl_ros.core.geometry import so3
-from geoctl_ros.core.geometry.so3 import FloatArray, Scalars, matvec
+from geoctl_ros.core.geometry.elementwise import (
+    ARRAYS,
+    FLOATS,
+    joined,
+    joined_matrix,
+    matrix_parts,
+    one_run,
+    vector_parts,
+)
+from geoctl_ros.core.geometry.so3 import FloatArray, Scalars, exp_parts, matmul_parts
 from geoctl_ros.core.law.dynamics import Dynamics
 
 PREDICT_SLOW_S = 0.25    # s, the observer's low-pass of the model's error
@@ -142,7 +150,8 @@ class DelayPredictor:
                                                                   # last rate sample
         self.residual: Optional[float] = None     # rad/s^2: the last rate sample's |acceleration
                                                # the model and the observer did not know| (one
-                                               # run; None until a sample taught it)
+                                               # run alone; None until a sample taught it, and
+                                               # in a batch)
 
     def observe(self, model: Dynamics, R: FloatArray, Omega: FloatArray, captured: Scalars,
                 history: 'CommandHistory') -> None:
@@ -151,34 +160,40 @@ class DelayPredictor:
         repeats it), one more than ``OBSERVE_GAP_MAX_S`` after it, or an interval that starts
         before the first command held teaches nothing.
         """
-        interval: Scalars               # (a float for one run, an array for a batch)
         last, self._last = self._last, (captured, Omega)
         self.residual = None
         if last is None:
             return
-        if np.ndim(captured) == 0:              # one run (the node's tick): plain floats
-            interval = float(captured) - float(last[0])
-            if not (1e-6 < interval <= OBSERVE_GAP_MAX_S and last[0] >= history.first):
-                return
-            modelled = model.acceleration(R, 0.5 * (Omega + last[1]),
-                                          history.at(last[0] + 0.5 * interval))
-            innovation = modelled - (Omega - last[1]) / interval - self.acc_error
-            self.residual = np.sqrt(so3.dot(innovation, innovation))
-            self.acc_error = self.acc_error + innovation * (
-                interval / (min(self.learnt, PREDICT_SLOW_S) + interval))
-            self.learnt += interval
+        one = one_run(R)
+        alone = np.ndim(captured) == 0          # one run (the node's tick)
+        before, captured_at = last[0], captured
+        if one and not alone:                   # a batch of one: its times as floats
+            before, captured_at = (float(np.asarray(v).reshape(-1)[0])
+                                   for v in (before, captured_at))
+        scalar = one or alone
+        ops = FLOATS if scalar else ARRAYS
+        interval: Scalars = (float(captured_at) - float(before) if scalar
+                             else captured_at - before)
+        usable = (interval > 1e-6) & (interval <= OBSERVE_GAP_MAX_S) & (before >= history.first)
+        if not ops.some(usable):
             return
-        interval = captured - last[0]
-        usable = (interval > 1e-6) & (interval <= OBSERVE_GAP_MAX_S) & (last[0] >= history.first)
-        if not np.any(usable):
-            return
-        span = np.where(usable, interval, 1.0)
-        mid_rate = 0.5 * (Omega + last[1])
-        modelled = model.acceleration(R, mid_rate, history.at(last[0] + 0.5 * span))
-        measured = ((Omega - last[1]).T / span).T
-        weight = np.where(usable, span / (np.minimum(self.learnt, PREDICT_SLOW_S) + span), 0.0)
-        self.acc_error = self.acc_error + ((modelled - measured - self.acc_error).T * weight).T
-        self.learnt = self.learnt + np.where(usable, span, 0.0)
+        span = ops.where(usable, interval, 1.0)
+        now_, then = vector_parts(Omega, one), vector_parts(last[1], one)
+        modelled = model.acceleration_parts(
+            matrix_parts(R, one), [0.5 * (now_[i] + then[i]) for i in range(3)],
+            vector_parts(history.at(before + 0.5 * span), one),
+            vector_parts(model.delta_bar, one))
+        error = self.acc_error
+        e = [error] * 3 if isinstance(error, float) else vector_parts(error, one)
+        innovation = [modelled[i] - (now_[i] - then[i]) / span - e[i] for i in range(3)]
+        weight = ops.where(usable, span / (ops.minimum(self.learnt, PREDICT_SLOW_S) + span),
+                           0.0)
+        self.acc_error = joined([e[i] + innovation[i] * weight for i in range(3)], R.shape[:-2],
+                                one)
+        self.learnt = self.learnt + ops.where(usable, span, 0.0)
+        if alone and one:                       # (the node's: its unlearnt moment's watch)
+            x, y, z = (cast(float, v) for v in innovation)
+            self.residual = math.sqrt(x * x + y * y + z * z)
 
     def __call__(self, model: Dynamics, R: FloatArray, Omega: FloatArray, age_R: Scalars,
                  age_Omega: Scalars, history: CommandHistory, now: float, lead: float = 0.0
@@ -232,45 +247,52 @@ class DelayPredictor:
         midpoint, less the observed error: the rate only after moved_Omega, the attitude only
         after moved_R (their capture times). first: (the model's acceleration at the start,
         the moment then) to save the first piece's evaluation, or None.
-        """
-        pieces: Union[int, FloatArray]  # (one count, or one per run)
-        error = self.acc_error
-        if scalar:
-            pieces = max(math.ceil(span / SUBSTEP_MAX_S - 1e-9), 1)
-            h = span / pieces
-            for j in range(pieces):
-                mid = start + (j + 0.5) * h
-                acc = self._piece_acceleration(model, j, R, Omega, history.at(mid), first) - error
-                Omega_next = Omega + acc * h if mid > moved_Omega else Omega
-                if mid > moved_R:
-                    R = so3.matmul(R, so3.exp((0.5 * (Omega + Omega_next)) * h))
-                Omega = Omega_next
-            return R, Omega
-        # each run in its own number of equal pieces (so a run's prediction does not depend on
-        # the other runs of its batch); a run with fewer pieces than the most idles (h = 0)
-        pieces = np.maximum(np.ceil(span / SUBSTEP_MAX_S - 1e-9), 1.0)
-        h_run = span / pieces
-        for j in range(int(np.max(pieces))):
-            h = np.where(j < pieces, h_run, 0.0)
-            mid = start + (j + 0.5) * h_run
-            acc = self._piece_acceleration(model, j, R, Omega, history.at(mid), first) - error
-            # each measurement moves only after its own capture time
-            hw = np.where(mid > moved_Omega, h, 0.0)
-            hr = np.where(mid > moved_R, h, 0.0)
-            Omega_next = Omega + (acc.T * hw).T
-            R = so3.matmul(R, so3.exp(((0.5 * (Omega + Omega_next)).T * hr).T))
-            Omega = Omega_next
-        return R, Omega
 
-    def _piece_acceleration(self, model: Dynamics, j: int, R: FloatArray, Omega: FloatArray,
-                            moment: FloatArray,
-                            first: Optional[Tuple[FloatArray, FloatArray]]) -> FloatArray:
-        """The model's acceleration in piece j under moment. The first piece starts at the
-        measured state, where it is acc0 under moment_now (``first``): under another moment it
-        differs by J^-1 times the difference (it is linear in the moment), which saves a model
-        evaluation.
+        One formula by components for one run (floats) and a batch (arrays; each run in its
+        own number of equal pieces, so a run's prediction does not depend on the other runs of
+        its batch: a run with fewer pieces than the most idles, h = 0).
         """
-        if j == 0 and first is not None:
-            acc0, moment_now = first
-            return acc0 + matvec(model.J_inv, moment - moment_now)
-        return model.acceleration(R, Omega, moment)
+        one = one_run(R)
+        if one and not scalar:                   # a batch of one: its times as floats
+            start, span, moved_R, moved_Omega = (float(np.asarray(v).reshape(-1)[0]) for v in
+                                                 (start, span, moved_R, moved_Omega))
+            scalar = True
+        ops = FLOATS if scalar else ARRAYS
+        lead = R.shape[:-2]
+        Rp, Wp = matrix_parts(R, one), vector_parts(Omega, one)
+        d = vector_parts(model.delta_bar, one)
+        error = self.acc_error
+        e = [error] * 3 if isinstance(error, float) else vector_parts(error, one)
+        if scalar:
+            pieces: Scalars = float(max(math.ceil(span / SUBSTEP_MAX_S - 1e-9), 1))
+            count = int(pieces)
+        else:
+            pieces = np.maximum(np.ceil(span / SUBSTEP_MAX_S - 1e-9), 1.0)
+            count = int(np.max(pieces))
+        h_run = span / pieces
+        for j in range(count):
+            h = ops.where(j < pieces, h_run, 0.0)
+            mid = start + (j + 0.5) * h_run
+            moment = vector_parts(history.at(mid), one)
+            if j == 0 and first is not None:
+                # the first piece starts at the measured state, where the acceleration is acc0
+                # under moment_now: under another moment it differs by J^-1 times the
+                # difference (it is linear in the moment), which saves a model evaluation
+                acc0, moment_now = (vector_parts(v, one) for v in first)
+                change = model.J_inv_times([moment[i] - moment_now[i] for i in range(3)])
+                acc = [acc0[i] + change[i] for i in range(3)]
+            else:
+                acc = model.acceleration_parts(Rp, Wp, moment, d)
+            acc = [acc[i] - e[i] for i in range(3)]
+            # each measurement moves only after its own capture time
+            moves_Omega, moves_R = mid > moved_Omega, mid > moved_R
+            W_next = Wp
+            if ops.some(moves_Omega):
+                hw = ops.where(moves_Omega, h, 0.0)
+                W_next = [Wp[i] + acc[i] * hw for i in range(3)]
+            if ops.some(moves_R):
+                hr = ops.where(moves_R, h, 0.0)
+                Rp = matmul_parts(Rp, exp_parts(*((0.5 * (Wp[i] + W_next[i])) * hr
+                                                   for i in range(3))))
+            Wp = W_next
+        return (joined_matrix(Rp, lead, one), joined(Wp, lead, one))
