@@ -15,7 +15,7 @@ numpy 1.26 (Ubuntu 24.04's) has no ``ndarray.mT`` nor ``np.matvec``/``vecmat``/`
 products here are the package's own (``test_package.py`` fails on a numpy name 1.26 lacks).
 """
 import math
-from typing import Any, List, Sequence, Tuple, cast
+from typing import List, Sequence, Tuple, cast
 
 import numpy as np
 
@@ -157,18 +157,20 @@ def vecmat(v: FloatArray, M: FloatArray) -> FloatArray:
     return out
 
 
-def dot(a: FloatArray, b: FloatArray) -> Any:
-    """a . b for two vectors (a numpy float), or for each pair of two stacks of them (an array)."""
+def dot(a: FloatArray, b: FloatArray) -> FloatArray:
+    """a . b for two vectors (a numpy float, which indexes and broadcasts as a 0-d array), or for
+    each pair of two stacks of them (an array).
+    """
     if not a.shape[-1]:
         return np.zeros(np.broadcast_shapes(a.shape[:-1], b.shape[:-1]))[()]
     if a.ndim == 1 and b.ndim == 1:
         x, y = a.tolist(), b.tolist()
         if len(x) == 3:
-            return np.float64(x[0] * y[0] + x[1] * y[1] + x[2] * y[2])
+            return cast(FloatArray, np.float64(x[0] * y[0] + x[1] * y[1] + x[2] * y[2]))
         acc = x[0] * y[0]
         for k in range(1, len(x)):
             acc = acc + x[k] * y[k]
-        return np.float64(acc)
+        return cast(FloatArray, np.float64(acc))
     if a.shape == ONE and b.shape == ONE:
         return np.array([dot(a[0], b[0])])
     if a.shape[-1] == 3:

@@ -416,7 +416,7 @@ class BrakeTerms(NamedTuple):
 
     def model_rate_change(self, moment: FloatArray) -> FloatArray:
         """dw/dt by the brake's model, frozen at the tick, under the rotors' moment."""
-        return cast(FloatArray, self.kin - so3.dot(self.A, moment[..., None, :]) - self.f_along)
+        return self.kin - so3.dot(self.A, moment[..., None, :]) - self.f_along
 
 
 def brake_terms(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray,

@@ -57,7 +57,7 @@ def approach_rates(sc: FloatArray, Omega: FloatArray) -> FloatArray:
     """
     cross = sc[..., 1:]
     sin_phi = np.sqrt(so3.dot(cross, cross))
-    return cast(FloatArray, -so3.dot(cross, Omega[..., None, :]) / np.maximum(sin_phi, 1e-9))
+    return -so3.dot(cross, Omega[..., None, :]) / np.maximum(sin_phi, 1e-9)
 
 
 WIDEN_GAP_SHARE = 0.5     # the widening takes at most this share of the gap to a cone's barrier

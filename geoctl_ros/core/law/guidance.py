@@ -124,7 +124,7 @@ def _cosines(X: FloatArray, Y: FloatArray) -> FloatArray:
     """X Y^T for unit vectors X (N, 3) and Y (C, 3): (N, C), entry by entry (not through BLAS,
     whose kernels round by the CPU: a plan, and every decision on it, would differ by machine).
     """
-    return cast(FloatArray, so3.dot(X[:, None, :], Y[None, :, :]))
+    return so3.dot(X[:, None, :], Y[None, :, :])
 
 
 def _dijkstra(cost: FloatArray, start: int) -> IntArray:
