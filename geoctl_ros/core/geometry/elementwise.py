@@ -33,20 +33,29 @@ class Ops:
     def __init__(self, maximum: Callable[[Value, Value], Value],
                  minimum: Callable[[Value, Value], Value],
                  where: Callable[[Flag, Value, Value], Value], sqrt: Callable[[Value], Value],
-                 every: Callable[[Flag], bool], some: Callable[[Flag], bool]) -> None:
+                 every: Callable[[Flag], bool], some: Callable[[Flag], bool],
+                 arccos: Callable[[Value], Value], sin: Callable[[Value], Value]) -> None:
         self.maximum = maximum      # maximum(a, b): elementwise (a where equal)
         self.minimum = minimum      # minimum(a, b): elementwise (a where equal)
         self.where = where          # where(condition, a, b): a where condition, else b
         self.sqrt = sqrt
         self.every = every          # every(flags): whether all are true (a short cut's test)
         self.some = some            # some(flags): whether any is true (a short cut's test)
+        self.arccos = arccos        # numpy's, on floats too (the math module's need not round
+        self.sin = sin              # as numpy's do)
+
+
+def _float_of(function: Callable[[Any], Any]) -> Callable[[Value], Value]:
+    """A numpy function of one float, as a float."""
+    return lambda x: float(function(x))
 
 
 FLOATS = Ops(cast(Callable[[Value, Value], Value], max),
              cast(Callable[[Value, Value], Value], min), _choose,
-             cast(Callable[[Value], Value], math.sqrt), bool, bool)
+             cast(Callable[[Value], Value], math.sqrt), bool, bool, _float_of(np.arccos),
+             _float_of(np.sin))
 ARRAYS = Ops(np.maximum, np.minimum, np.where, np.sqrt, lambda flags: bool(np.all(flags)),
-             lambda flags: bool(np.any(flags)))
+             lambda flags: bool(np.any(flags)), np.arccos, np.sin)
 
 
 def evaluate(formula: Callable[..., ResultT], consts: Tuple[object, ...],

@@ -57,16 +57,27 @@ designed hold, and the state is safe (Phi >= 0) at the start.
 from dataclasses import dataclass
 import functools
 import math
-from typing import NamedTuple, Optional, Tuple, Union, cast
+from typing import Dict, List, NamedTuple, Optional, Sequence, Tuple, Union, cast
 
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.core.geometry.elementwise import Flag, Ops, Value, evaluate
+from geoctl_ros.core.geometry.elementwise import (
+    ARRAYS,
+    FLOATS,
+    Flag,
+    Ops,
+    Value,
+    evaluate,
+    matrix_parts,
+    one_run,
+    vector_parts,
+)
 from geoctl_ros.core.geometry.flags import Flags
 from geoctl_ros.core.geometry.so3 import BoolArray, FloatArray, Scalars
 from geoctl_ros.core.law.cones import ConeSet
 from geoctl_ros.core.law.controller_config import ControllerConfig
+from geoctl_ros.core.law.mechanics import Parts, Rows
 from geoctl_ros.core.law.projection import TOL, Polytope, project, slack_of
 
 # ``_worst``: per cone G0, w0, the rotors' deceleration, the backup's first command, Phi (and
@@ -158,6 +169,7 @@ def _shares(spans: Tuple[float, ...]) -> Tuple[float, ...]:
 
 
 SHARES = _shares(BACKUP_SPANS)
+_ANY_BRAKE = ApproachBrake(1.0, 0.0, 0.0, 0.0, 0.0)     # (``opening``'s: its terms need none)
 
 
 class Phases(NamedTuple):
@@ -374,25 +386,211 @@ class BrakeInputs(NamedTuple):
     thrusts: Optional[FloatArray] = None
 
 
+def _opening(ops: Ops, R: Rows, Omega: Parts, r: Parts, r_cols: Rows, v: Parts,
+             theta: Value) -> Tuple[Value, Value, List[Value], Value, Value, Value]:
+    """``opening`` of one cone by components (an ``elementwise`` formula): (s, gap, n, w, kin,
+    |Omega|^2), the products in index order as ``ConeSet.terms``' and
+    ``ConeSet.axes_in_body``'s.
+    """
+    P = [[R[k][0] * r_cols[0][j] + R[k][1] * r_cols[1][j] + R[k][2] * r_cols[2][j]
+          for j in range(4)] for k in range(3)]                      # R [r, hat(r)]
+    s, c0, c1, c2 = (v[0] * P[0][j] + v[1] * P[1][j] + v[2] * P[2][j] for j in range(4))
+    inv = 1.0 / ops.maximum(ops.sqrt(c0 * c0 + c1 * c1 + c2 * c2), 1e-9)
+    n = [c0 * inv, c1 * inv, c2 * inv]
+    w = -(n[0] * Omega[0] + n[1] * Omega[1] + n[2] * Omega[2])
+    b = [v[0] * R[0][j] + v[1] * R[1][j] + v[2] * R[2][j] for j in range(3)]    # R^T v
+    spin = Omega[0] * Omega[0] + Omega[1] * Omega[1] + Omega[2] * Omega[2]
+    kin = ((b[0] * Omega[0] + b[1] * Omega[1] + b[2] * Omega[2])
+           * (r[0] * Omega[0] + r[1] * Omega[1] + r[2] * Omega[2]) - s * (spin - w * w)) * inv
+    gap = ops.arccos(ops.minimum(ops.maximum(s, -1.0), 1.0)) - theta
+    return s, gap, n, w, kin, spin
+
+
+def _cone_terms(ops: Ops, brake: ApproachBrake, J_inv: Rows, n: Parts, kin: Value, f: Parts,
+                gravity: Parts, rotors: Parts) -> Tuple[List[Value], Value, Value, Value, Flag]:
+    """``brake_terms``' rest for one cone by components (an ``elementwise`` formula): (A,
+    f_along, D_s, authority, weak).
+    """
+    A = [n[0] * J_inv[0][j] + n[1] * J_inv[1][j] + n[2] * J_inv[2][j] for j in range(3)]
+    f_along = A[0] * f[0] + A[1] * f[1] + A[2] * f[2]
+    # the backup's authority here: a_b, less what of the model's other terms (the estimate,
+    # the gyroscopic term, the observed error: a_b counts gravity) and of the kinematic term
+    # works against it now
+    authority = brake.authority + ops.minimum(
+        f_along - (A[0] * gravity[0] + A[1] * gravity[1] + A[2] * gravity[2]) - kin, 0.0)
+    # the backup must out-brake a_u by a share of a_b at least: where the model's other terms
+    # leave less (a model error past the bounds, learnt by the observer), the derivation does
+    # not hold (``weak``), and the brake takes that share all the same
+    floor = brake.unmodelled + NET_SHARE_MIN * brake.authority
+    weak = authority < floor
+    authority = ops.maximum(authority, floor)
+    D_s = A[0] * rotors[0] + A[1] * rotors[1] + A[2] * rotors[2] + f_along - kin
+    return A, f_along, D_s, authority, weak
+
+
+class _View:
+    """The brake's per-cone view of a tick (``_cones_at``): its terms, and with the law's
+    moment, whether the law meets each cone's condition and the worst state there. One run's
+    arrays are built only when asked for (the usual tick needs its two flags alone).
+    """
+
+    def __init__(self, cols: Sequence[Sequence[object]], shape: Tuple[int, ...],
+                 one: bool) -> None:
+        self._cols, self._shape, self._one = cols, shape, one
+        self._built: Optional[Dict[int, FloatArray]] = None
+
+    def _flag(self, k: int, every: bool) -> Flags:
+        """Per run, whether every cone's flag k is set (every) or any is."""
+        if self._one:
+            flags = cast('Sequence[bool]', self._cols[k])
+            value = all(flags) if every else any(flags)
+            return np.array([value]) if self._shape[:-1] else np.bool_(value)
+        flags_all = self._arrays()[k]
+        return cast(Flags, np.all(flags_all, axis=-1) if every else np.any(flags_all, axis=-1))
+
+    @property
+    def weak(self) -> Flags:
+        """Per run, whether any cone's bounds are too weak for the derivation."""
+        return self._flag(8, every=False)
+
+    @property
+    def met(self) -> Flags:
+        """Per run, whether the law's moment meets every cone's condition."""
+        return self._flag(14, every=True)
+
+    @property
+    def terms(self) -> 'BrakeTerms':
+        out = self._arrays()
+        return BrakeTerms(out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7],
+                          cast(BoolArray, out[8]))
+
+    @property
+    def worst(self) -> Optional[Worst]:
+        """The worst state of every cone (``_worst``; None without the law's moment)."""
+        if len(self._cols) == 9:
+            return None
+        out = self._arrays()
+        return tuple(out[k] for k in range(9, 14))
+
+    def _arrays(self) -> Dict[int, FloatArray]:
+        """Every result as an array (one run's: three calls at once)."""
+        if self._built is not None:
+            return self._built
+        cols, shape, got = self._cols, self._shape, range(len(self._cols))
+        if self._one:
+            lead = shape[:-1]
+            figures = np.array([cols[k] for k in _FIGURES if k in got], dtype=float)
+            flags = np.array([cols[k] for k in _FLAGS if k in got], dtype=bool)
+            vectors = np.array([cols[k] for k in _VECTORS], dtype=float)
+            if lead:                              # (a batch of one)
+                figures, flags, vectors = figures[:, None], flags[:, None], vectors[:, None]
+            out = {k: figures[i] for i, k in enumerate(k for k in _FIGURES if k in got)}
+            out.update((k, flags[i]) for i, k in enumerate(k for k in _FLAGS if k in got))
+            out.update((k, vectors[i]) for i, k in enumerate(_VECTORS))
+        else:
+            out = {k: np.broadcast_to(np.asarray(cols[k][0],
+                                                 dtype=bool if k in _FLAGS else float),
+                                      shape).copy() for k in got if k not in _VECTORS}
+            out.update((k, np.stack(np.broadcast_arrays(*cast(Sequence[FloatArray], cols[k][0]),
+                                                        np.zeros(shape))[:3], axis=-1))
+                       for k in _VECTORS)
+        self._built = out
+        return out
+
+
+_FIGURES = (0, 2, 3, 5, 6, 7, 9, 10, 11, 12, 13)       # ``_cone``'s results of one number
+_FLAGS = (8, 14)                                      # ... of one flag
+_VECTORS = (1, 4)                                     # ... of a vector
+
+
+class _TickParts(NamedTuple):
+    """A tick's values by components for ``_cone``: one run's floats, or a batch's arrays with
+    an axis for the cones (runs, 1).
+    """
+
+    R: Rows
+    Omega: Parts
+    f: Parts
+    gravity: Parts
+    rotors: Parts
+    u: Optional[Parts]
+    age: Value
+
+    @classmethod
+    def of(cls, x: 'BrakeInputs', u: Optional[FloatArray], one: bool) -> '_TickParts':
+        if one:
+            return cls(matrix_parts(x.R, True), vector_parts(x.Omega, True),
+                       vector_parts(x.f, True), vector_parts(x.gravity, True),
+                       vector_parts(x.rotors, True), None if u is None else vector_parts(u, True),
+                       float(np.asarray(x.age).reshape(-1)[0]))
+
+        def per_run(a: FloatArray) -> List[Value]:
+            return [a[..., k, None] for k in range(3)]
+        return cls([[x.R[..., i, j, None] for j in range(3)] for i in range(3)],
+                   per_run(x.Omega), per_run(x.f), per_run(x.gravity), per_run(x.rotors),
+                   None if u is None else per_run(u),
+                   np.asarray(x.age, dtype=float)[..., None] if np.ndim(x.age)
+                   else float(x.age))
+
+
+def _cone(ops: Ops, brake: ApproachBrake, p: Phases, keep: float, J_inv: Rows, r: Parts,
+          r_cols: Rows, x: _TickParts, worst: bool, v: Parts, theta: Value) -> Tuple[object, ...]:
+    """One cone's ``_View`` at a tick by components (an ``elementwise`` formula): gap, n, w,
+    kin, A, f_along, D_s, authority, weak; with worst or the law's moment u also the worst state
+    (G0, w0, Ds, first, margin: ``_worst``), and with u whether the law meets the condition.
+    """
+    s, gap, n, w, kin, spin = _opening(ops, x.R, x.Omega, r, r_cols, v, theta)
+    A, f_along, D_s, authority, weak = _cone_terms(ops, brake, J_inv, n, kin, x.f, x.gravity,
+                                                   x.rotors)
+    out: Tuple[object, ...] = (gap, n, w, kin, A, f_along, D_s, authority, weak)
+    u = x.u
+    if u is None and not worst:
+        return out
+    # |Omega| / sin phi (``ApproachBrake.uncertainty``)
+    spin_rate = ops.sqrt(spin) / ops.maximum(ops.sin(gap + theta), SIN_PHI_MIN)
+    if u is None:
+        return out + _worst_state(ops, brake, p, keep, gap, w, D_s, x.age, spin_rate, authority)
+    law = A[0] * u[0] + A[1] * u[1] + A[2] * u[2] + f_along - kin
+    G0, w0, Ds, first, margin, _, met = _worst_with_law(ops, brake, p, keep, gap, w, D_s, x.age,
+                                                        spin_rate, authority, law)
+    return out + (G0, w0, Ds, first, margin, met)
+
+
+def _cones_at(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray, x: 'BrakeInputs',
+              u: Optional[FloatArray] = None, worst: bool = False) -> _View:
+    """The brake's view of every cone at the tick of x (``_cone``): one run's cones one by one
+    in floats, a batch's in whole arrays (runs, cones); with worst, the worst state of each;
+    with the law's moment u, that and whether the law meets every cone's condition.
+    """
+    one = one_run(x.R) and len(cones) > 0
+    consts = (brake, phases(brake, x.hold), brake.keep(x.hold),
+              cast('List[List[Value]]', J_inv.reshape(3, 3).tolist()),
+              cast('List[Value]', cones.r.tolist()),
+              cast('List[List[Value]]', cones.r_cols.tolist()), _TickParts.of(x, u, one), worst)
+    if one:
+        theta = cones.theta.reshape(-1)
+        per_cone = list(zip(*(_cone(FLOATS, *consts, v, t) for v, t in
+                              zip(cones.V.reshape(-1, 3).tolist(), theta.tolist()))))
+        return _View(per_cone, x.R.shape[:-2] + theta.shape, True)
+    V, theta = cones.V, cones.theta
+    whole = _cone(ARRAYS, *consts, [V[..., k] for k in range(3)], theta)
+    return _View([[c] for c in whole], np.broadcast_shapes(x.R.shape[:-2] + (1,), theta.shape),
+                 False)
+
+
 def opening(cones: ConeSet, R: FloatArray,
             Omega: FloatArray) -> Tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Per cone at (R, Omega): (gap (rad, phi - theta), n (the opening direction, body, unit),
     w (the approach rate, rad/s), kin (the approach's kinematic term, rad/s^2)): with
     b = R^T v, c = b x r, n = c / |c|, w = -n . Omega, and dw/dt = kin - n . Omega' where
     kin = -(dn/dt) . Omega = ((b . Omega)(r . Omega) - s (|Omega|^2 - w^2)) / |c|
-    (dc/dt = s Omega - b (r . Omega), n . b = 0; dot products only).
+    (dc/dt = s Omega - b (r . Omega), n . b = 0; dot products only). (``_opening``, for every
+    cone.)
     """
-    sc = cones.terms(R)
-    s, c = sc[..., 0], sc[..., 1:]
-    inv = 1.0 / np.maximum(np.sqrt(so3.dot(c, c)), 1e-9)
-    n = c * inv[..., None]
-    Om = Omega[..., None, :]
-    w = -so3.dot(n, Om)
-    b = cones.axes_in_body(R)                              # R^T v_i
-    spin = so3.dot(Omega, Omega)[..., None]
-    kin = (so3.dot(b, Om) * so3.dot(cones.r, Omega)[..., None] - s * (spin - w * w)) * inv
-    gap = np.arccos(np.clip(s, -1.0, 1.0)) - cones.theta
-    return gap, n, w, kin
+    zero = np.zeros(3)
+    t = _cones_at(_ANY_BRAKE, cones, np.eye(3),
+                  BrakeInputs(R, Omega, 0.0, 0.0, zero, zero, zero)).terms
+    return t.gap, t.n, t.w, t.kin
 
 
 class BrakeTerms(NamedTuple):
@@ -421,23 +619,8 @@ class BrakeTerms(NamedTuple):
 
 def brake_terms(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray,
                 x: BrakeInputs) -> BrakeTerms:
-    """``BrakeTerms`` at the tick of x (see the module)."""
-    gap, n, w, kin = opening(cones, x.R, x.Omega)
-    A = so3.matmul(n, J_inv)                             # J symmetric: rows (J^-1 n_i)^T
-    f_along = so3.dot(A, x.f[..., None, :])              # n . J^-1 f
-    # the backup's authority here: a_b, less what of the model's other terms (the estimate,
-    # the gyroscopic term, the observed error: a_b counts gravity) and of the kinematic term
-    # works against it now
-    authority = brake.authority + np.minimum(
-        f_along - so3.dot(A, x.gravity[..., None, :]) - kin, 0.0)
-    # the backup must out-brake a_u by a share of a_b at least: where the model's other terms
-    # leave less (a model error past the bounds, learnt by the observer), the derivation does
-    # not hold (``weak``), and the brake takes that share all the same
-    floor = brake.unmodelled + NET_SHARE_MIN * brake.authority
-    weak = authority < floor
-    authority = np.maximum(authority, floor)
-    D_s = so3.dot(A, x.rotors[..., None, :]) + f_along - kin
-    return BrakeTerms(gap, n, w, kin, A, f_along, D_s, authority, weak)
+    """``BrakeTerms`` at the tick of x (see the module; ``_cone`` for each cone)."""
+    return _cones_at(brake, cones, J_inv, x).terms
 
 
 def rows(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray, x: BrakeInputs,
@@ -445,42 +628,17 @@ def rows(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray, x: BrakeInputs
     """The brake's condition at a tick for every cone (``BrakeRows``; see the module); terms:
     ``brake_terms`` of x, worst: ``_worst_at`` of them, where already computed.
     """
-    t = brake_terms(brake, cones, J_inv, x) if terms is None else terms
-    D, margin = least_deceleration(brake, t.gap, t.w, t.D_s, _age(x), _spin(cones, t, x),
-                                   t.authority, x.hold, worst)
+    if terms is None or worst is None:
+        view = _cones_at(brake, cones, J_inv, x, worst=True)
+        terms, worst = view.terms, view.worst
+    t = terms
+    D, margin = least_deceleration(brake, t.gap, t.w, t.D_s, 0.0, 0.0, t.authority, x.hold,
+                                   worst)
     return BrakeRows(t.A, D - t.f_along + t.kin, cast(FloatArray, margin), t.weak)
-
-
-def law_meets(brake: ApproachBrake, cones: ConeSet, t: BrakeTerms, x: BrakeInputs,
-              u: FloatArray) -> Tuple[BoolArray, Worst]:
-    """(...,) bool: whether the law's moment u meets every cone's condition at the tick of x
-    (``meets``, on the law's own deceleration along each cone; no search), and ``_worst`` of
-    every cone there (for the rows: once a tick), the law's travel integrated with it.
-    """
-    law = so3.dot(t.A, u[..., None, :]) + t.f_along - t.kin
-    worst = _worst(brake, t.gap, t.w, t.D_s, _age(x), _spin(cones, t, x), t.authority, x.hold,
-                   law)
-    return np.all(worst[-1], axis=-1), worst[:5]
-
-
-def _worst_at(brake: ApproachBrake, cones: ConeSet, t: BrakeTerms, x: BrakeInputs) -> Worst:
-    """``_worst`` of every cone at the tick of x (its terms t)."""
-    return _worst(brake, t.gap, t.w, t.D_s, _age(x), _spin(cones, t, x), t.authority, x.hold)
 
 
 SIN_PHI_MIN = math.sin(math.radians(5.0))   # sin phi below which the rate error is taken at
                                             # this (deep inside a cone, or opposite it)
-
-
-def _spin(cones: ConeSet, t: BrakeTerms, x: BrakeInputs) -> FloatArray:
-    """|Omega| / sin phi per run and cone (``ApproachBrake.uncertainty``)."""
-    sin_phi = np.maximum(np.sin(t.gap + cones.theta), SIN_PHI_MIN)
-    return cast(FloatArray, np.sqrt(so3.dot(x.Omega, x.Omega))[..., None] / sin_phi)
-
-
-def _age(x: BrakeInputs) -> Scalars:
-    """T_b per run, one axis for the cones (a float where one for all)."""
-    return np.asarray(x.age, dtype=float)[..., None] if np.ndim(x.age) else x.age
 
 
 def brake_authority(vertices: FloatArray, J_inv: FloatArray, m_rho: FloatArray,
@@ -565,20 +723,20 @@ def braked(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray, polytope: Po
     (A, beta) the moment must meet with the brake's (the cbf law's pointing constraints), or
     None.
     """
-    t = brake_terms(brake, cones, J_inv, x)
-    weak = np.any(t.weak, axis=-1)
+    view = _cones_at(brake, cones, J_inv, x, None if extra is not None else u, worst=True)
+    weak = view.weak
     A_p, beta_p = reachable(polytope, brake.keep(x.hold), x.thrusts)
     # (a moment the rotors cannot reach this hold, which the lag compensation would clip, needs
     # the projection too: the derivation's rotors reach every command, the law's too)
     unreached = np.any(slack_of(A_p, u, beta_p) < -TOL, axis=-1)
     if extra is None:
-        meet, worst = law_meets(brake, cones, t, x, u)
-        braking = ~meet
+        # whether the law's moment meets every cone's condition (``meets``, on the law's own
+        # deceleration along each cone; no search), and the worst state of every cone there
+        # (for the rows)
+        braking = ~view.met
         if not np.any(braking | unreached):
             return Braked(u, braking, weak)
-    else:
-        worst = _worst_at(brake, cones, t, x)
-    r = rows(brake, cones, J_inv, x, t, worst)
+    r = rows(brake, cones, J_inv, x, view.terms, view.worst)
     A, beta = r.A, r.beta
     if extra is not None:
         A = np.concatenate((extra[0], A), axis=-2)

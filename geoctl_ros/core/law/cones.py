@@ -110,8 +110,8 @@ class ConeSet:
         """
         r = np.asarray(sensor_axis, dtype=float)
         self.r = r / np.linalg.norm(r)
-        # V @ (R @ self._r_cols): column 0 is s_i = r^T R^T v_i, columns 1-3 (R^T v_i) x r
-        self._r_cols = np.column_stack((self.r, hat(self.r)))
+        # V @ (R @ self.r_cols): column 0 is s_i = r^T R^T v_i, columns 1-3 (R^T v_i) x r
+        self.r_cols = np.column_stack((self.r, hat(self.r)))
         V = np.asarray(axes, dtype=float)
         V = V.reshape(-1, 3) if V.ndim < 3 else V
         self.V = V / np.linalg.norm(V, axis=-1, keepdims=True) if V.size else V
@@ -157,7 +157,7 @@ class ConeSet:
         """(n, 4) per cone: s_i = r^T R^T v_i, then (R^T v_i) x r; both linear in R (the control
         step evaluates them as part of one precomputed linear map, see ``core.law.control``).
         """
-        return matmul(self.V, matmul(R, self._r_cols))
+        return matmul(self.V, matmul(R, self.r_cols))
 
     def evaluate(self, R: FloatArray) -> 'ConeEval':
         """Barrier values, gradients and flags at attitude R."""
