@@ -34,7 +34,9 @@ class Ops:
                  minimum: Callable[[Value, Value], Value],
                  where: Callable[[Flag, Value, Value], Value], sqrt: Callable[[Value], Value],
                  every: Callable[[Flag], bool], some: Callable[[Flag], bool],
-                 arccos: Callable[[Value], Value], sin: Callable[[Value], Value]) -> None:
+                 arccos: Callable[[Value], Value], sin: Callable[[Value], Value],
+                 both: Callable[[Callable[[Value], Value], Value, Value],
+                                Tuple[Value, Value]]) -> None:
         self.maximum = maximum      # maximum(a, b): elementwise (a where equal)
         self.minimum = minimum      # minimum(a, b): elementwise (a where equal)
         self.where = where          # where(condition, a, b): a where condition, else b
@@ -43,6 +45,16 @@ class Ops:
         self.some = some            # some(flags): whether any is true (a short cut's test)
         self.arccos = arccos        # numpy's, on floats too (the math module's need not round
         self.sin = sin              # as numpy's do)
+        self.both = both            # both(f, a, b): (f(a), f(b)); a batch's in one evaluation
+
+
+def _both_floats(f: Callable[[Value], Value], a: Value, b: Value) -> Tuple[Value, Value]:
+    return f(a), f(b)
+
+
+def _both_arrays(f: Callable[[Value], Value], a: Value, b: Value) -> Tuple[Value, Value]:
+    out = cast(FloatArray, f(np.stack(np.broadcast_arrays(a, b))))      # (the same entries)
+    return out[0], out[1]
 
 
 def _float_of(function: Callable[[Any], Any]) -> Callable[[Value], Value]:
@@ -53,9 +65,9 @@ def _float_of(function: Callable[[Any], Any]) -> Callable[[Value], Value]:
 FLOATS = Ops(cast(Callable[[Value, Value], Value], max),
              cast(Callable[[Value, Value], Value], min), _choose,
              cast(Callable[[Value], Value], math.sqrt), bool, bool, _float_of(np.arccos),
-             _float_of(np.sin))
+             _float_of(np.sin), _both_floats)
 ARRAYS = Ops(np.maximum, np.minimum, np.where, np.sqrt, lambda flags: bool(np.all(flags)),
-             lambda flags: bool(np.any(flags)), np.arccos, np.sin)
+             lambda flags: bool(np.any(flags)), np.arccos, np.sin, _both_arrays)
 
 
 def evaluate(formula: Callable[..., ResultT], consts: Tuple[object, ...],

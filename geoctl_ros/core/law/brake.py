@@ -253,13 +253,20 @@ def backup_first(brake: ApproachBrake, D_s: Scalars, authority: Scalars, hold: f
     return keep * D_s + (1.0 - keep) * authority
 
 
+def _worst_box(ops: Ops, brake: ApproachBrake, keep: float, gap: Value, w: Value, D_s: Value,
+               age: Value, spin: Value, authority: Value) -> Tuple[Value, Value, Value, Value]:
+    """The worst state of the uncertainty box of one element (an ``elementwise`` formula): G0,
+    w0, the rotors' deceleration now taken at most a_b, the backup's first command.
+    """
+    dg, dw = brake.uncertainty(age, spin)
+    Ds = ops.minimum(D_s, authority)
+    return gap - dg, w + dw, Ds, keep * Ds + (1.0 - keep) * authority     # (backup_first)
+
+
 def _worst_state(ops: Ops, brake: ApproachBrake, p: Phases, keep: float, gap: Value, w: Value,
                  D_s: Value, age: Value, spin: Value, authority: Value) -> Worst:
     """``_worst`` of one element without a law (an ``elementwise`` formula)."""
-    dg, dw = brake.uncertainty(age, spin)
-    G0, w0 = gap - dg, w + dw
-    Ds = ops.minimum(D_s, authority)
-    first = keep * Ds + (1.0 - keep) * authority        # backup_first
+    G0, w0, Ds, first = _worst_box(ops, brake, keep, gap, w, D_s, age, spin, authority)
     return G0, w0, Ds, first, G0 - _travel(ops, p, w0, Ds, first, authority)
 
 
@@ -269,9 +276,9 @@ def _worst_with_law(ops: Ops, brake: ApproachBrake, p: Phases, keep: float, gap:
     """``_worst`` of one element with the law's deceleration, and whether the law meets the
     condition there (``_met``; an ``elementwise`` formula).
     """
-    G0, w0, Ds, first, margin = _worst_state(ops, brake, p, keep, gap, w, D_s, age, spin,
-                                             authority)
-    travel = _travel(ops, p, w0, Ds, law, authority)
+    G0, w0, Ds, first = _worst_box(ops, brake, keep, gap, w, D_s, age, spin, authority)
+    backup, travel = ops.both(lambda D: _travel(ops, p, w0, Ds, D, authority), first, law)
+    margin = G0 - backup
     return G0, w0, Ds, first, margin, travel, _met(margin, first, law, travel, G0)
 
 
@@ -306,8 +313,7 @@ def _least(ops: Ops, p: Phases, G0: Value, w0: Value, Ds: Value, first: Value, m
     # that does (the backup's own first), keeping the one that does
     lo = ops.minimum(Ds, 0.0) - 4.0 * authority
     hi = first
-    f_lo = _travel(ops, p, w0, Ds, lo, authority) - G0
-    f_hi = _travel(ops, p, w0, Ds, hi, authority) - G0
+    f_lo, f_hi = ops.both(lambda D: _travel(ops, p, w0, Ds, D, authority) - G0, lo, hi)
     fine = f_lo <= 0.0                     # (even the low end meets it: a far cone)
     hi = ops.where(fine, lo, hi)
     fixed = fine | past                    # (past: the backup's first, whatever the search)
