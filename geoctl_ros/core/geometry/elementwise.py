@@ -1,13 +1,17 @@
-"""One formula for one run and for a batch, where the formula is elementwise (per run and cone).
+"""One formula for one run and for a batch, where the formula is elementwise (per run and cone,
+or per component of a vector).
 
 A formula written here takes ``ops`` (how to take a maximum, a minimum, a choice, a square
-root) and its values, and uses only arithmetic, comparisons and ``&``/``|`` besides: so it runs
-on Python floats (``FLOATS``) and on numpy arrays (``ARRAYS``) alike, and gives the same bits on
-both (IEEE arithmetic and square roots round alike on either; the choices are exact).
-``evaluate`` runs it: a few elements (one run's cones) one by one in Python floats, where a
-numpy call would cost more than its arithmetic (about 1 us a call against 0.05 us a float
-operation), and more elements (a batch) in whole-array operations. A run alone and in a batch
-of any size therefore gives the same bits.
+root, numpy's arccos and sine) and its values, and uses only arithmetic, comparisons and
+``&``/``|`` besides: so it runs on Python floats (``FLOATS``) and on numpy arrays (``ARRAYS``)
+alike, and gives the same bits on both (IEEE arithmetic and square roots round alike on either,
+the choices are exact, and the transcendental functions are numpy's on both). ``evaluate`` runs
+it: a few elements (one run's cones) one by one in Python floats, where a numpy call would cost
+more than its arithmetic (about 1 us a call against 0.05 us a float operation), and more elements
+(a batch) in whole-array operations. A run alone and in a batch of any size therefore gives the
+same bits (test/test_elementwise.py). Vectors and matrices go by their components
+(``vector_parts``, ``matrix_parts``, ``joined``): the formula then names each product's terms,
+in the index order of ``so3``'s stacked products.
 """
 import math
 from typing import Any, Callable, List, Sequence, Tuple, TypeVar, Union, cast
