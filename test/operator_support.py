@@ -86,7 +86,7 @@ PRODUCERS = {
         'SensorAgreement._rest_problems', 'SensorAgreement._gravity_cause',
         'SensorAgreement._rate_cause', 'SensorAgreement._judge_rate',
         'SensorAgreement._judge_yaw', 'SensorAgreement._yaw_cause'),
-    'core/actuation/esc_wire.py': ('motor_commands_problem',),
+    'core/actuation/esc_wire.py': ('motor_commands_problem', 'esc_report', 'esc_report_of'),
     'core/geometry/quaternions.py': ('quaternion_problem',),
     'core/law/feasibility.py': ('setpoint_problem',),
     'core/telemetry/diagnostics.py': ('failsafe',),

@@ -414,22 +414,24 @@ def test_a_lost_esc_fails_safe_and_arming_names_it_and_a_silent_esc_node_too():
     tick()
     assert loop.arm(t[0]).ok                                   # no ESC node: nothing to judge
     loop.disarm()
-    assert loop.offer_esc_health(240, [0, 0, 0, 0, 0, 1], t[0]) is None  # rotor 6 ignored
+    assert loop.offer_esc_health(240, ['OK'] * 5 + ['IGNORED'], t[0]) is None  # rotor 6 ignored
     assert loop.arm(t[0]).ok
     assert tick().armed
-    assert loop.offer_esc_health(240, [0, 0, 0, 2, 0, 1], t[0]) is None
+    assert loop.offer_esc_health(240, ['OK', 'OK', 'OK', 'LOST', 'OK', 'IGNORED'], t[0]) is None
     assert not tick().armed
     assert loop.supervisor.reason == 'failsafe: ESC of rotor 4 lost'
     refused = loop.arm(t[0])
     assert not refused.ok and 'ESC of rotor 4 lost' in refused.message
-    assert loop.offer_esc_health(255, [0] * 6, t[0]) is None
+    assert loop.offer_esc_health(255, ['OK'] * 6, t[0]) is None
     assert "esc_i2c's motor.command_max 255 is not the controller's 240" in loop.arm(t[0]).message
-    assert loop.offer_esc_health(240, [0] * 6, t[0]) is None
+    assert loop.offer_esc_health(240, ['OK'] * 6, t[0]) is None
     tick()
     t[0] += 2.0
     assert 'esc_i2c silent for 2.' in loop.arm(t[0]).message
-    assert loop.offer_esc_health(240, [0, 7, 0, 0, 0, 0], t[0]) == (
-        'expected 6 ESC health codes of 0-3, got [0, 7, 0, 0, 0, 0]')
+    assert loop.offer_esc_health(240, ['OK', 'BROKEN', 'OK', 'OK', 'OK', 'OK'], t[0]) == (
+        "expected 6 ESC healths (OK, IGNORED, LOST or FAULT), got ['OK', 'BROKEN', 'OK', 'OK', "
+        "'OK', 'OK']")
+    assert loop.offer_esc_health(240, ['OK'] * 5, t[0]).startswith('expected 6 ESC healths')
 
 
 def _safety_snippets():

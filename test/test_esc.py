@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from geoctl_ros.core.actuation.esc_wire import EscHealth
+from geoctl_ros.core.actuation.esc_wire import EscHealth, esc_report, esc_report_of
 from geoctl_ros.esc import health, protocol
 from geoctl_ros.esc.bus import RecordingBus
 from geoctl_ros.esc.driver import EscDriver, EscStartError
@@ -254,7 +254,21 @@ def test_the_diagnostics_say_what_is_wrong_with_which_esc():
     assert 'ESC 4 (0x2c) does not answer' in r.message
     # what the controller reads of it (esc_health): rotor 2 at fault, rotor 4 lost
     H = EscHealth
-    assert health.esc_health(d, clock.t, 100.0) == (H.OK, H.FAULT, H.OK, H.LOST, H.OK, H.OK)
+    escs = health.esc_health(d, clock.t, 100.0)
+    assert escs == (H.OK, H.FAULT, H.OK, H.LOST, H.OK, H.OK)
+    # as it travels (esc_health's key-values), and as the controller reads them back
+    report = esc_report(d.config.command_max, escs)
+    assert report.failing and report.message == 'rotor 2 FAULT, rotor 4 LOST'
+    assert report.values[:3] == (('command_max', str(d.config.command_max)), ('rotor 1', 'OK'),
+                                 ('rotor 2', 'FAULT'))
+    assert esc_report_of(report.values) == (d.config.command_max,
+                                            ['OK', 'FAULT', 'OK', 'LOST', 'OK', 'OK'])
+    assert esc_report_of(report.values[1:]) == 'no command_max'
+    assert esc_report_of((('command_max', '2.5'),)) == "command_max '2.5' is not a whole number"
+    assert esc_report_of(report.values[:2] + report.values[3:]) == (
+        "keys other than command_max and rotor 1 ... rotor 1: 'rotor 3', 'rotor 4', 'rotor 5', "
+        "'rotor 6'")
+    assert not esc_report(255, (H.OK, H.IGNORED)).failing
     assert r.figures.i2c_errors == 3                             # the write and its 2 retries
     warn = health.report(d, clock.t, 80.0, 100.0, errors_before=0)
     assert warn.level == protocol.ERROR                          # the worst decides

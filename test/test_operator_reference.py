@@ -75,7 +75,7 @@ def test_the_collector_finds_what_the_nodes_are_known_to_say(collector):
               'failsafe: ' + W,                                 # failsafe's own format
               "the IMU's specific force is %s m/s^2 at rest, not about %s: no accelerometer "
               'data in linear_acceleration, or its units wrong' % (W, W),
-              'parameters not applied: ' + W, 'esc_health refused: empty',
+              'parameters not applied: ' + W, 'esc_health refused: ' + W, 'no command_max',
               'monitoring topics not published: %s: %s' % (W, W),
               'ESC %s (0x%s) does not answer' % (W, W),                  # the ESC node
               'refused: the controller is armed', 'zero not written to 0x' + W,

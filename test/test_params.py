@@ -236,6 +236,21 @@ def test_a_thrust_curve_whose_inverse_would_overflow_is_refused():
     assert [name for name, _ in refused.value.errors] == ['thrust_max']
 
 
+def test_thrust_limits_that_cannot_carry_the_collective_thrust_are_refused():
+    """Found by the fuzzer (a ground station's THRUST_MAX of 1 N): thrust limits that leave the
+    rotors no way to carry the collective thrust left the moment polytope empty, and the brake's
+    authority over it raised. They are refused, naming the limit and the shares.
+    """
+    for over, name in (({'thrust_max': 1.0}, 'thrust_max'), ({'thrust_min': 3.0}, 'thrust_min')):
+        with pytest.raises(ConfigError) as refused:
+            controller_setup(resolve(CONTROLLER, over))
+        [(got, reason)] = refused.value.errors
+        assert got == name and 'cannot carry the collective thrust' in reason, reason
+    # limits that carry it, but leave the rotors no deceleration against gravity at the stops
+    with pytest.raises(ConfigError, match='brake_acceleration: the rotors cannot decelerate'):
+        controller_setup(resolve(CONTROLLER, {'thrust_max': 3.0}))
+
+
 @pytest.mark.parametrize('order', ['wildcard first', 'node first'])
 def test_a_files_sections_apply_in_its_order_as_rclpy_applies_them(tmp_path, order):
     """k_R set in '/**' (0.7) and in the controller's section (0.9) of one file: what the tools

@@ -6,6 +6,7 @@ import math
 import os
 import time
 
+from diagnostic_msgs.msg import KeyValue
 from geometry_msgs.msg import PoseStamped
 from hypothesis import strategies as st
 import numpy as np
@@ -172,7 +173,10 @@ EVENTS = st.lists(st.one_of(
               st.integers(0, 2 ** 32 - 1), ARRAYS),
     st.tuples(st.just('configuration_error'), st.none(), hostile_float()),
     st.tuples(st.just('armed'), st.none(), st.lists(st.integers(0, 2 ** 32 - 1), max_size=4)),
-    st.tuples(st.just('esc_health'), st.none(), st.lists(st.integers(0, 65535), max_size=8))),
+    st.tuples(st.just('esc_health'), st.none(), st.lists(st.tuples(
+        st.sampled_from(('command_max', 'rotor 1', 'rotor 2', 'rotor 6', 'rotor 7', 'other')),
+        st.one_of(st.sampled_from(('OK', 'IGNORED', 'LOST', 'FAULT', '240', '255', '-1', '')),
+                  st.text(max_size=12))), max_size=8))),
     min_size=1, max_size=6)
 
 
@@ -196,6 +200,8 @@ def _message(msg_type, topic, stamp, payload):
     elif topic in ('motor_commands', 'cone_margins', 'disturbance_estimate'):
         msg.data = [float(x) for x in payload]
         msg.layout.data_offset = stamp          # (the session number of motor_commands)
+    elif topic == 'esc_health':             # (key-values, as a DiagnosticStatus's)
+        msg.values = [KeyValue(key=k, value=v) for k, v in payload]
     else:
         msg.data = list(payload)
     return msg

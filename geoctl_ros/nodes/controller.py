@@ -11,13 +11,13 @@ import sys
 import time
 from typing import NamedTuple
 
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, QuaternionStamped
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import Imu
-from std_msgs.msg import Float64MultiArray, UInt16MultiArray, UInt32MultiArray
+from std_msgs.msg import Float64MultiArray, UInt32MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core.actuation.esc_wire import ArmedState
@@ -107,7 +107,7 @@ class ControllerNode(Node):
         self.create_subscription(Imu, 'imu', self._on_imu, qos.SENSOR)
         self.create_subscription(QuaternionStamped, 'attitude_setpoint', self._on_setpoint,
                                  qos.EVENT)
-        self.create_subscription(UInt16MultiArray, 'esc_health', self._on_esc_health,
+        self.create_subscription(DiagnosticStatus, 'esc_health', self._on_esc_health,
                                  qos.COMMAND)
         self.pub_motors = self.create_publisher(Float64MultiArray, 'motor_commands', qos.COMMAND)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
@@ -253,7 +253,7 @@ class ControllerNode(Node):
 
     def _on_esc_health(self, msg):
         report = esc_health_of(msg)
-        problem = ('empty' if report is None
+        problem = (report if isinstance(report, str)
                    else self.loop.offer_esc_health(report[0], report[1], self._now()))
         if problem:
             self.get_logger().warning('esc_health refused: ' + problem,

@@ -6,11 +6,10 @@ from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from std_msgs.msg import (
     Float64MultiArray,
     MultiArrayDimension,
-    UInt16MultiArray,
     UInt32MultiArray,
 )
 
-from geoctl_ros.core.actuation.esc_wire import ArmedState
+from geoctl_ros.core.actuation.esc_wire import ArmedState, esc_report, esc_report_of
 from geoctl_ros.core.telemetry.diagnostics import Status, from_values, to_values
 from geoctl_ros.mavlink.health import Report as BridgeReport
 from geoctl_ros.mavlink.health import from_values as bridge_values
@@ -32,20 +31,23 @@ def armed_state_of(msg):
     return ArmedState(bool(msg.data[0]), int(msg.data[1]))
 
 
-def esc_health_msg(command_max, escs):
-    """The ESC node's ``esc_health``: UInt16MultiArray [motor.command_max, then each ESC's
-    EscHealth in rotor order].
+ESC_HEALTH_NAME = 'geoctl_ros: esc_health'
+
+
+def esc_health_msg(command_max, escs, hardware_id=''):
+    """The ESC node's ``esc_health``: its ``EscReport`` (core.actuation.esc_wire) as a
+    diagnostic_msgs/DiagnosticStatus, level ERROR where an ESC is lost or at fault, else OK.
     """
-    msg = UInt16MultiArray(data=[int(command_max)] + [int(e) for e in escs])
-    msg.layout.dim = [MultiArrayDimension(label='command_max, then rotor', size=len(msg.data),
-                                          stride=len(msg.data))]
-    return msg
+    report = esc_report(command_max, escs)
+    return DiagnosticStatus(
+        level=DiagnosticStatus.ERROR if report.failing else DiagnosticStatus.OK,
+        name=ESC_HEALTH_NAME, hardware_id=hardware_id, message=report.message,
+        values=[KeyValue(key=k, value=v) for k, v in report.values])
 
 
 def esc_health_of(msg):
-    """``esc_health`` -> (command_max, [health code per rotor]), or None if it is empty."""
-    data = list(msg.data)
-    return (data[0], data[1:]) if data else None
+    """``esc_health`` -> (command_max, each rotor's health as named), or why it is not one."""
+    return esc_report_of((kv.key, kv.value) for kv in msg.values)
 
 
 def motor_commands_msg(session):

@@ -23,7 +23,6 @@ from rclpy.node import Node
 from std_msgs.msg import (
     Float64MultiArray,
     MultiArrayDimension,
-    UInt16MultiArray,
     UInt32MultiArray,
 )
 from std_srvs.srv import Trigger
@@ -75,7 +74,7 @@ class EscNode(Node):
         self.pub_telemetry = self.create_publisher(Float64MultiArray, 'esc/telemetry',
                                                    qos.TELEMETRY)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
-        self.pub_health = self.create_publisher(UInt16MultiArray, 'esc_health', qos.COMMAND)
+        self.pub_health = self.create_publisher(DiagnosticStatus, 'esc_health', qos.COMMAND)
         self.create_service(Trigger, '~/motor_test', self._on_motor_test)
         self.create_service(Trigger, '~/motor_test_stop', self._on_motor_test_stop)
         ros_params.watch(self, ESC, self._validate, self._on_params)
@@ -180,7 +179,7 @@ class EscNode(Node):
         warn, error = self.setup.temperature_warn, self.setup.temperature_error
         r = health.report(d, now, warn, error, *self._report_base, scheduling=self.scheduling)
         self.pub_health.publish(esc_health_msg(
-            d.config.command_max, health.esc_health(d, now, error)))
+            d.config.command_max, health.esc_health(d, now, error), self.bus.name))
         self._report_base = (r.figures.i2c_errors, r.figures.refused)
         d.latency.reset()
         status = DiagnosticStatus(level=bytes([r.level]), name=health.NAME,

@@ -217,7 +217,12 @@ def controller_setup(values: dict) -> 'ControllerSetup':
     authority = brake_authority(polytope.vertices, so3.inverse3(config.J), config.m_rho,
                                 config.gravity, config.tilt_max, config.cones.r)
     asked = values['brake_acceleration']
-    if asked > authority:
+    if authority <= 0.0:
+        errors.append(('brake_acceleration', "the rotors cannot decelerate along every cone's "
+                       "opening direction with gravity at the joint's stops (%.1f rad/s^2 at "
+                       'best): thrust limits, mass or centre of mass out of reach'
+                       % authority))
+    elif asked > authority:
         errors.append(('brake_acceleration', '%.1f rad/s^2 is more than the rotors can make along '
                        "every cone's opening direction with gravity at the joint's stops "
                        '(%.1f rad/s^2)' % (asked, authority)))
@@ -330,4 +335,15 @@ def mixer(values: dict) -> Mixer:
         raise ConfigError([('rotors', str(e))]) from None
     collective = values['collective_thrust'] or values['mass'] * float(
         np.linalg.norm(values['gravity']))
+    # the rotors must carry the collective thrust with no moment at all (else they make no
+    # moment unsaturated: the moment polytope is empty)
+    shares = collective * allocator.base_share
+    if (shares.max() > allocator.hi - allocator.INSET
+            or shares.min() < allocator.lo + allocator.INSET):
+        raise ConfigError([('thrust_max' if shares.max() > allocator.hi - allocator.INSET
+                            else 'thrust_min',
+                            'the rotors cannot carry the collective thrust %.3g N within '
+                            'thrust_min..thrust_max (%.3g..%.3g N): their shares of it are '
+                            '%.3g..%.3g N' % (collective, allocator.lo, allocator.hi,
+                                              shares.min(), shares.max()))])
     return Mixer(allocator, curve, collective, values['motor_lag_compensation'])

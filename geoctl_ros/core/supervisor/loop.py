@@ -146,16 +146,15 @@ class ControlLoop(Generic[StampT]):
                                else self.frames.imu_vector(specific_force), stamp, receipt)
         return problem
 
-    def offer_esc_health(self, command_max: int, escs: Sequence[int],
+    def offer_esc_health(self, command_max: int, escs: Sequence[str],
                          receipt: float) -> Optional[str]:
-        """The ESC node's report: its motor.command_max and each ESC's health (EscHealth values,
+        """The ESC node's report: its motor.command_max and each ESC's health (EscHealth names,
         in rotor order); None if taken, else why not.
         """
-        if len(escs) != self.rotor_count or any(e not in EscHealth._value2member_map_
-                                                 for e in escs):
-            return 'expected %d ESC health codes of 0-3, got %r' % (self.rotor_count,
-                                                                     list(escs)[:12])
-        self.esc = EscStatus(int(command_max), tuple(EscHealth(e) for e in escs), receipt)
+        if len(escs) != self.rotor_count or any(e not in EscHealth.__members__ for e in escs):
+            return 'expected %d ESC healths (OK, IGNORED, LOST or FAULT), got %r' % (
+                self.rotor_count, [e[:12] for e in escs[:12]])
+        self.esc = EscStatus(int(command_max), tuple(EscHealth[e] for e in escs), receipt)
         return None
 
     def esc_report_problem(self, now: float) -> Optional[str]:
