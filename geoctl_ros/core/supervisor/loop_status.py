@@ -76,38 +76,17 @@ class StatusLoop(LoopInputs, Protocol[StampT]):
     ``core.supervisor.loop.ControlLoop``, which imports this module).
     """
 
-    @property
-    def bridge(self) -> GapBridge: ...
-
-    @property
-    def last_tick(self) -> Optional[LoopTick[StampT]]: ...
-
-    @property
-    def entry(self) -> Optional[Tuple[str, float]]: ...
-
-    @property
-    def cone_entries(self) -> int: ...
-
-    @property
-    def window(self) -> Window: ...
-
-    @property
-    def pose_age(self) -> WindowStats: ...
-
-    @property
-    def rate_age(self) -> WindowStats: ...
-
-    @property
-    def gaps(self) -> Dict[str, List[float]]: ...
-
-    @property
-    def unlearnt_bound(self) -> float: ...
-
-    @property
-    def unlearnt_over(self) -> int: ...
-
-    @property
-    def setpoint_note(self) -> Optional[str]: ...
+    bridge: GapBridge
+    last_tick: Optional[LoopTick[StampT]]
+    entry: Optional[Tuple[str, float]]
+    cone_entries: int
+    window: Window
+    pose_age: WindowStats
+    rate_age: WindowStats
+    gaps: Dict[str, List[float]]
+    unlearnt_bound: float
+    unlearnt_over: int
+    setpoint_note: Optional[str]
 
 
 def gap_notes(loop: StatusLoop[StampT], now: float) -> List[str]:

@@ -79,23 +79,10 @@ class Setup(Protocol):
     which params builds: params is above core).
     """
 
-    @property
-    def config(self) -> ControllerConfig: ...
-
-    @property
-    def mixer(self) -> Mixer: ...
-
-    @property
-    def setpoint(self) -> FloatArray: ...
-
-    @property
-    def schedule(self) -> SetpointSchedule: ...
-
-    @property
-    def loop(self) -> LoopSettings: ...
-
-    @property
-    def frames(self) -> InputFrames: ...
-
-    @property
-    def agreement(self) -> AgreementSettings: ...
+    config: ControllerConfig
+    mixer: Mixer
+    setpoint: FloatArray
+    schedule: SetpointSchedule
+    loop: LoopSettings
+    frames: InputFrames
+    agreement: AgreementSettings

@@ -19,46 +19,28 @@ class LoopInputs(Protocol):
     input streams, its supervisor and the sensors' agreement.
     """
 
-    @property
-    def unconfigured(self) -> Optional[str]: ...
+    unconfigured: Optional[str]
+    supervisor: Supervisor
+    agreement: SensorAgreement
+    setup: Setup
+    pose: Stream
+    rate: Stream
 
     def esc_report_problem(self, now: float) -> Optional[str]: ...
-
-    @property
-    def supervisor(self) -> Supervisor: ...
-
-    @property
-    def agreement(self) -> SensorAgreement: ...
-
-    @property
-    def setup(self) -> Setup: ...
-
-    @property
-    def pose(self) -> Stream: ...
-
-    @property
-    def rate(self) -> Stream: ...
 
 
 class PreflightLoop(LoopInputs, Protocol):
     """What the arming checks read of the loop besides its inputs."""
 
+    controller: AttitudeController
+    R: Optional[FloatArray]
+    Omega: Optional[FloatArray]
+    step: ControlTick
+
     @property
     def holds_at_arming(self) -> bool: ...
 
     def hold_attitude(self) -> Optional[FloatArray]: ...
-
-    @property
-    def controller(self) -> AttitudeController: ...
-
-    @property
-    def R(self) -> Optional[FloatArray]: ...
-
-    @property
-    def Omega(self) -> Optional[FloatArray]: ...
-
-    @property
-    def step(self) -> ControlTick: ...
 
 
 def arm_problems(loop: PreflightLoop, now: float,
