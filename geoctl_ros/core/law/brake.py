@@ -571,8 +571,8 @@ def _cones_at(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray, x: 'Brake
     one = one_run(x.R) and len(cones) > 0
     consts = (brake, phases(brake, x.hold), brake.keep(x.hold),
               cast('List[List[Value]]', J_inv.reshape(3, 3).tolist()),
-              cast('List[Value]', cones.r.tolist()),
-              cast('List[List[Value]]', cones.r_cols.tolist()), _TickParts.of(x, u, one), worst)
+              cast('List[Value]', cones.r_floats),
+              cast('List[List[Value]]', cones.r_cols_floats), _TickParts.of(x, u, one), worst)
     if one:
         theta = cones.theta.reshape(-1)
         per_cone = list(zip(*(_cone(FLOATS, *consts, v, t) for v, t in

@@ -37,7 +37,7 @@ ConeSet with axes (batch, n, 3) and half-angles (batch, n); it evaluates a stack
 (batch, 3, 3) with the same formulas.
 """
 import math
-from typing import Iterable, Optional, Tuple, cast
+from typing import Iterable, List, Optional, Tuple, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -112,6 +112,9 @@ class ConeSet:
         self.r = r / np.linalg.norm(r)
         # V @ (R @ self.r_cols): column 0 is s_i = r^T R^T v_i, columns 1-3 (R^T v_i) x r
         self.r_cols = np.column_stack((self.r, hat(self.r)))
+        # the same as floats, made once (the brake's view of a cone takes them: core.law.brake)
+        self.r_floats: List[float] = self.r.tolist()
+        self.r_cols_floats: List[List[float]] = self.r_cols.tolist()
         V = np.asarray(axes, dtype=float)
         V = V.reshape(-1, 3) if V.ndim < 3 else V
         self.V = V / np.linalg.norm(V, axis=-1, keepdims=True) if V.size else V
