@@ -50,6 +50,8 @@ LOOKAHEAD_MIN = math.radians(5.0)   # the lookahead near a cone, at least
 LOOKAHEAD_PER_GAP = 2.0     # near a cone the lookahead is at most this many times the gap to it
 CAP_SLACK = math.radians(0.5)   # a joint cap keeps this far from a path's end inside it
 CAP_CLEARANCE = math.radians(2.0)   # the path keeps this far from the joint's caps
+SIGHT_SURE = 1e-6           # rad: a way judged clear by a bound has this much to spare (far more
+                            # than the rounding of the exact judgement it stands for)
 
 
 def arc_clearance(a: FloatArray, b: FloatArray, axes: FloatArray) -> FloatArray:
@@ -105,7 +107,12 @@ def sensor_path(d0: FloatArray, d1: FloatArray, axes: FloatArray, rims: FloatArr
     keep = rims + np.clip(np.minimum(clearance, 0.5 * gap), 0.0, None)        # widened radii
     nodes = [ends] + [_rim(v, k + RIM_SLACK, RIM_POINTS) for v, k in zip(axes, keep)]
     X = np.concatenate(nodes)
-    clear = np.all(arc_clearance(X[:, None], X[None, :], axes) >= keep - 1e-9, axis=-1)  # (N, N)
+    # (N, N): the way between two points is the same both ways, to the bit (arc_clearance's
+    # terms only change sign), so each pair is worked out once
+    first, second = np.triu_indices(len(X))
+    clear = np.empty((len(X), len(X)), dtype=bool)
+    clear[first, second] = clear[second, first] = np.all(
+        arc_clearance(X[first], X[second], axes) >= keep - 1e-9, axis=-1)
     # a point of one rim inside another widened cone is no way
     inside = np.any(np.arccos(np.clip(_cosines(X, axes), -1.0, 1.0)) < keep - 1e-9, axis=-1)
     clear &= ~inside[:, None] & ~inside[None, :]
@@ -435,8 +442,19 @@ def _sight(D: FloatArray, V: FloatArray, rims: FloatArray, window: int,
     ahead = np.minimum(np.arange(K)[:, None] + np.arange(1, window)[None, :], K - 1)
     gap = np.arccos(np.clip(np.einsum('nkx,ncx->nkc', D, V), -1.0, 1.0)) - rims[:, None]
     need = rims[:, None] + np.clip(0.5 * gap, 0.0, clearance)                  # (n, K, C)
-    clear = np.all(arc_clearance(D[:, :, None, :], D[:, ahead], V[:, None, None])
-                   >= need[:, :, None] - 1e-9, axis=-1)                         # (n, K, W-1)
+    # Most ways are clear by the triangle inequality: every point of the arc from k to j lies
+    # within the arc's length of k, and that length is at most the path's from k to j; so the
+    # arc keeps a cone at least k's angle to its axis less that away. Only the rest, near a
+    # cone, is worked out whole (arc_clearance), with the same comparison as before.
+    steps = np.arccos(np.clip(so3.dot(D[:, :-1], D[:, 1:]), -1.0, 1.0))     # (n, K - 1)
+    along = np.concatenate([np.zeros((n, 1)), np.cumsum(steps, axis=-1)], axis=-1)
+    length = along[:, ahead] - along[:, :, None]                                # (n, K, W-1)
+    room = np.min(gap + rims[:, None] - need, axis=-1, initial=np.inf)         # (n, K)
+    clear = length <= (room - SIGHT_SURE)[:, :, None]                          # (n, K, W-1)
+    runs, k, m = np.nonzero(~clear)
+    if len(runs):
+        clear[runs, k, m] = np.all(arc_clearance(D[runs, k], D[runs, ahead[k, m]], V[runs])
+                                   >= need[runs, k] - 1e-9, axis=-1)
     blocked = np.cumsum(~clear, axis=-1) > 0          # from the first point it does not see
     seen = np.sum(~blocked, axis=-1)                  # how many points ahead it sees
     return cast(IntArray, np.minimum(np.arange(K)[None, :] + np.maximum(seen, 1), K - 1))
