@@ -237,8 +237,10 @@ def test_lag_compensation_brings_the_lagged_rotors_to_the_allocation_by_the_next
     for lag in (0.0, 0.04):
         mixer = params.mixer(resolve(CONTROLLER, {'motor_lag_compensation': lag}))
         act = RotorActuator(tilted_ring(), RHO, mixer.curve, time_constant=0.04)
+        rotors = None                          # (the lag model: the mixer keeps none)
         for k in range(101):                   # 1 s at rest (no moment), then the step
-            out = mixer.mix(step if k == 100 else np.zeros(3), dt=dt)
+            out = mixer.mix(step if k == 100 else np.zeros(3), rotors, dt=dt)
+            rotors = out.rotors
             for _ in range(10):
                 produced = act.moment(out.commands, h)
         missing[lag] = np.linalg.norm(produced - out.allocation.moment) / np.linalg.norm(step)
@@ -265,9 +267,11 @@ def test_lag_compensation_follows_the_real_holds_of_a_late_loop():
     for told in (False, True):
         mixer = params.mixer(resolve(CONTROLLER, {'motor_lag_compensation': 0.04}))
         act = RotorActuator(tilted_ring(), RHO, mixer.curve, time_constant=0.04)
-        held, missing[told] = None, []
+        held, missing[told], rotors = None, [], None
         for k in range(110):                   # 1 s on time at rest, then the step, late
-            out = mixer.mix(step if k >= 100 else np.zeros(3), dt=dt, held=held if told else None)
+            out = mixer.mix(step if k >= 100 else np.zeros(3), rotors, dt=dt,
+                            held=held if told else None)
+            rotors = out.rotors
             hold = 50 if k >= 100 else 10
             for _ in range(hold):
                 produced = act.moment(out.commands, h)

@@ -307,14 +307,14 @@ def test_the_lag_compensations_clipping_counts_as_saturation():
     do not reach the allocation by the end of the hold, so the brake's derivation does not
     speak of it (``MotorOutput.saturated``).
     """
-    mixer = controller_setup(_testbed_values()).mixer
+    mixer, rotors = controller_setup(_testbed_values()).mixer, None
     for _ in range(mixer.spool_ticks(0.01)):
-        assert mixer.spools(0.01, 0.01)
-        mixer.mix(np.zeros(3), armed=True, dt=0.01, held=0.01)
-    assert not mixer.spools(0.01, 0.01)
-    calm = mixer.mix(np.zeros(3), armed=True, dt=0.01, held=0.01)
+        assert mixer.spools(rotors, 0.01, 0.01)
+        rotors = mixer.mix(np.zeros(3), rotors, armed=True, dt=0.01, held=0.01).rotors
+    assert not mixer.spools(rotors, 0.01, 0.01)
+    calm = mixer.mix(np.zeros(3), rotors, armed=True, dt=0.01, held=0.01)
     assert not calm.saturated
-    jump = mixer.mix(np.array([0.0, 1.2, 0.0]), armed=True, dt=0.01, held=0.01)
+    jump = mixer.mix(np.array([0.0, 1.2, 0.0]), calm.rotors, armed=True, dt=0.01, held=0.01)
     assert jump.clipped and jump.saturated and not jump.allocation.saturated
 
 
@@ -363,12 +363,14 @@ def _flown(T_b):
     # the true rotors: the same airframe about the pivot (no offset), the same curve and lag
     geometry, curve, _ = airframe(values)
     actuator = RotorActuator(geometry, np.zeros(3), curve, LAG)
+    rotors = None
     for _ in range(mixer.spool_ticks(HOLD)):               # spooled before the start
-        cmd = mixer.mix(np.zeros(3), armed=True, dt=HOLD, held=HOLD).commands
+        spooled = mixer.mix(np.zeros(3), rotors, armed=True, dt=HOLD, held=HOLD)
+        rotors = spooled.rotors
         for _ in range(int(round(HOLD / h))):
-            actuator.moment(cmd, h)
+            actuator.moment(spooled.commands, h)
     history = CommandHistory(64, LAG)
-    made = mixer.moments(HOLD)
+    made = mixer.moments(rotors, HOLD)
     history.push(-T_b - HOLD, made[0], made[1])
     predictor = DelayPredictor()
     predictor.observe = lambda *a: None                   # (the observer off)
@@ -380,12 +382,14 @@ def _flown(T_b):
         (R_b, W_b), (R_l, W_l) = predictor(ctl.dynamics, R_m, W_m, T_b, T_b, history, t,
                                            0.5 * HOLD)
         M_g = ctl.gravity_moment(R_b)
-        x = BrakeInputs(R_b, W_b, T_b, mixer.design_hold_for(HOLD, HOLD), history.at(t),
-                        ctl.dynamics.moment(R_b, W_b), M_g, mixer.thrust_offsets(HOLD))
+        x = BrakeInputs(R_b, W_b, T_b, mixer.design_hold_for(rotors, HOLD, HOLD),
+                        history.at(t), ctl.dynamics.moment(R_b, W_b), M_g,
+                        mixer.thrust_offsets(rotors, HOLD))
         out = ctl.step(R_l, W_l, HOLD, adapt=False, brake=x)
-        motors = mixer.mix(out.u, armed=True, dt=HOLD, held=HOLD)
+        motors = mixer.mix(out.u, rotors, armed=True, dt=HOLD, held=HOLD)
+        rotors = motors.rotors
         assert not motors.saturated, (T_b, t)            # (within the assumptions)
-        history.push(t, *mixer.moments())
+        history.push(t, *mixer.moments(rotors))
         for _ in range(steps):
             plant.step(actuator.moment(motors.commands, h), h)
             past = past[1:] + [(plant.R.copy(), plant.Omega.copy())]

@@ -289,7 +289,7 @@ def _spool_up(bed: Testbeds, tick: ControlTick, dt: float, n_sub: int, h: float,
     plant = bed.plant
     plant.held = o.start == 'held'
     now, before = 0.0, None
-    while tick.mixer.spools(None if before is None else now - before, dt):
+    while tick.mixer.spools(tick.rotors, None if before is None else now - before, dt):
         R, W = bed.state()
         out, motors = cast(Tuple[ControlOutput, MotorOutput],   # (a batch: never no control)
                            tick(R, W, dt, now, ages)[:2])
@@ -333,7 +333,7 @@ class _Judge:
         """
         tick, bed = self.tick, self.bed
         R, W = bed.state()
-        hold = dt if tick.mixer.rotors is None else tick.mixer.rotors.design_hold
+        hold = dt if tick.rotors is None else tick.rotors.design_hold
         x = tick.brake_inputs(R, W, 0.0, hold, t)
         terms = self.terms = brake_terms(self.brake, bed.cones, tick.controller.J_inv, x)
         self.safe[k] = np.all(backup_margin(self.brake, terms.gap, terms.w, terms.D_s,

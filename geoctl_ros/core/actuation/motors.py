@@ -74,6 +74,8 @@ class MotorOutput:
     clipped: Union[bool, Flags] = False   # the lag compensation was cut at a thrust limit (the
                                           # rotors do not reach the allocation by the end of the
                                           # hold: a saturation too)
+    rotors: Optional['RotorModel'] = None   # the lag model after this command (the next
+                                            # mix's; None: the rotors at rest, or no model)
 
     @property
     def saturated(self) -> Flags:
@@ -85,8 +87,9 @@ class MotorOutput:
 
 class RotorModel(NamedTuple):
     """The lag compensation's model of the rotors between two commands (one row of thrusts per
-    run of a batch; the Mixer keeps None instead while the rotors are at rest: disarmed, or no
-    compensation).
+    run of a batch; None instead while the rotors are at rest: disarmed, or no compensation).
+    The mixer keeps none of it: each mix takes the model the last one returned
+    (``MotorOutput.rotors``), and the caller holds it between ticks.
     """
 
     sent: FloatArray        # N: the thrusts the last command asked for (the curve's, as sent)
@@ -123,6 +126,9 @@ class Mixer:
     at the barrier's stiffness near a cone; in the campaign that let a sensor starting in a
     narrow corridor between two cones bounce between them into one (docs/campaigns.md, "Safety
     campaign").
+    The mixer holds no state: the lag model (``RotorModel``) comes in with each mix and goes
+    out with its output, and the caller (``ControlTick``) keeps it between ticks, as PX4's
+    control allocation keeps the actuators' state apart from the allocation.
     A batch of moments keeps one model per run. The model starts at rest at the first armed step
     (the rotors were stopped) and is dropped when disarmed. For ``SPOOL_LAGS`` time constants
     after arming the rotors spool up to the allocation uncompensated: no kick (a motor starting
@@ -144,33 +150,23 @@ class Mixer:
         self.lag = float(lag)
         self._dead = np.array([i for i in range(allocator.count) if i not in allocator.alive],
                               dtype=int)
-        self.rotors: Optional[RotorModel] = None   # the lag model (None: the rotors at rest)
 
-    def adopt_state(self, other: 'Mixer') -> None:
-        """Carry the lag model over from the mixer this one replaces (a run-time
-        reconfiguration).
-        """
-        if other.rotors is not None:
-            self.rotors = other.rotors._replace(sent=other.rotors.sent.copy(),
-                                                modelled=other.rotors.modelled.copy())
-
-    def mix(self, moment: FloatArray, armed: bool = True, dt: Optional[float] = None,
-            held: Optional[float] = None) -> 'MotorOutput':
+    def mix(self, moment: FloatArray, rotors: Optional[RotorModel] = None, armed: bool = True,
+            dt: Optional[float] = None, held: Optional[float] = None) -> 'MotorOutput':
         """Motor commands for the moment (or a stack of them); all zero when not armed.
 
-        dt: how long this command is expected to be held (the control period); held: how long the
-        previous command really was (the time since the last step; dt when not given). Both are
-        needed for the lag compensation only.
+        rotors: the lag model the last command left (its ``MotorOutput.rotors``; None: the
+        rotors at rest). dt: how long this command is expected to be held (the control period);
+        held: how long the previous command really was (the time since the last step; dt when
+        not given). The three are needed for the lag compensation only.
         """
         allocation = self.allocator.allocate(moment, self.collective_thrust)
         thrusts = allocation.thrusts
         if not armed:
             zero = np.zeros_like(thrusts, dtype=int)
-            self.rotors = None
             return MotorOutput(zero, np.zeros(zero.shape), allocation)
         compensate = self.lag > 0.0 and dt is not None and dt > 0.0
         clipped: Union[bool, Flags] = False
-        rotors = self.rotors
         if compensate:
             if rotors is None or rotors.modelled.shape != thrusts.shape:
                 # arming: the rotors are at rest, and spool up to the allocation uncompensated
@@ -182,7 +178,7 @@ class Mixer:
                 spool_left = rotors.spool_left
                 if spool_left > 0.0:
                     spool_left -= held
-            hold = self.design_hold_for(cast(float, dt), held)
+            hold = self.design_hold_for(rotors, cast(float, dt), held)
             if spool_left <= 0.0:
                 a = math.exp(-hold / self.lag)
                 wanted = (thrusts - a * model) / (1.0 - a)
@@ -191,47 +187,48 @@ class Mixer:
         commands = self.curve.command(thrusts)
         if len(self._dead):
             commands[..., self._dead] = 0
-        if compensate:
-            self.rotors = RotorModel(self.curve.thrust(commands), model, hold, spool_left)
-        else:                       # compensation turned off: a stale model is not kept
-            self.rotors = None
-        return MotorOutput(commands, self.curve.normalised(commands), allocation, clipped)
+        # (compensation turned off: a stale model is not kept)
+        after = (RotorModel(self.curve.thrust(commands), model, hold, spool_left) if compensate
+                 else None)
+        return MotorOutput(commands, self.curve.normalised(commands), allocation, clipped, after)
 
-    def design_hold_for(self, dt: float, held: Optional[float]) -> float:
+    def design_hold_for(self, rotors: Optional[RotorModel], dt: float,
+                        held: Optional[float]) -> float:
         """The hold H (s) the next command's lag compensation is designed for: the control
         period, or the previous command's real hold when that was longer, and after a late
         step the longest recent hold, back to the period over about HOLD_MEMORY (the approach
         brake takes the same H for the hold its command is reached in).
         """
-        if self.rotors is None:
+        if rotors is None:
             return dt                          # arming
         held = dt if held is None else max(held, 0.0)
         hold = max(dt, held)
-        last = self.rotors.design_hold
+        last = rotors.design_hold
         if last > hold:                           # a late step not long ago: back to dt slowly
             hold = max(hold, dt + (last - dt) * math.exp(-held / self.HOLD_MEMORY))
         return hold
 
-    def moments(self, held: float = 0.0) -> Optional[Tuple[FloatArray, FloatArray]]:
-        """The moments about the pivot the rotors make by the lag model (None: no model kept, at
-        rest or uncompensated): (the one they settle to under the last command, the one they
+    def moments(self, rotors: Optional[RotorModel],
+                held: float = 0.0) -> Optional[Tuple[FloatArray, FloatArray]]:
+        """The moments about the pivot the rotors make by the lag model rotors (None: no model,
+        at rest or uncompensated): (the one they settle to under the last command, the one they
         make ``held`` s after it).
         """
-        if self.rotors is None:
+        if rotors is None:
             return None
         B = self.allocator.B_full[3:]
-        now = self.rotors.modelled if held <= 0.0 else self.rotors.after(held, self.lag)
-        return matvec(B, self.rotors.sent), matvec(B, now)
+        now = rotors.modelled if held <= 0.0 else rotors.after(held, self.lag)
+        return matvec(B, rotors.sent), matvec(B, now)
 
-    def thrust_offsets(self, held: float) -> Optional[FloatArray]:
+    def thrust_offsets(self, rotors: Optional[RotorModel], held: float) -> Optional[FloatArray]:
         """Each alive rotor's thrust by the lag model, held s after the last command, less its
         share of the collective thrust (N; the allocation's base): where the rotors are now
         within the moment polytope's frame (``Allocator.moment_polytope``); None without a
         lag model.
         """
-        if self.rotors is None:
+        if rotors is None:
             return None
-        now = self.rotors.modelled if held <= 0.0 else self.rotors.after(held, self.lag)
+        now = rotors.modelled if held <= 0.0 else rotors.after(held, self.lag)
         return now[..., self.allocator.alive] - self.collective_thrust * self.allocator.base_share
 
     def spool_ticks(self, dt: float) -> int:
@@ -246,13 +243,13 @@ class Mixer:
             ticks += 1
         return ticks
 
-    def spools(self, held: Optional[float], dt: float) -> bool:
+    def spools(self, rotors: Optional[RotorModel], held: Optional[float], dt: float) -> bool:
         """Whether the next armed command is still part of the spool-up (the rotors at rest
         before it, or within SPOOL_LAGS time constants of the arming): sent uncompensated, while
         the vehicle rests on its stops or is held and the controller does not yet fly it.
         """
         if self.lag <= 0.0 or dt <= 0.0:
             return False
-        if self.rotors is None:
+        if rotors is None:
             return True
-        return self.rotors.spool_left - (dt if held is None else max(held, 0.0)) > 0.0
+        return rotors.spool_left - (dt if held is None else max(held, 0.0)) > 0.0

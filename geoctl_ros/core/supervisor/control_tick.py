@@ -10,7 +10,7 @@ from typing import NamedTuple, Optional, Tuple, cast
 
 import numpy as np
 
-from geoctl_ros.core.actuation.motors import Mixer, MotorOutput
+from geoctl_ros.core.actuation.motors import Mixer, MotorOutput, RotorModel
 from geoctl_ros.core.geometry.so3 import FloatArray, Scalars, matvec
 from geoctl_ros.core.law.brake import ApproachBrake, BrakeInputs, rows
 from geoctl_ros.core.law.control import AttitudeController
@@ -85,8 +85,9 @@ class Command(NamedTuple):
 
 class ControlTick:
     """One control tick, with the state that ties a tick to the one before: the moments the rotors
-    were told to produce, with when (the prediction's input), and when the last command went out
-    (the lag compensation's real hold).
+    were told to produce, with when (the prediction's input), the rotors' lag model (the
+    mixer's, which keeps none), and when the last command went out (the lag compensation's real
+    hold).
     """
 
     def __init__(self, controller: AttitudeController, mixer: Mixer) -> None:
@@ -97,6 +98,7 @@ class ControlTick:
         self.controller = controller
         self.predict = DelayPredictor()
         self.mixer = mixer
+        self.rotors: Optional[RotorModel] = None   # the lag model (None: the rotors at rest)
         # what the rotors were told to produce, with when (the prediction's input)
         self.history = CommandHistory(HISTORY_TICKS, mixer.lag)
         self._last_now: Optional[float] = None
@@ -107,7 +109,7 @@ class ControlTick:
         self.flying = False             # armed and past the spool-up
 
     def reconfigure(self, mixer: Mixer) -> None:
-        """A new mixer (that has adopted the old one's lag model), at run time."""
+        """A new mixer, at run time (the rotors' lag model goes on under it)."""
         self.mixer = mixer
         self.history.lag = mixer.lag
 
@@ -155,14 +157,15 @@ class ControlTick:
         held = self._held(now)
         t = self._time(now, dt)
         mixer = self.mixer
-        spooling = bool(armed) and mixer.spools(held, dt)
+        rotors = self.rotors
+        spooling = bool(armed) and mixer.spools(rotors, held, dt)
         took_over = bool(armed) and not spooling and not self.flying
         self.flying = bool(armed) and not spooling
         if took_over:
             # nothing of the spool-up is predicted or learnt (the vehicle was held): the history
             # starts with the moment the spooled rotors make now
             self.history.clear()
-            made = mixer.moments(dt if held is None else held)
+            made = mixer.moments(rotors, dt if held is None else held)
             if made is not None:
                 self.history.push(t, made[0], made[1])
             self.predict.reset()
@@ -179,8 +182,8 @@ class ControlTick:
         brake = None
         if controller.brake is not None and self.flying:
             brake = self.brake_inputs(R_b, W_b, np.maximum(ages[0], ages[1]),
-                                      mixer.design_hold_for(dt, held), t,
-                                      mixer.thrust_offsets(dt if held is None else held))
+                                      mixer.design_hold_for(rotors, dt, held), t,
+                                      mixer.thrust_offsets(rotors, dt if held is None else held))
         out: Optional[ControlOutput]        # (None: a moment not finite, not commanded)
         out = controller.step(R, Omega, dt, adapt=adapt and self.flying, blind=blind,
                               brake=brake, guide=not spooling, gain_scale=gain_scale)
@@ -190,8 +193,9 @@ class ControlTick:
             if np.ndim(out.u) > 1:
                 raise FloatingPointError('a run of the batch produced a non-finite moment')
             out, armed = None, False
-        motors = mixer.mix(np.zeros(3) if out is None else out.u, armed=armed, dt=dt,
+        motors = mixer.mix(np.zeros(3) if out is None else out.u, rotors, armed=armed, dt=dt,
                            held=held)
+        self.rotors = motors.rotors
         self.history.push(t, *self._produced(motors, armed))
         return Command(out, motors, spooling, took_over)
 
@@ -241,7 +245,7 @@ class ControlTick:
         """
         if not armed:
             return np.zeros(3), None
-        made = self.mixer.moments()
+        made = self.mixer.moments(motors.rotors)
         return (motors.allocation.moment, None) if made is None else made
 
     def idle(self, dt: float, now: Optional[float] = None) -> Command:
@@ -249,6 +253,7 @@ class ControlTick:
         commands, and the time noted.
         """
         self.flying = False
+        self.rotors = None
         self._held(now)
         self.history.push(self._time(now, dt), np.zeros(3))
         return Command(None, self.mixer.mix(np.zeros(3), armed=False, dt=dt))

@@ -257,7 +257,6 @@ class ControlLoop(Generic[StampT]):
             self.controller.reconfigure(setup.config)
         except SetpointRejected as e:
             return str(e)
-        setup.mixer.adopt_state(self.setup.mixer)
         self.setup = setup
         self.unlearnt_bound = _unlearnt_bound(self.controller)
         self.agreement.configure(setup.agreement)
