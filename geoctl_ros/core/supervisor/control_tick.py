@@ -75,12 +75,17 @@ class DegradedMode:
 
 
 class Command(NamedTuple):
-    """What one control tick commands."""
+    """What one control tick commands, and what it found on the way."""
 
     control: Optional[ControlOutput]   # the step's; None when its moment was not finite
     motors: MotorOutput      # zero commands unless armed
     spooling: bool = False   # armed, the rotors spooling up (the vehicle held, not yet flown)
     took_over: bool = False  # the first tick the controller flies after the spool-up
+    blind: Scalars = 0.0     # s: the blind time the step allowed for (``blind_time``; an idle
+                             # tick's: the last step's)
+    gain_scale: Scalars = 1.0   # the bandwidth's scale past the delay bound (``DegradedMode``)
+    residual: Optional[float] = None   # rad/s^2: the unlearnt acceleration at the last rate
+                                       # sample (``DelayPredictor.residual``; one run alone)
 
 
 class ControlTick:
@@ -197,7 +202,8 @@ class ControlTick:
                            held=held)
         self.rotors = motors.rotors
         self.history.push(t, *self._produced(motors, armed))
-        return Command(out, motors, spooling, took_over)
+        return Command(out, motors, spooling, took_over, blind, gain_scale,
+                       self.predict.residual)
 
     def brake_inputs(self, R: FloatArray, Omega: FloatArray, age: Scalars, hold: float,
                      t: float, thrusts: Optional[FloatArray] = None) -> BrakeInputs:
@@ -256,4 +262,5 @@ class ControlTick:
         self.rotors = None
         self._held(now)
         self.history.push(self._time(now, dt), np.zeros(3))
-        return Command(None, self.mixer.mix(np.zeros(3), armed=False, dt=dt))
+        return Command(None, self.mixer.mix(np.zeros(3), armed=False, dt=dt), blind=self.blind,
+                       gain_scale=self.degraded.scale_now)

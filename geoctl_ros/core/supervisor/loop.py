@@ -297,8 +297,8 @@ class ControlLoop(Generic[StampT]):
                 self._schedule_index = i
         state = self.bridge.update(now, self.pose.fresh(now), self.rate.fresh(now))
         if state is None:
-            out, motors = self.step.idle(dt, now)[:2]
-            tick = self._result(None, motors, armed, False, None)
+            command = self.step.idle(dt, now)
+            tick = self._result(None, command.motors, armed, False, None)
         else:
             bridging = self.bridge.bridging
             R, Omega = state
@@ -308,9 +308,9 @@ class ControlLoop(Generic[StampT]):
             # as fresh. The estimate learns only from measurements.
             ages = (0.0 if self.pose.last_receipt is None else self.pose.capture_age(now),
                     0.0 if self.rate.last_receipt is None else self.rate.capture_age(now))
-            out, motors, spooling, took_over = self.step(
-                R, Omega, dt, now, ages, armed=armed, adapt=armed and not bridging,
-                predict=not bridging)
+            command = self.step(R, Omega, dt, now, ages, armed=armed,
+                                adapt=armed and not bridging, predict=not bridging)
+            out, motors, spooling, took_over = command[:4]
             if took_over:
                 self.unlearnt_over = 0
                 self._spool_from = None
@@ -319,7 +319,7 @@ class ControlLoop(Generic[StampT]):
                 if moved is not None:
                     self.disarm(failsafe(moved), failed=True)
                     armed = False
-            if self.window.note_unlearnt(self.step.predict.residual, self.unlearnt_bound):
+            if self.window.note_unlearnt(command.residual, self.unlearnt_bound):
                 self.unlearnt_over += 1
             if out is None:
                 self.disarm(NON_FINITE, failed=True)
@@ -333,8 +333,8 @@ class ControlLoop(Generic[StampT]):
             self.pose_age.add(self.pose.age(now))
         if self.rate.last_receipt is not None:
             self.rate_age.add(self.rate.age(now))
-        self.window.note(armed, tick.motors.allocation.saturated, tick.bridging, self.step.blind,
-                         self.step.degraded.scale_now)
+        self.window.note(armed, tick.motors.allocation.saturated, tick.bridging, command.blind,
+                         command.gain_scale)
         self.last_tick = tick
         return tick
 
