@@ -14,7 +14,7 @@ same bits (test/test_elementwise.py). Vectors and matrices go by their component
 in the index order of ``so3``'s stacked products.
 """
 import math
-from typing import Any, Callable, List, Sequence, Tuple, TypeVar, Union, cast
+from typing import Callable, List, Sequence, Tuple, TypeVar, Union, cast
 
 import numpy as np
 
@@ -61,7 +61,7 @@ def _both_arrays(f: Callable[[Value], Value], a: Value, b: Value) -> Tuple[Value
     return out[0], out[1]
 
 
-def _float_of(function: Callable[[Any], Any]) -> Callable[[Value], Value]:
+def _float_of(function: Callable[[Value], Value]) -> Callable[[Value], Value]:
     """A numpy function of one float, as a float."""
     return lambda x: float(function(x))
 
@@ -93,10 +93,11 @@ def evaluate(formula: Callable[..., ResultT], consts: Tuple[object, ...],
                                           for v in values))
     columns = [[float(v)] * size if isinstance(v, float) else _elements(v, shape)
                for v in values]
-    results: List[Any] = [formula(FLOATS, *consts, *element) for element in zip(*columns)]
-    if not isinstance(results[0], tuple):
-        return cast(ResultT, _array(results, shape))
-    return cast(ResultT, tuple(_array(part, shape) for part in zip(*results)))
+    results = [formula(FLOATS, *consts, *element) for element in zip(*columns)]
+    if not isinstance(results[0], tuple):              # (a float or a flag per element)
+        return cast(ResultT, _array(cast('List[float]', results), shape))
+    return cast(ResultT, tuple(_array(part, shape)
+                               for part in zip(*cast('List[Tuple[float, ...]]', results))))
 
 
 def _elements(v: Union[Value, Flag], shape: Tuple[int, ...]) -> List[float]:
@@ -106,7 +107,7 @@ def _elements(v: Union[Value, Flag], shape: Tuple[int, ...]) -> List[float]:
                 .tolist())
 
 
-def _array(elements: Sequence[Any], shape: Tuple[int, ...]) -> FloatArray:
+def _array(elements: Sequence[Union[float, bool]], shape: Tuple[int, ...]) -> FloatArray:
     """Elements (floats, or flags) as an array of shape."""
     out = np.array(elements, dtype=bool if isinstance(elements[0], bool) else float)
     return out if len(shape) == 1 else out.reshape(shape)

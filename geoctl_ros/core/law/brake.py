@@ -434,13 +434,16 @@ def _cone_terms(ops: Ops, brake: ApproachBrake, J_inv: Rows, n: Parts, kin: Valu
     return A, f_along, D_s, authority, weak
 
 
+Column = Union[Value, Flag, Parts]    # one of ``_cone``'s results: a number, a flag or a vector
+
+
 class _View:
     """The brake's per-cone view of a tick (``_cones_at``): its terms, and with the law's
     moment, whether the law meets each cone's condition and the worst state there. One run's
     arrays are built only when asked for (the usual tick needs its two flags alone).
     """
 
-    def __init__(self, cols: Sequence[Sequence[object]], shape: Tuple[int, ...],
+    def __init__(self, cols: Sequence[Sequence[Column]], shape: Tuple[int, ...],
                  one: bool) -> None:
         self._cols, self._shape, self._one = cols, shape, one
         self._built: Optional[Dict[int, FloatArray]] = None
@@ -540,7 +543,7 @@ class _TickParts(NamedTuple):
 
 
 def _cone(ops: Ops, brake: ApproachBrake, p: Phases, keep: float, J_inv: Rows, r: Parts,
-          r_cols: Rows, x: _TickParts, worst: bool, v: Parts, theta: Value) -> Tuple[object, ...]:
+          r_cols: Rows, x: _TickParts, worst: bool, v: Parts, theta: Value) -> Tuple[Column, ...]:
     """One cone's ``_View`` at a tick by components (an ``elementwise`` formula): gap, n, w,
     kin, A, f_along, D_s, authority, weak; with worst or the law's moment u also the worst state
     (G0, w0, Ds, first, margin: ``_worst``), and with u whether the law meets the condition.
@@ -548,7 +551,7 @@ def _cone(ops: Ops, brake: ApproachBrake, p: Phases, keep: float, J_inv: Rows, r
     s, gap, n, w, kin, spin = _opening(ops, x.R, x.Omega, r, r_cols, v, theta)
     A, f_along, D_s, authority, weak = _cone_terms(ops, brake, J_inv, n, kin, x.f, x.gravity,
                                                    x.rotors)
-    out: Tuple[object, ...] = (gap, n, w, kin, A, f_along, D_s, authority, weak)
+    out: Tuple[Column, ...] = (gap, n, w, kin, A, f_along, D_s, authority, weak)
     u = x.u
     if u is None and not worst:
         return out
