@@ -522,6 +522,31 @@ def test_every_public_function_of_the_typed_layers_has_type_hints():
     assert not bare, bare
 
 
+@odroid
+def test_no_signature_in_core_takes_or_gives_any_or_object():
+    """core's functions say what they take and give: no argument or result of any of them
+    (private ones too) is typed Any or object, written plainly or inside another type. (Only the
+    diagnostics codec's table of mixed fields holds Any, in its Key's fields.)
+    """
+    vague = []
+    for path in sorted(pathlib.Path(PKG, 'core').rglob('*.py')):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            args = node.args
+            annotations = [a.annotation for a in args.posonlyargs + args.args + args.kwonlyargs
+                           + [args.vararg, args.kwarg] if a is not None and a.annotation]
+            for annotation in annotations + ([node.returns] if node.returns else []):
+                text = (annotation.value if isinstance(annotation, ast.Constant)
+                        and isinstance(annotation.value, str) else ast.unparse(annotation))
+                names = {n.id for n in ast.walk(ast.parse(text, mode='eval'))
+                         if isinstance(n, ast.Name)}
+                if names & {'Any', 'object'}:
+                    vague.append('%s:%d %s: %s' % (path.relative_to(PKG), node.lineno,
+                                                   node.name, text))
+    assert not vague, vague
+
+
 INSTALLED_CONFIG = """
 import sys
 from geoctl_ros.sil import rosenv

@@ -74,26 +74,25 @@ ARRAYS = Ops(np.maximum, np.minimum, np.where, np.sqrt, lambda flags: bool(np.al
              lambda flags: bool(np.any(flags)), np.arccos, np.sin, _both_arrays)
 
 
-def evaluate(formula: Callable[..., ResultT], consts: Tuple[object, ...],
-             *values: Union[Value, Flag]) -> ResultT:
-    """formula(ops, *consts, *values) for every element of the values broadcast together
-    (floats, or arrays of any shapes that broadcast): the result, or a tuple of results, as
-    floats where every value is a float, else as arrays of the broadcast shape. consts: what
-    is the same for every element (bounds, spans), passed as they are.
+def evaluate(formula: Callable[..., ResultT], *values: Union[Value, Flag]) -> ResultT:
+    """formula(ops, *values) for every element of the values broadcast together (floats, or
+    arrays of any shapes that broadcast): the result, or a tuple of results, as floats where
+    every value is a float, else as arrays of the broadcast shape. (What is the same for every
+    element, bounds and spans, the caller binds: ``lambda ops, *v: f(ops, bound, *v)``.)
     """
     if all(isinstance(v, float) for v in values):
-        return formula(FLOATS, *consts, *(float(v) for v in values))
+        return formula(FLOATS, *(float(v) for v in values))
     arrays = [np.asarray(v, dtype=float) for v in values if not isinstance(v, float)]
     shape = arrays[0].shape
     if any(a.shape != shape for a in arrays):
         shape = np.broadcast_shapes(*(a.shape for a in arrays))
     size = math.prod(shape)
     if size > FLOATS_MAX or not size:
-        return formula(ARRAYS, *consts, *(v if isinstance(v, float) else np.asarray(v, dtype=float)
-                                          for v in values))
+        return formula(ARRAYS, *(v if isinstance(v, float) else np.asarray(v, dtype=float)
+                                 for v in values))
     columns = [[float(v)] * size if isinstance(v, float) else _elements(v, shape)
                for v in values]
-    results = [formula(FLOATS, *consts, *element) for element in zip(*columns)]
+    results = [formula(FLOATS, *element) for element in zip(*columns)]
     if not isinstance(results[0], tuple):              # (a float or a flag per element)
         return cast(ResultT, _array(cast('List[float]', results), shape))
     return cast(ResultT, tuple(_array(part, shape)

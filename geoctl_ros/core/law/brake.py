@@ -232,7 +232,8 @@ def backup_travel(brake: ApproachBrake, w0: Scalars, D_s: Scalars, D: Scalars, a
     start's plus (acc0 + c T) T and (w + (acc0 / 2 + c T / 3) T) T (c = (acc1 - acc0) / 2 T),
     and the farthest point is a phase's end or the stop within one (``_stop``).
     """
-    return evaluate(_travel, (phases(brake, hold),), w0, D_s, D, authority)
+    p = phases(brake, hold)
+    return evaluate(lambda ops, *v: _travel(ops, p, *v), w0, D_s, D, authority)
 
 
 def backup_margin(brake: ApproachBrake, gap: Scalars, w: Scalars, D_s: Scalars, authority: Scalars,
@@ -290,11 +291,12 @@ def _worst(brake: ApproachBrake, gap: Scalars, w: Scalars, D_s: Scalars, age: Sc
     deceleration per cone: the law's), also the worst-case travel after a command reaching it
     and whether the law meets the condition (``_met``).
     """
-    consts = (brake, phases(brake, hold), brake.keep(hold))
+    p, keep = phases(brake, hold), brake.keep(hold)
     if law is None:
-        return evaluate(_worst_state, consts, gap, w, D_s, age, spin, authority)
-    return cast(Worst, evaluate(_worst_with_law, consts, gap, w, D_s, age, spin, authority,
-                                law))      # (its last: flags)
+        return evaluate(lambda ops, *v: _worst_state(ops, brake, p, keep, *v), gap, w, D_s, age,
+                        spin, authority)
+    return cast(Worst, evaluate(lambda ops, *v: _worst_with_law(ops, brake, p, keep, *v), gap,
+                                w, D_s, age, spin, authority, law))      # (its last: flags)
 
 
 def _met(margin: Value, first: Value, D: Value, travel: Value, G0: Value) -> Flag:
@@ -346,7 +348,8 @@ def least_deceleration(brake: ApproachBrake, gap: Scalars, w: Scalars, D_s: Scal
     """
     G0, w0, Ds, first, margin = (_worst(brake, gap, w, D_s, age, spin, authority, hold)
                                  if worst is None else worst)[:5]
-    D = evaluate(_least, (phases(brake, hold),), G0, w0, Ds, first, margin, authority)
+    p = phases(brake, hold)
+    D = evaluate(lambda ops, *v: _least(ops, p, *v), G0, w0, Ds, first, margin, authority)
     return D, margin
 
 
