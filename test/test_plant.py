@@ -111,3 +111,33 @@ def test_the_esc_timeout_counts_the_links_silence_not_the_simulators_own_stall()
     # then stopped at the next tick
     esc.received(t + 0.7)
     assert esc.fresh(t + 0.705) and esc.fresh(t + 1.5) and not esc.fresh(t + 1.505)
+
+
+def test_the_stops_catch_a_falling_testbed_alone_and_in_a_batch_to_the_same_bits():
+    """A centre of mass 5 cm above the pivot, 10 deg off upright, falls onto stops at 30 deg:
+    they catch it within a degree past them and hold it there. In a batch beside a testbed
+    that swings within its stops (centre of mass below the pivot), it steps to the bits it
+    steps to alone (the batch skips the stops' moment only where no testbed is near them).
+    """
+    limit = math.radians(30.0)
+
+    def config(offsets):
+        n = len(offsets)
+        if n == 1:
+            return PlantConfig(J_LAB, 1.26, np.array(offsets[0]), G_W, NO_DIST, limit)
+        return PlantConfig(np.repeat(J_LAB[None], n, axis=0), np.full(n, 1.26),
+                           np.array(offsets), G_W,
+                           Disturbance(np.zeros((n, 3)), np.zeros((n, 3)), 0.0), limit)
+    R0 = so3.axis_angle([1.0, 0.3, 0.0], math.radians(10.0))
+    alone = Plant(config([[0.0, 0.0, 0.05]]), R0, np.zeros(3))
+    batch = Plant(config([[0.0, 0.0, 0.05], [0.0, 0.0, -0.05]]), np.stack([R0, R0]),
+                  np.zeros((2, 3)))
+    tilts = []
+    for _ in range(2000):                                   # 2 s at 1 kHz
+        alone.step(np.zeros(3), 1e-3)
+        batch.step(np.zeros((2, 3)), 1e-3)
+        tilts.append(math.degrees(math.acos(alone.R[2, 2])))
+        assert np.array_equal(alone.R, batch.R[0]) and np.array_equal(alone.Omega,
+                                                                      batch.Omega[0])
+    assert 30.0 < max(tilts) < 31.0 and abs(tilts[-1] - 30.0) < 0.2, (max(tilts), tilts[-1])
+    assert math.degrees(math.acos(batch.R[1, 2, 2])) < 10.0        # the other: within them
