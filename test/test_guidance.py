@@ -61,6 +61,51 @@ def _campaign_case(seed, index):
 
 
 @odroid
+def test_the_upright_attitudes_point_the_sensor_and_tilt_the_least():
+    """For 200 random directions d at once: R r = d, R is a rotation, and its z axis is tilted
+    from up by |elevation of d - elevation of r| (the least any attitude pointing r along d
+    has, checked against a sweep of the turns about d); directions straight up and down are
+    rotations that point the sensor too.
+    """
+    rng = np.random.default_rng(3)
+    up = np.array([0.0, 0.0, 1.0])
+    for r in (R_AXIS, _unit([1.0, 0.0, 0.5])):
+        d = rng.normal(size=(200, 3))
+        d = np.concatenate([d / np.linalg.norm(d, axis=1)[:, None], [up, -up]])
+        R = guidance.upright(d, r, up)
+        assert np.allclose(R @ r, d, atol=1e-12)
+        assert np.allclose(R @ R.transpose(0, 2, 1), np.eye(3), atol=1e-12)
+        assert np.allclose(np.linalg.det(R), 1.0)
+        tilt = np.arccos(np.clip(R[:, :, 2] @ up, -1.0, 1.0))
+        least = np.abs(np.arcsin(np.clip(d @ up, -1.0, 1.0)) - math.asin(r[2]))
+        assert np.allclose(tilt[:-2], least[:-2], atol=1e-7)
+        swept = [np.arccos(np.clip((so3.exp(d[k] * psi) @ R[k])[:, 2] @ up, -1.0, 1.0))
+                 for k in range(5) for psi in np.linspace(-math.pi, math.pi, 73)]
+        assert min(swept) >= tilt[:5].min() - 1e-9
+
+
+@odroid
+def test_a_path_through_the_same_point_twice_or_its_opposite_is_a_path():
+    """Corners the same to the bit (a unit vector whose square sums to just below 1) or exactly
+    opposite: the path is made of rotations with no NaN (before, the first gave the leg a NaN
+    axis: 0/0), from the start to the goal in steps of at most PATH_STEP.
+    """
+    a = _unit([-1.0, 0.6, 0.8])
+    assert float(so3.dot(a, a)) < 1.0              # (this one does not square to 1 exactly)
+    up = np.array([0.0, 0.0, 1.0])
+    R0 = guidance.upright(a[None], R_AXIS, up)[0]
+    across = _unit(np.cross(a, up))
+    for b, R_goal in ((a.copy(), so3.exp(a * 0.7) @ R0), (-a, so3.exp(across * math.pi) @ R0)):
+        path = guidance.attitude_path(R0, R_goal, R_AXIS, [a, b], up)
+        assert np.isfinite(path).all()
+        assert np.allclose(path @ path.transpose(0, 2, 1), np.eye(3), atol=1e-9)
+        assert np.array_equal(path[0], R0) and np.array_equal(path[-1], R_goal)
+        d = path @ R_AXIS
+        steps = np.arccos(np.clip(np.sum(d[:-1] * d[1:], axis=-1), -1.0, 1.0))
+        assert steps.max() <= guidance.PATH_STEP + 1e-6
+
+
+@odroid
 @pytest.mark.parametrize('index', range(12))
 def test_the_planned_path_keeps_every_cone_clear_and_ends_at_the_goal(index):
     """On the campaign's random cones (a straight way through the first one): every point of the

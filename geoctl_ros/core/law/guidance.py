@@ -159,32 +159,39 @@ def _dijkstra(cost: FloatArray, start: int) -> IntArray:
 
 
 def upright(d: FloatArray, r: FloatArray, up: FloatArray) -> FloatArray:
-    """The attitude that points the body-fixed r along the unit d with the body's z axis as
-    near up as it can be (R r = d, R e3 on the cone of half-angle angle(r, e3) round d, on the
-    side of up): its tilt is |elevation of d - elevation of r in the body|, the least any
-    attitude pointing r along d has.
+    """The attitudes that point the body-fixed r along each unit d (K, 3) with the body's z axis
+    as near up as it can be (R r = d, R e3 on the cone of half-angle angle(r, e3) round d, on the
+    side of up): (K, 3, 3). Each one's tilt is |elevation of d - elevation of r in the body|, the
+    least any attitude pointing r along d has. (Entry by entry the operations of one attitude's
+    floats: the same bits for a direction alone and among others.)
     """
-    (rx, ry, rz), (dx, dy, dz), (ux, uy, uz) = (np.asarray(v, dtype=float).tolist()
-                                                for v in (r, d, up))
+    (rx, ry, rz), (ux, uy, uz) = (np.asarray(v, dtype=float).tolist() for v in (r, up))
     zb = [-rz * rx, -rz * ry, 1.0 - rz * rz]            # body z, less its part along r
-    dot_ud = ux * dx + uy * dy + uz * dz
-    zw = [ux - dot_ud * dx, uy - dot_ud * dy, uz - dot_ud * dz]   # towards up, across d
     nb = math.sqrt(zb[0] * zb[0] + zb[1] * zb[1] + zb[2] * zb[2])
-    nw = math.sqrt(zw[0] * zw[0] + zw[1] * zw[1] + zw[2] * zw[2])
     if nb < 1e-9:                                      # r along the body's z: any turn will do
         zb = so3.cross_floats([rx, ry, rz], np.eye(3)[int(np.argmin(np.abs(r)))].tolist())
         nb = math.sqrt(zb[0] * zb[0] + zb[1] * zb[1] + zb[2] * zb[2])
-    if nw < 1e-9:                                      # d straight up or down
-        zw = so3.cross_floats([dx, dy, dz], np.eye(3)[int(np.argmin(np.abs(d)))].tolist())
-        nw = math.sqrt(zw[0] * zw[0] + zw[1] * zw[1] + zw[2] * zw[2])
     zb = [v / nb for v in zb]
-    zw = [v / nw for v in zw]
     yb = so3.cross_floats([rx, ry, rz], zb)
-    yw = so3.cross_floats([dx, dy, dz], zw)
+    d = np.asarray(d, dtype=float)
+    dx, dy, dz = d[:, 0], d[:, 1], d[:, 2]
+    dot_ud = ux * dx + uy * dy + uz * dz
+    zw = [ux - dot_ud * dx, uy - dot_ud * dy, uz - dot_ud * dz]   # towards up, across d
+    nw = np.sqrt(zw[0] * zw[0] + zw[1] * zw[1] + zw[2] * zw[2])
+    for k in np.flatnonzero(nw < 1e-9):                # d straight up or down
+        other = so3.cross_floats(d[k].tolist(), np.eye(3)[int(np.argmin(np.abs(d[k])))].tolist())
+        for i in range(3):
+            zw[i][k] = other[i]
+        nw[k] = math.sqrt(other[0] * other[0] + other[1] * other[1] + other[2] * other[2])
+    zw = [v / nw for v in zw]
+    yw = [dy * zw[2] - dz * zw[1], dz * zw[0] - dx * zw[2], dx * zw[1] - dy * zw[0]]  # d x z_w
     # R = W B^T with the columns B = (r, z_b, r x z_b) and W = (d, z_w, d x z_w)
     B, W = ([rx, ry, rz], zb, yb), ([dx, dy, dz], zw, yw)
-    return np.array([[W[0][i] * B[0][j] + W[1][i] * B[1][j] + W[2][i] * B[2][j]
-                      for j in range(3)] for i in range(3)])
+    out = np.empty((len(d), 3, 3))
+    for i in range(3):
+        for j in range(3):
+            out[:, i, j] = W[0][i] * B[0][j] + W[1][i] * B[1][j] + W[2][i] * B[2][j]
+    return out
 
 
 def _turn_about(d: FloatArray, R: FloatArray, base: FloatArray) -> float:
@@ -213,26 +220,30 @@ def attitude_path(R0: FloatArray, R_goal: FloatArray, r: FloatArray,
         if angle < 1e-12:
             continue
         axis = np.cross(a, b)
+        if not so3.dot(axis, axis) > 0.0:    # the same or opposite to the bit: by any great
+            if angle < 0.5 * math.pi:        # circle through them (before: a NaN axis)
+                continue
+            axis = np.cross(a, np.eye(3)[int(np.argmin(np.abs(a)))])
         axis /= math.sqrt(so3.dot(axis, axis))
-        points += [so3.matvec(so3.exp(axis * (angle * i / k)), a) for i in range(1, k + 1)]
+        turned = so3.exp(axis[None, :] * (angle * np.arange(1, k + 1) / k)[:, None])
+        points += list(so3.matvec(turned, a))
     d = np.array(points)
     arc = np.concatenate([[0.0], np.cumsum(np.arccos(np.clip(
         so3.dot(d[:-1], d[1:]), -1.0, 1.0)))])
-    bases = [upright(p, r, up) for p in points]
+    bases = upright(d, r, up)
     first, last = _turn_about(d[0], R0, bases[0]), _turn_about(d[-1], R_goal, bases[-1])
     if len(points) == 1:               # the sensor does not move: turn about it in steps
         twist = last - first
         k = max(1, int(math.ceil(abs(twist) / PATH_STEP)))
-        path = np.array([so3.matmul(so3.exp(d[0] * (first + twist * i / k)), bases[0])
-                         for i in range(k + 1)])
+        turns = first + twist * np.arange(k + 1) / k
+        path = so3.matmul(so3.exp(d[0][None, :] * turns[:, None]), bases[0])
     else:
         share = arc / arc[-1] if arc[-1] > 0.0 else np.linspace(0.0, 1.0, len(points))
         turns = first + (last - first) * share
         if tilt_max < math.pi - 1e-9:
             limit = twist_within(bases, d, up, tilt_max - CAP_CLEARANCE)
             turns[1:-1] = np.clip(turns[1:-1], -limit[1:-1], limit[1:-1])
-        path = np.array([so3.matmul(so3.exp(d[i] * turns[i]), bases[i])
-                         for i in range(len(points))])
+        path = so3.matmul(so3.exp(d * turns[:, None]), bases)
     path[0], path[-1] = R0, R_goal
     return _filled(path)
 
@@ -252,7 +263,7 @@ def _filled(path: FloatArray) -> FloatArray:
     return np.array(out)
 
 
-def twist_within(bases: List[FloatArray], d: FloatArray, up: FloatArray,
+def twist_within(bases: FloatArray, d: FloatArray, up: FloatArray,
                  tilt: float) -> FloatArray:
     """The largest turn psi (rad, >= 0) about each sensor direction d[k] that keeps the body's
     z axis of exp(+-psi d[k]) bases[k] within tilt (rad) of up; 0 where even the upright
@@ -260,7 +271,7 @@ def twist_within(bases: List[FloatArray], d: FloatArray, up: FloatArray,
     a along d and b across it (b towards up: the upright attitude), up . z(psi) = a + b cos psi
     falls with |psi| on [0, pi], so the bound is arccos((cos tilt - a) / b).
     """
-    z = np.array([B[:, 2] for B in bases])
+    z = np.ascontiguousarray(bases[:, :, 2])
     along = so3.dot(z, d)[:, None] * d
     a = so3.dot(along, up[None, :])
     b = so3.dot(z - along, up[None, :])
