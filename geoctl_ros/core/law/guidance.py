@@ -50,6 +50,7 @@ LOOKAHEAD_MIN = math.radians(5.0)   # the lookahead near a cone, at least
 LOOKAHEAD_PER_GAP = 2.0     # near a cone the lookahead is at most this many times the gap to it
 CAP_SLACK = math.radians(0.5)   # a joint cap keeps this far from a path's end inside it
 CAP_CLEARANCE = math.radians(2.0)   # the path keeps this far from the joint's caps
+SIGHT_CHUNK = 8             # the set point's sight is worked out this many places ahead at a time
 SIGHT_SURE = 1e-6           # rad: a way judged clear by a bound has this much to spare (far more
                             # than the rounding of the exact judgement it stands for)
 
@@ -462,10 +463,18 @@ def _sight(D: FloatArray, V: FloatArray, rims: FloatArray, window: int,
     length = along[:, ahead] - along[:, :, None]                                # (n, K, W-1)
     room = np.min(gap + rims[:, None] - need, axis=-1, initial=np.inf)         # (n, K)
     clear = length <= (room - SIGHT_SURE)[:, :, None]                          # (n, K, W-1)
-    runs, k, m = np.nonzero(~clear)
-    if len(runs):
-        clear[runs, k, m] = np.all(arc_clearance(D[runs, k], D[runs, ahead[k, m]], V[runs])
-                                   >= need[runs, k] - 1e-9, axis=-1)
+    # and only up to the first way that is not clear: the points after it are not seen
+    # whatever their ways (SIGHT_CHUNK places ahead at a time)
+    looking = np.ones((n, K), dtype=bool)
+    for first in range(0, window - 1, SIGHT_CHUNK):
+        part = clear[:, :, first:first + SIGHT_CHUNK]
+        runs, k, m = np.nonzero(looking[:, :, None] & ~part)
+        if len(runs):
+            part[runs, k, m] = np.all(arc_clearance(D[runs, k], D[runs, ahead[k, first + m]],
+                                                    V[runs]) >= need[runs, k] - 1e-9, axis=-1)
+        looking &= np.all(part, axis=-1)
+        if not looking.any():
+            break
     blocked = np.cumsum(~clear, axis=-1) > 0          # from the first point it does not see
     seen = np.sum(~blocked, axis=-1)                  # how many points ahead it sees
     return cast(IntArray, np.minimum(np.arange(K)[None, :] + np.maximum(seen, 1), K - 1))
