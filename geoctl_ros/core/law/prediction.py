@@ -32,6 +32,7 @@ from geoctl_ros.core.geometry.elementwise import (
 )
 from geoctl_ros.core.geometry.so3 import FloatArray, Scalars, exp_parts, matmul_parts
 from geoctl_ros.core.law.dynamics import Dynamics
+from geoctl_ros.core.law.mechanics import Parts, Rows
 
 PREDICT_SLOW_S = 0.25    # s, the observer's low-pass of the model's error
 OBSERVE_GAP_MAX_S = 0.05  # s, the longest interval between rate samples the observer learns from
@@ -146,25 +147,28 @@ class DelayPredictor:
         """
         self.acc_error: Scalars = 0.0     # rad/s^2: model minus measured acceleration, low-passed
         self.learnt: Scalars = 0.0    # s: the time learnt since the reset (one per run)
-        self._last: Optional[Tuple[Scalars, FloatArray]] = None   # (capture time, Omega) of the
-                                                                  # last rate sample
+        self._last: Optional[Tuple[Scalars, Parts]] = None   # (capture time, Omega by
+                                                             # components) of the last rate
+                                                             # sample
         self.residual: Optional[float] = None     # rad/s^2: the last rate sample's |acceleration
                                                # the model and the observer did not know| (one
                                                # run alone; None until a sample taught it, and
                                                # in a batch)
 
-    def observe(self, model: Dynamics, R: FloatArray, Omega: FloatArray, captured: Scalars,
-                history: 'CommandHistory') -> None:
+    def observe(self, model: Dynamics, R: Rows, Omega: Parts, captured: Scalars,
+                history: 'CommandHistory', one: bool, shape: Tuple[int, ...],
+                delta_bar: Parts) -> None:
         """Learn the model's error from a rate sample captured at ``captured`` (a time on the
         history's clock; one per run of a batch). A sample no newer than the last (a stall
         repeats it), one more than ``OBSERVE_GAP_MAX_S`` after it, or an interval that starts
-        before the first command held teaches nothing.
+        before the first command held teaches nothing. (R, Omega and the estimate delta_bar by
+        components, ``elementwise``: one run's (``one``) floats, or a batch's arrays of runs
+        ``shape``.)
         """
         last, self._last = self._last, (captured, Omega)
         self.residual = None
         if last is None:
             return
-        one = one_run(R)
         alone = np.ndim(captured) == 0          # one run (the node's tick)
         before, captured_at = last[0], captured
         if one and not alone:                   # a batch of one: its times as floats
@@ -178,18 +182,16 @@ class DelayPredictor:
         if not ops.some(usable):
             return
         span = ops.where(usable, interval, 1.0)
-        now_, then = vector_parts(Omega, one), vector_parts(last[1], one)
+        now_, then = Omega, last[1]
         modelled = model.acceleration_parts(
-            matrix_parts(R, one), [0.5 * (now_[i] + then[i]) for i in range(3)],
-            vector_parts(history.at(before + 0.5 * span), one),
-            vector_parts(model.delta_bar, one))
+            R, [0.5 * (now_[i] + then[i]) for i in range(3)],
+            vector_parts(history.at(before + 0.5 * span), one), delta_bar)
         error = self.acc_error
         e = [error] * 3 if isinstance(error, float) else vector_parts(error, one)
         innovation = [modelled[i] - (now_[i] - then[i]) / span - e[i] for i in range(3)]
         weight = ops.where(usable, span / (ops.minimum(self.learnt, PREDICT_SLOW_S) + span),
                            0.0)
-        self.acc_error = joined([e[i] + innovation[i] * weight for i in range(3)], R.shape[:-2],
-                                one)
+        self.acc_error = joined([e[i] + innovation[i] * weight for i in range(3)], shape, one)
         self.learnt = self.learnt + ops.where(usable, span, 0.0)
         if alone and one:                       # (the node's: its unlearnt moment's watch)
             x, y, z = (cast(float, v) for v in innovation)
@@ -213,7 +215,12 @@ class DelayPredictor:
         """
         horizon: Scalars
         captured = now - age_Omega               # when the rate sample was captured
-        self.observe(model, R, Omega, captured, history)
+        # (by components from here on, made once: ``elementwise``)
+        one, shape = one_run(R), R.shape[:-2]
+        Rp: Rows = matrix_parts(R, one)
+        Wp: Parts = vector_parts(Omega, one)
+        d = vector_parts(model.delta_bar, one)
+        self.observe(model, Rp, Wp, captured, history, one, shape, d)
         # nothing is predicted from before the first command held: what moved the vehicle then
         # (its stops, a hand) is not in the model
         known = max(now - history.first, 0.0)
@@ -228,39 +235,39 @@ class DelayPredictor:
             age_R = np.asarray(age_R, dtype=float)
             age_Omega = np.asarray(age_Omega, dtype=float)
             horizon = np.maximum(age_R, age_Omega)
-        if float(np.max(horizon)) > 0.0:
-            moment_now = history.at(captured)     # (the moment then, before any clipping)
-            acc0 = model.acceleration(R, Omega, moment_now)
-            R, Omega = self._integrate(model, R, Omega, now - age_R, now - age_Omega, history,
-                                       now - horizon, horizon, (acc0, moment_now), scalar)
         at_now = (R, Omega)
-        if lead > 0.0:
-            R, Omega = self._integrate(model, R, Omega, now, now, history, now, lead, None, True)
-        return at_now, (R, Omega)
+        if float(np.max(horizon)) > 0.0:
+            # (the moment then, before any clipping)
+            moment_now = vector_parts(history.at(captured), one)
+            acc0 = model.acceleration_parts(Rp, Wp, moment_now, d)
+            Rp, Wp = self._integrate(model, Rp, Wp, d, one, now - age_R, now - age_Omega,
+                                     history, now - horizon, horizon, (acc0, moment_now), scalar)
+            at_now = (joined_matrix(Rp, shape, one), joined(Wp, shape, one))
+        if lead <= 0.0:
+            return at_now, at_now
+        Rp, Wp = self._integrate(model, Rp, Wp, d, one, now, now, history, now, lead, None, True)
+        return at_now, (joined_matrix(Rp, shape, one), joined(Wp, shape, one))
 
-    def _integrate(self, model: Dynamics, R: FloatArray, Omega: FloatArray, moved_R: Scalars,
-                   moved_Omega: Scalars, history: CommandHistory, start: Scalars, span: Scalars,
-                   first: Optional[Tuple[FloatArray, FloatArray]],
-                   scalar: bool) -> Tuple[FloatArray, FloatArray]:
+    def _integrate(self, model: Dynamics, Rp: Rows, Wp: Parts, d: Parts, one: bool,
+                   moved_R: Scalars, moved_Omega: Scalars, history: CommandHistory,
+                   start: Scalars, span: Scalars, first: Optional[Tuple[Parts, Parts]],
+                   scalar: bool) -> Tuple[Rows, Parts]:
         """Integrate the model from ``start`` over ``span`` (s; one per run of a batch unless
         scalar) in equal pieces of at most SUBSTEP_MAX_S, each under the moment in force at its
         midpoint, less the observed error: the rate only after moved_Omega, the attitude only
         after moved_R (their capture times). first: (the model's acceleration at the start,
-        the moment then) to save the first piece's evaluation, or None.
+        the moment then) to save the first piece's evaluation, or None. The state (Rp, Wp)
+        and the estimate d come and go by components (one run's floats, or a batch's arrays).
 
         One formula by components for one run (floats) and a batch (arrays; each run in its
         own number of equal pieces, so a run's prediction does not depend on the other runs of
         its batch: a run with fewer pieces than the most idles, h = 0).
         """
-        one = one_run(R)
         if one and not scalar:                   # a batch of one: its times as floats
             start, span, moved_R, moved_Omega = (float(np.asarray(v).reshape(-1)[0]) for v in
                                                  (start, span, moved_R, moved_Omega))
             scalar = True
         ops = FLOATS if scalar else ARRAYS
-        lead = R.shape[:-2]
-        Rp, Wp = matrix_parts(R, one), vector_parts(Omega, one)
-        d = vector_parts(model.delta_bar, one)
         error = self.acc_error
         e = [error] * 3 if isinstance(error, float) else vector_parts(error, one)
         if scalar:
@@ -278,7 +285,7 @@ class DelayPredictor:
                 # the first piece starts at the measured state, where the acceleration is acc0
                 # under moment_now: under another moment it differs by J^-1 times the
                 # difference (it is linear in the moment), which saves a model evaluation
-                acc0, moment_now = (vector_parts(v, one) for v in first)
+                acc0, moment_now = first
                 change = model.J_inv_times([moment[i] - moment_now[i] for i in range(3)])
                 acc = [acc0[i] + change[i] for i in range(3)]
             else:
@@ -295,4 +302,4 @@ class DelayPredictor:
                 Rp = matmul_parts(Rp, exp_parts(*((0.5 * (Wp[i] + W_next[i])) * hr
                                                    for i in range(3))))
             Wp = W_next
-        return (joined_matrix(Rp, lead, one), joined(Wp, lead, one))
+        return Rp, Wp
