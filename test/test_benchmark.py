@@ -32,7 +32,6 @@ def read(path):
         return list(csv.DictReader(f))
 
 
-@pytest.mark.headless        # (long flights: beside the other CPU-bound tests, ./run test)
 def test_the_benchmark_flies_every_law_on_a_case_and_the_same_random_runs(
         dask_scheduler, tmp_path, capsys):
     out = tmp_path / 'bench'

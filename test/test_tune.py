@@ -33,7 +33,6 @@ SHORT = ['--trials', '3', '--runs', '4', '--duration', '1.5', '--latency-duratio
          '--seed', '3', '--check-runs', '4']
 
 
-@pytest.mark.headless        # (long flights: beside the other CPU-bound tests, ./run test)
 def test_a_short_tuning_writes_its_trials_front_and_figure_and_repeats_from_its_seed(
         dask_scheduler, tmp_path, capsys):
     outs = []
