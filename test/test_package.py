@@ -6,6 +6,7 @@ The launch files are checked here for what needs no launcher (they parse, and ev
 parameter file and remapping they name exists); ``test_launch.py`` runs them with ``ros2 launch``.
 """
 import ast
+import functools
 import importlib.util
 import json
 import os
@@ -145,13 +146,21 @@ def _flight_modules():
                                     or name.split('.', 1)[1] in FLIGHT_CLI)}
 
 
+@functools.lru_cache(maxsize=None)
+def _imports_of(path, lazy):
+    """``module_level_imports`` of a file, parsed once per run (every module's walk reads the
+    package's common modules again).
+    """
+    return tuple(module_level_imports(path, functions=lazy))
+
+
 def _on_import(name, files, lazy=False):
     """The third-party modules that importing the package's module NAME imports, through every
     module of the package it imports on the way (and their packages' __init__s); with lazy, the
     imports inside functions too (what running it may import).
     """
     def scan(path):
-        return module_level_imports(path, functions=lazy)
+        return _imports_of(path, lazy)
     parts = name.split('.')
     stack, seen, found = ['.'.join(parts[:i]) for i in range(1, len(parts) + 1)], set(), set()
     while stack:
