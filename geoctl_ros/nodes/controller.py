@@ -235,8 +235,12 @@ class ControllerNode(Node):
     def _stamp_delay(self, stamp):
         """How old a header stamp is by this computer's ROS clock (the system clock, or /clock
         with use_sim_time): the capture-to-receipt delay, if the stamping clock is in sync.
+        (Without sim time the ROS clock is the system clock, CLOCK_REALTIME: read directly, at a
+        fraction of rclpy's cost, on every sample.)
         """
-        return self.get_clock().now().nanoseconds * 1e-9 - stamp
+        if self._sim_time:
+            return self.get_clock().now().nanoseconds * 1e-9 - stamp
+        return time.time() - stamp
 
     def _on_imu(self, msg):
         now = self._now()
