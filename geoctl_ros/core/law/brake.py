@@ -438,6 +438,14 @@ def _cone_terms(ops: Ops, brake: ApproachBrake, J_inv: Rows, n: Parts, kin: Valu
 
 
 Column = Union[Value, Flag, Parts]    # one of ``_cone``'s results: a number, a flag or a vector
+# ``_cone``'s results in their order, by name: the terms (``BrakeTerms``'s fields), the worst
+# state (``Worst``) and whether the law meets the condition
+_TERMS = ('gap', 'n', 'w', 'kin', 'A', 'f_along', 'D_s', 'authority', 'weak')
+_WORST = ('G0', 'w0', 'Ds', 'first', 'margin')
+_AT = {name: k for k, name in enumerate(_TERMS + _WORST + ('met',))}
+_FLAGS = (_AT['weak'], _AT['met'])                    # the results of one flag
+_VECTORS = (_AT['n'], _AT['A'])                       # ... of a vector
+_FIGURES = tuple(k for k in _AT.values() if k not in _FLAGS + _VECTORS)   # ... of one number
 
 
 class _View:
@@ -463,26 +471,25 @@ class _View:
     @property
     def weak(self) -> Flags:
         """Per run, whether any cone's bounds are too weak for the derivation."""
-        return self._flag(8, every=False)
+        return self._flag(_AT['weak'], every=False)
 
     @property
     def met(self) -> Flags:
         """Per run, whether the law's moment meets every cone's condition."""
-        return self._flag(14, every=True)
+        return self._flag(_AT['met'], every=True)
 
     @property
     def terms(self) -> 'BrakeTerms':
         out = self._arrays()
-        return BrakeTerms(out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7],
-                          cast(BoolArray, out[8]))
+        return BrakeTerms._make(out[_AT[name]] for name in _TERMS)
 
     @property
     def worst(self) -> Optional[Worst]:
         """The worst state of every cone (``_worst``; None without the law's moment)."""
-        if len(self._cols) == 9:
+        if len(self._cols) == len(_TERMS):
             return None
         out = self._arrays()
-        return tuple(out[k] for k in range(9, 14))
+        return tuple(out[_AT[name]] for name in _WORST)
 
     def _arrays(self) -> Dict[int, FloatArray]:
         """Every result as an array (one run's: three calls at once)."""
@@ -509,10 +516,6 @@ class _View:
         self._built = out
         return out
 
-
-_FIGURES = (0, 2, 3, 5, 6, 7, 9, 10, 11, 12, 13)       # ``_cone``'s results of one number
-_FLAGS = (8, 14)                                      # ... of one flag
-_VECTORS = (1, 4)                                     # ... of a vector
 
 
 class _TickParts(NamedTuple):
