@@ -147,28 +147,27 @@ class DelayPredictor:
         """
         self.acc_error: Scalars = 0.0     # rad/s^2: model minus measured acceleration, low-passed
         self.learnt: Scalars = 0.0    # s: the time learnt since the reset (one per run)
-        self._last: Optional[Tuple[Scalars, Parts]] = None   # (capture time, Omega by
-                                                             # components) of the last rate
-                                                             # sample
+        self._last: Optional[Tuple[Scalars, FloatArray]] = None   # (capture time, Omega) of the
+                                                                  # last rate sample
         self.residual: Optional[float] = None     # rad/s^2: the last rate sample's |acceleration
                                                # the model and the observer did not know| (one
                                                # run alone; None until a sample taught it, and
                                                # in a batch)
 
-    def observe(self, model: Dynamics, R: Rows, Omega: Parts, captured: Scalars,
-                history: 'CommandHistory', one: bool, shape: Tuple[int, ...],
-                delta_bar: Parts) -> None:
+    def observe(self, model: Dynamics, R: FloatArray, Omega: FloatArray, captured: Scalars,
+                history: 'CommandHistory') -> Optional[Tuple[Rows, Parts, Parts]]:
         """Learn the model's error from a rate sample captured at ``captured`` (a time on the
         history's clock; one per run of a batch). A sample no newer than the last (a stall
         repeats it), one more than ``OBSERVE_GAP_MAX_S`` after it, or an interval that starts
-        before the first command held teaches nothing. (R, Omega and the estimate delta_bar by
-        components, ``elementwise``: one run's (``one``) floats, or a batch's arrays of runs
-        ``shape``.)
+        before the first command held teaches nothing. Returns R, Omega and the estimate by
+        components (``elementwise``) where it took them to learn, for the prediction to go on
+        with, else None.
         """
         last, self._last = self._last, (captured, Omega)
         self.residual = None
         if last is None:
-            return
+            return None
+        one = one_run(R)
         alone = np.ndim(captured) == 0          # one run (the node's tick)
         before, captured_at = last[0], captured
         if one and not alone:                   # a batch of one: its times as floats
@@ -180,22 +179,26 @@ class DelayPredictor:
                              else captured_at - before)
         usable = (interval > 1e-6) & (interval <= OBSERVE_GAP_MAX_S) & (before >= history.first)
         if not ops.some(usable):
-            return
+            return None
         span = ops.where(usable, interval, 1.0)
-        now_, then = Omega, last[1]
+        taken = (matrix_parts(R, one), vector_parts(Omega, one),
+                 vector_parts(model.delta_bar, one))
+        now_, then = taken[1], vector_parts(last[1], one)
         modelled = model.acceleration_parts(
-            R, [0.5 * (now_[i] + then[i]) for i in range(3)],
-            vector_parts(history.at(before + 0.5 * span), one), delta_bar)
+            taken[0], [0.5 * (now_[i] + then[i]) for i in range(3)],
+            vector_parts(history.at(before + 0.5 * span), one), taken[2])
         error = self.acc_error
         e = [error] * 3 if isinstance(error, float) else vector_parts(error, one)
         innovation = [modelled[i] - (now_[i] - then[i]) / span - e[i] for i in range(3)]
         weight = ops.where(usable, span / (ops.minimum(self.learnt, PREDICT_SLOW_S) + span),
                            0.0)
-        self.acc_error = joined([e[i] + innovation[i] * weight for i in range(3)], shape, one)
+        self.acc_error = joined([e[i] + innovation[i] * weight for i in range(3)],
+                                R.shape[:-2], one)
         self.learnt = self.learnt + ops.where(usable, span, 0.0)
         if alone and one:                       # (the node's: its unlearnt moment's watch)
             x, y, z = (cast(float, v) for v in innovation)
             self.residual = math.sqrt(x * x + y * y + z * z)
+        return taken
 
     def __call__(self, model: Dynamics, R: FloatArray, Omega: FloatArray, age_R: Scalars,
                  age_Omega: Scalars, history: CommandHistory, now: float, lead: float = 0.0
@@ -215,12 +218,7 @@ class DelayPredictor:
         """
         horizon: Scalars
         captured = now - age_Omega               # when the rate sample was captured
-        # (by components from here on, made once: ``elementwise``)
-        one, shape = one_run(R), R.shape[:-2]
-        Rp: Rows = matrix_parts(R, one)
-        Wp: Parts = vector_parts(Omega, one)
-        d = vector_parts(model.delta_bar, one)
-        self.observe(model, Rp, Wp, captured, history, one, shape, d)
+        taken = self.observe(model, R, Omega, captured, history)
         # nothing is predicted from before the first command held: what moved the vehicle then
         # (its stops, a hand) is not in the model
         known = max(now - history.first, 0.0)
@@ -236,6 +234,12 @@ class DelayPredictor:
             age_Omega = np.asarray(age_Omega, dtype=float)
             horizon = np.maximum(age_R, age_Omega)
         at_now = (R, Omega)
+        if lead <= 0.0 and float(np.max(horizon)) <= 0.0:
+            return at_now, at_now
+        # (by components from here on, made once, or as the observer took them)
+        one, shape = one_run(R), R.shape[:-2]
+        Rp, Wp, d = taken if taken is not None else (
+            matrix_parts(R, one), vector_parts(Omega, one), vector_parts(model.delta_bar, one))
         if float(np.max(horizon)) > 0.0:
             # (the moment then, before any clipping)
             moment_now = vector_parts(history.at(captured), one)
