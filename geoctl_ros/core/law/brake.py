@@ -517,7 +517,6 @@ class _View:
         return out
 
 
-
 class _TickParts(NamedTuple):
     """A tick's values by components for ``_cone``: one run's floats, or a batch's arrays with
     an axis for the cones (runs, 1).
@@ -641,7 +640,8 @@ def brake_terms(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray,
 def rows(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray, x: BrakeInputs,
          terms: Optional[BrakeTerms] = None, worst: Optional[Worst] = None) -> BrakeRows:
     """The brake's condition at a tick for every cone (``BrakeRows``; see the module); terms:
-    ``brake_terms`` of x, worst: ``_worst_at`` of them, where already computed.
+    ``brake_terms`` of x, worst: the worst state of each cone there (``_worst``), where
+    already computed (the two together, or neither).
     """
     if terms is None or worst is None:
         view = _cones_at(brake, cones, J_inv, x, worst=True)
