@@ -20,6 +20,7 @@ from rcl_interfaces.srv import SetParameters
 import rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
@@ -101,6 +102,9 @@ class NodeProcess:
             return f.read()
 
 
+RECORD_DEPTH = 50     # a monitor's history of each monitoring topic (0.5 s at 100 Hz)
+
+
 class Monitor(Node):
     """Records what the controller and the sim publish; arms, sets parameters, injects input."""
 
@@ -110,7 +114,9 @@ class Monitor(Node):
         self._record = None if record is None else set(record)
         self.log = {k: [] for k in ('motors', 'margins', 'psi', 'dbar', 'true_pose', 'pose',
                                     'diagnostics', 'eR')}
-        tel = qos.TELEMETRY
+        # the monitoring topics as they are published (best effort), with room for what arrives
+        # while this process is busy: at depth 1 a stall kept only the newest, a series with holes
+        tel = QoSProfile(depth=RECORD_DEPTH, reliability=ReliabilityPolicy.BEST_EFFORT)
         self._sub(Float64MultiArray, 'motor_commands', 'motors', qos.COMMAND,
                   lambda m: list(m.data))
         self._sub(Float64MultiArray, 'cone_margins', 'margins', tel, lambda m: list(m.data))
