@@ -26,7 +26,7 @@ from geoctl_ros.core.law.brake import (
     rows,
 )
 from geoctl_ros.core.law.control import AttitudeController
-from geoctl_ros.core.law.prediction import CommandHistory, DelayPredictor
+from geoctl_ros.core.law.prediction import CommandHistory, Observer, predict
 from geoctl_ros.params import (
     CONTROLLER,
     ConfigError,
@@ -372,15 +372,14 @@ def _flown(T_b):
     history = CommandHistory(64, LAG)
     made = mixer.moments(rotors, HOLD)
     history.push(-T_b - HOLD, made[0], made[1])
-    predictor = DelayPredictor()
-    predictor.observe = lambda *a: None                   # (the observer off)
     closest = math.inf
     steps = int(round(HOLD / h))
     for k in range(int(0.8 / HOLD)):
         t = k * HOLD
         R_m, W_m = past[0]
-        (R_b, W_b), (R_l, W_l) = predictor(ctl.dynamics, R_m, W_m, T_b, T_b, history, t,
-                                           0.5 * HOLD)
+        # (the observer off: a fresh one each tick learns nothing)
+        _, (R_b, W_b), (R_l, W_l), _ = predict(Observer(), ctl.dynamics, R_m, W_m, T_b, T_b,
+                                               history, t, 0.5 * HOLD)
         M_g = ctl.gravity_moment(R_b)
         x = BrakeInputs(R_b, W_b, T_b, mixer.design_hold_for(rotors, HOLD, HOLD),
                         history.at(t), ctl.dynamics.moment(R_b, W_b), M_g,

@@ -15,7 +15,7 @@ from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.law.configuration_error import approach_rates, blind_widening
 from geoctl_ros.core.law.control import AttitudeController
 from geoctl_ros.core.law.mechanics import gravity_moment
-from geoctl_ros.core.law.prediction import CommandHistory, DelayPredictor
+from geoctl_ros.core.law.prediction import CommandHistory, Observer, predict
 from geoctl_ros.core.supervisor.loop import ControlLoop
 from geoctl_ros.core.supervisor.safety import REANCHOR_AFTER, Stream
 from geoctl_ros.core.telemetry.diagnostics import (
@@ -72,7 +72,8 @@ def test_the_prediction_over_the_commands_sent_matches_the_plant_integrated_fine
             plant.step(produced, h)
             produced = target + math.exp(-h / lag) * (produced - target)
     now = 0.06
-    R_pred, W_pred = DelayPredictor()(c.dynamics, R_then, W_then, now, now, history, now)[1]
+    R_pred, W_pred = predict(Observer(), c.dynamics, R_then, W_then, now, now, history,
+                             now).at_lead
     err_R = math.degrees(so3.angle(plant.R.T @ R_pred))
     err_W = np.linalg.norm(plant.Omega - W_pred)
     assert err_R < 0.1 and err_W < 0.05, (err_R, err_W)
@@ -96,14 +97,15 @@ def test_the_predictions_observer_learns_the_models_error_and_not_a_real_manoeuv
     plant = Plant(PlantConfig(cfg.inertia, cfg.mass, cfg.cog_offset, cfg.gravity,
                               Disturbance(unknown, np.zeros(3), 0.0)),
                   so3.exp(np.radians([5.0, -3.0, 20.0])), np.zeros(3))
-    predictor, history = DelayPredictor(), CommandHistory(64)
+    observer, history = Observer(), CommandHistory(64)
     age, dt, h = 0.06, 0.01, 1e-3
     lag = int(round(age / dt))
     past = [(plant.R.copy(), plant.Omega.copy())] * (lag + 1)     # past[-1]: the state now
     for k in range(150):
         now = k * dt
         R_seen, W_seen = past[-1 - lag]
-        R_pred, W_pred = predictor(c.dynamics, R_seen, W_seen, age, age, history, now)[1]
+        observer, _, (R_pred, W_pred), _ = predict(observer, c.dynamics, R_seen, W_seen, age,
+                                                   age, history, now)
         moment = 0.5 * np.array([math.sin(4 * math.pi * now), math.cos(4 * math.pi * now),
                                  -math.sin(4 * math.pi * now)])
         moment = moment - gravity_moment(plant.R, cfg.m_rho, cfg.gravity)   # held up
@@ -112,7 +114,7 @@ def test_the_predictions_observer_learns_the_models_error_and_not_a_real_manoeuv
             plant.step(moment, h)
         past.append((plant.R.copy(), plant.Omega.copy()))
     expected = -c.J_inv @ unknown
-    assert np.linalg.norm(predictor.acc_error - expected) < 0.5, (predictor.acc_error, expected)
+    assert np.linalg.norm(observer.acc_error - expected) < 0.5, (observer.acc_error, expected)
     # the last prediction (at now = 1.49 s) against the plant then
     R_then, W_then = past[-2]
     assert math.degrees(so3.angle(R_then.T @ R_pred)) < 0.3
@@ -134,7 +136,7 @@ def test_after_a_take_over_the_observer_knows_the_models_error_from_its_first_sa
     plant = Plant(PlantConfig(cfg.inertia, cfg.mass / 1.25, cfg.cog_offset, cfg.gravity,
                               Disturbance(unknown, np.zeros(3), 0.0)),
                   so3.exp(np.radians([20.0, -15.0, 30.0])), np.zeros(3))
-    predictor, history = DelayPredictor(), CommandHistory(64)
+    observer, history = Observer(), CommandHistory(64)
     age, dt, h = 0.06, 0.01, 1e-3
     lag = int(round(age / dt))
     past = [(plant.R.copy(), plant.Omega.copy())] * (lag + 1)     # held until the take-over
@@ -142,17 +144,18 @@ def test_after_a_take_over_the_observer_knows_the_models_error_from_its_first_sa
     for k in range(9):
         now = k * dt
         R_seen, W_seen = past[-1 - lag]
-        predictor(c.dynamics, R_seen, W_seen, age, age, history, now)
+        observer = predict(observer, c.dynamics, R_seen, W_seen, age, age, history,
+                           now).observer
         # the model's acceleration less the plant's at the measurement (the plant's m rho and
         # inertia about the pivot are the lighter vehicle's)
         true = np.linalg.solve(plant.config.J, moment + unknown + gravity_moment(
             R_seen, plant.config.m_rho, cfg.gravity) - np.cross(W_seen, plant.config.J @ W_seen))
         expected = c.dynamics.acceleration(R_seen, W_seen, moment) - true
         if now < age + dt - 1e-9:
-            assert np.all(predictor.acc_error == 0.0), (now, predictor.acc_error)  # nothing yet
+            assert np.all(observer.acc_error == 0.0), (now, observer.acc_error)  # nothing yet
         else:
-            assert np.linalg.norm(predictor.acc_error - expected) < 0.02 * np.linalg.norm(
-                expected), (now, predictor.acc_error, expected)
+            assert np.linalg.norm(observer.acc_error - expected) < 0.02 * np.linalg.norm(
+                expected), (now, observer.acc_error, expected)
         history.push(now, moment)
         for _ in range(int(round(dt / h))):
             plant.step(moment, h)

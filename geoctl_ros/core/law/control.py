@@ -178,7 +178,7 @@ class AttitudeController:
         guide: move guidance's set point (not while the rotors spool up: it is planned at the
         take-over). gain_scale: of the bandwidth (k_R by its square, k_Omega by it; one per run
         of a batch), below 1 past the delay bound
-        (``core.supervisor.control_tick.DegradedMode``).
+        (``core.supervisor.control_tick.Degraded``).
         """
         if guide and self.guidance is not None and not self._tracking:
             self._follow(R)
@@ -242,7 +242,7 @@ class AttitudeController:
             e_Omega = Omega - Omega_d
         W = terms.W
         delta_bar = self.delta_bar.copy()
-        g = gain_scale                          # past the delay bound, below 1 (DegradedMode)
+        g = gain_scale                          # past the delay bound, below 1 (Degraded)
         k_R: Scalars
         k_Omega: Scalars
         if np.ndim(g):                          # one per run of a batch

@@ -12,9 +12,10 @@ import numpy as np
 
 from geoctl_ros.core.actuation.motors import Mixer, MotorOutput, RotorModel
 from geoctl_ros.core.geometry.so3 import FloatArray, Scalars, matvec
+from geoctl_ros.core.law import prediction
 from geoctl_ros.core.law.brake import ApproachBrake, BrakeInputs, rows
 from geoctl_ros.core.law.control import AttitudeController
-from geoctl_ros.core.law.prediction import CommandHistory, DelayPredictor
+from geoctl_ros.core.law.prediction import CommandHistory, Observer
 from geoctl_ros.core.law.step_types import ControlOutput
 
 ON_TIME_S = 1e-6       # a step less late than this is on time (the clock's rounding)
@@ -42,36 +43,31 @@ SUSTAINED_TAU_S = 0.25      # s, the low-pass that tells a sustained blindness f
 PEAK_RELEASE_S = 1.0        # s, how long a blind peak past the bound keeps the gains down
 
 
-class DegradedMode:
+class Degraded(NamedTuple):
     """Past the delay bound, the feedback gains come down with the blindness (docs/safety.md,
     "Past the bound"): the loop's bandwidth scales by s = min(1, SUSTAINED_BLIND_BOUND_S /
     (blind time low-passed over SUSTAINED_TAU_S), BLIND_BOUND_S / (blind time peak-held over
     PEAK_RELEASE_S)), k_R by s^2 and k_Omega by s, so the loop's phase lag at its crossover
-    stays what it was at the bound. Within the bound s = 1 and nothing changes. One scale per run
-    of a batch.
+    stays what it was at the bound. Within the bound s = 1 and nothing changes. The state of
+    that scale (``degraded``), one value per run of a batch.
     """
 
-    def __init__(self) -> None:
-        self.sustained: Scalars = 0.0   # s, the low-passed blind time
-        self.peak: Scalars = 0.0        # s, the blind time held from its last peak
-        self.scale_now: Scalars = 1.0
+    sustained: Scalars = 0.0   # s, the low-passed blind time
+    peak: Scalars = 0.0        # s, the blind time held from its last peak
+    scale: Scalars = 1.0       # the scale s after the last tick (1 within the bound)
 
-    def scale(self, blind: Scalars, held: float) -> Scalars:
-        """The gain scale s after a tick of blind time ``blind`` that came ``held`` s after the
-        last.
-        """
-        self.sustained = self.sustained + (blind - self.sustained) * (
-            held / (SUSTAINED_TAU_S + held))
-        if np.ndim(blind) == 0 and np.ndim(self.peak) == 0:     # one run: plain floats
-            self.peak = max(float(blind), self.peak * math.exp(-held / PEAK_RELEASE_S))
-            self.scale_now = min(1.0, SUSTAINED_BLIND_BOUND_S / max(self.sustained, 1e-9),
-                                 BLIND_BOUND_S / max(self.peak, 1e-9))
-            return self.scale_now
-        self.peak = np.maximum(blind, self.peak * np.exp(-held / PEAK_RELEASE_S))
-        self.scale_now = np.minimum(1.0, np.minimum(
-            SUSTAINED_BLIND_BOUND_S / np.maximum(self.sustained, 1e-9),
-            BLIND_BOUND_S / np.maximum(self.peak, 1e-9)))
-        return self.scale_now
+
+def degraded(state: Degraded, blind: Scalars, held: float) -> Degraded:
+    """``Degraded`` after a tick of blind time ``blind`` that came ``held`` s after the last."""
+    sustained = state.sustained + (blind - state.sustained) * (held / (SUSTAINED_TAU_S + held))
+    if np.ndim(blind) == 0 and np.ndim(state.peak) == 0:     # one run: plain floats
+        peak = max(float(blind), state.peak * math.exp(-held / PEAK_RELEASE_S))
+        return Degraded(sustained, peak, min(1.0, SUSTAINED_BLIND_BOUND_S / max(sustained, 1e-9),
+                                             BLIND_BOUND_S / max(peak, 1e-9)))
+    peaks = np.maximum(blind, state.peak * np.exp(-held / PEAK_RELEASE_S))
+    return Degraded(sustained, peaks, np.minimum(1.0, np.minimum(
+        SUSTAINED_BLIND_BOUND_S / np.maximum(sustained, 1e-9),
+        BLIND_BOUND_S / np.maximum(peaks, 1e-9))))
 
 
 class Command(NamedTuple):
@@ -83,9 +79,9 @@ class Command(NamedTuple):
     took_over: bool = False  # the first tick the controller flies after the spool-up
     blind: Scalars = 0.0     # s: the blind time the step allowed for (``blind_time``; an idle
                              # tick's: the last step's)
-    gain_scale: Scalars = 1.0   # the bandwidth's scale past the delay bound (``DegradedMode``)
+    gain_scale: Scalars = 1.0   # the bandwidth's scale past the delay bound (``Degraded``)
     residual: Optional[float] = None   # rad/s^2: the unlearnt acceleration at the last rate
-                                       # sample (``DelayPredictor.residual``; one run alone)
+                                       # sample (``Learnt.residual``; one run alone)
 
 
 class ControlTick:
@@ -101,14 +97,14 @@ class ControlTick:
         does not tell: ``core.supervisor.safety.Stream`` for the node, the closed loop alike.)
         """
         self.controller = controller
-        self.predict = DelayPredictor()
+        self.observer = Observer()      # the prediction's observer of the model's error
         self.mixer = mixer
         self.rotors: Optional[RotorModel] = None   # the lag model (None: the rotors at rest)
         # what the rotors were told to produce, with when (the prediction's input)
         self.history = CommandHistory(HISTORY_TICKS, mixer.lag)
         self._last_now: Optional[float] = None
         self.blind: Scalars = 0.0                # the last tick's blind time (blind_time)
-        self.degraded = DegradedMode()
+        self.degraded = Degraded()      # the gains' scale past the delay bound
         self._clock = 0.0               # the tick's time: now, or (untimed) periods counted
         self._ticked = False
         self.flying = False             # armed and past the spool-up
@@ -173,17 +169,19 @@ class ControlTick:
             made = mixer.moments(rotors, dt if held is None else held)
             if made is not None:
                 self.history.push(t, made[0], made[1])
-            self.predict.reset()
+            self.observer = Observer()
             self.controller.replan()           # guidance's way from where the vehicle is
         R_b, W_b = R, Omega
+        residual = None
         if predict:
             # with a model of the motors' lag, the law aims at the middle of the command's hold
-            (R_b, W_b), (R, Omega) = self.predict(self.controller.dynamics, R, Omega, ages[0],
-                                                  ages[1], self.history, t,
-                                                  0.5 * dt if mixer.lag > 0.0 else 0.0)
+            self.observer, (R_b, W_b), (R, Omega), residual = prediction.predict(
+                self.observer, self.controller.dynamics, R, Omega, ages[0], ages[1], self.history,
+                t, 0.5 * dt if mixer.lag > 0.0 else 0.0)
         blind = self.blind = blind_time(ages, dt, held)
         controller = self.controller
-        gain_scale = self.degraded.scale(blind, dt if held is None else held)
+        self.degraded = degraded(self.degraded, blind, dt if held is None else held)
+        gain_scale = self.degraded.scale
         brake = None
         if controller.brake is not None and self.flying:
             brake = self.brake_inputs(R_b, W_b, np.maximum(ages[0], ages[1]),
@@ -202,8 +200,7 @@ class ControlTick:
                            held=held)
         self.rotors = motors.rotors
         self.history.push(t, *self._produced(motors, armed))
-        return Command(out, motors, spooling, took_over, blind, gain_scale,
-                       self.predict.residual)
+        return Command(out, motors, spooling, took_over, blind, gain_scale, residual)
 
     def brake_inputs(self, R: FloatArray, Omega: FloatArray, age: Scalars, hold: float,
                      t: float, thrusts: Optional[FloatArray] = None) -> BrakeInputs:
@@ -214,7 +211,7 @@ class ControlTick:
         """
         model = self.controller.dynamics
         M_g, f = model.moments(R, Omega)
-        error = self.predict.acc_error          # (0.0 until the observer has learnt)
+        error = self.observer.acc_error         # (0.0 until the observer has learnt)
         if np.ndim(error):
             f = f - matvec(model.config.J, cast(FloatArray, error))
         return BrakeInputs(R, Omega, age, hold, self.history.at(t), f, M_g, thrusts)
@@ -263,4 +260,4 @@ class ControlTick:
         self._held(now)
         self.history.push(self._time(now, dt), np.zeros(3))
         return Command(None, self.mixer.mix(np.zeros(3), armed=False, dt=dt), blind=self.blind,
-                       gain_scale=self.degraded.scale_now)
+                       gain_scale=self.degraded.scale)
