@@ -31,7 +31,6 @@ set point; the switches between them are not covered by it (docs/control-law.md,
 A batch plans each run's path on its own (at a set point's start only) and picks
 every run's set point at once.
 """
-import heapq
 import math
 from typing import List, Optional, Tuple, cast
 
@@ -137,24 +136,27 @@ def _cosines(X: FloatArray, Y: FloatArray) -> FloatArray:
 
 def _dijkstra(cost: FloatArray, start: int) -> IntArray:
     """The predecessor of each node on its shortest way from start (-1: no way) on the dense
-    cost matrix (inf: no edge).
+    cost matrix (inf: no edge). The nodes are settled nearest first, the lower index first
+    among equally near ones (a heap of (distance, index) would settle them so too); with as
+    few nodes as a plan has (some 50), a scan of the distances beats the heap.
     """
     n = len(cost)
     dist = np.full(n, np.inf)
     previous = np.full(n, -1)
     done = np.zeros(n, dtype=bool)
-    dist[start] = 0.0
-    queue = [(0.0, start)]
-    while queue:
-        d, i = heapq.heappop(queue)
-        if done[i]:
-            continue
+    waiting = np.full(n, np.inf)        # the distances of the nodes reached, not yet settled
+    dist[start] = waiting[start] = 0.0
+    for _ in range(n):
+        i = int(np.argmin(waiting))
+        d = waiting[i]
+        if d == np.inf:
+            break
         done[i] = True
-        better = (d + cost[i] < dist) & ~done
-        for j in np.flatnonzero(better):
-            dist[j] = d + cost[i, j]
-            previous[j] = i
-            heapq.heappush(queue, (float(dist[j]), int(j)))
+        waiting[i] = np.inf
+        through = d + cost[i]
+        better = (through < dist) & ~done
+        dist[better] = waiting[better] = through[better]
+        previous[better] = i
     previous[start] = start
     return previous
 
@@ -255,13 +257,22 @@ def _filled(path: FloatArray) -> FloatArray:
     changes the turn faster than the sensor moves: the lift off the stops at the start), so that
     the set point, which looks LOOKAHEAD_MIN ahead near a cone, always has a next one in reach.
     """
-    out = [path[0]]
-    for a, b in zip(path[:-1], path[1:]):
+    # (the neighbours' turns all at once, a little generously: only those that may be more
+    # than twice PATH_STEP apart are worked out one by one, as before)
+    turns = so3.angle(so3.matmul(so3.transpose(path[:-1]), path[1:]))
+    far = np.flatnonzero(turns > 2.0 * PATH_STEP * (1.0 - 1e-9))
+    if not len(far):
+        return path
+    out = [path[:far[0] + 1]]
+    for n, m in enumerate(far):
+        a, b = path[m], path[m + 1]
         w = so3.log(so3.matmul(so3.transpose(a), b))
         angle = math.sqrt(so3.dot(w, w))
         k = int(math.ceil(angle / PATH_STEP)) if angle > 2.0 * PATH_STEP else 1
-        out += [so3.matmul(a, so3.exp(w * (i / k))) for i in range(1, k)] + [b]
-    return np.array(out)
+        out.append(np.array([so3.matmul(a, so3.exp(w * (i / k))) for i in range(1, k)]
+                            ).reshape(-1, 3, 3))
+        out.append(path[m + 1:far[n + 1] + 1 if n + 1 < len(far) else len(path)])
+    return np.concatenate(out)
 
 
 def twist_within(bases: FloatArray, d: FloatArray, up: FloatArray,
