@@ -240,6 +240,33 @@ def test_the_control_step_equals_a_plain_transcription_of_the_paper():
     assert checked > 100
 
 
+def test_the_estimates_stage_is_eq_39s_euler_step_projected_and_leaves_the_steps_own_alone():
+    """The adaptive law's stage (``adapted``), written here from eq. 39: Delta_bar + dt k_Delta
+    (e_Omega + c e_R) for the constant model, then onto the ball of delta_bar_max. Each step's
+    output keeps the estimate it used (a recording of a flight shows what each step flew with),
+    and a step that does not adapt leaves the estimate as it was.
+    """
+    cfg = config(one_cone(), k_Delta=0.5, c=1.0, delta_bar_max=0.02)
+    ctl = AttitudeController(cfg)
+    R, w, dt = so3.exp(np.array([0.3, -0.2, 0.5])), np.array([0.4, -0.1, 0.2]), 0.01
+    used = []
+    for k in range(12):
+        before = np.array(ctl.delta_bar)
+        out = ctl.step(R, w, dt)
+        used.append((out, before))
+        expected = before + dt * 0.5 * (out.e_Omega + 1.0 * out.e_R)
+        size = np.linalg.norm(expected)
+        if size > 0.02:
+            expected *= 0.02 / size
+        assert np.allclose(ctl.delta_bar, expected, rtol=0, atol=1e-15), k
+    assert np.linalg.norm(ctl.delta_bar) == pytest.approx(0.02)        # the ball was reached
+    for out, before in used:
+        assert np.array_equal(out.delta_bar, before)
+    held = np.array(ctl.delta_bar)
+    ctl.step(R, w, dt, adapt=False)
+    assert np.array_equal(ctl.delta_bar, held)
+
+
 @odroid
 def _terms_by_definition(R, R_d, cfg):
     """The step's affine terms written here from their definitions, with plain matrix products:

@@ -23,7 +23,9 @@ from ``geoctl_ros.core.law.mechanics``). The tracking feed-forward
 controller; the paper's stability proof covers Omega_d = 0 only.
 
 Discrete time: ``step`` computes u from the estimate Delta_bar_k and then advances the estimate by
-one explicit Euler step of the adaptive law over dt (the control period). The estimate is frozen
+one explicit Euler step of the adaptive law over dt (the control period): the stage ``adapted``, a
+pure function of the estimate and the step's output (the control tick runs it as a stage of its
+own). The estimate is frozen
 while any cone's barrier is saturated (the sensor within the floor band or inside a cone, where the
 paper's assumptions do not hold) and optionally projected onto a ball so that it cannot wind up.
 
@@ -34,7 +36,7 @@ and model are shared by the batch. (``x.T`` on a stack of vectors puts the batch
 ``(x.T * a).T`` scales each run's vector by its own scalar and a single vector by a scalar.)
 """
 import math
-from typing import Optional, cast
+from typing import NamedTuple, Optional, Tuple, cast
 
 import numpy as np
 
@@ -119,7 +121,7 @@ class AttitudeController:
 
     def reset_adaptation(self) -> None:
         """Zero the disturbance estimate."""
-        self.delta_bar[:] = 0.0
+        self.delta_bar = np.zeros_like(self.delta_bar)
 
     def reconfigure(self, config: ControllerConfig) -> None:
         """Switch to a new configuration, keeping the estimate when its size still fits.
@@ -134,7 +136,7 @@ class AttitudeController:
             self.delta_bar = np.zeros(config.n_params)
         self._set_config(config)
         self.R_d = self._R_d
-        self._project()
+        self.delta_bar = projected(self.delta_bar.copy(), self._adaptation.balls)
 
     # --- the hot path ----------------------------------------------------------------------------
     @property
@@ -162,12 +164,13 @@ class AttitudeController:
 
     def step(self, R: FloatArray, Omega: FloatArray, dt: float, adapt: bool = True,
              blind: Scalars = 0.0, brake: Optional[BrakeInputs] = None, guide: bool = True,
-             gain_scale: Scalars = 1.0) -> ControlOutput:
+             gain_scale: Scalars = 1.0, advance: bool = True) -> ControlOutput:
         """One control step at attitude R and body angular velocity Omega, by the configured law
         (``config.law``, one of ``LAWS``): its configuration error (``terms``, with the cones'
         barrier or without), the geometric moment with the estimate in force (``moment``), the
-        estimate's step (``adapt``), and the law's filter of the moment, if it has one (a pure
-        function of the step's terms and the model: ``core.law.step_types.Law``).
+        law's filter of the moment, if it has one (a pure function of the step's terms and the
+        model: ``core.law.step_types.Law``), then the estimate's step (``adapt``; advance=False
+        leaves that stage to the caller, as the control tick runs it).
 
         dt is the time until the next step (the control period); adapt=False holds the estimate
         (e.g. while disarmed). blind: the time (s; one per run of a batch) over which the loop
@@ -189,11 +192,12 @@ class AttitudeController:
         else:
             psi, e_R = terms.A[..., 0], terms.e_RA
         out = self.moment(R, Omega, adapt, terms, psi, e_R, law.barrier, gain_scale)
-        self.adapt(out, terms.W, dt)
-        if law.filter is None:
-            return out
-        return law.filter(out, terms, R, Omega, self.law_model,
-                          brake if self.brake is not None else None)
+        if law.filter is not None:
+            out = law.filter(out, terms, R, Omega, self.law_model,
+                             brake if self.brake is not None else None)
+        if advance:
+            self.adapt(out, dt)
+        return out
 
     def _follow(self, R: FloatArray) -> None:
         """Move the law's set point along guidance's path (``core.law.guidance``): its linear map
@@ -241,7 +245,7 @@ class AttitudeController:
             Omega_d = matvec(RtRd, self.Omega_d)
             e_Omega = Omega - Omega_d
         W = terms.W
-        delta_bar = self.delta_bar.copy()
+        delta_bar = self.delta_bar          # (never changed in place: ``adapted`` makes anew)
         g = gain_scale                          # past the delay bound, below 1 (Degraded)
         k_R: Scalars
         k_Omega: Scalars
@@ -262,32 +266,11 @@ class AttitudeController:
         violated = (ev.violated.any(axis=-1) if any_flag(ev.any_saturated)
                     else ev.any_saturated)
         return ControlOutput(u, e_R, e_Omega, psi, delta_bar, violated, saturated,
-                             adapting, ev, cfg.cones.theta_deg)
+                             adapting, ev, cfg.cones.theta_deg, W=W)
 
-    def adapt(self, out: ControlOutput, W: Optional[FloatArray], dt: float) -> None:
-        """The adaptive law's step (eq. 39), explicit Euler over dt: Delta_bar += dt Gamma W^T
-        (e_Omega + c e_R) for the runs that adapt (``out.adapting``; W the step's regressor,
-        None for the constant model), then projected onto its balls.
-        """
-        adapting = out.adapting
-        if adapting is False or not any_flag(adapting):
-            return
-        cfg = self.config
-        v = out.e_Omega + cfg.c * out.e_R
-        rate = (dt * cfg.k_Delta) * v if W is None else dt * (
-            self._gamma * matvec(transpose(W), v))
-        if rate.ndim > 1:                       # a batch: only the runs that adapt
-            rate *= cast(BoolArray, adapting)[..., None]
-        self.delta_bar += rate
-        self._project()
-
-    def _project(self) -> None:
-        """Project each block of the estimate onto its ball (bounds of 0 mean unbounded)."""
-        for block, bound in self._balls:
-            part = self.delta_bar[..., block]
-            n2 = so3.dot(part, part)
-            if any_flag(n2 > bound * bound):
-                part *= (bound / np.maximum(np.sqrt(n2), bound))[..., None]
+    def adapt(self, out: ControlOutput, dt: float) -> None:
+        """The adaptive law's stage: the estimate after a step's output (``adapted``)."""
+        self.delta_bar = adapted(self.delta_bar, out, dt, self._adaptation)
 
     def _set_config(self, config: ControllerConfig) -> None:
         self.config = config
@@ -301,7 +284,55 @@ class AttitudeController:
         self.J_inv = so3.inverse3(config.J)      # the model's, for the prediction too
         self.model_parts = ModelParts.of(config, self.J_inv)
         self.law_model = LawModel(config, self.J_inv, self.brake)     # what a law's filter knows
-        self._gamma = np.array([config.k_Delta] * 3 + [config.k_Delta_cog] * 3)[:config.n_params]
-        self._balls = [(block, bound) for block, bound in ((slice(0, 3), config.delta_bar_max),
-                                                           (slice(3, 6), config.cog_estimate_max))
-                       if bound > 0.0 and block.start < config.n_params]
+        self._adaptation = Adaptation.of(config)
+
+
+class Adaptation(NamedTuple):
+    """What the adaptive law's stage knows of the configuration: k_Delta, c, Gamma's diagonal
+    (k_Delta for the constant moment, k_Delta_cog for the m*rho block) and the estimate's balls
+    ((its block, its bound) for each block bounded).
+    """
+
+    k_Delta: float
+    c: float
+    gamma: FloatArray
+    balls: Tuple[Tuple[slice, float], ...]
+
+    @classmethod
+    def of(cls, config: ControllerConfig) -> 'Adaptation':
+        gamma = np.array([config.k_Delta] * 3 + [config.k_Delta_cog] * 3)[:config.n_params]
+        balls = tuple((block, bound) for block, bound in (
+            (slice(0, 3), config.delta_bar_max), (slice(3, 6), config.cog_estimate_max))
+            if bound > 0.0 and block.start < config.n_params)
+        return cls(config.k_Delta, config.c, gamma, balls)
+
+
+def adapted(delta_bar: FloatArray, out: ControlOutput, dt: float,
+            adaptation: Adaptation) -> FloatArray:
+    """The adaptive law's step (eq. 39), explicit Euler over dt: Delta_bar + dt Gamma W^T
+    (e_Omega + c e_R) for the runs that adapt (``out.adapting``; W the step's regressor,
+    ``out.W``, None for the constant model), then projected onto its balls (``projected``). A
+    new array: the estimate a step used (``out.delta_bar``) stays as it was.
+    """
+    adapting = out.adapting
+    if adapting is False or not any_flag(adapting):
+        return delta_bar
+    v = out.e_Omega + adaptation.c * out.e_R
+    W = out.W
+    rate = (dt * adaptation.k_Delta) * v if W is None else dt * (
+        adaptation.gamma * matvec(transpose(W), v))
+    if rate.ndim > 1:                       # a batch: only the runs that adapt
+        rate *= cast(BoolArray, adapting)[..., None]
+    return projected(delta_bar + rate, adaptation.balls)
+
+
+def projected(delta_bar: FloatArray, balls: Tuple[Tuple[slice, float], ...]) -> FloatArray:
+    """Each block of the estimate projected onto its ball (``Adaptation.balls``), in place of
+    delta_bar (a new array, or one the caller owns).
+    """
+    for block, bound in balls:
+        part = delta_bar[..., block]
+        n2 = so3.dot(part, part)
+        if any_flag(n2 > bound * bound):
+            part *= (bound / np.maximum(np.sqrt(n2), bound))[..., None]
+    return delta_bar

@@ -39,6 +39,8 @@ class ControlOutput(NamedTuple):
     braking: Union[bool, Flags] = False      # the approach brake changed the law's moment
     brake_unmet: Union[bool, Flags] = False  # no moment within the rotors' limits met the
                                              # brake's condition
+    W: Optional[FloatArray] = None   # the regressor W(R) the step used (None for the constant
+                                     # model, W = I): the adaptive law's (``adapted``)
     # (in a batch, each field has the batch axis first: psi, violated, ... one per run)
 
     @property

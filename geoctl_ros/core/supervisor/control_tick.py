@@ -189,7 +189,9 @@ class ControlTick:
                                       mixer.thrust_offsets(rotors, dt if held is None else held))
         out: Optional[ControlOutput]        # (None: a moment not finite, not commanded)
         out = controller.step(R, Omega, dt, adapt=adapt and self.flying, blind=blind,
-                              brake=brake, guide=not spooling, gain_scale=gain_scale)
+                              brake=brake, guide=not spooling, gain_scale=gain_scale,
+                              advance=False)
+        controller.adapt(out, dt)           # the estimate's stage (``core.law.control.adapted``)
         if spooling:                        # the feed-forward alone, the vehicle held
             out = out._replace(u=controller.feedforward(R))
         if not np.isfinite(out.u).all():           # a last line of defence: never command it
