@@ -22,8 +22,7 @@ from geometry_msgs.msg import PoseStamped
 import numpy as np
 import rclpy
 from rclpy.node import Node
-from sensor_msgs.msg import Imu
-from std_msgs.msg import Float64MultiArray
+from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import SetBool
 
 from geoctl_ros.nodes import qos
@@ -47,9 +46,9 @@ def measure(seconds=10.0, rate=100.0, log_dir='/tmp/geoctl_latency'):
             self.sent = None             # perf time of the last imu sent
             self.latencies = {'relay': [], 'controller': []}
             self.recording = None
-            self.create_subscription(Float64MultiArray, 'relay/motor_commands',
+            self.create_subscription(JointState, 'relay/motor_commands',
                                      lambda m: self._got('relay'), qos.COMMAND)
-            self.create_subscription(Float64MultiArray, 'motor_commands',
+            self.create_subscription(JointState, 'motor_commands',
                                      lambda m: self._got('controller'), qos.COMMAND)
             self.pose, self.imu = PoseStamped(), Imu()
             set_quaternion(self.pose.pose.orientation, (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5)))

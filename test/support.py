@@ -3,10 +3,10 @@ operator's set points and a rival controller.
 """
 import math
 
+from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, QuaternionStamped
 import numpy as np
-from sensor_msgs.msg import Imu
-from std_msgs.msg import Float64MultiArray, UInt32MultiArray
+from sensor_msgs.msg import Imu, JointState
 
 from geoctl_ros.core.actuation.esc_wire import ArmedState
 from geoctl_ros.core.geometry import so3
@@ -83,14 +83,15 @@ class FakeInputs(Monitor):
         self.pub_setpoint.publish(msg)
 
     def publish_commands(self, data, session=0):
-        """Publish on motor_commands as a plain publisher (session 0), or as the controller of
-        session (created on first use: while it exists, the real controller refuses to arm).
+        """Publish on motor_commands as a plain publisher (session 0: the values alone, as a
+        hand-typed command), or as the controller of session (created on first use: while it
+        exists, the real controller refuses to arm).
         """
         if getattr(self, 'pub_commands', None) is None:
-            self.pub_commands = self.create_publisher(Float64MultiArray, 'motor_commands',
+            self.pub_commands = self.create_publisher(JointState, 'motor_commands',
                                                       qos.COMMAND)
-        msg = motor_commands_msg(session)
-        msg.data = [float(x) for x in data]
+        msg = motor_commands_msg(session, len(data)) if session else JointState()
+        msg.effort = [float(x) for x in data]
         self.pub_commands.publish(msg)
 
     def stop_commands(self):
@@ -102,7 +103,7 @@ class FakeInputs(Monitor):
     def act_as_controller(self, armed, session):
         """Publish the typed armed state a controller of session publishes (~/armed)."""
         if getattr(self, 'pub_armed', None) is None:
-            self.pub_armed = self.create_publisher(UInt32MultiArray, '/controller/armed',
+            self.pub_armed = self.create_publisher(DiagnosticStatus, '/controller/armed',
                                                    qos.LATCHED)
         self.pub_armed.publish(armed_state_msg(ArmedState(armed, session)))
 

@@ -3,14 +3,23 @@ and stop, the watchdog, NACKs and missing ESCs, the motor test; and the virtual 
 """
 import dataclasses
 
+from diagnostic_msgs.msg import KeyValue
 import numpy as np
 import pytest
+from sensor_msgs.msg import JointState
 
-from geoctl_ros.core.actuation.esc_wire import EscHealth, esc_report, esc_report_of
+from geoctl_ros.core.actuation.esc_wire import ArmedState, EscHealth, esc_report, esc_report_of
 from geoctl_ros.esc import health, protocol
 from geoctl_ros.esc.bus import RecordingBus
 from geoctl_ros.esc.driver import EscDriver, EscStartError
 from geoctl_ros.esc.virtual import VirtualEscBus
+from geoctl_ros.nodes.conversions import (
+    armed_state_msg,
+    armed_state_of,
+    commands_of,
+    motor_commands_msg,
+    session_of,
+)
 from geoctl_ros.params.esc import EscConfig
 
 pytestmark = pytest.mark.odroid
@@ -291,3 +300,33 @@ def test_the_diagnostics_say_what_is_wrong_with_which_esc():
     assert r.level == protocol.WARN and r.figures.refused == 1
     assert r.message.startswith('motor_commands refused: expected 6 finite values')
     assert r.figures.output.startswith('refused: expected 6 finite values')
+
+
+def test_the_armed_state_and_the_commands_session_travel_in_typed_fields_and_garbage_is_none():
+    """~/armed is a DiagnosticStatus with the key-values armed and session; a motor command is a
+    JointState with the session in its header's frame_id. What is not exactly that (a plain
+    publisher's command, a session out of 32 bits, digits that are not ASCII, a third key) reads
+    as no session, or no armed state, never as an exception.
+    """
+    for state in (ArmedState(True, 1), ArmedState(False, 2 ** 32 - 1), ArmedState(True, SESSION)):
+        assert armed_state_of(armed_state_msg(state)) == state
+    msg = armed_state_msg(ArmedState(True, SESSION))
+    for values in ([('armed', 'true')], [('armed', 'yes'), ('session', '5')],
+                   [('armed', 'true'), ('session', '0')],
+                   [('armed', 'true'), ('session', '4294967296')],
+                   [('armed', 'true'), ('session', '\u00b2')],
+                   [('armed', 'true'), ('session', '-5')],
+                   [('armed', 'true'), ('session', '5'), ('other', '1')]):
+        msg.values = [KeyValue(key=k, value=v) for k, v in values]
+        assert armed_state_of(msg) is None, values
+    cmd = motor_commands_msg(SESSION, 6)
+    cmd.effort = HOVER
+    assert session_of(cmd) == SESSION and list(commands_of(cmd)) == HOVER
+    assert list(cmd.name) == ['rotor %d' % i for i in range(1, 7)]
+    for frame_id in ('', '0', ' 77', '\u00b2', '4294967296', '99999999999', 'session 77'):
+        cmd.header.frame_id = frame_id
+        assert session_of(cmd) == 0, frame_id
+    assert session_of(JointState(effort=HOVER)) == 0           # a hand-typed command
+    # and the driver takes a session-0 command for none of its controller's
+    d, bus, clock = driver()
+    assert 'not from the controller' in d.offer(HOVER, session=session_of(JointState()))

@@ -5,6 +5,7 @@ monitor node).
 import math
 import time
 
+from diagnostic_msgs.msg import DiagnosticStatus
 from node_support import (
     FED,
     LEVEL_YAW90,
@@ -19,13 +20,19 @@ import numpy as np
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
 
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.telemetry.diagnostics import ERROR, WARN
-from geoctl_ros.nodes import commands
+from geoctl_ros.nodes import commands, qos
 from geoctl_ros.nodes.controller import ControllerNode
-from geoctl_ros.nodes.conversions import refusal_reason
+from geoctl_ros.nodes.conversions import (
+    armed_state_of,
+    refusal_reason,
+    session_of,
+    stamp_seconds,
+)
 
 pytestmark = pytest.mark.dds
 
@@ -55,6 +62,16 @@ def test_arming_needs_fresh_inputs_and_disarming_zeroes_the_motors(ros):
     # about hover (118/240): a condition, since this process's feeder can stall beside the other
     # DDS tests, and the commands move while the controller rides its gap through
     mon.wait_for(lambda: all(0.3 < c < 0.7 for c in mon.last('motors')), 5.0, 'about hover')
+    # each command as a receiver sees it: its rotors by name, when it was made, and the session
+    # the controller's armed state names (what esc_i2c follows)
+    sent, armed = [], []
+    mon.create_subscription(JointState, 'motor_commands', sent.append, qos.COMMAND)
+    mon.create_subscription(DiagnosticStatus, '/controller/armed', armed.append, qos.LATCHED)
+    mon.wait_for(lambda: sent and armed, 5.0, 'a command and the armed state')
+    state, msg = armed_state_of(armed[-1]), sent[-1]
+    assert state.armed and session_of(msg) == state.session != 0
+    assert list(msg.name) == ['rotor %d' % i for i in range(1, 7)] and len(msg.effort) == 6
+    assert abs(stamp_seconds(msg.header.stamp) - time.time()) < 2.0
     # the arming holds the attitude fed (arming_setpoint hold); a set point 90 deg from it, sent
     # as the setpoint command sends it, is taken armed
     assert mon.set_parameter('setpoint', [0.0, 0.0, 0.0, 1.0]).successful

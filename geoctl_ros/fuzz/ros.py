@@ -169,10 +169,14 @@ EVENTS = st.lists(st.one_of(
     st.tuples(st.just('attitude_setpoint'), stamps(), QUATERNIONS),
     st.tuples(st.just('imu'), stamps(), st.tuples(VECTORS, VECTORS, st.booleans())),
     st.tuples(st.just('control_wrench'), stamps(), VECTORS),
-    st.tuples(st.sampled_from(('motor_commands', 'cone_margins', 'disturbance_estimate')),
-              st.integers(0, 2 ** 32 - 1), ARRAYS),
+    st.tuples(st.sampled_from(('cone_margins', 'disturbance_estimate')), st.none(), ARRAYS),
+    st.tuples(st.just('motor_commands'), stamps(), st.tuples(     # (the session's text, values)
+        st.one_of(st.integers(0, 2 ** 33).map(str), st.text(max_size=12)), ARRAYS)),
     st.tuples(st.just('configuration_error'), st.none(), hostile_float()),
-    st.tuples(st.just('armed'), st.none(), st.lists(st.integers(0, 2 ** 32 - 1), max_size=4)),
+    st.tuples(st.just('armed'), st.none(), st.lists(st.tuples(   # (key-values)
+        st.sampled_from(('armed', 'session', 'other')),
+        st.one_of(st.sampled_from(('true', 'false', '0', '1', '4294967295', '4294967296', '')),
+                  st.text(max_size=12))), max_size=4)),
     st.tuples(st.just('esc_health'), st.none(), st.lists(st.tuples(
         st.sampled_from(('command_max', 'rotor 1', 'rotor 2', 'rotor 6', 'rotor 7', 'other')),
         st.one_of(st.sampled_from(('OK', 'IGNORED', 'LOST', 'FAULT', '240', '255', '-1', '')),
@@ -197,10 +201,12 @@ def _message(msg_type, topic, stamp, payload):
         set_vector(msg.wrench.torque, payload)
     elif topic == 'configuration_error':
         msg.data = payload
-    elif topic in ('motor_commands', 'cone_margins', 'disturbance_estimate'):
+    elif topic in ('cone_margins', 'disturbance_estimate'):
         msg.data = [float(x) for x in payload]
-        msg.layout.data_offset = stamp          # (the session number of motor_commands)
-    elif topic == 'esc_health':             # (key-values, as a DiagnosticStatus's)
+    elif topic == 'motor_commands':         # (a JointState: the session in its header)
+        msg.header.frame_id = payload[0]
+        msg.effort = [float(x) for x in payload[1]]
+    elif topic in ('esc_health', 'armed'):  # (key-values, as a DiagnosticStatus's)
         msg.values = [KeyValue(key=k, value=v) for k, v in payload]
     else:
         msg.data = list(payload)
@@ -220,7 +226,7 @@ def fuzz_messages(examples, seed):
             for msg_type, callback in subs[topic]:
                 callback(_message(msg_type, topic, stamp, payload))
         ctl._tick(ctl._now())
-        motors = ctl.motors_msg.data
+        motors = ctl.motors_msg.effort
         if not all(x == 0.0 for x in motors):
             raise AssertionError('disarmed, yet motor commands %r' % (list(motors),))
         torque = ctl.telemetry.wrench.wrench.torque

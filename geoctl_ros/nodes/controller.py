@@ -16,8 +16,7 @@ from geometry_msgs.msg import PoseStamped, QuaternionStamped
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from sensor_msgs.msg import Imu
-from std_msgs.msg import Float64MultiArray, UInt32MultiArray
+from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import SetBool, Trigger
 
 from geoctl_ros.core.actuation.esc_wire import ArmedState
@@ -36,6 +35,7 @@ from geoctl_ros.nodes.conversions import (
     armed_state_msg,
     esc_health_of,
     motor_commands_msg,
+    set_stamp,
     stamp_seconds,
     status_msg,
 )
@@ -109,17 +109,17 @@ class ControllerNode(Node):
                                  qos.EVENT)
         self.create_subscription(DiagnosticStatus, 'esc_health', self._on_esc_health,
                                  qos.COMMAND)
-        self.pub_motors = self.create_publisher(Float64MultiArray, 'motor_commands', qos.COMMAND)
+        self.pub_motors = self.create_publisher(JointState, 'motor_commands', qos.COMMAND)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', qos.EVENT)
         # the armed state and session the ESC node follows (core.actuation.esc_wire.ArmedState)
         self.session = new_session()
-        self.pub_armed = self.create_publisher(UInt32MultiArray, '~/armed', qos.LATCHED)
+        self.pub_armed = self.create_publisher(DiagnosticStatus, '~/armed', qos.LATCHED)
         self._armed_sent = None
         self.create_service(SetBool, '~/arm', self._on_arm)
         self.create_service(Trigger, '~/reset_adaptation', self._on_reset)
         self.create_service(Trigger, '~/hold', self._on_hold)
 
-        self.motors_msg = motor_commands_msg(self.session)
+        self.motors_msg = motor_commands_msg(self.session, self.loop.rotor_count)
         self.telemetry = Telemetry(self, self.frame_id, self.world_frame_id)
         self._last_tick = None
         self._period_stats = WindowStats()
@@ -147,8 +147,9 @@ class ControllerNode(Node):
         self._publish_zero()
 
     def _publish_zero(self):
-        msg = motor_commands_msg(self.session)
-        msg.data = [0.0] * self.loop.rotor_count
+        msg = motor_commands_msg(self.session, self.loop.rotor_count)
+        msg.effort = [0.0] * self.loop.rotor_count
+        set_stamp(msg.header.stamp, self._ros_seconds())
         self.pub_motors.publish(msg)
         self._publish_armed(False)
 
@@ -233,14 +234,19 @@ class ControllerNode(Node):
             self._tick(now)
 
     def _stamp_delay(self, stamp):
-        """How old a header stamp is by this computer's ROS clock (the system clock, or /clock
-        with use_sim_time): the capture-to-receipt delay, if the stamping clock is in sync.
-        (Without sim time the ROS clock is the system clock, CLOCK_REALTIME: read directly, at a
-        fraction of rclpy's cost, on every sample.)
+        """How old a header stamp is by this computer's ROS clock: the capture-to-receipt
+        delay, if the stamping clock is in sync.
+        """
+        return self._ros_seconds() - stamp
+
+    def _ros_seconds(self):
+        """The ROS clock (the system clock, or /clock with use_sim_time), in seconds: what
+        stamps are on. (Without sim time it is the system clock, CLOCK_REALTIME: read directly,
+        at a fraction of rclpy's cost, for every sample and command.)
         """
         if self._sim_time:
-            return self.get_clock().now().nanoseconds * 1e-9 - stamp
-        return time.time() - stamp
+            return self.get_clock().now().nanoseconds * 1e-9
+        return time.time()
 
     def _on_imu(self, msg):
         now = self._now()
@@ -341,7 +347,11 @@ class ControllerNode(Node):
             self._failed_step(e)
             return
         msg = self.motors_msg
-        msg.data = tick.motors.normalised.tolist()
+        msg.effort = commands = tick.motors.normalised.tolist()
+        if len(commands) != len(msg.name):       # (an airframe of another rotor count since)
+            self.motors_msg = msg = motor_commands_msg(self.session, len(commands))
+            msg.effort = commands
+        set_stamp(msg.header.stamp, self._ros_seconds())
         if tick.armed and self._armed_sent is not True:
             self._publish_armed(True)            # the ESC node's gate opens before the command
         self.pub_motors.publish(msg)

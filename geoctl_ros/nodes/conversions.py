@@ -3,32 +3,45 @@ import array
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-from std_msgs.msg import (
-    Float64MultiArray,
-    MultiArrayDimension,
-    UInt32MultiArray,
-)
+from sensor_msgs.msg import JointState
 
-from geoctl_ros.core.actuation.esc_wire import ArmedState, esc_report, esc_report_of
+from geoctl_ros.core.actuation.esc_wire import (
+    ROTOR_KEY,
+    ArmedState,
+    esc_report,
+    esc_report_of,
+)
 from geoctl_ros.core.telemetry.diagnostics import Status, from_values, to_values
 from geoctl_ros.mavlink.health import Report as BridgeReport
 from geoctl_ros.mavlink.health import from_values as bridge_values
 
-ARMED_LABELS = ('armed', 'session')
+ARMED_NAME = 'geoctl_ros: armed'
+SESSION_MAX = 2 ** 32 - 1
 
 
 def armed_state_msg(state):
-    """ArmedState -> the controller's ``~/armed`` message (UInt32MultiArray [armed, session])."""
-    msg = UInt32MultiArray(data=[int(state.armed), state.session])
-    msg.layout.dim = [MultiArrayDimension(label=' '.join(ARMED_LABELS), size=2, stride=2)]
-    return msg
+    """ArmedState -> the controller's ``~/armed`` message: a diagnostic_msgs/DiagnosticStatus
+    (level OK, message 'armed' or 'disarmed') with the key-values ``armed`` ('true' or 'false')
+    and ``session`` (the session number, decimal).
+    """
+    armed = 'true' if state.armed else 'false'
+    return DiagnosticStatus(level=DiagnosticStatus.OK, name=ARMED_NAME,
+                            message='armed' if state.armed else 'disarmed',
+                            values=[KeyValue(key='armed', value=armed),
+                                    KeyValue(key='session', value=str(int(state.session)))])
 
 
 def armed_state_of(msg):
-    """The ``~/armed`` message -> ArmedState, or None if it is not one."""
-    if len(msg.data) != 2 or msg.data[0] not in (0, 1):
+    """The ``~/armed`` message -> ArmedState, or None if it is not one (its key-values are not
+    exactly ``armed`` true or false and ``session`` a number of 1 to 2^32 - 1).
+    """
+    pairs = {kv.key: kv.value for kv in msg.values}
+    if set(pairs) != {'armed', 'session'} or pairs['armed'] not in ('true', 'false'):
         return None
-    return ArmedState(bool(msg.data[0]), int(msg.data[1]))
+    session = pairs['session']
+    if not _decimal(session) or not 0 < int(session) <= SESSION_MAX:
+        return None
+    return ArmedState(pairs['armed'] == 'true', int(session))
 
 
 ESC_HEALTH_NAME = 'geoctl_ros: esc_health'
@@ -50,18 +63,41 @@ def esc_health_of(msg):
     return esc_report_of((kv.key, kv.value) for kv in msg.values)
 
 
-def motor_commands_msg(session):
-    """An empty motor_commands message of the controller of session: the session number in its
-    ``layout.data_offset`` (receivers that do not check it, as ``ros2 topic echo``, ignore it).
+def motor_commands_msg(session, rotors):
+    """An empty motor_commands message of the controller of session for its rotors (a count): a
+    sensor_msgs/JointState whose ``name`` is rotor 1 ... rotor n, whose ``effort`` is to hold
+    each rotor's normalised command in [0, 1] (command / ``motor.command_max``: not a force),
+    and whose header carries the session number (decimal) as its ``frame_id`` and the time the
+    command was made as its ``stamp`` (set at each publish).
     """
-    msg = Float64MultiArray()
-    msg.layout.data_offset = session
+    msg = JointState(name=[ROTOR_KEY % (i + 1) for i in range(int(rotors))])
+    msg.header.frame_id = str(int(session))
     return msg
 
 
+def commands_of(msg):
+    """The normalised commands a motor_commands message holds, in rotor order."""
+    return msg.effort
+
+
 def session_of(msg):
-    """The session number a motor_commands message carries (0: none)."""
-    return int(msg.layout.data_offset)
+    """The session number a motor_commands message carries (0: none, or not a number)."""
+    text = msg.header.frame_id
+    if not _decimal(text):
+        return 0
+    session = int(text)
+    return session if session <= SESSION_MAX else 0
+
+
+def _decimal(text):
+    """Whether text is a whole number of 1 to 10 ASCII digits (a session number's form)."""
+    return 0 < len(text) <= 10 and text.isascii() and text.isdigit()
+
+
+def set_stamp(stamp, seconds):
+    """A builtin_interfaces/Time set in place to float seconds (a published message's, reused)."""
+    sec = int(seconds // 1)
+    stamp.sec, stamp.nanosec = sec, min(int(round((seconds - sec) * 1e9)), 999999999)
 
 
 def stamp_seconds(stamp):
@@ -71,8 +107,9 @@ def stamp_seconds(stamp):
 
 def time_msg(seconds):
     """float seconds -> builtin_interfaces/Time."""
-    sec = int(seconds // 1)
-    return Time(sec=sec, nanosec=min(int(round((seconds - sec) * 1e9)), 999999999))
+    stamp = Time()
+    set_stamp(stamp, seconds)
+    return stamp
 
 
 def set_quaternion(msg, q):

@@ -20,11 +20,8 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
-from std_msgs.msg import (
-    Float64MultiArray,
-    MultiArrayDimension,
-    UInt32MultiArray,
-)
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
 from geoctl_ros.core.telemetry.scheduling import scheduling
@@ -33,7 +30,12 @@ from geoctl_ros.esc.bus import I2cBus
 from geoctl_ros.esc.driver import EscDriver, EscStartError
 from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.nodes import qos, ros_params
-from geoctl_ros.nodes.conversions import armed_state_of, esc_health_msg, session_of
+from geoctl_ros.nodes.conversions import (
+    armed_state_of,
+    commands_of,
+    esc_health_msg,
+    session_of,
+)
 from geoctl_ros.nodes.runtime import RefusalLog, spin
 from geoctl_ros.params import ESC, ESC_LIVE, ConfigError, change_problem, resolve
 from geoctl_ros.params.esc import esc_setup
@@ -67,9 +69,9 @@ class EscNode(Node):
         self.scheduling = scheduling()      # (the realtime prefix's class: read once)
         self._stop = threading.Event()
         self._wake = threading.Event()
-        self.create_subscription(Float64MultiArray, 'motor_commands', self._on_commands,
+        self.create_subscription(JointState, 'motor_commands', self._on_commands,
                                  qos.COMMAND)
-        self.create_subscription(UInt32MultiArray, '%s/armed' % setup.controller,
+        self.create_subscription(DiagnosticStatus, '%s/armed' % setup.controller,
                                  self._on_armed, qos.LATCHED)
         self.pub_telemetry = self.create_publisher(Float64MultiArray, 'esc/telemetry',
                                                    qos.TELEMETRY)
@@ -120,7 +122,7 @@ class EscNode(Node):
     # --- callbacks ---------------------------------------------------------------------------
     def _on_commands(self, msg):
         foreign = self.driver.foreign
-        problem = self.driver.offer(msg.data, session=session_of(msg))
+        problem = self.driver.offer(commands_of(msg), session=session_of(msg))
         self._wake.set()
         if problem and self.driver.foreign > foreign:
             self.refusals.warn("motor_commands refused (the controller's stay in force): ",
@@ -131,7 +133,8 @@ class EscNode(Node):
     def _on_armed(self, msg):
         state = armed_state_of(msg)
         if state is None:
-            self.refusals.warn('armed state refused: ', 'not [armed, session]')
+            self.refusals.warn('armed state refused: ',
+                               'not the key-values armed (true or false) and session')
             return
         if state.armed and not self.driver.armed and self.driver.abort_test():
             self.get_logger().warning('motor test ended: the controller armed')

@@ -19,6 +19,7 @@ from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
@@ -41,7 +42,7 @@ from geoctl_ros.mavlink.params import TABLE
 from geoctl_ros.mavlink.vehicle import Vehicle
 from geoctl_ros.nodes import qos, ros_params
 from geoctl_ros.nodes.autopilot_imu import AutopilotImu
-from geoctl_ros.nodes.conversions import python_value, status_of
+from geoctl_ros.nodes.conversions import commands_of, python_value, status_of
 from geoctl_ros.nodes.mavlink_calls import (
     UNSIGNED_WARNING,
     ControllerCalls,
@@ -114,7 +115,7 @@ class MavlinkBridge(ControllerCalls, GroundStationReports, Node):
                 (QuaternionStamped, 'active_setpoint',
                  lambda m: view.take_attitude(quaternion(m.quaternion), setpoint=True),
                  qos.LATCHED),
-                (Float64MultiArray, 'motor_commands', lambda m: view.take_commands(m.data),
+                (JointState, 'motor_commands', lambda m: view.take_commands(commands_of(m)),
                  qos.COMMAND),
                 (Float64, 'configuration_error', lambda m: view.take_psi(m.data), qos.TELEMETRY),
                 (Float64MultiArray, 'cone_margins', lambda m: view.take_array('margins', m.data),

@@ -27,15 +27,14 @@ from geometry_msgs.msg import PoseStamped, WrenchStamped
 import numpy as np
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
-from sensor_msgs.msg import Imu
-from std_msgs.msg import Float64MultiArray
+from sensor_msgs.msg import Imu, JointState
 
 from geoctl_ros.core.actuation.esc_wire import motor_commands_problem
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.esc.protocol import current_raw, decode
 from geoctl_ros.esc.virtual import VirtualEscBus
 from geoctl_ros.nodes import qos, ros_params
-from geoctl_ros.nodes.conversions import set_quaternion, set_vector, time_msg
+from geoctl_ros.nodes.conversions import commands_of, set_quaternion, set_vector, time_msg
 from geoctl_ros.nodes.runtime import RefusalLog, spin
 from geoctl_ros.params import SIM, ConfigError, settings
 from geoctl_ros.params.build import emulated_imu
@@ -91,7 +90,7 @@ class SimNode(Node):
             self.esc_bus.power(True)
             self._bus_writes = -1.0
         elif self.n_rotors:
-            self.create_subscription(Float64MultiArray, 'motor_commands', self._on_commands,
+            self.create_subscription(JointState, 'motor_commands', self._on_commands,
                                      qos.COMMAND)
         else:                          # ideal actuation: the controller's moment itself
             self.create_subscription(WrenchStamped, 'control_wrench', self._on_wrench,
@@ -114,11 +113,12 @@ class SimNode(Node):
                                                          self.rtf))
 
     def _on_commands(self, msg):
-        problem = motor_commands_problem(msg.data, self.n_rotors)
+        values = commands_of(msg)
+        problem = motor_commands_problem(values, self.n_rotors)
         if problem:
             self.refusals.warn('motor_commands refused: ', problem)
             return
-        data = np.asarray(msg.data, dtype=float)
+        data = np.asarray(values, dtype=float)
         self.commands = np.rint(data * self.command_max)
         self.esc.received(time.monotonic())
         self.ever_commanded = True

@@ -25,7 +25,7 @@ TOPICS = (
     Topic('/imu', 'sensor_msgs/msg/Imu', False, depth=5),
     Topic('/attitude', 'geometry_msgs/msg/QuaternionStamped', False),
     Topic('/body_rate', 'geometry_msgs/msg/Vector3Stamped', False),
-    Topic('/motor_commands', 'std_msgs/msg/Float64MultiArray', True),
+    Topic('/motor_commands', 'sensor_msgs/msg/JointState', True),
     Topic('/control_wrench', 'geometry_msgs/msg/WrenchStamped', True),
     Topic('/attitude_error', 'geometry_msgs/msg/Vector3Stamped', False),
     Topic('/angular_velocity_error', 'geometry_msgs/msg/Vector3Stamped', False),

@@ -54,6 +54,13 @@ class Flight(NamedTuple):
     setpoints: list                # (t, quaternion) of active_setpoint, as the controller flew
 
 
+def _commands(m):
+    """A motor_commands message's normalised commands: a JointState's effort (in a record of
+    an earlier version, a Float64MultiArray's data).
+    """
+    return list(m.effort) if hasattr(m, 'effort') else list(m.data)
+
+
 def _series(msgs, t0, value):
     if not msgs:
         return np.zeros(0), np.zeros((0,))
@@ -113,7 +120,7 @@ def load_flight(path, params_file=None):
         e_R=_series(topics.get('/attitude_error', []), t0, vec3),
         e_Omega=_series(topics.get('/angular_velocity_error', []), t0, vec3),
         delta_bar=_series(topics.get('/disturbance_estimate', []), t0, lambda m: list(m.data)),
-        motors=_series(topics.get('/motor_commands', []), t0, lambda m: list(m.data)),
+        motors=_series(topics.get('/motor_commands', []), t0, _commands),
         diag_t=np.array([t for t, *_ in figures]),
         armed=np.array([float(f.armed) for *_, f in figures]),
         pose_age_ms=np.array([1e3 * f.pose_age if math.isfinite(f.pose_age) else np.nan

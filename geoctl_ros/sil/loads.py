@@ -19,8 +19,8 @@ import time
 from geometry_msgs.msg import PoseStamped
 import numpy as np
 import rclpy
-from sensor_msgs.msg import Imu
-from std_msgs.msg import Float64MultiArray, String
+from sensor_msgs.msg import Imu, JointState
+from std_msgs.msg import String
 
 from geoctl_ros.nodes.qos import COMMAND, EVENT, SENSOR
 from geoctl_ros.nodes.runtime import make_executor
@@ -165,7 +165,7 @@ def listen_main(path):
     rclpy.init()
     node = rclpy.create_node('soak_command_listener')
     stamps = []
-    node.create_subscription(Float64MultiArray, 'motor_commands',
+    node.create_subscription(JointState, 'motor_commands',
                              lambda m: stamps.append(time.monotonic()),
                              COMMAND)
     stop = []

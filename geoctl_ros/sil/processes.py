@@ -21,6 +21,7 @@ import rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
@@ -29,6 +30,7 @@ from geoctl_ros.mavlink.health import NAME as BRIDGE_STATUS
 from geoctl_ros.nodes import qos
 from geoctl_ros.nodes.conversions import (
     bridge_report,
+    commands_of,
     key_values,
     stamp_seconds,
     status_of,
@@ -117,8 +119,8 @@ class Monitor(Node):
         # the monitoring topics as they are published (best effort), with room for what arrives
         # while this process is busy: at depth 1 a stall kept only the newest, a series with holes
         tel = QoSProfile(depth=RECORD_DEPTH, reliability=ReliabilityPolicy.BEST_EFFORT)
-        self._sub(Float64MultiArray, 'motor_commands', 'motors', qos.COMMAND,
-                  lambda m: list(m.data))
+        self._sub(JointState, 'motor_commands', 'motors', qos.COMMAND,
+                  lambda m: list(commands_of(m)))
         self._sub(Float64MultiArray, 'cone_margins', 'margins', tel, lambda m: list(m.data))
         self._sub(Float64, 'configuration_error', 'psi', tel, lambda m: m.data)
         self._sub(Float64MultiArray, 'disturbance_estimate', 'dbar', tel, lambda m: list(m.data))

@@ -17,7 +17,7 @@ from geoctl_ros.core.geometry.so3 import Vector
 class ArmedState(NamedTuple):
     """What the controller tells the nodes that drive its motors (esc_i2c): whether it is armed,
     and its session number, the random nonzero 32-bit number it drew at start and stamps on each
-    of its motor_commands (their ``layout.data_offset``), so commands from anything else (a
+    of its motor_commands (their header's ``frame_id``), so commands from anything else (a
     second publisher, a recorded flight played back) are told apart and refused.
     """
 
