@@ -8,6 +8,7 @@ import re
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 from tools_support import NO_EXTRA
 
@@ -295,18 +296,38 @@ for name in sorted(os.listdir(sys.argv[1])):
 """
 
 
-def test_every_scenario_flies_to_the_same_bits_under_another_blas_kernel():
+def test_numpy_here_computes_exp_arccos_and_arctan2_as_the_c_library_does():
+    """This process (as every process of the package: geoctl_ros/__init__.py) has numpy compute
+    exp, arccos and arctan2 on arrays to the bits of the C library's, which is what numpy does on
+    a CPU without AVX-512 (with its AVX-512 kernels, some hundred of these 2,000 values differ).
+    """
+    rng = np.random.default_rng(3)
+    x, y = rng.uniform(-1.0, 1.0, 2000), rng.uniform(-5.0, 5.0, 2000)
+    assert np.array_equal(np.exp(y), [math.exp(v) for v in y])
+    assert np.array_equal(np.arccos(x), [math.acos(v) for v in x])
+    assert np.array_equal(np.arctan2(x, y), [math.atan2(a, b) for a, b in zip(x, y)])
+
+
+def test_every_scenario_flies_to_the_same_bits_under_another_blas_kernel_and_simd_target():
     """Every shipped scenario's first 1.5 s (its whole history: attitude, rates, moments, the
     estimate, the rotors) has the same sha256 with OpenBLAS's Prescott kernel (the oldest x86
     one) as with the kernel this CPU picks: nothing on the path goes through BLAS, whose kernels
-    round by the CPU (docs/scenarios.md's figures hold on any CPU).
+    round by the CPU. And the same with every one of numpy's own CPU-specific targets turned
+    off (as on the oldest CPU numpy runs on) as with those the package leaves on: numpy's AVX-512
+    kernels of exp, arccos, arctan2 and the like round otherwise than the C library's functions,
+    and the package keeps numpy off them (geoctl_ros/__init__.py). So docs/scenarios.md's figures
+    hold on any CPU, and on both stacks.
     """
-    def hashes(kernel):
+    def hashes(kernel, numpy_targets=None):
         env = {k: v for k, v in os.environ.items() if k != 'OPENBLAS_CORETYPE'}
         env.update({'OPENBLAS_CORETYPE': kernel} if kernel else {})
+        if numpy_targets is not None:
+            env['NPY_DISABLE_CPU_FEATURES'] = numpy_targets
         out = subprocess.run([sys.executable, '-c', _HASHES, SCENARIOS], capture_output=True,
                              text=True, env=env, check=True).stdout
         return dict(line.split() for line in out.splitlines())
     prescott = hashes('Prescott')
     assert len(prescott) == len(os.listdir(SCENARIOS))
     assert hashes(None) == prescott
+    umath = getattr(np, '_core', None) or np.core        # (numpy 2, numpy 1.26)
+    assert hashes(None, ' '.join(umath._multiarray_umath.__cpu_dispatch__)) == prescott
