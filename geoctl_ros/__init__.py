@@ -19,22 +19,57 @@ _AVX512_TARGETS = {(2, 4): 'X86_V4 AVX512_ICL AVX512_SPR',
                            'AVX512_CNL AVX512_ICL'}
 
 
-def _numpy_as_on_every_cpu():
-    """Set NPY_DISABLE_CPU_FEATURES to numpy's AVX-512 targets, before numpy is imported, on
-    x86-64 (elsewhere numpy has no such kernels to leave out).
+def avx512_targets():
+    """numpy's names of its AVX-512 targets for the numpy installed here, on x86-64 (what
+    NPY_DISABLE_CPU_FEATURES takes), else None (another CPU: numpy has no such kernels).
+    Found without importing numpy.
     """
-    if 'numpy' in _sys.modules or 'NPY_DISABLE_CPU_FEATURES' in _os.environ:
-        return
     import platform  # noqa: PLC0415  (only here: at the package's import)
     if platform.machine().lower() not in ('x86_64', 'amd64'):
-        return
+        return None
     from importlib import metadata  # noqa: PLC0415
     try:
         version = tuple(int(part) for part in metadata.version('numpy').split('.')[:2])
     except (metadata.PackageNotFoundError, ValueError):
+        return None
+    return next(names for since, names in _AVX512_TARGETS.items() if version >= since)
+
+
+def _numpy_as_on_every_cpu():
+    """Set NPY_DISABLE_CPU_FEATURES to numpy's AVX-512 targets before numpy is imported."""
+    if 'numpy' in _sys.modules or 'NPY_DISABLE_CPU_FEATURES' in _os.environ:
         return
-    _os.environ['NPY_DISABLE_CPU_FEATURES'] = next(
-        names for since, names in _AVX512_TARGETS.items() if version >= since)
+    targets = avx512_targets()
+    if targets:
+        _os.environ['NPY_DISABLE_CPU_FEATURES'] = targets
 
 
 _numpy_as_on_every_cpu()
+
+
+class RoundingError(RuntimeError):
+    """A process (a cluster's worker) whose numpy does not round as the package's processes do
+    (``numpy_rounding_problem``): what it flew would not be what it flies elsewhere.
+    """
+
+
+def numpy_rounding_problem():
+    """Why numpy in this process does not round as the package's processes do (a sentence), or
+    None: exp, arccos and arctan2 on arrays must give the C library's bits, as they do with the
+    setting above and on every CPU without AVX-512. A process that imported numpy before this
+    package (a ``dask worker`` started plainly) runs numpy's AVX-512 kernels where the CPU has
+    them: its flights' bits are another CPU's.
+    """
+    import math  # noqa: PLC0415
+
+    import numpy as np  # noqa: PLC0415
+    x = np.linspace(-0.999, 0.999, 257)
+    y = 5.0 * x[::-1]
+    if (np.array_equal(np.exp(y), [math.exp(v) for v in y])
+            and np.array_equal(np.arccos(x), [math.acos(v) for v in x])
+            and np.array_equal(np.arctan2(x, y), [math.atan2(a, b) for a, b in zip(x, y)])):
+        return None
+    return ("numpy in this process rounds exp, arccos or arctan2 otherwise than the C library "
+            "(its AVX-512 kernels: numpy was imported before geoctl_ros), so its flights would "
+            "not give the bits they give elsewhere: start it with NPY_DISABLE_CPU_FEATURES='%s' "
+            "in its environment (docs/campaigns.md)" % (avx512_targets() or ''))

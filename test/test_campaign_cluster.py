@@ -107,6 +107,38 @@ def test_a_worker_killed_mid_campaign_loses_no_run_and_doubles_none(reference, t
     assert (out / 'runs.csv').read_bytes() == reference.read_bytes()
 
 
+def test_a_worker_whose_numpy_rounds_otherwise_is_refused_naming_the_fix(tmp_path, capsys):
+    """A `dask worker` started plainly imports numpy before the package, so on a CPU with
+    AVX-512 its numpy runs the kernels the package keeps it off (geoctl_ros/__init__.py), and
+    its runs would not be what they are elsewhere: the campaign refuses the cluster, naming the
+    worker and the environment to start it with, and flies nothing. (Where the CPU has no such
+    kernels there is nothing to refuse.)
+    """
+    plain = {k: v for k, v in os.environ.items() if k != 'NPY_DISABLE_CPU_FEATURES'}
+    probe = subprocess.run([sys.executable, '-c', 'import numpy, geoctl_ros; '
+                            'print(geoctl_ros.numpy_rounding_problem() or "")'],
+                           env=plain, capture_output=True, text=True, check=True).stdout
+    if not probe.strip():
+        pytest.skip('numpy has no kernels here that round otherwise than the C library')
+    with LocalCluster(n_workers=0, host='127.0.0.1', dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        worker = subprocess.Popen(
+            [sys.executable, '-m', 'distributed.cli.dask_worker', cluster.scheduler_address,
+             '--nworkers', '1', '--nthreads', '1', '--host', '127.0.0.1', '--no-dashboard'],
+            env=plain, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            client.wait_for_workers(1, timeout=60)
+            code = campaign.main(['--scheduler', cluster.scheduler_address, '--runs', '2',
+                                  '--duration', '1', '--out', str(tmp_path / 'refused')])
+        finally:
+            worker.terminate()
+            worker.wait(30)
+    err = capsys.readouterr().err
+    assert code == 2 and 'campaign: refused: worker tcp://127.0.0.1:' in err, err
+    assert "start it with NPY_DISABLE_CPU_FEATURES='" in err
+    assert not (tmp_path / 'refused' / 'runs.csv').exists()
+
+
 def test_ctrl_c_writes_the_runs_flown_so_far(dask_scheduler, tmp_path):
     out = tmp_path / 'interrupted'
     proc = subprocess.Popen([sys.executable, '-m', 'geoctl_ros.cli.campaign', '--runs', '60',

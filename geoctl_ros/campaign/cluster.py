@@ -4,7 +4,9 @@
 process per core, one thread each, scheduler and workers on 127.0.0.1 only, no dashboard unless
 asked), or on an existing scheduler (``tcp://HOST:PORT``: ``dask scheduler`` and ``dask worker``
 on the lab's machines, or dask-jobqueue on SLURM; docs/campaigns.md, "Campaigns on a cluster").
-The same code path serves both.
+The same code path serves both. A worker whose numpy does not round as the package's processes
+do (``geoctl_ros.numpy_rounding_problem``) is refused (``RoundingError``), at the start and by
+each task.
 
 ``run_tasks()`` submits the tasks, hands each result over as it arrives (nothing is held but what
 the caller keeps), and reports progress from the workers' own events: a task calls
@@ -21,6 +23,8 @@ import uuid
 
 import dask
 from distributed import Client, LocalCluster, as_completed, get_worker
+
+from geoctl_ros import RoundingError, numpy_rounding_problem
 
 LOOPBACK = '127.0.0.1'
 # Dask's statistical profiler samples the task's stack every 10 ms from the worker's event loop:
@@ -39,6 +43,7 @@ def connect(scheduler=None, workers=None, dashboard=False):
     if scheduler:
         client = Client(scheduler, timeout='20s')
         try:
+            _refuse_foreign_rounding(client)
             yield client, 'scheduler %s (%d workers now)' % (scheduler, worker_count(client))
         finally:
             client.close()
@@ -51,12 +56,33 @@ def connect(scheduler=None, workers=None, dashboard=False):
                                silence_logs=logging.ERROR)
     try:
         with Client(cluster) as client:
+            _refuse_foreign_rounding(client)
             where = 'a local cluster of %d worker processes on %s' % (workers, LOOPBACK)
             if dashboard:
                 where += ', dashboard at %s' % client.dashboard_link
             yield client, where
     finally:
         cluster.close()
+
+
+def _refuse_foreign_rounding(client):
+    """RoundingError naming each worker whose numpy does not round as the package's processes
+    do, with why (``geoctl_ros.numpy_rounding_problem``): its runs would not be theirs.
+    """
+    found = client.run(numpy_rounding_problem)
+    problems = ['worker %s: %s' % (worker, why) for worker, why in sorted(found.items()) if why]
+    if problems:
+        raise RoundingError('; '.join(problems))
+
+
+def _checked(fn, task):
+    """fn(task) on a worker whose numpy rounds as the package's processes do; else
+    RoundingError with why (a worker that joined after ``connect``'s check).
+    """
+    problem = numpy_rounding_problem()
+    if problem:
+        raise RoundingError(problem)
+    return fn(task)
 
 
 def worker_count(client):
@@ -93,7 +119,8 @@ def run_tasks(client, fn, tasks, on_result, progress=None, weights=None):
 
     client.subscribe_topic(PROGRESS_TOPIC, on_event)
     t0 = time.monotonic()
-    futures = [client.submit(fn, task, key=key, pure=False) for task, key in zip(tasks, keys)]
+    futures = [client.submit(_checked, fn, task, key=key, pure=False)
+               for task, key in zip(tasks, keys)]
     done = 0.0
     finished = as_completed(futures, with_results=False)
     shown = 0.0

@@ -1,8 +1,12 @@
-"""What the command-line front ends share: argparse types."""
+"""What the command-line front ends share: argparse types, the cluster's arguments and refusals."""
 import argparse
+import functools
 import math
 import os
 import sys
+from typing import Any, Callable
+
+from geoctl_ros import RoundingError
 
 
 def positive_seconds(text: str) -> float:
@@ -14,6 +18,22 @@ def positive_seconds(text: str) -> float:
     if not (value > 0 and math.isfinite(value)):
         raise argparse.ArgumentTypeError('%r is not a positive number of seconds' % text)
     return value
+
+
+def on_a_cluster(prog: str) -> Callable[[Callable[..., int]], Callable[..., int]]:
+    """A command's main that flies on a cluster: a worker refused for its numpy's rounding
+    (``geoctl_ros.RoundingError``, from ``campaign.cluster``) is said in one line, exit code 2.
+    """
+    def wrap(main: Callable[..., int]) -> Callable[..., int]:
+        @functools.wraps(main)
+        def checked(*args: Any, **kwargs: Any) -> int:
+            try:
+                return main(*args, **kwargs)
+            except RoundingError as e:
+                print('%s: refused: %s' % (prog, e), file=sys.stderr)
+                return 2
+        return checked
+    return wrap
 
 
 def cannot_start(prog: str, error: Exception, path: str) -> int:

@@ -13,12 +13,18 @@ from geoctl_ros.benchmark import cases
 from geoctl_ros.benchmark.run import GAIN_SETS, benchmark, gain_set
 from geoctl_ros.campaign import cluster, runner
 from geoctl_ros.cli import tools
-from geoctl_ros.cli.args import add_cluster_arguments, cannot_start, positive_seconds
+from geoctl_ros.cli.args import (
+    add_cluster_arguments,
+    cannot_start,
+    on_a_cluster,
+    positive_seconds,
+)
 from geoctl_ros.cli.campaign import progress_printer
 from geoctl_ros.params import ConfigError, load_parameter_file
 from geoctl_ros.sil.rosenv import config_dir
 
 
+@on_a_cluster('benchmark')
 def main(argv=None):
     parser = argparse.ArgumentParser(prog='benchmark', description=__doc__.split('\n\n')[0],
                                      epilog=tools.WHERE)

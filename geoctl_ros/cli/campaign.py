@@ -12,7 +12,12 @@ import time
 
 from geoctl_ros.campaign import cluster, manoeuvres, runner, study
 from geoctl_ros.cli import tools
-from geoctl_ros.cli.args import add_cluster_arguments, cannot_start, positive_seconds
+from geoctl_ros.cli.args import (
+    add_cluster_arguments,
+    cannot_start,
+    on_a_cluster,
+    positive_seconds,
+)
 from geoctl_ros.params import ConfigError, load_parameter_file
 from geoctl_ros.sil.rosenv import config_dir
 
@@ -32,6 +37,7 @@ def progress_printer(total, prog='campaign'):
     return report
 
 
+@on_a_cluster('campaign')
 def main(argv=None):
     parser = argparse.ArgumentParser(prog='campaign', description=__doc__.split('\n\n')[0],
                                      epilog=tools.WHERE)

@@ -19,7 +19,12 @@ import time
 
 from geoctl_ros.campaign import cluster, manoeuvres
 from geoctl_ros.cli import tools
-from geoctl_ros.cli.args import add_cluster_arguments, cannot_start, positive_seconds
+from geoctl_ros.cli.args import (
+    add_cluster_arguments,
+    cannot_start,
+    on_a_cluster,
+    positive_seconds,
+)
 from geoctl_ros.falsify.envelope import OUTSIDE, Envelope, Space
 from geoctl_ros.falsify.requirements import REQUIREMENTS
 from geoctl_ros.falsify.search import OPTIMIZERS, Search, search
@@ -89,6 +94,7 @@ def write_evaluations(path, searches, space, names):
                                  + [repr(e.robustness[n]) for n in names]) + '\n')
 
 
+@on_a_cluster('falsify')
 def main(argv=None):
     parser = argparse.ArgumentParser(prog='falsify', description=__doc__.split('\n\n')[0],
                                      epilog=tools.WHERE)

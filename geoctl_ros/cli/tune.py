@@ -24,7 +24,12 @@ import numpy as np
 
 from geoctl_ros.campaign import cluster, study, tune
 from geoctl_ros.cli import tools
-from geoctl_ros.cli.args import add_cluster_arguments, cannot_start, positive_seconds
+from geoctl_ros.cli.args import (
+    add_cluster_arguments,
+    cannot_start,
+    on_a_cluster,
+    positive_seconds,
+)
 from geoctl_ros.params import (
     CONTROLLER,
     ConfigError,
@@ -54,6 +59,7 @@ def _line(number, gains, got):
                ' '.join('%s=%.4g' % kv for kv in gains.items())))
 
 
+@on_a_cluster('tune')
 def main(argv=None):
     parser = argparse.ArgumentParser(prog='tune', description=__doc__.split('\n\n')[0],
                                      epilog=tools.WHERE)
