@@ -19,6 +19,9 @@ monitoring topics after it; p50, p99, max); the campaign's batched closed loop
 input-to-command latency over DDS against a bare relay node (``latency.py``; ``--no-latency``
 skips it).
 """
+import geoctl_ros  # (first: numpy as the package's processes have it, geoctl_ros/__init__.py)
+
+# isort: split
 import gc
 import json
 import os
@@ -35,7 +38,6 @@ import rclpy
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import Imu
 
-import geoctl_ros
 from geoctl_ros.campaign import manoeuvres
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.supervisor.loop import ControlLoop
