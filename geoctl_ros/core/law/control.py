@@ -121,7 +121,7 @@ class AttitudeController:
 
     def reset_adaptation(self) -> None:
         """Zero the disturbance estimate."""
-        self.delta_bar = np.zeros_like(self.delta_bar)
+        self.delta_bar = np.zeros(self.delta_bar.shape)
 
     def reconfigure(self, config: ControllerConfig) -> None:
         """Switch to a new configuration, keeping the estimate when its size still fits.

@@ -17,7 +17,7 @@ not yet learnt). Predicting with a constant rate, or with only the last moment, 
 """
 import bisect
 import math
-from typing import NamedTuple, Optional, Tuple, cast
+from typing import List, NamedTuple, Optional, Tuple, cast
 
 import numpy as np
 
@@ -63,6 +63,9 @@ class CommandHistory:
         self.start = self.end = None
         self._newest = -1                             # the slot of the newest entry
         self.count = 0                                # entries held
+        # one run's moments as floats too, slot by slot (its lookups by components: ``parts_at``)
+        self._end_floats: List[List[float]] = []
+        self._start_floats: List[List[float]] = []
 
     def clear(self) -> None:
         """Forget every command (at arming: the rotors were off, the vehicle on its stops)."""
@@ -72,6 +75,8 @@ class CommandHistory:
         if self.end is not None:
             cast(FloatArray, self.start)[:] = 0.0
             self.end[:] = 0.0
+        self._end_floats = [[0.0] * 3 for _ in self._end_floats]
+        self._start_floats = [[0.0] * 3 for _ in self._start_floats]
 
     @property
     def first(self) -> float:
@@ -85,14 +90,36 @@ class CommandHistory:
             self.end = np.zeros((self.size,) + end.shape)
             self.times[:] = -math.inf
             self._times = self.times.tolist()
+            one = end.size == 3
+            self._end_floats = [[0.0] * 3 for _ in range(self.size)] if one else []
+            self._start_floats = [[0.0] * 3 for _ in range(self.size)] if one else []
         self._newest = w = (self._newest + 1) % self.size
         self.count = min(self.count + 1, self.size)
         self.end[w] = end
         cast(FloatArray, self.start)[w] = end if start is None else start
+        if self._end_floats:
+            self._end_floats[w] = made = end.ravel().tolist()
+            self._start_floats[w] = made if start is None else np.ravel(start).tolist()
         self.times[:-1] = self.times[1:]
         self.times[-1] = t
         del self._times[0]
         self._times.append(float(t))
+
+    def parts_at(self, t: Scalars, one: bool) -> Parts:
+        """``at(t)`` by components (``elementwise.vector_parts``): one run's floats, looked up
+        without arrays (the same operations as ``at``'s), or a batch's arrays.
+        """
+        if not (one and self._end_floats and isinstance(t, float)):
+            return vector_parts(self.at(t), one)
+        k = max(bisect.bisect_right(self._times, t) - 1, 0)
+        slot = (self._newest + 1 + k) % self.size
+        end = self._end_floats[slot]
+        if self.lag <= 0.0:
+            return list(end)
+        start = self._start_floats[slot]
+        decay = float(np.exp(-max(t - self._times[k], 0.0) / self.lag))
+        return [end[0] + decay * (start[0] - end[0]), end[1] + decay * (start[1] - end[1]),
+                end[2] + decay * (start[2] - end[2])]
 
     def at(self, t: Scalars) -> FloatArray:
         """The moment in force at times t (a scalar, or one per run of a batch: (N,))."""
@@ -167,7 +194,7 @@ def observe(observer: Observer, model: Dynamics, R: FloatArray, Omega: FloatArra
     """
     last = observer.last
     if last is None:
-        return Learnt(observer._replace(last=(captured, Omega)), None, None)
+        return Learnt(Observer(observer.acc_error, observer.learnt, (captured, Omega)), None, None)
     one = one_run(R)
     alone = np.ndim(captured) == 0          # one run (the node's tick)
     before, captured_at = last[0], captured
@@ -180,14 +207,14 @@ def observe(observer: Observer, model: Dynamics, R: FloatArray, Omega: FloatArra
                          else captured_at - before)
     usable = (interval > 1e-6) & (interval <= OBSERVE_GAP_MAX_S) & (before >= history.first)
     if not ops.some(usable):
-        return Learnt(observer._replace(last=(captured, Omega)), None, None)
+        return Learnt(Observer(observer.acc_error, observer.learnt, (captured, Omega)), None, None)
     span = ops.where(usable, interval, 1.0)
     taken = (matrix_parts(R, one), vector_parts(Omega, one),
              vector_parts(model.delta_bar, one))
     now_, then = taken[1], vector_parts(last[1], one)
     modelled = model.acceleration_parts(
         taken[0], [0.5 * (now_[i] + then[i]) for i in range(3)],
-        vector_parts(history.at(before + 0.5 * span), one), taken[2])
+        history.parts_at(before + 0.5 * span, one), taken[2])
     error = observer.acc_error
     e = [error] * 3 if isinstance(error, float) else vector_parts(error, one)
     innovation = [modelled[i] - (now_[i] - then[i]) / span - e[i] for i in range(3)]
@@ -259,7 +286,7 @@ def predict(observer: Observer, model: Dynamics, R: FloatArray, Omega: FloatArra
     error = observer.acc_error
     if float(np.max(horizon)) > 0.0:
         # (the moment then, before any clipping)
-        moment_now = vector_parts(history.at(captured), one)
+        moment_now = history.parts_at(captured, one)
         acc0 = model.acceleration_parts(Rp, Wp, moment_now, d)
         Rp, Wp = _integrate(error, model, Rp, Wp, d, one, now - age_R, now - age_Omega,
                             history, now - horizon, horizon, (acc0, moment_now), scalar)
@@ -303,7 +330,7 @@ def _integrate(error: Scalars, model: Dynamics, Rp: Rows, Wp: Parts, d: Parts, o
     for j in range(count):
         h = ops.where(j < pieces, h_run, 0.0)
         mid = start + (j + 0.5) * h_run
-        moment = vector_parts(history.at(mid), one)
+        moment = history.parts_at(mid, one)
         if j == 0 and first is not None:
             # the first piece starts at the measured state, where the acceleration is acc0
             # under moment_now: under another moment it differs by J^-1 times the
