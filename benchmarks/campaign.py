@@ -18,6 +18,10 @@ after, the fixed cost of a campaign, and a 10,000-run campaign of 20 s runs.
 
 Not a test: nothing here passes or fails. Every process stays on 127.0.0.1.
 """
+# (first: numpy as the package's processes have it, where the tree first on PYTHONPATH sets it)
+import geoctl_ros  # noqa: F401
+
+# isort: split
 import argparse
 import os
 import re

@@ -6,7 +6,10 @@ and in the processes it starts: those kernels round otherwise than the C library
 numpy uses on every other CPU (and otherwise in numpy 1.26 than in numpy 2), so a flight would
 give other bits on a CPU with AVX-512 than on one without, and on the vehicle's stack than on the
 development stack (docs/speed.md, "The same bits"). Numpy's other kernels stay as they are (their
-results do not depend on the CPU). A NPY_DISABLE_CPU_FEATURES set beforehand is left as it is.
+results do not depend on the CPU). A NPY_DISABLE_CPU_FEATURES set beforehand is left as it is: an
+empty one leaves numpy as it comes (a numpy built with AVX-512 in its baseline refuses to import
+with them disabled). ``numpy_rounding_problem`` says whether a process rounds otherwise: the
+clusters' workers are checked with it, and ``scenario`` warns.
 """
 import os as _os
 import sys as _sys
@@ -70,6 +73,7 @@ def numpy_rounding_problem():
             and np.array_equal(np.arctan2(x, y), [math.atan2(a, b) for a, b in zip(x, y)])):
         return None
     return ("numpy in this process rounds exp, arccos or arctan2 otherwise than the C library "
-            "(its AVX-512 kernels: numpy was imported before geoctl_ros), so its flights would "
+            "(its AVX-512 kernels: numpy was imported before geoctl_ros, or "
+            "NPY_DISABLE_CPU_FEATURES was set otherwise), so its flights would "
             "not give the bits they give elsewhere: start it with NPY_DISABLE_CPU_FEATURES='%s' "
             "in its environment (docs/campaigns.md)" % (avx512_targets() or ''))

@@ -75,9 +75,10 @@ def _refuse_foreign_rounding(client):
         raise RoundingError('; '.join(problems))
 
 
-def _checked(fn, task):
+def checked(fn, task):
     """fn(task) on a worker whose numpy rounds as the package's processes do; else
-    RoundingError with why (a worker that joined after ``connect``'s check).
+    RoundingError with why (a worker that joined after ``connect``'s check). Every task of the
+    tools goes through it (``run_tasks``, or ``functools.partial(checked, fn)`` to ``map``).
     """
     problem = numpy_rounding_problem()
     if problem:
@@ -119,7 +120,7 @@ def run_tasks(client, fn, tasks, on_result, progress=None, weights=None):
 
     client.subscribe_topic(PROGRESS_TOPIC, on_event)
     t0 = time.monotonic()
-    futures = [client.submit(_checked, fn, task, key=key, pure=False)
+    futures = [client.submit(checked, fn, task, key=key, pure=False)
                for task, key in zip(tasks, keys)]
     done = 0.0
     finished = as_completed(futures, with_results=False)

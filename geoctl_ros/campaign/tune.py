@@ -31,6 +31,7 @@ function of its gains and the campaign seed (``runs.csv`` is the same on any clu
 tuning run again with the same seeds proposes and finds the same gain sets.
 """
 from dataclasses import dataclass, field
+import functools
 import itertools
 import math
 import os
@@ -38,7 +39,7 @@ from typing import Any, Dict, List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 
-from geoctl_ros.campaign import manoeuvres, runner, study
+from geoctl_ros.campaign import cluster, manoeuvres, runner, study
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.law.brake import ApproachBrake
 from geoctl_ros.core.law.gains import learning_gain, learning_time
@@ -260,7 +261,8 @@ def evaluate(client, base, args: TuneArgs, gain_sets, rows=TRIAL_LATENCY_ROWS):
     flown = latency_file(args.latency_path, base)
     jobs = [(study.parameter_file(flown, gains), lat, jit, args.latency_duration)
             for gains in gain_sets for lat, jit in rows]
-    margins = client.gather(client.map(latency_row, jobs, pure=False))
+    margins = client.gather(client.map(functools.partial(cluster.checked, latency_row), jobs,
+                                       pure=False))
     n = len(rows)
     return [figures({c: v[columns['gain_set'] == k + 1] for c, v in columns.items()},
                     args.duration, margins[k * n:(k + 1) * n]) for k in range(len(gain_sets))]

@@ -17,7 +17,7 @@ import argparse
 import os
 import sys
 
-from geoctl_ros import plots
+from geoctl_ros import numpy_rounding_problem, plots
 from geoctl_ros.cli.args import positive_seconds
 from geoctl_ros.core.law.gains import gain_condition
 from geoctl_ros.params import ConfigError, controller_config
@@ -59,6 +59,9 @@ def main(argv=None):
     check = gain_condition(controller_config(scenario.controller))
     if not check.ok:
         print('warning: ' + check.message(), file=sys.stderr)
+    rounding = numpy_rounding_problem()       # (a NPY_DISABLE_CPU_FEATURES set otherwise)
+    if rounding:
+        print('warning: ' + rounding, file=sys.stderr)
     result = run(scenario, args.duration)
     try:
         scenario_files.write(result, args.out,

@@ -14,11 +14,13 @@ cluster, and monitored; each evaluation is recorded in order with its robustness
 requirement, so a search that targets one requirement reports the others too.
 """
 from dataclasses import dataclass, field
+import functools
 import math
 from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
+from geoctl_ros.campaign.cluster import checked
 from geoctl_ros.falsify.envelope import OUTSIDE, Space
 from geoctl_ros.falsify.requirements import COVERED, monitors, series_robustness
 from geoctl_ros.params.scenario import from_sections, tick_jitter
@@ -104,7 +106,8 @@ class Objective:
                 part = members[k:k + BATCH]
                 jobs.append(([sections[i] for i in part], list(self.names)))
                 where.append(part)
-        results = self.client.gather(self.client.map(fly_batch, jobs, pure=False)) if jobs else []
+        results = self.client.gather(self.client.map(
+            functools.partial(checked, fly_batch), jobs, pure=False)) if jobs else []
         got: Dict[int, Evaluation] = {}
         for part, res in zip(where, results):
             for j, i in enumerate(part):
