@@ -284,6 +284,56 @@ def test_several_cones_are_one_qp_and_a_corridor_is_shared_not_given_up():
     assert np.all(polytope.A @ u >= polytope.beta - 1e-9)
 
 
+def test_the_far_cone_shortcut_bounds_the_backup_travel_and_decides_as_the_whole_working():
+    """``braked`` leaves a cone's backup travels out where a bound shows the law's moment keeps
+    it (``_surely_met``). The bound is above the travel worked out whole, on 20,000 random
+    states (receding and approaching, the law pushing in or braking past a_b, with and without a
+    lag); and at 2,000 random attitudes, rates and moments of the testbed near and far from its
+    cone, ``braked`` with the shortcut returns what it returns without it, to the bit.
+    """
+    rng = np.random.default_rng(11)
+    n = 20000
+    w0, Ds = rng.uniform(-3.0, 6.0, n), rng.uniform(-60.0, 60.0, n)
+    D = rng.uniform(-200.0, 80.0, n)
+    authority = rng.uniform(12.0, 60.0, n)
+    for lag, hold in ((0.04, 0.01), (0.0, 0.02), (0.1, 0.005)):
+        p = brake_module.phases(ApproachBrake(40.0, 9.5, 0.005, 0.015, lag), hold)
+        travel = brake_module.backup_travel(ApproachBrake(40.0, 9.5, 0.005, 0.015, lag), w0,
+                                            np.minimum(Ds, authority), D, authority, hold)
+        bound = brake_module.evaluate(lambda ops, *v: brake_module._travel_bound(ops, p, *v), w0,
+                                      np.minimum(Ds, authority), D, authority)
+        # (without a lag the bound is the travel's own formula: equal but for rounding, far
+        # inside the TRAVEL_SURE the shortcut keeps)
+        slack = bound - travel
+        assert np.all(slack >= -1e-12 * np.maximum(1.0, bound)), (lag, float(np.min(slack)))
+        assert brake_module.TRAVEL_SURE > 1e6 * float(np.max(-slack[bound < 4.0], initial=0.0))
+    setup = controller_setup(_testbed_values())
+    ctl = AttitudeController(setup.config)
+    cfg = ctl.config
+    quick_taken = 0
+    for _ in range(2000):
+        R = so3.exp(rng.normal(size=3) * rng.uniform(0.0, 1.5))
+        Omega = rng.normal(size=3) * rng.uniform(0.0, 3.0)
+        u = rng.normal(size=3) * rng.uniform(0.0, 0.5)
+        x = BrakeInputs(R, Omega, rng.uniform(0.0, 0.06), 0.01, rng.normal(size=3) * 0.1,
+                        ctl.dynamics.moment(R, Omega), ctl.gravity_moment(R), np.zeros(6))
+        got = braked(ctl.brake, cfg.cones, ctl.J_inv, cfg.moment_limits, x, u)
+        view = brake_module._cones_at(ctl.brake, cfg.cones, ctl.J_inv, x, u, worst=True)
+        quick = brake_module._cones_at(ctl.brake, cfg.cones, ctl.J_inv, x, u, worst=True,
+                                       quick=True)
+        quick_taken += not quick.whole
+        assert bool(quick.met) == bool(view.met) and bool(quick.weak) == bool(view.weak)
+        # the whole working, as braked did it before the shortcut
+        A_p, beta_p = brake_module.reachable(cfg.moment_limits, ctl.brake.keep(0.01), x.thrusts)
+        unreached = bool(np.any(brake_module.slack_of(A_p, u, beta_p) < -brake_module.TOL))
+        if bool(view.met) and not unreached:
+            assert np.array_equal(got.u, u) and not got.braking
+        else:
+            r = rows(ctl.brake, cfg.cones, ctl.J_inv, x, view.terms, view.worst)
+            assert np.all(r.A @ got.u >= r.beta - 1e-7) or got.unmet
+    assert 200 < quick_taken < 1900, quick_taken           # both ways were taken
+
+
 def test_the_derivation_speaks_of_steps_from_a_safe_state_while_the_bounds_hold():
     """``covered``: a step counts from one on the safe set whose measurements (lead steps before
     it) were within the bounds, for as long as they hold; a break ends it until the next safe

@@ -181,14 +181,15 @@ class Phases(NamedTuple):
     unmodelled: float
     durations: Tuple[float, ...]
     shares: Tuple[float, ...]
+    total: float          # s, the phases' durations together
 
 
 @functools.lru_cache(maxsize=64)
 def phases(brake: 'ApproachBrake', hold: float) -> Phases:
     """The backup's ``Phases`` for a brake and a hold."""
     spans = BACKUP_SPANS if brake.lag > 0.0 else ()
-    return Phases(brake.unmodelled, (hold,) + tuple(span * brake.lag for span in spans),
-                  SHARES[:len(spans) + 1])
+    durations = (hold,) + tuple(span * brake.lag for span in spans)
+    return Phases(brake.unmodelled, durations, SHARES[:len(spans) + 1], math.fsum(durations))
 
 
 def _travel(ops: Ops, p: Phases, w0: Value, D_s: Value, D: Value, authority: Value) -> Value:
@@ -215,6 +216,28 @@ def _travel(ops: Ops, p: Phases, w0: Value, D_s: Value, D: Value, authority: Val
     final = level[-1]                                       # (< 0: see NET_SHARE_MIN)
     rising = ops.maximum(w, 0.0)
     return ops.maximum(best, x + rising * rising / (2.0 * ops.maximum(-final, 1e-9)))
+
+
+TRAVEL_SURE = 1e-6    # rad: a travel bounded this far within the gap is within it, whatever the
+                      # rounding of its exact working out (``_surely_met``)
+
+
+def _travel_bound(ops: Ops, p: Phases, w0: Value, D_s: Value, D: Value, authority: Value) -> Value:
+    """An upper bound of ``_travel`` of the same arguments, in a few operations (an
+    ``elementwise`` formula). Over every phase the acceleration towards the cone is at most
+    A = a_u - min(D_s, D) (the hold's; the backup's levels after it only fall), so by the end of
+    the phases (their total T) the rate is at most w+ + A+ T and the travel, and every peak on
+    the way, at most w+ T + A+ T^2 / 2 (w+ = max(w0, 0), A+ = max(A, 0)); after them the
+    deceleration is the last level's, as ``_travel`` takes it, so its tail is at most
+    (w+ + A+ T)^2 / (2 max(-final, 1e-9)). It does not rise with D.
+    """
+    a_u = p.unmodelled
+    A = ops.maximum(a_u - ops.minimum(D_s, D), 0.0)
+    w = ops.maximum(w0, 0.0)
+    T = p.total
+    final = a_u - (authority - p.shares[-1] * (authority - ops.minimum(D, authority)))
+    rising = w + A * T
+    return w * T + 0.5 * A * T * T + rising * rising / (2.0 * ops.maximum(-final, 1e-9))
 
 
 def backup_travel(brake: ApproachBrake, w0: Scalars, D_s: Scalars, D: Scalars, authority: Scalars,
@@ -278,9 +301,26 @@ def _worst_with_law(ops: Ops, brake: ApproachBrake, p: Phases, keep: float, gap:
     condition there (``_met``; an ``elementwise`` formula).
     """
     G0, w0, Ds, first = _worst_box(ops, brake, keep, gap, w, D_s, age, spin, authority)
+    return _with_law(ops, p, G0, w0, Ds, first, authority, law)
+
+
+def _with_law(ops: Ops, p: Phases, G0: Value, w0: Value, Ds: Value, first: Value,
+              authority: Value, law: Value) -> Tuple[Union[Value, Flag], ...]:
+    """``_worst_with_law`` from the worst state of the uncertainty box."""
     backup, travel = ops.both(lambda D: _travel(ops, p, w0, Ds, D, authority), first, law)
     margin = G0 - backup
     return G0, w0, Ds, first, margin, travel, _met(margin, first, law, travel, G0)
+
+
+def _surely_met(ops: Ops, p: Phases, G0: Value, w0: Value, Ds: Value, first: Value,
+                authority: Value, law: Value) -> Flag:
+    """Where the law's deceleration surely meets the condition (an ``elementwise`` formula):
+    the travel's bound (``_travel_bound``) at the lesser of the law's and the backup's first
+    command is within the gap by TRAVEL_SURE. Then both travels are within G0, so the margin
+    is not negative and the law's travel within G0: ``_met`` is true, without working either
+    out (a cone far from the sensor, or approached slowly).
+    """
+    return _travel_bound(ops, p, w0, Ds, ops.minimum(law, first), authority) <= G0 - TRAVEL_SURE
 
 
 def _worst(brake: ApproachBrake, gap: Scalars, w: Scalars, D_s: Scalars, age: Scalars,
@@ -479,6 +519,16 @@ class _View:
         return self._flag(_AT['met'], every=True)
 
     @property
+    def whole(self) -> bool:
+        """Whether every cone's margin was worked out (not left out by ``_cone``'s quick)."""
+        if len(self._cols) == len(_TERMS):
+            return True
+        margins = self._cols[_AT['margin']]
+        if self._one:
+            return not any(math.isnan(cast(float, m)) for m in margins)
+        return not bool(np.isnan(cast(FloatArray, margins[0])).any())
+
+    @property
     def terms(self) -> 'BrakeTerms':
         out = self._arrays()
         return BrakeTerms._make(out[_AT[name]] for name in _TERMS)
@@ -548,10 +598,13 @@ class _TickParts(NamedTuple):
 
 
 def _cone(ops: Ops, brake: ApproachBrake, p: Phases, keep: float, J_inv: Rows, r: Parts,
-          r_cols: Rows, x: _TickParts, worst: bool, v: Parts, theta: Value) -> Tuple[Column, ...]:
+          r_cols: Rows, x: _TickParts, worst: bool, quick: bool, v: Parts,
+          theta: Value) -> Tuple[Column, ...]:
     """One cone's ``_View`` at a tick by components (an ``elementwise`` formula): gap, n, w,
     kin, A, f_along, D_s, authority, weak; with worst or the law's moment u also the worst state
     (G0, w0, Ds, first, margin: ``_worst``), and with u whether the law meets the condition.
+    quick (with u): where the law surely meets it (``_surely_met``, for every element), the
+    margin is not worked out (NaN: ``_View.whole`` says so).
     """
     s, gap, n, w, kin, spin = _opening(ops, x.R, x.Omega, r, r_cols, v, theta)
     A, f_along, D_s, authority, weak = _cone_terms(ops, brake, J_inv, n, kin, x.f, x.gravity,
@@ -565,22 +618,26 @@ def _cone(ops: Ops, brake: ApproachBrake, p: Phases, keep: float, J_inv: Rows, r
     if u is None:
         return out + _worst_state(ops, brake, p, keep, gap, w, D_s, x.age, spin_rate, authority)
     law = A[0] * u[0] + A[1] * u[1] + A[2] * u[2] + f_along - kin
-    G0, w0, Ds, first, margin, _, met = _worst_with_law(ops, brake, p, keep, gap, w, D_s, x.age,
-                                                        spin_rate, authority, law)
-    return out + (G0, w0, Ds, first, margin, met)
+    G0, w0, Ds, first = _worst_box(ops, brake, keep, gap, w, D_s, x.age, spin_rate, authority)
+    if quick and ops.every(_surely_met(ops, p, G0, w0, Ds, first, authority, law)):
+        return out + (G0, w0, Ds, first, G0 * math.nan, True)
+    worst_state = _with_law(ops, p, G0, w0, Ds, first, authority, law)
+    return out + worst_state[:5] + worst_state[6:]
 
 
 def _cones_at(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray, x: 'BrakeInputs',
-              u: Optional[FloatArray] = None, worst: bool = False) -> _View:
+              u: Optional[FloatArray] = None, worst: bool = False, quick: bool = False) -> _View:
     """The brake's view of every cone at the tick of x (``_cone``): one run's cones one by one
     in floats, a batch's in whole arrays (runs, cones); with worst, the worst state of each;
-    with the law's moment u, that and whether the law meets every cone's condition.
+    with the law's moment u, that and whether the law meets every cone's condition (quick: a
+    cone the law surely keeps without its margin, ``_cone``).
     """
     one = one_run(x.R) and len(cones) > 0
     consts = (brake, phases(brake, x.hold), brake.keep(x.hold),
               cast('List[List[Value]]', J_inv.reshape(3, 3).tolist()),
               cast('List[Value]', cones.r_floats),
-              cast('List[List[Value]]', cones.r_cols_floats), _TickParts.of(x, u, one), worst)
+              cast('List[List[Value]]', cones.r_cols_floats), _TickParts.of(x, u, one), worst,
+              quick)
     if one:
         theta = cones.theta.reshape(-1)
         per_cone = list(zip(*(_cone(FLOATS, *consts, v, t) for v, t in
@@ -738,7 +795,8 @@ def braked(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray, polytope: Po
     (A, beta) the moment must meet with the brake's (the cbf law's pointing constraints), or
     None.
     """
-    view = _cones_at(brake, cones, J_inv, x, None if extra is not None else u, worst=True)
+    view = _cones_at(brake, cones, J_inv, x, None if extra is not None else u, worst=True,
+                     quick=extra is None)
     weak = view.weak
     A_p, beta_p = reachable(polytope, brake.keep(x.hold), x.thrusts)
     # (a moment the rotors cannot reach this hold, which the lag compensation would clip, needs
@@ -751,6 +809,8 @@ def braked(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray, polytope: Po
         braking = ~view.met
         if not np.any(braking | unreached):
             return Braked(u, braking, weak)
+        if not view.whole:                 # (the rows need every cone's worst state whole)
+            view = _cones_at(brake, cones, J_inv, x, u, worst=True)
     r = rows(brake, cones, J_inv, x, view.terms, view.worst)
     A, beta = r.A, r.beta
     if extra is not None:
