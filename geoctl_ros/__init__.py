@@ -11,6 +11,7 @@ empty one leaves numpy as it comes (a numpy built with AVX-512 in its baseline r
 with them disabled). ``numpy_rounding_problem`` says whether a process rounds otherwise: the
 clusters' workers are checked with it, and ``scenario`` warns.
 """
+import functools as _functools
 import os as _os
 import sys as _sys
 
@@ -56,6 +57,7 @@ class RoundingError(RuntimeError):
     """
 
 
+@_functools.lru_cache(maxsize=1)          # (a process's numpy does not change)
 def numpy_rounding_problem():
     """Why numpy in this process does not round as the package's processes do (a sentence), or
     None: exp, arccos and arctan2 on arrays must give the C library's bits, as they do with the

@@ -231,13 +231,13 @@ def test_a_non_finite_control_output_disarms_and_publishes_zero(monkeypatch):
     loop = make_loop()
     feed(loop, 0.0)
     assert loop.arm(0.0).ok
-    real_step = loop.controller.step
+    real_law = loop.controller.control
 
     def poisoned(*args, **kwargs):           # stands in for a defect in the control law
-        out = real_step(*args, **kwargs)
+        out = real_law(*args, **kwargs)
         out.u[1] = math.nan
         return out
-    monkeypatch.setattr(loop.controller, 'step', poisoned)
+    monkeypatch.setattr(loop.controller, 'control', poisoned)
     tick = loop.tick(0.01, 0.01)
     assert tick.control is None and not tick.armed and not tick.motors.commands.any()
     assert loop.supervisor.reason == NON_FINITE

@@ -26,13 +26,13 @@ def on_a_cluster(prog: str) -> Callable[[Callable[..., int]], Callable[..., int]
     """
     def wrap(main: Callable[..., int]) -> Callable[..., int]:
         @functools.wraps(main)
-        def checked(*args: Any, **kwargs: Any) -> int:
+        def refusing(*args: Any, **kwargs: Any) -> int:
             try:
                 return main(*args, **kwargs)
             except RoundingError as e:
                 print('%s: refused: %s' % (prog, e), file=sys.stderr)
                 return 2
-        return checked
+        return refusing
     return wrap
 
 

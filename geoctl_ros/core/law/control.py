@@ -164,19 +164,28 @@ class AttitudeController:
 
     def step(self, R: FloatArray, Omega: FloatArray, dt: float, adapt: bool = True,
              blind: Scalars = 0.0, brake: Optional[BrakeInputs] = None, guide: bool = True,
-             gain_scale: Scalars = 1.0, advance: bool = True) -> ControlOutput:
-        """One control step at attitude R and body angular velocity Omega, by the configured law
-        (``config.law``, one of ``LAWS``): its configuration error (``terms``, with the cones'
-        barrier or without), the geometric moment with the estimate in force (``moment``), the
-        law's filter of the moment, if it has one (a pure function of the step's terms and the
-        model: ``core.law.step_types.Law``), then the estimate's step (``adapt``; advance=False
-        leaves that stage to the caller, as the control tick runs it).
+             gain_scale: Scalars = 1.0) -> ControlOutput:
+        """One control step of a controller used alone: the law's stage (``control``, with the
+        same arguments) and then the estimate's (``adapt``), as the control tick runs them.
+        """
+        out = self.control(R, Omega, adapt, blind, brake, guide, gain_scale)
+        self.adapt(out, dt)
+        return out
 
-        dt is the time until the next step (the control period); adapt=False holds the estimate
-        (e.g. while disarmed). blind: the time (s; one per run of a batch) over which the loop
-        cannot see or correct what the vehicle does beyond its nominal period: a law with the
-        barrier then acts on each cone widened by how far the sensor travels towards it in that
-        time (``blind_widening``). brake: the approach brake's inputs of the tick
+    def control(self, R: FloatArray, Omega: FloatArray, adapt: bool = True,
+                blind: Scalars = 0.0, brake: Optional[BrakeInputs] = None, guide: bool = True,
+                gain_scale: Scalars = 1.0) -> ControlOutput:
+        """The law's stage at attitude R and body angular velocity Omega, by the configured law
+        (``config.law``, one of ``LAWS``): its configuration error (``terms``, with the cones'
+        barrier or without), the geometric moment with the estimate in force (``moment``), and
+        the law's filter of the moment, if it has one (a pure function of the step's terms and
+        the model: ``core.law.step_types.Law``). The estimate does not move here (``adapt``).
+
+        adapt=False: the estimate is to hold this step (e.g. while disarmed; ``out.adapting``).
+        blind: the time (s; one per run of a batch) over which the loop cannot see or correct
+        what the vehicle does beyond its nominal period: a law with the barrier then acts on
+        each cone widened by how far the sensor travels towards it in that time
+        (``blind_widening``). brake: the approach brake's inputs of the tick
         (``core.law.brake.BrakeInputs``), or None (no brake this step: disarmed, spooling).
         guide: move guidance's set point (not while the rotors spool up: it is planned at the
         take-over). gain_scale: of the bandwidth (k_R by its square, k_Omega by it; one per run
@@ -192,12 +201,10 @@ class AttitudeController:
         else:
             psi, e_R = terms.A[..., 0], terms.e_RA
         out = self.moment(R, Omega, adapt, terms, psi, e_R, law.barrier, gain_scale)
-        if law.filter is not None:
-            out = law.filter(out, terms, R, Omega, self.law_model,
-                             brake if self.brake is not None else None)
-        if advance:
-            self.adapt(out, dt)
-        return out
+        if law.filter is None:
+            return out
+        return law.filter(out, terms, R, Omega, self.law_model,
+                          brake if self.brake is not None else None)
 
     def _follow(self, R: FloatArray) -> None:
         """Move the law's set point along guidance's path (``core.law.guidance``): its linear map

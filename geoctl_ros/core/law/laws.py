@@ -1,6 +1,6 @@
 """The control laws: the ``law`` parameter names a row of ``LAWS``, each a ``Law``
 (``core.law.step_types``): its configuration error and its filter of the geometric moment, data
-and a pure function of the step's terms and the model (``AttitudeController.step`` runs them).
+and a pure function of the step's terms and the model (``AttitudeController.control`` runs them).
 
 - ``delay_robust`` (the default): the paper's law with each cone widened by the blind time, and
   the approach brake;

@@ -111,15 +111,24 @@ class CommandHistory:
         """
         if not (one and self._end_floats and isinstance(t, float)):
             return vector_parts(self.at(t), one)
-        k = max(bisect.bisect_right(self._times, t) - 1, 0)
-        slot = (self._newest + 1 + k) % self.size
+        slot, decay = self._in_force(t)
         end = self._end_floats[slot]
-        if self.lag <= 0.0:
+        if decay is None:
             return list(end)
         start = self._start_floats[slot]
-        decay = float(np.exp(-max(t - self._times[k], 0.0) / self.lag))
         return [end[0] + decay * (start[0] - end[0]), end[1] + decay * (start[1] - end[1]),
                 end[2] + decay * (start[2] - end[2])]
+
+    def _in_force(self, t: float) -> Tuple[int, Optional[float]]:
+        """The slot of the command in force at one time t, and how much of its start is left
+        then, exp(-(t - sent) / lag) (None without a lag). (Before the first entry: an empty
+        slot, all zeros, of time -inf; before a full ring's oldest: that oldest.)
+        """
+        k = max(bisect.bisect_right(self._times, t) - 1, 0)
+        slot = (self._newest + 1 + k) % self.size
+        if self.lag <= 0.0:
+            return slot, None
+        return slot, float(np.exp(-max(t - self._times[k], 0.0) / self.lag))
 
     def at(self, t: Scalars) -> FloatArray:
         """The moment in force at times t (a scalar, or one per run of a batch: (N,))."""
@@ -130,14 +139,9 @@ class CommandHistory:
         # (before the first entry: an empty slot, all zeros, of time -inf; before a full ring's
         # oldest: i = -1, that oldest)
         if isinstance(t, float) or np.ndim(t) == 0:    # one time (the node's; a batch's tick)
-            t = float(t)
-            k = max(bisect.bisect_right(self._times, t) - 1, 0)
-            slot = (self._newest + 1 + k) % self.size
+            slot, decay = self._in_force(float(t))
             start, end = cast(FloatArray, self.start)[slot], self.end[slot]
-            if self.lag <= 0.0:
-                return end
-            decay: Scalars = np.exp(-max(t - self._times[k], 0.0) / self.lag)
-            return end + decay * (start - end)
+            return end if decay is None else end + decay * (start - end)
         i = np.maximum(np.searchsorted(self.times, t, side='right') - 1, 0)
         slots = (self._newest + 1 + i) % self.size
         runs = np.arange(len(slots))                         # each run its own entry

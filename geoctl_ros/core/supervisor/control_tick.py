@@ -188,9 +188,8 @@ class ControlTick:
                                       mixer.design_hold_for(rotors, dt, held), t,
                                       mixer.thrust_offsets(rotors, dt if held is None else held))
         out: Optional[ControlOutput]        # (None: a moment not finite, not commanded)
-        out = controller.step(R, Omega, dt, adapt=adapt and self.flying, blind=blind,
-                              brake=brake, guide=not spooling, gain_scale=gain_scale,
-                              advance=False)
+        out = controller.control(R, Omega, adapt=adapt and self.flying, blind=blind,
+                                 brake=brake, guide=not spooling, gain_scale=gain_scale)
         controller.adapt(out, dt)           # the estimate's stage (``core.law.control.adapted``)
         if spooling:                        # the feed-forward alone, the vehicle held
             out = out._replace(u=controller.feedforward(R))
