@@ -107,6 +107,7 @@ def test_a_worker_killed_mid_campaign_loses_no_run_and_doubles_none(reference, t
     assert (out / 'runs.csv').read_bytes() == reference.read_bytes()
 
 
+@pytest.mark.headless        # (the foreground stream is the first phase's longest now)
 def test_a_worker_whose_numpy_rounds_otherwise_is_refused_naming_the_fix(tmp_path, capsys):
     """A `dask worker` started plainly imports numpy before the package, so on a CPU with
     AVX-512 its numpy runs the kernels the package keeps it off (geoctl_ros/__init__.py), and
