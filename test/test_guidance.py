@@ -52,6 +52,45 @@ def test_arc_clearance_is_the_closest_approach_of_the_sampled_arc():
             assert np.degrees(got[i, j]) == pytest.approx(sampled, abs=0.1)
 
 
+
+@odroid
+def test_the_ways_judged_by_bounds_are_judged_as_the_whole_clearance_judges_them():
+    """The visibility graph's pairs decided by bounds (an end's angle less half the arc, the
+    arc's middle inside a cone) are decided as arc_clearance decides them, and a batch plans
+    every run's way as it is planned alone: random starts, goals and cones, the joint's caps
+    among them.
+    """
+    rng = np.random.default_rng(5)
+    judged = 0
+    for C in (1, 2, 4):
+        n = 3
+        ends = rng.normal(size=(n, 2, 3))
+        ends /= np.linalg.norm(ends, axis=-1)[..., None]
+        axes = rng.normal(size=(n, C, 3))
+        axes /= np.linalg.norm(axes, axis=-1)[..., None]
+        keep = rng.uniform(0.02, 1.2, (n, C))
+        X = np.concatenate([ends, np.array([np.concatenate(
+            [guidance._rim(v, k + guidance.RIM_SLACK, guidance.RIM_POINTS) for v, k in zip(V, K)])
+            for V, K in zip(axes, keep)]).reshape(n, -1, 3)], axis=1)
+        first, second = np.triu_indices(X.shape[1])
+        need = keep[:, None] - 1e-9
+        angles = np.arccos(np.clip(guidance._cosines(X, axes), -1.0, 1.0))
+        inside = np.any(angles < need, axis=-1)
+        length = np.arccos(np.clip(guidance._cosines(X, X), -1.0, 1.0))
+        got = guidance._clear_ways(X, axes, angles, need, length, inside, first, second)
+        whole = np.all(guidance.arc_clearance(X[:, first], X[:, second], axes[:, None]) >= need,
+                       axis=-1)
+        outside = ~(inside[:, first] | inside[:, second])
+        assert np.array_equal(got[:, first, second][outside], whole[outside])
+        judged += outside.sum()
+        R0, goal = so3.exp(rng.normal(size=(n, 3))), so3.exp(rng.normal(size=(n, 3)))
+        planned = guidance.plans(R0, goal, R_AXIS, axes, keep, 0.14, None, math.radians(40.0))
+        for i in range(n):
+            assert np.array_equal(planned[i], guidance.plan(R0[i], goal[i], R_AXIS, axes[i],
+                                                            keep[i], 0.14, None,
+                                                            math.radians(40.0)))
+    assert judged > 20_000
+
 def _campaign_case(seed, index):
     """A run's cones (axes, half-angles rad), start and goal of the campaign's draw."""
     m = manoeuvres.draw_manoeuvre(seed, index, R_AXIS)

@@ -28,16 +28,16 @@ hand-made set points round the cone. Guidance does that by itself, for any start
 
 The barrier of the law stays whole between the set points. The law's proof covers each constant
 set point; the switches between them are not covered by it (docs/control-law.md, "Guidance").
-A batch plans each run's path on its own (at a set point's start only) and picks
-every run's set point at once.
+A batch plans its runs' ways at once (at a set point's start only; each the same as planned
+alone) and picks every run's set point at once.
 """
 import math
-from typing import List, Optional, Tuple, cast
+from typing import Dict, List, Optional, Tuple, cast
 
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
-from geoctl_ros.core.geometry.so3 import FloatArray, IntArray, Scalars
+from geoctl_ros.core.geometry.so3 import BoolArray, FloatArray, IntArray, Scalars
 from geoctl_ros.core.law.cones import ConeSet
 
 RIM_POINTS = 48             # points on each cone's widened rim (7.5 deg apart)
@@ -50,8 +50,8 @@ LOOKAHEAD_PER_GAP = 2.0     # near a cone the lookahead is at most this many tim
 CAP_SLACK = math.radians(0.5)   # a joint cap keeps this far from a path's end inside it
 CAP_CLEARANCE = math.radians(2.0)   # the path keeps this far from the joint's caps
 SIGHT_CHUNK = 8             # the set point's sight is worked out this many places ahead at a time
-SIGHT_SURE = 1e-6           # rad: a way judged clear by a bound has this much to spare (far more
-                            # than the rounding of the exact judgement it stands for)
+BOUND_SURE = 1e-6           # rad: a way judged by a bound has this much to spare (far more than
+                            # the rounding of the exact judgement it stands for)
 
 
 def arc_clearance(a: FloatArray, b: FloatArray, axes: FloatArray) -> FloatArray:
@@ -96,69 +96,137 @@ def sensor_path(d0: FloatArray, d1: FloatArray, axes: FloatArray, rims: FloatArr
     per cone): the corner points, d0
     first and d1 last. Where d0 or d1 is nearer a cone than that, the cone is widened only up to
     halfway from its rim to the nearer of them. None where no such way exists (the cones close
-    round the start or the goal).
+    round the start or the goal). (``sensor_paths`` of one run.)
     """
     axes = np.asarray(axes, dtype=float).reshape(-1, 3)
-    rims = np.asarray(rims, dtype=float).reshape(-1)
-    if not len(axes):
-        return [d0, d1]
-    ends = np.stack([d0, d1])
-    gap = np.arccos(np.clip(_cosines(ends, axes), -1.0, 1.0)).min(axis=0) - rims     # (C,)
+    return sensor_paths(np.asarray(d0)[None], np.asarray(d1)[None], axes[None],
+                        np.asarray(rims, dtype=float).reshape(1, len(axes)), clearance)[0]
+
+
+PLAN_ENTRIES = 1 << 16      # the visibility graphs of this many (pair, cone) entries at a time
+
+
+def sensor_paths(d0: FloatArray, d1: FloatArray, axes: FloatArray, rims: FloatArray,
+                 clearance: Scalars) -> List[Optional[List[FloatArray]]]:
+    """``sensor_path`` for each of n runs: d0 and d1 (n, 3), axes (n, C, 3), rims (n, C),
+    clearance one, or one per cone (C,). A visibility graph of the start, the goal and
+    RIM_POINTS points on each cone's widened rim, searched by Dijkstra, for every run at once
+    (PLAN_ENTRIES at a time), entry by entry: each run's way is the same to the bit as alone.
+    """
+    n, C = rims.shape
+    if not C:
+        return [[a, b] for a, b in zip(d0, d1)]
+    N = 2 + C * RIM_POINTS
+    first, second = np.triu_indices(N)
+    chunk = max(1, PLAN_ENTRIES // (len(first) * C))
+    out: List[Optional[List[FloatArray]]] = []
+    for lo in range(0, n, chunk):
+        part = slice(lo, lo + chunk)
+        out += _visible_ways(d0[part], d1[part], axes[part], rims[part], clearance, first,
+                             second)
+    return out
+
+
+def _visible_ways(d0: FloatArray, d1: FloatArray, axes: FloatArray, rims: FloatArray,
+                  clearance: Scalars, first: IntArray,
+                  second: IntArray) -> List[Optional[List[FloatArray]]]:
+    """``sensor_paths`` of a chunk of runs (first, second: the graph's pairs of nodes)."""
+    ends = np.stack([d0, d1], axis=1)                                          # (n, 2, 3)
+    gap = np.arccos(np.clip(_cosines(ends, axes), -1.0, 1.0)).min(axis=-2) - rims   # (n, C)
     keep = rims + np.clip(np.minimum(clearance, 0.5 * gap), 0.0, None)        # widened radii
-    nodes = [ends] + [_rim(v, k + RIM_SLACK, RIM_POINTS) for v, k in zip(axes, keep)]
-    X = np.concatenate(nodes)
-    # (N, N): the way between two points is the same both ways, to the bit (arc_clearance's
-    # terms only change sign), so each pair is worked out once
-    first, second = np.triu_indices(len(X))
-    clear = np.empty((len(X), len(X)), dtype=bool)
-    clear[first, second] = clear[second, first] = np.all(
-        arc_clearance(X[first], X[second], axes) >= keep - 1e-9, axis=-1)
+    X = np.concatenate([ends, np.array([np.concatenate(
+        [_rim(v, k + RIM_SLACK, RIM_POINTS) for v, k in zip(V, K)]) for V, K in zip(axes, keep)]
+        ).reshape(len(ends), -1, 3)], axis=1)                                    # (n, N, 3)
+    n, N = X.shape[:2]
+    angles = np.arccos(np.clip(_cosines(X, axes), -1.0, 1.0))         # (n, N, C): to each axis
+    need = keep[:, None] - 1e-9                                            # (n, 1, C)
     # a point of one rim inside another widened cone is no way
-    inside = np.any(np.arccos(np.clip(_cosines(X, axes), -1.0, 1.0)) < keep - 1e-9, axis=-1)
-    clear &= ~inside[:, None] & ~inside[None, :]
+    inside = np.any(angles < need, axis=-1)
     length = np.arccos(np.clip(_cosines(X, X), -1.0, 1.0))
+    clear = _clear_ways(X, axes, angles, need, length, inside, first, second)
+    clear &= ~inside[:, :, None] & ~inside[:, None, :]
     previous = _dijkstra(np.where(clear, length, np.inf), 0)
-    if previous[1] < 0:
-        return None
-    way, i = [], 1
-    while i != 0:
-        way.append(X[i])
-        i = previous[i]
-    return [X[0]] + way[::-1]
+    ways: List[Optional[List[FloatArray]]] = []
+    for x, before in zip(X, previous.tolist()):
+        if before[1] < 0:
+            ways.append(None)
+            continue
+        way, i = [], 1
+        while i != 0:
+            way.append(x[i])
+            i = before[i]
+        ways.append([x[0]] + way[::-1])
+    return ways
+
+
+def _clear_ways(X: FloatArray, axes: FloatArray, angles: FloatArray, need: FloatArray,
+                length: FloatArray, inside: BoolArray, first: IntArray,
+                second: IntArray) -> BoolArray:
+    """(n, N, N): whether the arc between each pair of the nodes X (n, N, 3) keeps every cone
+    (axes (n, C, 3)) at least need (n, 1, C) away (``arc_clearance``); angles: each node's to each
+    axis, length: the pairs' arcs, inside: the nodes inside a cone (their ways are none anyway).
+    The way between two points is the same both ways, to the bit (arc_clearance's terms only
+    change sign), so each pair (first, second) is worked out once. Most are judged by bounds, by
+    BOUND_SURE: clear where each end's angle to every axis, less half the arc, is beyond need
+    (every point of the arc lies within half its length of an end); not clear where the arc's
+    middle lies inside a cone. Only the rest is worked out whole, with the same comparison as
+    before.
+    """
+    n, N = X.shape[:2]
+    half = 0.5 * length[:, first, second, None]                               # (n, P, 1)
+    sure = np.all(np.minimum(angles[:, first], angles[:, second]) - half >= need + BOUND_SURE,
+                  axis=-1)
+    middle = X[:, first] + X[:, second]
+    size = np.sqrt(so3.dot(middle, middle))[..., None]
+    cut = np.any(_cosines(middle, axes) > size * np.cos(np.maximum(need - BOUND_SURE, 0.0)),
+                 axis=-1) & (size[..., 0] > 1e-6)
+    ways = sure & ~(inside[:, first] | inside[:, second])
+    runs, pairs = np.nonzero(~(sure | cut | inside[:, first] | inside[:, second]))
+    if len(runs):
+        ways[runs, pairs] = np.all(arc_clearance(X[runs, first[pairs]], X[runs, second[pairs]],
+                                                 axes[runs]) >= need[runs, 0], axis=-1)
+    clear = np.empty((n, N, N), dtype=bool)
+    clear[:, first, second] = clear[:, second, first] = ways
+    return clear
 
 
 def _cosines(X: FloatArray, Y: FloatArray) -> FloatArray:
-    """X Y^T for unit vectors X (N, 3) and Y (C, 3): (N, C), entry by entry (not through BLAS,
-    whose kernels round by the CPU: a plan, and every decision on it, would differ by machine).
+    """X Y^T for unit vectors X (..., N, 3) and Y (..., C, 3): (..., N, C), entry by entry (not
+    through BLAS, whose kernels round by the CPU: a plan, and every decision on it, would differ
+    by machine).
     """
-    return so3.dot(X[:, None, :], Y[None, :, :])
+    return so3.dot(X[..., :, None, :], Y[..., None, :, :])
 
 
 def _dijkstra(cost: FloatArray, start: int) -> IntArray:
     """The predecessor of each node on its shortest way from start (-1: no way) on the dense
-    cost matrix (inf: no edge). The nodes are settled nearest first, the lower index first
-    among equally near ones (a heap of (distance, index) would settle them so too); with as
-    few nodes as a plan has (some 50), a scan of the distances beats the heap.
+    cost matrices (..., n, n) (inf: no edge), one graph per leading index, all searched at once.
+    The nodes are settled nearest first, the lower index first among equally near ones (a heap
+    of (distance, index) would settle them so too); with as few nodes as a plan has (some 50),
+    a scan of the distances beats the heap.
     """
-    n = len(cost)
-    dist = np.full(n, np.inf)
-    previous = np.full(n, -1)
-    done = np.zeros(n, dtype=bool)
-    waiting = np.full(n, np.inf)        # the distances of the nodes reached, not yet settled
-    dist[start] = waiting[start] = 0.0
+    n = cost.shape[-1]
+    graphs = cost.reshape(-1, n, n)
+    m = len(graphs)
+    dist = np.full((m, n), np.inf)
+    previous = np.full((m, n), -1)
+    done = np.zeros((m, n), dtype=bool)
+    waiting = np.full((m, n), np.inf)   # the distances of the nodes reached, not yet settled
+    dist[:, start] = waiting[:, start] = 0.0
+    every = np.arange(m)
     for _ in range(n):
-        i = int(np.argmin(waiting))
-        d = waiting[i]
-        if d == np.inf:
+        i = np.argmin(waiting, axis=-1)
+        d = waiting[every, i]
+        if not np.any(d < np.inf):      # (a graph with none left reached changes no more)
             break
-        done[i] = True
-        waiting[i] = np.inf
-        through = d + cost[i]
+        done[every, i] = True
+        waiting[every, i] = np.inf
+        through = d[:, None] + graphs[every, i]
         better = (through < dist) & ~done
         dist[better] = waiting[better] = through[better]
-        previous[better] = i
-    previous[start] = start
-    return previous
+        previous[better] = np.broadcast_to(i[:, None], better.shape)[better]
+    previous[:, start] = start
+    return cast(IntArray, previous.reshape(cost.shape[:-1]))
 
 
 def upright(d: FloatArray, r: FloatArray, up: FloatArray) -> FloatArray:
@@ -320,23 +388,43 @@ def plan(R0: FloatArray, R_goal: FloatArray, r: FloatArray, axes: FloatArray,
          tilt_max: float = math.pi) -> FloatArray:
     """The attitudes from R0 to R_goal round the cones (``sensor_path``, ``attitude_path``) and
     within the joint's stops (``joint_caps``: up, the world's up; tilt_max, rad); where no way
-    round exists, the goal alone (the law's barrier then decides).
+    round exists, the goal alone (the law's barrier then decides). (``plans`` of one run.)
+    """
+    axes = np.asarray(axes, dtype=float).reshape(-1, 3)
+    return plans(R0[None], R_goal[None], r, axes[None],
+                 np.asarray(rims, dtype=float).reshape(1, len(axes)), clearance, up,
+                 tilt_max)[0]
+
+
+def plans(R0: FloatArray, R_goal: FloatArray, r: FloatArray, axes: FloatArray,
+          rims: FloatArray, clearance: float, up: Optional[FloatArray] = None,
+          tilt_max: float = math.pi) -> List[FloatArray]:
+    """``plan`` for each of n runs: R0 and R_goal (n, 3, 3), axes (n, C, 3), rims (n, C); the
+    sensor's ways of all runs at once (``sensor_paths``), each the same as alone.
     """
     up = np.array([0.0, 0.0, 1.0]) if up is None else up
     d0, d1 = so3.matvec(R0, r), so3.matvec(R_goal, r)
-    axes, rims = np.asarray(axes).reshape(-1, 3), np.asarray(rims).reshape(-1)
-    corners = sensor_path(d0, d1, axes, rims, clearance)
-    cap_axes, cap_rims = joint_caps(up, r, tilt_max, np.stack([d0, d1]))
-    if corners is not None and len(cap_rims) and _enters(corners, cap_axes, cap_rims):
-        # the way round the cones goes past the stops: round the stops' caps too (planned only
-        # then: the caps make the graph half as large again)
-        corners = sensor_path(d0, d1, np.concatenate((axes, cap_axes)),
-                              np.concatenate((rims, cap_rims)),
-                              np.concatenate((np.full(len(rims), clearance),
-                                              np.full(len(cap_rims), CAP_CLEARANCE))))
-    if corners is None:
-        return R_goal[None].copy()
-    return attitude_path(R0, R_goal, r, corners, up, tilt_max)
+    corners = sensor_paths(d0, d1, axes, rims, clearance)
+    # the way round the cones that goes past the stops: round the stops' caps too (planned
+    # only then: the caps make the graph half as large again), the runs with as many caps
+    # together
+    again: Dict[int, List[Tuple[int, FloatArray, FloatArray]]] = {}
+    for i, way in enumerate(corners):
+        cap_axes, cap_rims = joint_caps(up, r, tilt_max, np.stack([d0[i], d1[i]]))
+        if way is not None and len(cap_rims) and _enters(way, cap_axes, cap_rims):
+            again.setdefault(len(cap_rims), []).append((i, cap_axes, cap_rims))
+    for caps, runs in again.items():
+        index = [i for i, _, _ in runs]
+        ways = sensor_paths(
+            d0[index], d1[index],
+            np.array([np.concatenate((axes[i], cap_axes)) for i, cap_axes, _ in runs]),
+            np.array([np.concatenate((rims[i], cap_rims)) for i, _, cap_rims in runs]),
+            np.concatenate((np.full(rims.shape[-1], clearance), np.full(caps, CAP_CLEARANCE))))
+        for i, way in zip(index, ways):
+            corners[i] = way
+    return [R_goal[i][None].copy() if way is None
+            else attitude_path(R0[i], R_goal[i], r, way, up, tilt_max)
+            for i, way in enumerate(corners)]
 
 
 def _enters(corners: List[FloatArray], axes: FloatArray, rims: FloatArray) -> bool:
@@ -431,8 +519,8 @@ class Guidance:
               runs: IntArray) -> None:
         """Plan the paths of the runs (indices) from the attitudes Rs to their goals."""
         V, rims = _cone_rows(cones, np.arange(len(Rs)))
-        new = {i: plan(Rs[i], goals[i], cones.r, V[i], rims[i], self.clearance, self.up,
-                       self.tilt_max) for i in runs}
+        new = dict(zip(runs.tolist(), plans(Rs[runs], goals[runs], cones.r, V[runs], rims[runs],
+                                            self.clearance, self.up, self.tilt_max)))
         old = [] if self.paths is None else [self.paths[i, :cast(IntArray, self.last)[i] + 1]
                                              for i in range(len(Rs))]
         paths = [new[i] if i in new else old[i] for i in range(len(Rs))]
@@ -473,7 +561,7 @@ def _sight(D: FloatArray, V: FloatArray, rims: FloatArray, window: int,
     along = np.concatenate([np.zeros((n, 1)), np.cumsum(steps, axis=-1)], axis=-1)
     length = along[:, ahead] - along[:, :, None]                                # (n, K, W-1)
     room = np.min(gap + rims[:, None] - need, axis=-1, initial=np.inf)         # (n, K)
-    clear = length <= (room - SIGHT_SURE)[:, :, None]                          # (n, K, W-1)
+    clear = length <= (room - BOUND_SURE)[:, :, None]                          # (n, K, W-1)
     # and only up to the first way that is not clear: the points after it are not seen
     # whatever their ways (SIGHT_CHUNK places ahead at a time)
     looking = np.ones((n, K), dtype=bool)
