@@ -6,7 +6,7 @@ from dataclasses import replace
 import math
 import os
 
-from loop_support import CONE, ROOT, YAW90, feed, make_loop, spinning
+from loop_support import CONE, ROOT, SPIN, YAW90, feed, make_loop, spinning
 import numpy as np
 import pytest
 
@@ -223,6 +223,32 @@ def test_adaptation_runs_only_while_armed():
     assert loop.arm(0.01).ok
     loop.tick(0.02, 0.01)
     assert loop.controller.delta_bar.any()
+
+
+def test_the_command_does_not_wait_for_the_bookkeeping_of_the_next_tick():
+    """The node publishes a tick's command before the step learns from it (the estimate) and
+    notes it (the prediction's command history): left to the caller, both wait until it settles
+    the tick, or until the next tick does, and the commands are the same as settled at once.
+    """
+    loops = [make_loop(), make_loop(), make_loop()]      # settled at once, by hand, by the next
+    commands = [[], [], []]
+    for k in range(30):
+        t = 0.01 * k
+        for i, loop in enumerate(loops):
+            feed(loop, t, q=so3.rot_to_quat(spinning(t)), w=SPIN)
+            if k == 0:
+                assert loop.arm(t).ok
+            before = (loop.controller.delta_bar.copy(), loop.step.history.count)
+            commands[i].append(loop.tick(t, 0.01, settle=i == 0).motors.commands)
+            if i == 1 and k > 20:        # (flying, the estimate learning)
+                assert np.array_equal(loop.controller.delta_bar, before[0])
+                assert loop.step.history.count == before[1]
+            if i == 1:
+                loop.settle()
+                assert not np.array_equal(loop.controller.delta_bar, before[0]) or k <= 20
+    assert loops[0].controller.delta_bar.any()
+    assert np.array_equal(commands[0], commands[1])
+    assert np.array_equal(commands[0], commands[2])
 
 
 # --- riding through input gaps (exact times; the defaults: pose 0.1 s stale, 0.5 s lost; imu

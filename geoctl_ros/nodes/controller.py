@@ -330,8 +330,8 @@ class ControllerNode(Node):
         self._publish_zero()
 
     def _tick(self, now):
-        """One control step at now: the motor command is published first, then the monitoring
-        topics.
+        """One control step at now: the motor command is published first, then the step's
+        bookkeeping for the next tick and the monitoring topics.
         """
         t0 = time.perf_counter()
         dt = self.period
@@ -342,7 +342,7 @@ class ControllerNode(Node):
                 dt = step_period(since, self.period)
         self._last_tick = now
         try:
-            tick = self.loop.tick(now, dt)
+            tick = self.loop.tick(now, dt, settle=False)
         except Exception as e:      # a defect must not end the node with the motors running on
             self._failed_step(e)
             return
@@ -357,6 +357,11 @@ class ControllerNode(Node):
         self.pub_motors.publish(msg)
         if not tick.armed and self._armed_sent is not False:
             self._publish_armed(False)
+        try:
+            self.loop.settle()      # what the next tick needs, with the command already out
+        except Exception as e:
+            self._failed_step(e)
+            return
         self._compute_stats.add(time.perf_counter() - t0)
         if tick.armed and tick.pose_receipt is not None:
             self._latency_stats.add(self._now() - tick.pose_receipt)

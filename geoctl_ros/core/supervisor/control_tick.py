@@ -108,6 +108,8 @@ class ControlTick:
         self._clock = 0.0               # the tick's time: now, or (untimed) periods counted
         self._ticked = False
         self.flying = False             # armed and past the spool-up
+        # (a tick's bookkeeping not yet done: ``settle``)
+        self._unsettled: Optional[Tuple[float, float, ControlOutput, MotorOutput, bool]] = None
 
     def reconfigure(self, mixer: Mixer) -> None:
         """A new mixer, at run time (the rotors' lag model goes on under it)."""
@@ -136,7 +138,7 @@ class ControlTick:
 
     def __call__(self, R: FloatArray, Omega: FloatArray, dt: float, now: Optional[float] = None,
                  ages: Tuple[Scalars, Scalars] = (0.0, 0.0), armed: bool = True,
-                 adapt: bool = True, predict: bool = True) -> Command:
+                 adapt: bool = True, predict: bool = True, settle: bool = True) -> Command:
         """Command the rotors from a measured attitude R and rate Omega.
 
         dt: the control period (how long this command is expected to be held); now: the tick's
@@ -154,7 +156,11 @@ class ControlTick:
 
         A step whose moment is not finite commands zero and returns control None: for one run the
         caller then disarms; a batch raises FloatingPointError, as a diverged simulation does.
+
+        settle: the tick's bookkeeping for the next (``settle``) at its end; False leaves it to
+        the caller once the command is out (the node: after publishing it), or to the next tick.
         """
+        self.settle()
         held = self._held(now)
         t = self._time(now, dt)
         mixer = self.mixer
@@ -190,7 +196,7 @@ class ControlTick:
         out: Optional[ControlOutput]        # (None: a moment not finite, not commanded)
         out = controller.control(R, Omega, adapt=adapt and self.flying, blind=blind,
                                  brake=brake, guide=not spooling, gain_scale=gain_scale)
-        controller.adapt(out, dt)           # the estimate's stage (``core.law.control.adapted``)
+        learnt = out                        # (the estimate's stage learns from it: ``settle``)
         if spooling:                        # the feed-forward alone, the vehicle held
             out = out._replace(u=controller.feedforward(R))
         if not np.isfinite(out.u).all():           # a last line of defence: never command it
@@ -200,8 +206,23 @@ class ControlTick:
         motors = mixer.mix(np.zeros(3) if out is None else out.u, rotors, armed=armed, dt=dt,
                            held=held)
         self.rotors = motors.rotors
-        self.history.push(t, *self._produced(motors, armed))
+        self._unsettled = (t, dt, learnt, motors, armed)
+        if settle:
+            self.settle()
         return Command(out, motors, spooling, took_over, blind, gain_scale, residual)
+
+    def settle(self) -> None:
+        """The last tick's bookkeeping for the next one, which its command does not wait for: the
+        estimate's stage (``core.law.control.adapted``) and the moments the rotors were told to
+        produce, with when (the prediction's history). Nothing when it is done already.
+        """
+        unsettled = self._unsettled
+        if unsettled is None:
+            return
+        self._unsettled = None
+        t, dt, learnt, motors, armed = unsettled
+        self.controller.adapt(learnt, dt)
+        self.history.push(t, *self._produced(motors, armed))
 
     def brake_inputs(self, R: FloatArray, Omega: FloatArray, age: Scalars, hold: float,
                      t: float, thrusts: Optional[FloatArray] = None) -> BrakeInputs:
@@ -256,6 +277,7 @@ class ControlTick:
         """A tick without a state to control from (before the first pose and rate): zero
         commands, and the time noted.
         """
+        self.settle()
         self.flying = False
         self.rotors = None
         self._held(now)

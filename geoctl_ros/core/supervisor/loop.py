@@ -276,9 +276,10 @@ class ControlLoop(Generic[StampT]):
         return None
 
     # --- the control tick --------------------------------------------------------------------
-    def tick(self, now: float, dt: float) -> LoopTick[StampT]:
+    def tick(self, now: float, dt: float, settle: bool = True) -> LoopTick[StampT]:
         """One control step at time now (the node's clock); dt is the control period (the time
-        the step's command is expected to be held).
+        the step's command is expected to be held). settle: False leaves the step's bookkeeping
+        for the next tick (``settle``) to the caller, once the command is out.
         """
         armed = self.supervisor.check(now)
         if armed and self.esc is not None:          # the documented action: fail safe
@@ -309,7 +310,8 @@ class ControlLoop(Generic[StampT]):
             ages = (0.0 if self.pose.last_receipt is None else self.pose.capture_age(now),
                     0.0 if self.rate.last_receipt is None else self.rate.capture_age(now))
             command = self.step(R, Omega, dt, now, ages, armed=armed,
-                                adapt=armed and not bridging, predict=not bridging)
+                                adapt=armed and not bridging, predict=not bridging,
+                                settle=settle)
             out, motors, spooling, took_over = command[:4]
             if took_over:
                 self.unlearnt_over = 0
@@ -337,6 +339,12 @@ class ControlLoop(Generic[StampT]):
                          command.gain_scale)
         self.last_tick = tick
         return tick
+
+    def settle(self) -> None:
+        """The last tick's bookkeeping for the next one (``ControlTick.settle``): the node's,
+        once the motor command is published.
+        """
+        self.step.settle()
 
     def _note_entry(self, out: ControlOutput) -> None:
         """The sensor is inside a cone while armed: count the entry, keep the deepest (latched
