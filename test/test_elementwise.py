@@ -19,6 +19,8 @@ from geoctl_ros.core.law.brake import (
     least_deceleration,
     opening,
 )
+from geoctl_ros.core.law.cones import ConeSet
+from geoctl_ros.core.law.configuration_error import barrier_at_step
 from geoctl_ros.core.law.control import AttitudeController
 from geoctl_ros.params import (
     CONTROLLER,
@@ -82,6 +84,37 @@ def test_the_brakes_view_of_a_run_is_the_same_bits_alone_and_in_a_batch():
         one = least_deceleration(brake, gap[k:k + 1], w[k:k + 1], D_s[k:k + 1], 0.02, 0.5,
                                  authority[k:k + 1], 0.01)
         assert (one[0][0], one[1][0]) == (least[k], margin[k])
+
+
+@pytest.mark.parametrize('cones', [1, 3])
+def test_the_barrier_at_the_step_is_the_same_bits_alone_and_in_a_batch(cones):
+    """The cones' barrier at a step, widened by the blind time (``barrier_at_step``), of 40
+    random ticks at once (whole arrays) equals each tick's alone (floats, cone by cone) bit for
+    bit, where cones are approached and widened, left alone, and in their floor band (the
+    extension: arrays for both).
+    """
+    rng = np.random.default_rng(7 + cones)
+    axes = rng.normal(size=(cones, 3))
+    set_ = ConeSet([1.0, 0.0, 0.0], axes, rng.uniform(0.2, 0.5, cones), 8.0, math.radians(0.5),
+                   guard_rad=math.radians(2.0))
+    R, Omega, _ = _ticks(rng, RUNS)
+    blind = rng.uniform(0.0, 0.08, RUNS)
+    blind[::5] = 0.0
+    sc = set_.terms(R)
+    together = barrier_at_step(set_, sc, Omega, blind, math.radians(5.0))
+    widened = banded = 0
+    for k in range(RUNS):
+        one = slice(k, k + 1)           # a batch of one (the sim's), and the node's one run
+        alone = barrier_at_step(set_, sc[one], Omega[one], blind[one], math.radians(5.0))
+        node = barrier_at_step(set_, sc[k], Omega[k], float(blind[k]), math.radians(5.0))
+        for name in ('s', 'B', 'weight', 'saturated', 'e_RB_sum'):
+            assert np.array_equal(getattr(alone, name), getattr(together, name)[one]), (k, name)
+        for name in ('s', 'B', 'weight', 'saturated'):
+            assert np.array_equal(getattr(node, name), getattr(together, name)[k]), (k, name)
+        banded += bool(alone.any_saturated[0])
+        plain = barrier_at_step(set_, sc[k], Omega[k], 0.0, 0.0)
+        widened += not np.array_equal(plain.B, node.B)
+    assert widened >= 3 and banded >= 1 and widened + banded < RUNS
 
 
 def test_the_models_acceleration_is_the_same_bits_alone_and_in_a_batch():

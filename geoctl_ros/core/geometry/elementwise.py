@@ -2,10 +2,11 @@
 or per component of a vector).
 
 A formula written here takes ``ops`` (how to take a maximum, a minimum, a choice, a square
-root, numpy's arccos and sine) and its values, and uses only arithmetic, comparisons and
-``&``/``|`` besides: so it runs on Python floats (``FLOATS``) and on numpy arrays (``ARRAYS``)
-alike, and gives the same bits on both (IEEE arithmetic and square roots round alike on either,
-the choices are exact, and the transcendental functions are numpy's on both). ``evaluate`` runs
+root, numpy's arccos, sine, cosine and logarithm) and its values, and uses only arithmetic,
+comparisons and ``&``/``|`` besides: so it runs on Python floats (``FLOATS``) and on numpy
+arrays (``ARRAYS``) alike, and gives the same bits on both (IEEE arithmetic and square roots
+round alike on either, the choices are exact, and the transcendental functions are numpy's on
+both). ``evaluate`` runs
 it: a few elements (one run's cones) one by one in Python floats, where a numpy call would cost
 more than its arithmetic (about 1 us a call against 0.05 us a float operation), and more elements
 (a batch) in whole-array operations. A run alone and in a batch of any size therefore gives the
@@ -40,7 +41,8 @@ class Ops:
                  every: Callable[[Flag], bool], some: Callable[[Flag], bool],
                  arccos: Callable[[Value], Value], sin: Callable[[Value], Value],
                  both: Callable[[Callable[[Value], Value], Value, Value],
-                                Tuple[Value, Value]]) -> None:
+                                Tuple[Value, Value]],
+                 cos: Callable[[Value], Value], log: Callable[[Value], Value]) -> None:
         self.maximum = maximum      # maximum(a, b): elementwise (a where equal)
         self.minimum = minimum      # minimum(a, b): elementwise (a where equal)
         self.where = where          # where(condition, a, b): a where condition, else b
@@ -49,6 +51,8 @@ class Ops:
         self.some = some            # some(flags): whether any is true (a short cut's test)
         self.arccos = arccos        # numpy's, on floats too (the math module's need not round
         self.sin = sin              # as numpy's do)
+        self.cos = cos
+        self.log = log
         self.both = both            # both(f, a, b): (f(a), f(b)); a batch's in one evaluation
 
 
@@ -69,9 +73,9 @@ def _float_of(function: Callable[[Value], Value]) -> Callable[[Value], Value]:
 FLOATS = Ops(cast(Callable[[Value, Value], Value], max),
              cast(Callable[[Value, Value], Value], min), _choose,
              cast(Callable[[Value], Value], math.sqrt), bool, bool, _float_of(np.arccos),
-             _float_of(np.sin), _both_floats)
+             _float_of(np.sin), _both_floats, _float_of(np.cos), _float_of(np.log))
 ARRAYS = Ops(np.maximum, np.minimum, np.where, np.sqrt, lambda flags: bool(np.all(flags)),
-             lambda flags: bool(np.any(flags)), np.arccos, np.sin, _both_arrays)
+             lambda flags: bool(np.any(flags)), np.arccos, np.sin, _both_arrays, np.cos, np.log)
 
 
 def evaluate(formula: Callable[..., ResultT], *values: Union[Value, Flag]) -> ResultT:

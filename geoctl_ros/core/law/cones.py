@@ -42,11 +42,32 @@ from typing import Iterable, List, Optional, Tuple, cast
 import numpy as np
 import numpy.typing as npt
 
+from geoctl_ros.core.geometry.elementwise import ARRAYS, Ops, Value
 from geoctl_ros.core.geometry.flags import Flags, any_flag
 from geoctl_ros.core.geometry.so3 import BoolArray, FloatArray, Scalars, hat, matmul, vecmat
 
 # ``ConeSet.widened``: cos, floor gap, B offset, 1 / (alpha g0), the inside field's magnitude
 Widened = Tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
+
+
+def barrier_constants(ops: Ops, theta_b: Value, floor: float,
+                      alpha: float) -> Tuple[Value, Value, Value, Value, Value]:
+    """A cone's barrier constants for the half-angle theta_b it acts on (an ``elementwise``
+    formula): cos theta_b, the floor gap g0, the B offset 1 + ln(1 + cos theta_b) / alpha,
+    1 / (alpha g0) and the inside field's magnitude sin theta_b / (alpha g0) (``Widened``).
+    """
+    cos_theta = ops.cos(theta_b)
+    g0 = cos_theta - ops.cos(theta_b + floor)
+    return (cos_theta, g0, 1.0 + ops.log(1.0 + cos_theta) / alpha, 1.0 / (alpha * g0),
+            ops.sin(theta_b) / (alpha * g0))
+
+
+def log_barrier(ops: Ops, g: Value, B_offset: Value, inv_alpha: float) -> Tuple[Value, Value]:
+    """A cone's barrier at the gap g = cos theta - s outside its floor band (g >= g0; within it
+    ``ConeSet.evaluate_terms`` extends it; an ``elementwise`` formula): B_i, and the weight
+    -1 / (alpha g_i) of its gradient e_RB,i = weight ((R^T v_i) x r).
+    """
+    return B_offset - ops.log(g) * inv_alpha, -inv_alpha / g
 
 
 def angle_deg(s: FloatArray) -> FloatArray:
@@ -127,14 +148,18 @@ class ConeSet:
         self.guard = float(guard_rad)
         self.theta_b = self.theta + self.guard        # the half-angles the barrier acts on
         self.cos_real = np.cos(self.theta)
-        self.cos_theta = np.cos(self.theta_b)
-        self.log_scale = 1.0 + self.cos_theta
-        self.g0 = self.cos_theta - np.cos(self.theta_b + self.floor)   # floor gap, > 0
-        self._B_offset = 1.0 + np.log(self.log_scale) / self.alpha
+        # cos theta_b, the floor gap (> 0), the B offset, 1 / (alpha g0), |e_RB,i| in cone i
+        self.constants = cast(Widened, barrier_constants(ARRAYS, self.theta_b, self.floor,
+                                                         self.alpha))
+        self.cos_theta, self.g0, self._B_offset, self._inv_alpha_g0, self.e_RB_inside = (
+            self.constants)
+        # the same as floats, cone by cone (one run's barrier: ``barrier_floats``)
+        self.constants_floats: List[Tuple[float, ...]] = (
+            list(zip(*(c.tolist() for c in self.constants))) if self.theta.ndim == 1 else [])
+        self.theta_b_floats: List[float] = (self.theta_b.tolist() if self.theta.ndim == 1
+                                            else [])
         self._inv_alpha = 1.0 / self.alpha
-        self._inv_alpha_g0 = 1.0 / (self.alpha * self.g0)
         self.theta_deg: FloatArray = np.degrees(self.theta)
-        self.e_RB_inside = np.sin(self.theta_b) / (self.alpha * self.g0)   # |e_RB,i| in cone i
         least = int(np.argmin(np.abs(self.r)))
         perp = np.cross(self.r, np.eye(3)[least])
         self._r_perp = perp / np.linalg.norm(perp)  # fallback direction on a cone's axis
@@ -171,11 +196,8 @@ class ConeSet:
         angle per cone, or per run and cone): cos, floor gap, B offset, 1 / (alpha g0) and the
         inside field's magnitude, as ``evaluate_terms`` takes them.
         """
-        theta_b = self.theta_b + extra_rad
-        cos_theta = np.cos(theta_b)
-        g0 = cos_theta - np.cos(theta_b + self.floor)
-        return (cos_theta, g0, 1.0 + np.log(1.0 + cos_theta) / self.alpha,
-                1.0 / (self.alpha * g0), np.sin(theta_b) / (self.alpha * g0))
+        return cast(Widened, barrier_constants(ARRAYS, self.theta_b + extra_rad, self.floor,
+                                               self.alpha))
 
     def evaluate_terms(self, sc: FloatArray, widened: Optional[Widened] = None) -> 'ConeEval':
         """Barrier values, gradients and flags from ``terms(R)``; widened: None, or the constants
@@ -183,23 +205,21 @@ class ConeSet:
         against the real cones).
         """
         s, cross = sc[..., 0], sc[..., 1:]
-        if widened is None:
-            cos_theta, g0, B_offset, inv_alpha_g0, inside_norm = (
-                self.cos_theta, self.g0, self._B_offset, self._inv_alpha_g0, self.e_RB_inside)
-        else:
-            cos_theta, g0, B_offset, inv_alpha_g0, inside_norm = widened
+        cos_theta, g0, B_offset, inv_alpha_g0, inside_norm = (
+            self.constants if widened is None else widened)
         g = cos_theta - s
         saturated = g < g0
         any_saturated = saturated.any(axis=-1)
         if not any_flag(any_saturated):
             # the usual case: the paper's barrier, nothing to flag
-            return ConeEval(s, B_offset - np.log(g) * self._inv_alpha, cross,
-                            -self._inv_alpha / g, saturated, saturated, any_saturated)
+            B, weight = log_barrier(ARRAYS, g, B_offset, self._inv_alpha)
+            return ConeEval(s, cast(FloatArray, B), cross, cast(FloatArray, weight), saturated,
+                            saturated, any_saturated)
         g_eff = np.maximum(g, g0)
         # log barrier at g_eff, plus the tangent-line extension below the floor (zero above it)
-        B = (B_offset - np.log(g_eff) * self._inv_alpha
-             + (g_eff - g) * inv_alpha_g0)       # g_eff - g = max(g0 - g, 0)
-        weight = -self._inv_alpha / g_eff
+        B_eff, weight_eff = log_barrier(ARRAYS, g_eff, B_offset, self._inv_alpha)
+        B = B_eff + (g_eff - g) * inv_alpha_g0       # g_eff - g = max(g0 - g, 0)
+        weight = cast(FloatArray, weight_eff)
         e_RB = cross * weight[..., None]
         inside = g <= 0.0                         # inside the barrier's (guarded) cone
         if inside.any():

@@ -8,8 +8,10 @@ from typing import Optional, Tuple, cast
 import numpy as np
 
 from geoctl_ros.core.geometry import so3
+from geoctl_ros.core.geometry.elementwise import ARRAYS, FLOATS, Ops, Value
+from geoctl_ros.core.geometry.flags import any_flag
 from geoctl_ros.core.geometry.so3 import FloatArray, Scalars, matvec, transpose, vee
-from geoctl_ros.core.law.cones import ConeEval
+from geoctl_ros.core.law.cones import ConeEval, ConeSet, barrier_constants, log_barrier
 from geoctl_ros.core.law.controller_config import ControllerConfig
 from geoctl_ros.core.law.mechanics import gravity_moment
 
@@ -50,33 +52,112 @@ def linear_terms(R: FloatArray, R_d: FloatArray, config: ControllerConfig) -> Fl
     return np.concatenate([np.broadcast_to(p, batch + p.shape[-1:]) for p in parts], axis=-1)
 
 
-def approach_rates(sc: FloatArray, Omega: FloatArray) -> FloatArray:
-    """Per cone, how fast the sensor's angle to the cone's axis is closing (rad/s; negative when
-    it opens), from ``ConeSet.terms`` (s_i, (R^T v_i) x r) and Omega: with s_i = cos(phi_i),
-    d/dt s_i = -Omega . ((R^T v_i) x r) and sin(phi_i) = |(R^T v_i) x r|.
+def approach_rate(ops: Ops, c0: Value, c1: Value, c2: Value, w0: Value, w1: Value,
+                  w2: Value) -> Value:
+    """How fast the sensor's angle to a cone's axis is closing (rad/s; negative when it opens;
+    an ``elementwise`` formula), from the cone's (R^T v_i) x r = (c0, c1, c2) (``ConeSet.terms``)
+    and Omega: with s_i = cos(phi_i), d/dt s_i = -Omega . ((R^T v_i) x r) and
+    sin(phi_i) = |(R^T v_i) x r|.
     """
-    cross = sc[..., 1:]
-    sin_phi = np.sqrt(so3.dot(cross, cross))
-    return -so3.dot(cross, Omega[..., None, :]) / np.maximum(sin_phi, 1e-9)
+    sin_phi = ops.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+    return -(c0 * w0 + c1 * w1 + c2 * w2) / ops.maximum(sin_phi, 1e-9)
+
+
+def approach_rates(sc: FloatArray, Omega: FloatArray) -> FloatArray:
+    """``approach_rate`` of every cone, from ``ConeSet.terms`` (s_i, (R^T v_i) x r) and Omega."""
+    return cast(FloatArray, approach_rate(ARRAYS, sc[..., 1], sc[..., 2], sc[..., 3],
+                                          Omega[..., None, 0], Omega[..., None, 1],
+                                          Omega[..., None, 2]))
 
 
 WIDEN_GAP_SHARE = 0.5     # the widening takes at most this share of the gap to a cone's barrier
 
 
+def widening(ops: Ops, s: Value, rate: Value, blind: Value, widening_max: float,
+             theta_b: Optional[Value]) -> Value:
+    """How much wider (rad) a cone's barrier is for a loop blind for ``blind`` seconds (an
+    ``elementwise`` formula): what the sensor travels towards the cone in that time at its
+    approach rate (``approach_rate``), at most widening_max and, given the barrier's half-angle
+    theta_b, at most WIDEN_GAP_SHARE of the sensor's gap to it (s: the cosine of the sensor's
+    angle to the axis).
+    """
+    travel = rate * blind
+    if theta_b is not None:
+        gap = ops.arccos(ops.minimum(ops.maximum(s, -1.0), 1.0)) - theta_b
+        travel = ops.minimum(travel, WIDEN_GAP_SHARE * gap)
+    return ops.minimum(ops.maximum(travel, 0.0), widening_max)
+
+
 def blind_widening(sc: FloatArray, Omega: FloatArray, blind: Scalars, widening_max: float,
                    theta_b: Optional[FloatArray] = None) -> FloatArray:
     """How much wider (rad) the barrier's cones are for a loop blind for ``blind`` seconds (one
-    per run of a batch): what the sensor travels towards each cone in that time at its present
-    approach rate, at most widening_max and, given the barrier's half-angles theta_b, at most
-    WIDEN_GAP_SHARE of the sensor's gap to each: the barrier is evaluated where the sensor is
+    per run of a batch; ``widening`` of every cone): the barrier is evaluated where the sensor is
     heading, but never at or past its edge, where a widened cone suddenly round the sensor would
     kick it with the barrier's strongest field (a 19 N m yaw command in a campaign run).
     """
-    travel = approach_rates(sc, Omega) * np.asarray(blind)[..., None]
-    if theta_b is not None:
-        gap = np.arccos(np.clip(sc[..., 0], -1.0, 1.0)) - theta_b
-        travel = np.minimum(travel, WIDEN_GAP_SHARE * gap)
-    return cast(FloatArray, np.clip(travel, 0.0, widening_max))
+    return cast(FloatArray, widening(ARRAYS, sc[..., 0], approach_rates(sc, Omega),
+                                     np.asarray(blind)[..., None], widening_max, theta_b))
+
+
+def barrier_at_step(cones: ConeSet, sc: FloatArray, Omega: FloatArray, blind: Scalars,
+                    widening_max: float) -> ConeEval:
+    """The cones' barrier at the step from their terms sc (``ConeSet.terms``), each widened by
+    the blind time (``blind_widening``; none where blind is 0 or no cone is being approached):
+    ``ConeSet.evaluate_terms``. One run's few cones (up to FLOATS_CONES) go cone by cone in
+    floats, by the same formulas (``barrier_floats``), a batch's in arrays.
+    """
+    n = len(cones)
+    if n and sc.shape[:-2] in ((), (1,)) and n <= FLOATS_CONES and cones.constants_floats:
+        ev = barrier_floats(cones, sc, Omega, blind, widening_max)
+        if ev is not None:
+            return ev
+    widened = None
+    if n and (blind > 0.0 if isinstance(blind, float) else any_flag(np.asarray(blind) > 0.0)):
+        extra = blind_widening(sc, Omega, blind, widening_max, cones.theta_b)
+        if extra.max() > 0.0:                  # (else no cone is being approached)
+            widened = cones.widened(extra)
+    return cones.evaluate_terms(sc, widened)
+
+
+FLOATS_CONES = 4       # one run's cones up to which the barrier is worked out in floats
+
+
+def barrier_floats(cones: ConeSet, sc: FloatArray, Omega: FloatArray, blind: Scalars,
+                   widening_max: float) -> Optional[ConeEval]:
+    """``barrier_at_step`` for one run (sc (n, 4), or a batch of one's (1, n, 4)) in floats, cone
+    by cone: the same formulas (``approach_rate``, ``widening``, ``barrier_constants``,
+    ``log_barrier``) and so the same bits as the arrays; None where a cone is in its floor band
+    (the extension's arrays then).
+    """
+    lead = sc.shape[:-2]
+    rows = (sc if not lead else sc[0]).tolist()
+    blind_ = float(blind) if isinstance(blind, float) else float(np.asarray(blind).reshape(-1)[0])
+    w0, w1, w2 = (Omega if Omega.ndim == 1 else Omega[0]).tolist()
+    B, weight = [], []
+    inv_alpha = 1.0 / cones.alpha
+    for (s, c0, c1, c2), theta_b, constants in zip(rows, cones.theta_b_floats,
+                                                   cones.constants_floats):
+        cos_theta: Value
+        g0: Value
+        B_offset: Value
+        cos_theta, g0, B_offset = constants[:3]
+        if blind_ > 0.0:
+            extra = widening(FLOATS, s, approach_rate(FLOATS, c0, c1, c2, w0, w1, w2), blind_,
+                             widening_max, theta_b)
+            if extra > 0.0:
+                cos_theta, g0, B_offset = barrier_constants(FLOATS, theta_b + extra,
+                                                            cones.floor, cones.alpha)[:3]
+        g = cos_theta - s
+        if g < g0:
+            return None
+        b, w = log_barrier(FLOATS, g, B_offset, inv_alpha)
+        B.append(b)
+        weight.append(w)
+    shape = lead + (len(B),)
+    saturated = np.zeros(shape, dtype=bool)
+    return ConeEval(sc[..., 0], np.array(B).reshape(shape), sc[..., 1:],
+                    np.array(weight).reshape(shape), saturated, saturated,
+                    np.zeros(lead, dtype=bool)[()])
 
 
 class LinearMap:

@@ -45,11 +45,7 @@ from geoctl_ros.core.geometry.flags import any_flag
 from geoctl_ros.core.geometry.so3 import BoolArray, FloatArray, Scalars, cross, matvec, transpose
 from geoctl_ros.core.law.brake import ApproachBrake, BrakeInputs
 from geoctl_ros.core.law.cones import ConeSet
-from geoctl_ros.core.law.configuration_error import (
-    LinearMap,
-    blind_widening,
-    with_cones,
-)
+from geoctl_ros.core.law.configuration_error import LinearMap, barrier_at_step, with_cones
 from geoctl_ros.core.law.controller_config import DISTURBANCE_MODELS, ControllerConfig
 from geoctl_ros.core.law.dynamics import Dynamics, ModelParts
 from geoctl_ros.core.law.feasibility import setpoint_problem
@@ -227,12 +223,7 @@ class AttitudeController:
         y = self._linear(R)                     # A, e_RA, the cones' terms, M_g (linear_terms)
         n = self._linear.n_cones
         sc = y[..., 4:4 + 4 * n].reshape(y.shape[:-1] + (n, 4))
-        widened = None
-        if n and (blind > 0.0 if isinstance(blind, float) else any_flag(np.asarray(blind) > 0.0)):
-            extra = blind_widening(sc, Omega, blind, cfg.blind_guard_max, cfg.cones.theta_b)
-            if extra.max() > 0.0:                  # (else no cone is being approached)
-                widened = cfg.cones.widened(extra)
-        ev = cfg.cones.evaluate_terms(sc, widened)
+        ev = barrier_at_step(cfg.cones, sc, Omega, blind, cfg.blind_guard_max)
         return StepTerms(y[..., 0:1], y[..., 1:4], ev, y[..., -3:], self.regressor(R))
 
     def moment(self, R: FloatArray, Omega: FloatArray, adapt: bool, terms: StepTerms,
