@@ -801,13 +801,13 @@ def braked(brake: ApproachBrake, cones: ConeSet, J_inv: FloatArray, polytope: Po
     A_p, beta_p = reachable(polytope, brake.keep(x.hold), x.thrusts)
     # (a moment the rotors cannot reach this hold, which the lag compensation would clip, needs
     # the projection too: the derivation's rotors reach every command, the law's too)
-    unreached = np.any(slack_of(A_p, u, beta_p) < -TOL, axis=-1)
+    unreached = (slack_of(A_p, u, beta_p) < -TOL).any(axis=-1)
     if extra is None:
         # whether the law's moment meets every cone's condition (``meets``, on the law's own
         # deceleration along each cone; no search), and the worst state of every cone there
         # (for the rows)
         braking = ~view.met
-        if not np.any(braking | unreached):
+        if not (braking | unreached).any():
             return Braked(u, braking, weak)
         if not view.whole:                 # (the rows need every cone's worst state whole)
             view = _cones_at(brake, cones, J_inv, x, u, worst=True)

@@ -210,7 +210,11 @@ class AttitudeController:
         guidance = self.guidance
         assert guidance is not None
         carrot = guidance.carrot(R, self._R_d, self.config.cones)
-        if self._carrot is None or not np.array_equal(carrot, self._carrot):
+        # (one run's compared as floats: a tenth of array_equal's cost; the same equality)
+        same = (self._carrot is not None
+                and (carrot.tolist() == self._carrot.tolist() if carrot.ndim == 2
+                     else np.array_equal(carrot, self._carrot)))
+        if not same:
             self._linear = self._linear.retargeted(carrot, self.config.G)
             self._carrot = carrot.copy()
 

@@ -435,6 +435,10 @@ def _enters(corners: List[FloatArray], axes: FloatArray, rims: FloatArray) -> bo
     return bool(np.any(arc_clearance(a[:, None], b[:, None], axes[None]) < rims + CAP_CLEARANCE))
 
 
+_ONE_RUN = np.zeros(1, dtype=int)
+_ONE_RUN.flags.writeable = False
+
+
 class Guidance:
     """The set point fed along the planned path, for one run or a batch (see the module)."""
 
@@ -474,6 +478,8 @@ class Guidance:
         if self.paths is None:
             self._plan(Rs, goals, cones, np.arange(len(Rs)))
         assert self.paths is not None and self.index is not None
+        if single:
+            return self._carrot_of_one(Rs, goals, cones)
         runs = np.arange(len(Rs))
         P = self.paths[runs, self.index]
         cos_now = 0.5 * (np.einsum('nij,nij->n', P, Rs) - 1.0)     # cos of the angle R to P
@@ -486,6 +492,18 @@ class Guidance:
             self._advance(Rs[moving], moving, cones)
         P = self.paths[runs, self.index]
         return P[0] if single else P
+
+    def _carrot_of_one(self, Rs: FloatArray, goals: FloatArray, cones: ConeSet) -> FloatArray:
+        """``carrot`` for one run (Rs and goals (1, 3, 3)): the same steps, without the batch's
+        indexing.
+        """
+        assert self.paths is not None and self.index is not None and self.last is not None
+        P = self.paths[0, self.index[0]]
+        if 0.5 * (np.einsum('nij,nij->n', P[None], Rs)[0] - 1.0) < self.cos_replan:
+            self._plan(Rs, goals, cones, _ONE_RUN)
+        if self.index[0] < self.last[0]:
+            self._advance(Rs, _ONE_RUN, cones)
+        return cast(FloatArray, self.paths[0, self.index[0]].copy())
 
     def _advance(self, Rs: FloatArray, runs: IntArray, cones: ConeSet) -> None:
         """Move the set points of the runs (indices) along their paths (see ``carrot``). Near a
