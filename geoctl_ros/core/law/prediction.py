@@ -271,24 +271,27 @@ def predict(observer: Observer, model: Dynamics, R: FloatArray, Omega: FloatArra
     known = max(now - history.first, 0.0)
     if known <= 0.0:
         return Prediction(observer, (R, Omega), (R, Omega), residual)
-    age_R, age_Omega = np.minimum(age_R, known), np.minimum(age_Omega, known)
     scalar = np.ndim(age_R) == 0 and np.ndim(age_Omega) == 0
-    if scalar:
+    if scalar:                      # (one run: plain floats, np.minimum's value)
         age_R, age_Omega = float(age_R), float(age_Omega)
+        age_R = known if known < age_R else age_R
+        age_Omega = known if known < age_Omega else age_Omega
         horizon = max(age_R, age_Omega)
+        latest = horizon
     else:
-        age_R = np.asarray(age_R, dtype=float)
-        age_Omega = np.asarray(age_Omega, dtype=float)
+        age_R = np.minimum(np.asarray(age_R, dtype=float), known)
+        age_Omega = np.minimum(np.asarray(age_Omega, dtype=float), known)
         horizon = np.maximum(age_R, age_Omega)
+        latest = float(np.max(horizon))
     at_now = (R, Omega)
-    if lead <= 0.0 and float(np.max(horizon)) <= 0.0:
+    if lead <= 0.0 and latest <= 0.0:
         return Prediction(observer, at_now, at_now, residual)
     # (by components from here on, made once, or as the observer took them)
     one, shape = one_run(R), R.shape[:-2]
     Rp, Wp, d = taken if taken is not None else (
         matrix_parts(R, one), vector_parts(Omega, one), vector_parts(model.delta_bar, one))
     error = observer.acc_error
-    if float(np.max(horizon)) > 0.0:
+    if latest > 0.0:
         # (the moment then, before any clipping)
         moment_now = history.parts_at(captured, one)
         acc0 = model.acceleration_parts(Rp, Wp, moment_now, d)
