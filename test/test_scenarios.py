@@ -290,10 +290,29 @@ def test_the_testbed_scenarios_fly_the_testbeds_own_gains():
 # every shipped scenario's first seconds, the sha256 of its history, printed per line
 _HASHES = """
 import hashlib, os, sys
+from geoctl_ros.core.supervisor.loop import ControlLoop
+from geoctl_ros.params import controller_setup
 from geoctl_ros.sim import scenario
+flights = {}
 for name in sorted(os.listdir(sys.argv[1])):
-    flight = scenario.run(scenario.load(os.path.join(sys.argv[1], name)), duration=1.5)
+    flight = flights[name] = scenario.run(scenario.load(os.path.join(sys.argv[1], name)),
+                                          duration=1.5)
     print(name, hashlib.sha256(flight.history.tobytes()).hexdigest())
+# the node's control loop (as controller_node runs it) fed testbed_yaw90's attitude and rates
+flight = flights['testbed_yaw90.yaml']
+loop = ControlLoop(controller_setup(dict(flight.scenario.controller, consistency_checks=False)))
+cols, h = flight.columns, hashlib.sha256()
+for k, row in enumerate(flight.history):
+    t = 0.01 * k
+    loop.offer_pose(row[[cols.index(c) for c in ('qx', 'qy', 'qz', 'qw')]], t - 0.004, t - 0.003)
+    loop.offer_angular_velocity(row[[cols.index(c) for c in ('wx', 'wy', 'wz')]], t - 0.002,
+                                t - 0.001)
+    if k == 0:
+        assert loop.arm(t).ok
+    tick = loop.tick(t, 0.01)
+    h.update(tick.motors.commands.tobytes())
+    h.update(tick.control.u.tobytes() if tick.control is not None else b'')
+print('node', h.hexdigest())
 """
 
 
@@ -311,13 +330,14 @@ def test_numpy_here_computes_exp_arccos_and_arctan2_as_the_c_library_does():
 
 def test_every_scenario_flies_to_the_same_bits_under_another_blas_kernel_and_simd_target():
     """Every shipped scenario's first 1.5 s (its whole history: attitude, rates, moments, the
-    estimate, the rotors) has the same sha256 with OpenBLAS's Prescott kernel (the oldest x86
-    one) as with the kernel this CPU picks: nothing on the path goes through BLAS, whose kernels
-    round by the CPU. And the same with every one of numpy's own CPU-specific targets turned
-    off (as on the oldest CPU numpy runs on) as with those the package leaves on: numpy's AVX-512
-    kernels of exp, arccos, arctan2 and the like round otherwise than the C library's functions,
-    and the package keeps numpy off them (geoctl_ros/__init__.py). So docs/scenarios.md's figures
-    hold on any CPU, and on both stacks.
+    estimate, the rotors), and the node's control loop's commands fed one of them, have the same
+    sha256 with OpenBLAS's Prescott kernel (the oldest x86 one) as with the kernel this CPU
+    picks: nothing on the path goes through BLAS, whose kernels round by the CPU. And the same
+    with every one of numpy's own CPU-specific targets turned off (as on the oldest CPU numpy
+    runs on) as with those the package leaves on: numpy's AVX-512 kernels of exp, arccos,
+    arctan2 and the like round otherwise than the C library's functions, and the package keeps
+    numpy off them (geoctl_ros/__init__.py). So docs/scenarios.md's figures hold on any CPU, and
+    on both stacks, and the node flies a recorded flight again to its bits on any CPU.
     """
     def hashes(kernel, numpy_targets=None):
         env = {k: v for k, v in os.environ.items() if k != 'OPENBLAS_CORETYPE'}
@@ -328,7 +348,7 @@ def test_every_scenario_flies_to_the_same_bits_under_another_blas_kernel_and_sim
                              text=True, env=env, check=True).stdout
         return dict(line.split() for line in out.splitlines())
     prescott = hashes('Prescott')
-    assert len(prescott) == len(os.listdir(SCENARIOS))
+    assert len(prescott) == len(os.listdir(SCENARIOS)) + 1
     assert hashes(None) == prescott
     dispatched = importlib.import_module('numpy._core._multiarray_umath').__cpu_dispatch__
     assert hashes(None, ' '.join(dispatched)) == prescott

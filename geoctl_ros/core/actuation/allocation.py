@@ -116,14 +116,12 @@ class Allocator:
             valid = np.isfinite(moment).all(axis=-1) & math.isfinite(collective)
         all_valid = all_flag(valid)
         m = moment if all_valid else np.where(np.asarray(valid)[..., None], moment, 0.0)
-        # (one moment, the node's: a plain product, the fastest; a batch's rows go entry by
-        # entry, so that a run's bits do not depend on its batch; the node's tick matches a batch
-        # of one's to rounding, not bit for bit: test_loop.py)
-        f = collective * self._d + (self._p_moment @ m if m.ndim == 1
-                                    else matvec(self._p_moment, m))
+        # (entry by entry, one moment or a batch's rows: a run's bits do not depend on its batch
+        # or on the CPU's BLAS kernel)
+        f = collective * self._d + matvec(self._p_moment, m)
         met = (f.min(axis=-1) >= self.lo) & (f.max(axis=-1) <= self.hi)
         if not all_flag(met):
-            f_rp = self._p_rp @ m[:2] if m.ndim == 1 else matvec(self._p_rp, m[..., :2])
+            f_rp = matvec(self._p_rp, m[..., :2])
             f_y = self._p_y * m[..., 2:]
             # roll and pitch scaled first, then yaw (only when roll and pitch are whole), then the
             # collective thrust moved within what the rotors allow

@@ -79,7 +79,8 @@ def vee(M: FloatArray) -> FloatArray:
 # through matmul, whose BLAS kernels round a pair by where it falls in memory (OpenBLAS 0.3.23's
 # Prescott kernel: every other 3x3 matrix of a stack). A matrix of <= SMALL entries times a vector
 # goes in floats in the same order, so a run alone (a batch of one, shapes ONE and ONE_M; one
-# testbed's rotors) gives a stack's bits; a larger one, and v^T M unstacked (the node's), ``@``.
+# testbed's rotors) gives a stack's bits; a larger one, and v^T M unstacked (the node's), by a
+# running sum in the same order (``_in_order``): no product of the package's goes through BLAS.
 SMALL = 18
 ONE, ONE_M = (1, 3), (1, 3, 3)
 
@@ -103,6 +104,17 @@ def _float_matvec(M: FloatArray, v: FloatArray) -> FloatArray:
     return np.array(out, dtype=float)
 
 
+def _in_order(products: FloatArray, axis: int) -> FloatArray:
+    """The sums of products along axis, each left to right in index order (a running sum's
+    last: numpy's accumulate adds in order, where BLAS and a reduction pair them by the CPU's
+    kernel): a stack's order, for one matrix or vector of any size.
+    """
+    axis %= products.ndim
+    if not products.shape[axis]:
+        return np.zeros(products.shape[:axis] + products.shape[axis + 1:])
+    return cast(FloatArray, products.cumsum(axis=axis)[(slice(None),) * axis + (-1,)])
+
+
 def matmul(A: FloatArray, B: FloatArray) -> FloatArray:
     """A B for two matrices, or for each pair of stacks of them (broadcasting)."""
     if A.ndim == 2 and B.ndim == 2:
@@ -110,7 +122,7 @@ def matmul(A: FloatArray, B: FloatArray) -> FloatArray:
             a, b = A.tolist(), B.tolist()
             return np.array([[r[0] * b[0][j] + r[1] * b[1][j] + r[2] * b[2][j] for j in range(3)]
                              for r in a])
-        return A @ B
+        return _in_order(A[:, :, None] * B[None, :, :], 1)
     if A.shape == ONE_M and B.shape == ONE_M:
         return matmul(A[0], B[0])[None]
     if A.shape[-1] == 3:
@@ -125,7 +137,7 @@ def matmul(A: FloatArray, B: FloatArray) -> FloatArray:
 def matvec(M: FloatArray, v: FloatArray) -> FloatArray:
     """M v for a matrix and a vector, or for each of a stack of them (broadcasting)."""
     if M.ndim <= 2 and v.ndim == 1:
-        return _float_matvec(M, v) if M.size <= SMALL else M @ v
+        return _float_matvec(M, v) if M.size <= SMALL else _in_order(M * v, -1)
     if v.shape == ONE and (M.ndim == 2 and M.size <= SMALL or M.shape == ONE_M):
         return _float_matvec(M[0] if M.ndim == 3 else M, v[0])[None]
     v = v[..., None, :]
@@ -142,7 +154,7 @@ def matvec(M: FloatArray, v: FloatArray) -> FloatArray:
 def vecmat(v: FloatArray, M: FloatArray) -> FloatArray:
     """v^T M (= M^T v) for a vector and a matrix, or for each of a stack of them."""
     if v.ndim == 1 and M.ndim <= 2:
-        return v @ M
+        return _in_order(v[:, None] * M if M.ndim == 2 else v * M, 0)
     if v.shape == ONE and (M.ndim == 2 and M.size <= SMALL or M.shape == ONE_M):
         return _float_matvec((M[0] if M.ndim == 3 else M).T, v[0])[None]
     v = v[..., None]

@@ -32,6 +32,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.so3 import FloatArray, Vector
 
 # the source's world -> ENU
@@ -120,31 +121,31 @@ class InputFrames:
         """The airframe's attitude (ENU <- FLU) of a pose R_s as the source streams it."""
         if self.pose_identity:
             return R_source
-        return self.pose_left @ R_source @ self.pose_right
+        return so3.matmul(so3.matmul(self.pose_left, R_source), self.pose_right)
 
     def imu_vector(self, v: Vector) -> FloatArray:
         """An IMU vector (its specific force) in the airframe's body axes."""
         a = np.asarray(v, dtype=float)
-        return a if self.imu_identity else self.imu_map @ a
+        return a if self.imu_identity else so3.matvec(self.imu_map, a)
 
     def angular_velocity(self, w: Vector) -> FloatArray:
         """The gyro's reading, less its bias, in the airframe's body axes."""
         a = np.asarray(w, dtype=float)
         if not self.bias_zero:
             a = a - self.gyro_bias
-        return a if self.imu_identity else self.imu_map @ a
+        return a if self.imu_identity else so3.matvec(self.imu_map, a)
 
     # --- package -> source (what a source of these conventions streams: the simulator) ------
     def source_attitude(self, R: FloatArray) -> FloatArray:
         """The pose such a source streams for the airframe's attitude R."""
         if self.pose_identity:
             return R
-        return self.pose_left.T @ R @ self.pose_right.T
+        return so3.matmul(so3.matmul(self.pose_left.T, R), self.pose_right.T)
 
     def source_vector(self, v: Vector) -> FloatArray:
         """An airframe body vector in such an IMU's axes (no bias)."""
         a = np.asarray(v, dtype=float)
-        return a if self.imu_identity else self.imu_map.T @ a
+        return a if self.imu_identity else so3.matvec(self.imu_map.T, a)
 
     def describe(self) -> str:
         """The conventions in words (for the start-up log)."""
