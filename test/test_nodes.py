@@ -355,7 +355,7 @@ def test_a_control_step_that_raises_disarms_and_commands_zero_and_the_node_stays
     executor.add_node(node)
     executor.add_node(mon)
     try:
-        def fail(now, dt):
+        def fail(now, dt, settle=True):
             raise TypeError('planted')
         monkeypatch.setattr(node.loop, 'tick', fail)
         end = time.monotonic() + 10.0
