@@ -117,6 +117,43 @@ def test_the_barrier_at_the_step_is_the_same_bits_alone_and_in_a_batch(cones):
     assert widened >= 3 and banded >= 1 and widened + banded < RUNS
 
 
+def test_the_mix_of_one_run_is_the_same_bits_as_in_a_batch():
+    """The mixer's lag compensation and thrust curve of one run (floats, rotor by rotor) give
+    the commands, the cut and the rotors' model of a batch of 40 (whole arrays), bit for bit:
+    random moments (some beyond the rotors), rotor states and holds, spooling and flying.
+    """
+    _, setup = _controller()
+    mixer = setup.mixer
+    rng = np.random.default_rng(9)
+    u = rng.normal(0.0, 0.6, (RUNS, 3))
+    first = mixer.mix(np.zeros((RUNS, 3)), None, dt=0.01)       # the rotors at rest, spooling
+    lo, hi = mixer.allocator.lo, mixer.allocator.hi
+    sent = rng.uniform(lo, hi, first.rotors.sent.shape)
+    modelled = rng.uniform(lo, hi, sent.shape)
+    # half the runs' rotors near what the moment needs (the compensation not cut)
+    near = mixer.allocator.allocate(u, mixer.collective_thrust).thrusts[::2]
+    sent[::2] = modelled[::2] = near + rng.normal(0.0, 0.01, near.shape)
+    clipped = 0
+    for spool_left in (0.03, -0.01):
+        rotors = first.rotors._replace(sent=sent, modelled=modelled, design_hold=0.02,
+                                       spool_left=spool_left)
+        together = mixer.mix(u, rotors, dt=0.01, held=0.013)
+        for k in range(RUNS):
+            one = rotors._replace(sent=sent[k], modelled=modelled[k])
+            alone = mixer.mix(u[k], one, dt=0.01, held=0.013)
+            assert np.array_equal(alone.commands, together.commands[k]), k
+            assert np.array_equal(alone.normalised, together.normalised[k]), k
+            assert alone.clipped == (together.clipped[k] if np.ndim(together.clipped)
+                                     else together.clipped), k
+            for name in ('sent', 'modelled'):
+                assert np.array_equal(getattr(alone.rotors, name),
+                                      getattr(together.rotors, name)[k]), (k, name)
+            assert (alone.rotors.design_hold, alone.rotors.spool_left) == (
+                together.rotors.design_hold, together.rotors.spool_left)
+            clipped += bool(alone.clipped)
+    assert 0 < clipped < RUNS
+
+
 def test_the_models_acceleration_is_the_same_bits_alone_and_in_a_batch():
     """``Dynamics.acceleration`` and ``moments`` of 40 random states at once equal each one's
     alone, bit for bit, and J times the acceleration is the moments' sum (to rounding).
