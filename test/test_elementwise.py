@@ -109,7 +109,6 @@ def test_the_barrier_at_the_step_is_the_same_bits_alone_and_in_a_batch(cones):
         node = barrier_at_step(set_, sc[k], Omega[k], float(blind[k]), math.radians(5.0))
         for name in ('s', 'B', 'weight', 'saturated', 'e_RB_sum'):
             assert np.array_equal(getattr(alone, name), getattr(together, name)[one]), (k, name)
-        for name in ('s', 'B', 'weight', 'saturated'):
             assert np.array_equal(getattr(node, name), getattr(together, name)[k]), (k, name)
         banded += bool(alone.any_saturated[0])
         plain = barrier_at_step(set_, sc[k], Omega[k], 0.0, 0.0)

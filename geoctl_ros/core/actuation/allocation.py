@@ -14,7 +14,7 @@ import numpy as np
 from geoctl_ros.core.actuation.airframe import AirframeError, check
 from geoctl_ros.core.geometry import so3
 from geoctl_ros.core.geometry.flags import Flags, all_flag
-from geoctl_ros.core.geometry.so3 import FloatArray, Scalars, matvec
+from geoctl_ros.core.geometry.so3 import FloatArray, Scalars, matvec, matvec_floats
 
 
 class MomentPolytope(NamedTuple):
@@ -85,6 +85,9 @@ class Allocator:
         self._d, self._p_rp, self._p_y = P[:, 0], P[:, 1:3], P[:, 3]
         self.base_share = self._d               # each alive rotor's thrust per N of collective
         self._p_moment = np.ascontiguousarray(P[:, 1:])
+        self._p_moment_rows: List[List[float]] = self._p_moment.tolist()   # (one moment's)
+        self._d_floats: List[float] = self._d.tolist()
+        self._B_made = np.ascontiguousarray(self.B[2:])   # rows F_z, M_x, M_y, M_z
         if np.any(self._d <= 1e-9):
             raise AirframeError('collective thrust would need rotor(s) %s to push the other way'
                                 % [self.alive[i] + 1 for i in np.nonzero(self._d <= 1e-9)[0]])
@@ -118,8 +121,14 @@ class Allocator:
         m = moment if all_valid else np.where(np.asarray(valid)[..., None], moment, 0.0)
         # (entry by entry, one moment or a batch's rows: a run's bits do not depend on its batch
         # or on the CPU's BLAS kernel)
-        f = collective * self._d + matvec(self._p_moment, m)
-        met = (f.min(axis=-1) >= self.lo) & (f.max(axis=-1) <= self.hi)
+        if m.ndim == 1:                     # (one moment: the same sums, in floats)
+            parts = matvec_floats(self._p_moment_rows, m.tolist())
+            f_floats = [collective * d + p for d, p in zip(self._d_floats, parts)]
+            f = np.array(f_floats)
+            met = np.bool_(min(f_floats) >= self.lo and max(f_floats) <= self.hi)
+        else:
+            f = collective * self._d + matvec(self._p_moment, m)
+            met = (f.min(axis=-1) >= self.lo) & (f.max(axis=-1) <= self.hi)
         if not all_flag(met):
             f_rp = matvec(self._p_rp, m[..., :2])
             f_y = self._p_y * m[..., 2:]
@@ -167,6 +176,6 @@ class Allocator:
         else:
             thrusts = np.zeros(f_alive.shape[:-1] + (self.count,))
             thrusts[..., self.alive] = f_alive
-        wrench = matvec(self.B, f_alive)
-        return Allocation(thrusts=thrusts, moment=wrench[..., 3:], collective=wrench[..., 2],
-                          moment_lost=moment - wrench[..., 3:], saturated=saturated, valid=valid)
+        made = matvec(self._B_made, f_alive)      # the collective thrust and the moment
+        return Allocation(thrusts=thrusts, moment=made[..., 1:], collective=made[..., 0],
+                          moment_lost=moment - made[..., 1:], saturated=saturated, valid=valid)

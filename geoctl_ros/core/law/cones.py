@@ -88,14 +88,17 @@ class ConeEval:
     any_saturated: saturated.any(axis=-1), one flag per run of a batch.
     """
 
-    __slots__ = ('s', 'B', 'cross', 'weight', 'violated', 'saturated', 'any_saturated', '_e_RB')
+    __slots__ = ('s', 'B', 'cross', 'weight', 'violated', 'saturated', 'any_saturated', '_e_RB',
+                 '_e_RB_sum')
 
     def __init__(self, s: FloatArray, B: FloatArray, cross: FloatArray, weight: FloatArray,
                  violated: BoolArray, saturated: BoolArray, any_saturated: Flags,
-                 e_RB: Optional[FloatArray] = None) -> None:
+                 e_RB: Optional[FloatArray] = None,
+                 e_RB_sum: Optional[FloatArray] = None) -> None:
         self.s, self.B, self.cross, self.weight = s, B, cross, weight
         self.violated, self.saturated, self.any_saturated = violated, saturated, any_saturated
         self._e_RB = e_RB
+        self._e_RB_sum = e_RB_sum      # (where worked out with the rest: the same sums)
 
     @property
     def e_RB(self) -> FloatArray:
@@ -106,6 +109,8 @@ class ConeEval:
     @property
     def e_RB_sum(self) -> FloatArray:
         """sum_i e_RB,i (per run of a batch)."""
+        if self._e_RB_sum is not None:
+            return self._e_RB_sum
         if self._e_RB is None:
             return vecmat(self.weight, self.cross)
         return cast(FloatArray, self._e_RB.sum(axis=-2))

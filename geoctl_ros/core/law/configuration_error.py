@@ -3,7 +3,7 @@ attractive error A and its gradient e_RA, the cones' barrier folded in (Psi, e_R
 linear map of R, and the barrier's widening by the blind time.
 """
 
-from typing import Optional, Tuple, cast
+from typing import List, Optional, Tuple, cast
 
 import numpy as np
 
@@ -134,6 +134,7 @@ def barrier_floats(cones: ConeSet, sc: FloatArray, Omega: FloatArray, blind: Sca
     blind_ = float(blind) if isinstance(blind, float) else float(np.asarray(blind).reshape(-1)[0])
     w0, w1, w2 = (Omega if Omega.ndim == 1 else Omega[0]).tolist()
     B, weight = [], []
+    total: List[float] = []          # sum_i weight_i ((R^T v_i) x r), as vecmat sums it
     inv_alpha = 1.0 / cones.alpha
     for (s, c0, c1, c2), theta_b, constants in zip(rows, cones.theta_b_floats,
                                                    cones.constants_floats):
@@ -153,11 +154,13 @@ def barrier_floats(cones: ConeSet, sc: FloatArray, Omega: FloatArray, blind: Sca
         b, w = log_barrier(FLOATS, g, B_offset, inv_alpha)
         B.append(b)
         weight.append(w)
+        term = [w * c0, w * c1, w * c2]
+        total = term if not total else [total[k] + term[k] for k in range(3)]
     shape = lead + (len(B),)
     saturated = np.zeros(shape, dtype=bool)
     return ConeEval(sc[..., 0], np.array(B).reshape(shape), sc[..., 1:],
                     np.array(weight).reshape(shape), saturated, saturated,
-                    np.zeros(lead, dtype=bool)[()])
+                    np.zeros(lead, dtype=bool)[()], e_RB_sum=np.array(total).reshape(lead + (3,)))
 
 
 class LinearMap:
