@@ -3,53 +3,13 @@ commands (allocation, the lag compensation, the curve).
 """
 from dataclasses import dataclass, field
 import math
-from typing import List, NamedTuple, Optional, Tuple, Union, cast
+from typing import NamedTuple, Optional, Tuple, Union, cast
 
 import numpy as np
 
 from geoctl_ros.core.actuation.allocation import Allocation, Allocator
-from geoctl_ros.core.geometry.elementwise import ARRAYS, FLOATS, Flag, Ops, Value
 from geoctl_ros.core.geometry.flags import Flags
 from geoctl_ros.core.geometry.so3 import FloatArray, IntArray, matvec
-
-
-def rotor_thrust(ops: Ops, command: Value, a: Value, b: Value, c: Value,
-                 voltage_scale: float) -> Value:
-    """A rotor's thrust (N) at an ESC command, by its curve a x^2 + b x + c, x = voltage_scale *
-    command, never negative (an ``elementwise`` formula).
-    """
-    x = voltage_scale * command
-    return ops.maximum(a * x * x + b * x + c, 0.0)
-
-
-def rotor_command(ops: Ops, thrust: Value, disc0: Value, four_a: Value, k: Value, k0: Value,
-                  zero_up_to: Value, command_max: int) -> Value:
-    """The smallest command whose thrust is at least the one asked, within 0..command_max, from
-    the curve's folded constants (``ThrustCurve``; an ``elementwise`` formula, an integer's
-    value).
-    """
-    f = ops.maximum(thrust, 0.0)
-    x = ops.sqrt(disc0 + four_a * f) * k + k0                          # x / vs, less 1e-9
-    return ops.where(f <= zero_up_to, 0.0,
-                     ops.minimum(ops.maximum(ops.ceil(x), 0.0), command_max))
-
-
-def lag_compensated(ops: Ops, thrust: Value, model: Value, a: Value, lo: float,
-                    hi: float) -> Tuple[Value, Flag]:
-    """The thrust to command so that a rotor at ``model`` reaches ``thrust`` by the end of a
-    hold that leaves a share a of its gap (first-order lag), within lo..hi, and whether that
-    limit cut it (an ``elementwise`` formula).
-    """
-    wanted = (thrust - a * model) / (1.0 - a)
-    sent = ops.minimum(ops.maximum(wanted, lo), hi)
-    return sent, sent != wanted
-
-
-def lagged(sent: Value, modelled: Value, keep: float) -> Value:
-    """A rotor's thrust a while after a command (keep = exp(-while / lag) of its gap left; an
-    ``elementwise`` formula).
-    """
-    return sent + keep * (modelled - sent)
 
 
 @dataclass(frozen=True)
@@ -69,12 +29,11 @@ class ThrustCurve:
     _k: FloatArray = field(init=False, repr=False, compare=False)
     _k0: FloatArray = field(init=False, repr=False, compare=False)
     _zero_up_to: FloatArray = field(init=False, repr=False, compare=False)
-    rotor_floats: List[Tuple[float, ...]] = field(init=False, repr=False, compare=False)
 
     def thrust(self, command: IntArray) -> FloatArray:
-        """Thrust (N) of integer commands (n,); never negative (``rotor_thrust``)."""
-        return cast(FloatArray, rotor_thrust(ARRAYS, np.asarray(command, dtype=float), self.a,
-                                             self.b, self.c, self.voltage_scale))
+        """Thrust (N) of integer commands (n,); never negative."""
+        x = self.voltage_scale * np.asarray(command, dtype=float)
+        return np.maximum(self.a * x * x + self.b * x + self.c, 0.0)
 
     def __post_init__(self) -> None:
         # command(f) = ceil(x / voltage_scale) with x the root of a x^2 + b x + c = f, i.e.
@@ -84,21 +43,17 @@ class ThrustCurve:
                             ('_four_a', 4.0 * self.a), ('_k', k),
                             ('_k0', -self.b * k - 1e-9), ('_zero_up_to', np.maximum(self.c, 0.0))):
             object.__setattr__(self, name, value)
-        # per rotor, as floats (one run's mix): (a, b, c) and the command's constants
-        object.__setattr__(self, 'rotor_floats', list(zip(*(np.broadcast_to(
-            v, np.shape(self.a)).tolist() for v in (self.a, self.b, self.c, self._disc0,
-                                                    self._four_a, self._k, self._k0,
-                                                    self._zero_up_to)))))
 
     def command(self, thrust: FloatArray) -> IntArray:
         """Smallest integer command whose thrust is at least the requested one (the lab's ceil),
         clipped to 0..command_max; negative thrust counts as 0, and a request that command 0
-        already meets (the curve is clipped at 0 N) gives 0 (``rotor_command``).
+        already meets (the curve is clipped at 0 N) gives 0.
         """
-        command = cast(FloatArray, rotor_command(
-            ARRAYS, np.asarray(thrust, dtype=float), self._disc0, self._four_a, self._k,
-            self._k0, self._zero_up_to, self.command_max))
-        return command.astype(int)
+        f = np.maximum(np.asarray(thrust, dtype=float), 0.0)
+        x = np.sqrt(self._disc0 + self._four_a * f) * self._k + self._k0     # x / vs, less 1e-9
+        cmd: IntArray = np.minimum(np.maximum(np.ceil(x), 0.0), self.command_max).astype(int)
+        cmd[f <= self._zero_up_to] = 0
+        return cmd
 
     def max_thrust(self) -> FloatArray:
         """Thrust of each motor at command_max."""
@@ -146,7 +101,7 @@ class RotorModel(NamedTuple):
         """The thrusts the rotors make held s after the last command, by their first-order lag
         (time constant lag, s).
         """
-        return cast(FloatArray, lagged(self.sent, self.modelled, math.exp(-held / lag)))
+        return self.sent + math.exp(-held / lag) * (self.modelled - self.sent)
 
 
 class Mixer:
@@ -211,9 +166,6 @@ class Mixer:
             zero = np.zeros_like(thrusts, dtype=int)
             return MotorOutput(zero, np.zeros(zero.shape), allocation)
         compensate = self.lag > 0.0 and dt is not None and dt > 0.0
-        if (compensate and thrusts.ndim == 1 and rotors is not None
-                and rotors.modelled.shape == thrusts.shape):
-            return self._mix_one(allocation, rotors, cast(float, dt), held)
         clipped: Union[bool, Flags] = False
         if compensate:
             if rotors is None or rotors.modelled.shape != thrusts.shape:
@@ -228,9 +180,10 @@ class Mixer:
                     spool_left -= held
             hold = self.design_hold_for(rotors, cast(float, dt), held)
             if spool_left <= 0.0:
-                sent, cut = lag_compensated(ARRAYS, thrusts, model, math.exp(-hold / self.lag),
-                                            self.allocator.lo, self.allocator.hi)
-                thrusts, clipped = cast(FloatArray, sent), np.any(cut, axis=-1)
+                a = math.exp(-hold / self.lag)
+                wanted = (thrusts - a * model) / (1.0 - a)
+                thrusts = np.minimum(np.maximum(wanted, self.allocator.lo), self.allocator.hi)
+                clipped = np.any(thrusts != wanted, axis=-1)
         commands = self.curve.command(thrusts)
         if len(self._dead):
             commands[..., self._dead] = 0
@@ -238,41 +191,6 @@ class Mixer:
         after = (RotorModel(self.curve.thrust(commands), model, hold, spool_left) if compensate
                  else None)
         return MotorOutput(commands, self.curve.normalised(commands), allocation, clipped, after)
-
-    def _mix_one(self, allocation: Allocation, rotors: RotorModel, dt: float,
-                 held: Optional[float]) -> 'MotorOutput':
-        """``mix`` of one run's allocation with the lag compensation and a model of the rotors:
-        the same formulas rotor by rotor in floats (``lagged``, ``lag_compensated``,
-        ``rotor_command``, ``rotor_thrust``), the same bits as the arrays'.
-        """
-        held_ = dt if held is None else max(held, 0.0)
-        keep = math.exp(-held_ / self.lag)
-        model = [lagged(s, m, keep) for s, m in zip(rotors.sent.tolist(),
-                                                     rotors.modelled.tolist())]
-        spool_left = rotors.spool_left
-        if spool_left > 0.0:
-            spool_left -= held_
-        hold = self.design_hold_for(rotors, dt, held)
-        thrusts = cast('List[float]', allocation.thrusts.tolist())
-        clipped: Union[bool, Flags] = False
-        if spool_left <= 0.0:
-            a = math.exp(-hold / self.lag)
-            lo, hi = self.allocator.lo, self.allocator.hi
-            pairs = [lag_compensated(FLOATS, f, m, a, lo, hi) for f, m in zip(thrusts, model)]
-            thrusts = [cast(float, p[0]) for p in pairs]
-            clipped = np.bool_(any(p[1] for p in pairs))
-        curve = self.curve
-        cmax = curve.command_max
-        commands = [int(rotor_command(FLOATS, f, disc0, four_a, k, k0, zero, cmax))
-                    for f, (_, _, _, disc0, four_a, k, k0, zero) in zip(thrusts,
-                                                                          curve.rotor_floats)]
-        for i in self._dead.tolist():
-            commands[i] = 0
-        sent = [rotor_thrust(FLOATS, float(c), a, b, c0, curve.voltage_scale)
-                for c, (a, b, c0, *_) in zip(commands, curve.rotor_floats)]
-        out = np.array(commands, dtype=int)
-        return MotorOutput(out, out / cmax, allocation, clipped,
-                           RotorModel(np.array(sent), np.array(model), hold, spool_left))
 
     def design_hold_for(self, rotors: Optional[RotorModel], dt: float,
                         held: Optional[float]) -> float:

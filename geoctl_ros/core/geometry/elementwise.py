@@ -42,8 +42,7 @@ class Ops:
                  arccos: Callable[[Value], Value], sin: Callable[[Value], Value],
                  both: Callable[[Callable[[Value], Value], Value, Value],
                                 Tuple[Value, Value]],
-                 cos: Callable[[Value], Value], log: Callable[[Value], Value],
-                 ceil: Callable[[Value], Value]) -> None:
+                 cos: Callable[[Value], Value], log: Callable[[Value], Value]) -> None:
         self.maximum = maximum      # maximum(a, b): elementwise (a where equal)
         self.minimum = minimum      # minimum(a, b): elementwise (a where equal)
         self.where = where          # where(condition, a, b): a where condition, else b
@@ -54,7 +53,6 @@ class Ops:
         self.sin = sin              # as numpy's do)
         self.cos = cos
         self.log = log
-        self.ceil = ceil            # (exact on either)
         self.both = both            # both(f, a, b): (f(a), f(b)); a batch's in one evaluation
 
 
@@ -75,11 +73,9 @@ def _float_of(function: Callable[[Value], Value]) -> Callable[[Value], Value]:
 FLOATS = Ops(cast(Callable[[Value, Value], Value], max),
              cast(Callable[[Value, Value], Value], min), _choose,
              cast(Callable[[Value], Value], math.sqrt), bool, bool, _float_of(np.arccos),
-             _float_of(np.sin), _both_floats, _float_of(np.cos), _float_of(np.log),
-             cast(Callable[[Value], Value], math.ceil))
+             _float_of(np.sin), _both_floats, _float_of(np.cos), _float_of(np.log))
 ARRAYS = Ops(np.maximum, np.minimum, np.where, np.sqrt, lambda flags: bool(np.all(flags)),
-             lambda flags: bool(np.any(flags)), np.arccos, np.sin, _both_arrays, np.cos, np.log,
-             np.ceil)
+             lambda flags: bool(np.any(flags)), np.arccos, np.sin, _both_arrays, np.cos, np.log)
 
 
 def evaluate(formula: Callable[..., ResultT], *values: Union[Value, Flag]) -> ResultT:
