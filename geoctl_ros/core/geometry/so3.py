@@ -95,6 +95,10 @@ def _float_matvec(M: FloatArray, v: FloatArray) -> FloatArray:
     x = v.tolist()
     if len(x) == 3:
         return np.array(matvec_floats(M.tolist(), x))
+    if len(x) == 6:             # (the regressor's rows: the sums as the loop below makes them)
+        x0, x1, x2, x3, x4, x5 = x
+        return np.array([r[0] * x0 + r[1] * x1 + r[2] * x2 + r[3] * x3 + r[4] * x4 + r[5] * x5
+                         for r in M.tolist()])
     out = []
     for r in M.tolist():
         acc = r[0] * x[0] if x else 0.0
