@@ -169,8 +169,8 @@ def _clear_ways(X: FloatArray, axes: FloatArray, angles: FloatArray, need: Float
     change sign), so each pair (first, second) is worked out once. Most are judged by bounds, by
     BOUND_SURE: clear where each end's angle to every axis, less half the arc, is beyond need
     (every point of the arc lies within half its length of an end); not clear where the arc's
-    middle lies inside a cone. Only the rest is worked out whole, with the same comparison as
-    before.
+    middle lies inside a cone. Only the rest is worked out whole (``arc_clearance`` against
+    need), and so every pair is judged as that would judge it.
     """
     n, N = X.shape[:2]
     half = 0.5 * length[:, first, second, None]                               # (n, P, 1)
