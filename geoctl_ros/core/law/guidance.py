@@ -478,8 +478,9 @@ class Guidance:
         if self.paths is None:
             self._plan(Rs, goals, cones, np.arange(len(Rs)))
         assert self.paths is not None and self.index is not None
-        if single:
-            return self._carrot_of_one(Rs, goals, cones)
+        if len(Rs) == 1:                # one run, or a batch of one
+            P = self._carrot_of_one(Rs, goals, cones)
+            return P if single else P[None]
         runs = np.arange(len(Rs))
         P = self.paths[runs, self.index]
         cos_now = 0.5 * (np.einsum('nij,nij->n', P, Rs) - 1.0)     # cos of the angle R to P
@@ -495,7 +496,7 @@ class Guidance:
 
     def _carrot_of_one(self, Rs: FloatArray, goals: FloatArray, cones: ConeSet) -> FloatArray:
         """``carrot`` for one run (Rs and goals (1, 3, 3)): the same steps, without the batch's
-        indexing.
+        indexing; its set point (3, 3).
         """
         assert self.paths is not None and self.index is not None and self.last is not None
         P = self.paths[0, self.index[0]]
