@@ -150,10 +150,33 @@ def _log_stack(M: FloatArray) -> FloatArray:
     return skew * scale[:, None]
 
 
+class _Closing(NamedTuple):
+    """A window as the pose that closed it left it, to be worked out by ``_Accumulator.settle``
+    (its poses' buffers, handed over whole, and the IMU's sums).
+    """
+
+    receipt: float
+    span: float
+    Rs: FloatArray
+    ts: FloatArray
+    n: int
+    t0: float
+    r0: float
+    w: FloatArray
+    ww: float
+    f: FloatArray
+    nw: int
+    nf: int
+    gyro_r0: float
+    gyro_receipt: float
+
+
 class _Accumulator:
     """One window of poses (kept, by their stamps, in preallocated buffers: the hot path stores
     a pose and adds an IMU sample, nothing more) and the sums of the IMU's samples; the window's
-    figures are computed once, when a pose closes it.
+    figures are computed once, after a pose closes it: by ``settle``, which the loop runs once
+    the tick's motor command is out (so that a closing pose does not delay the next command),
+    and which reading ``last`` runs too.
 
     A window is judged only where both streams sample it: across a hole the gyro's mean and the
     poses' slope weigh different stretches of the motion, and differ wherever it accelerates. A
@@ -184,7 +207,20 @@ class _Accumulator:
         self.gyro_r0 = self.gyro_receipt = 0.0   # receipts of its first and last gyro samples
         self.cut = False                 # a hole in the IMU's samples while the poses went on
         self.imu_stamp: Optional[float] = None   # the last IMU sample's stamp
-        self.last: Optional[Window] = None
+        self._last: Optional[Window] = None
+        self._closing: Optional[_Closing] = None  # a window closed, not yet worked out
+        self._spare = (np.zeros((self.CAPACITY, 3, 3)), np.zeros(self.CAPACITY))
+
+    @property
+    def last(self) -> Optional[Window]:
+        """The last window worked out (a closed one first: ``settle``)."""
+        self.settle()
+        return self._last
+
+    @last.setter
+    def last(self, window: Optional[Window]) -> None:
+        self.settle()
+        self._last = window
 
     def configure(self, settings: AgreementSettings) -> None:
         """Take new settings (a reconfiguration: the next window closes with them)."""
@@ -223,17 +259,19 @@ class _Accumulator:
             self.f += f
             self.nf += 1
 
-    def pose(self, R: FloatArray, stamp: float, receipt: float) -> Optional[Window]:
+    def pose(self, R: FloatArray, stamp: float, receipt: float) -> None:
+        """A pose of stamp, received at receipt; one that closes the window hands it to
+        ``settle``.
+        """
         if not self.n or stamp < self.t0 or self.cut:
             self._restart(R, stamp, receipt)
-            return None
+            return
         if stamp - self.t_last > self.gap:          # a hole in the poses
-            out = None
             if (receipt - self.gyro_receipt > self.gap           # the IMU paused too
                     and self.t_last - self.t0 >= MIN_SHARE * self.span):
-                out = self._close(self.pose_receipt, self.t_last - self.t0)
+                self._hand_over(self.pose_receipt, self.t_last - self.t0)
             self._restart(R, stamp, receipt)
-            return out
+            return
         k = self.n
         self.Rs[k] = R
         self.ts[k] = stamp
@@ -241,17 +279,39 @@ class _Accumulator:
         self.t_last, self.pose_receipt = stamp, receipt
         tau = stamp - self.t0
         if tau < self.span and self.n < self.CAPACITY:
-            return None
-        out = self._close(receipt, tau)
+            return
+        self._hand_over(receipt, tau)
         self._restart(R, stamp, receipt)
-        return out
 
-    def _close(self, receipt: float, span: float) -> Optional[Window]:
-        n, s, nw = self.n, self.settings, self.nw
-        if (not nw or self.gyro_r0 - self.r0 > self.gap
-                or receipt - self.gyro_receipt > self.gap):     # the IMU missed its start or end
+    def _hand_over(self, receipt: float, span: float) -> None:
+        """Close the window: its buffers and sums go to ``settle`` (the spare buffers take the
+        next window's poses). A window still waiting is worked out first.
+        """
+        self.settle()
+        self._closing = _Closing(receipt, span, self.Rs, self.ts, self.n, self.t0, self.r0,
+                                 self.w.copy(), self.ww, self.f.copy(), self.nw, self.nf,
+                                 self.gyro_r0, self.gyro_receipt)
+        self.Rs, self.ts = self._spare
+        self._spare = (self._closing.Rs, self._closing.ts)
+
+    def settle(self) -> Optional[Window]:
+        """Work out the window a pose closed, if one waits: the window (None where it cannot be
+        judged, or none waits). ``last`` becomes it where it can be judged.
+        """
+        closing, self._closing = self._closing, None
+        if closing is None:
             return None
-        Rs, t = self.Rs[:n], self.ts[:n] - self.t0
+        window = self._close(closing)
+        if window is not None:
+            self._last = window
+        return window
+
+    def _close(self, c: _Closing) -> Optional[Window]:
+        n, s, nw, receipt, span = c.n, self.settings, c.nw, c.receipt, c.span
+        if (not nw or c.gyro_r0 - c.r0 > self.gap
+                or receipt - c.gyro_receipt > self.gap):     # the IMU missed its start or end
+            return None
+        Rs, t = c.Rs[:n], c.ts[:n] - c.t0
         theta = _log_stack(so3.matmul(Rs[0].T, Rs))
         st, stt = float(t.sum()), float((t * t).sum())
         spread = n * stt - st * st
@@ -260,24 +320,23 @@ class _Accumulator:
         slope = (n * (t[:, None] * theta).sum(axis=0) - st * theta.sum(axis=0)) / spread
         poses_sigma = s.attitude_noise * math.sqrt(n / spread)
         gyro_sigma = s.gyro_noise / math.sqrt(nw)
-        force = self.f / self.nf if self.nf else None
+        force = c.f / c.nf if c.nf else None
         g = _norm(s.gravity)
         sigma_tilt = math.hypot(s.attitude_noise / math.sqrt(n),
-                                s.accelerometer_noise / (g * math.sqrt(max(self.nf, 1))))
-        gyro = self.w / nw
+                                s.accelerometer_noise / (g * math.sqrt(max(c.nf, 1))))
+        gyro = c.w / nw
         if self.spread and nw > 1:   # the samples' spread, against a chi-square of 3 (nw - 1)
             dof = 3 * (nw - 1)
-            gyro_spread = math.sqrt(max(self.ww - nw * float(so3.dot(gyro, gyro)), 0.0) / dof)
+            gyro_spread = math.sqrt(max(c.ww - nw * float(so3.dot(gyro, gyro)), 0.0) / dof)
             spread_tolerance = s.gyro_noise * math.sqrt(1.0 + SIGMAS * math.sqrt(2.0 / dof))
         else:
             gyro_spread, spread_tolerance = 0.0, math.inf
         turned = float(np.max(so3.dot(theta, theta)))
         resolved = turned < RESOLVED_RAD ** 2 and _norm(gyro) * span < RESOLVED_RAD
         up = so3.vecmat(self.up_world, Rs).mean(axis=0)     # the mean of R^T e_up
-        self.last = Window(receipt, gyro, slope, SIGMAS * math.hypot(poses_sigma, gyro_sigma),
-                           up, force, SIGMAS * sigma_tilt, n, nw, resolved, gyro_sigma,
-                           poses_sigma, gyro_spread, spread_tolerance)
-        return self.last
+        return Window(receipt, gyro, slope, SIGMAS * math.hypot(poses_sigma, gyro_sigma),
+                      up, force, SIGMAS * sigma_tilt, n, nw, resolved, gyro_sigma,
+                      poses_sigma, gyro_spread, spread_tolerance)
 
 
 # the conventions a mismatch is checked against, to name its likely cause:
@@ -321,8 +380,17 @@ class SensorAgreement:
         pose as the source streamed it (to name a likely cause).
         """
         self.raw_pose = raw
+        self.settle()                   # (a window still waiting: the tick did not run)
         self.rest.pose(R, stamp, receipt)
-        closed = self.flight.pose(R, stamp, receipt)
+        self.flight.pose(R, stamp, receipt)
+
+    def settle(self) -> None:
+        """Work out and judge the windows the last poses closed (``_Accumulator.settle``): the
+        loop runs this once the tick's motor command is out, so a window's verdict
+        (``flight_note``) is in force from the next tick on.
+        """
+        self.rest.settle()
+        closed = self.flight.settle()
         if closed is not None and closed.resolved:
             self.yaw.add(closed.gyro, closed.poses_rate, closed.gyro_sigma, closed.poses_sigma)
             self._judge_rate(closed)
@@ -391,6 +459,7 @@ class SensorAgreement:
         """
         if not self.settings.enabled:
             return []
+        self.settle()
         w = self.rest.last
         if w is None or now - w.end > LATE * REST_WINDOW:
             return ['the sensor checks have no recent window (%.1f s of poses and IMU '

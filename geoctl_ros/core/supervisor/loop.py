@@ -279,7 +279,8 @@ class ControlLoop(Generic[StampT]):
     def tick(self, now: float, dt: float, settle: bool = True) -> LoopTick[StampT]:
         """One control step at time now (the node's clock); dt is the control period (the time
         the step's command is expected to be held). settle: False leaves the step's bookkeeping
-        for the next tick (``settle``) to the caller, once the command is out.
+        for the next tick and the sensor checks' closed windows (``settle``) to the caller, once
+        the command is out.
         """
         armed = self.supervisor.check(now)
         if armed and self.esc is not None:          # the documented action: fail safe
@@ -338,13 +339,17 @@ class ControlLoop(Generic[StampT]):
         self.window.note(armed, tick.motors.allocation.saturated, tick.bridging, command.blind,
                          command.gain_scale)
         self.last_tick = tick
+        if settle:
+            self.agreement.settle()
         return tick
 
     def settle(self) -> None:
-        """The last tick's bookkeeping for the next one (``ControlTick.settle``): the node's,
-        once the motor command is published.
+        """The last tick's bookkeeping for the next one (``ControlTick.settle``) and the sensor
+        checks' windows the last poses closed (``SensorAgreement.settle``): the node's, once the
+        motor command is published.
         """
         self.step.settle()
+        self.agreement.settle()
 
     def _note_entry(self, out: ControlOutput) -> None:
         """The sensor is inside a cone while armed: count the entry, keep the deepest (latched
