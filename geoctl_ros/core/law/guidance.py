@@ -456,6 +456,8 @@ class Guidance:
         # the path's points within the lookahead lie at most this many places ahead (its steps
         # turn the sensor at least PATH_STEP / 2, and the body at least as far)
         self.window = 2 * int(math.ceil(lookahead / PATH_STEP)) + 2
+        self._around = np.arange(-self.window, self.window + 1)[None, :]   # (the places looked
+        self._ahead = np.arange(self.window)[None, :]                      # at, made once)
         self.paths: Optional[FloatArray] = None   # (runs, K, 3, 3), each padded with its goal
         self.sensor: Optional[FloatArray] = None  # (runs, K, 3): the sensor's direction on it
         self.last: Optional[IntArray] = None      # (runs,): the goal's place on each path
@@ -516,15 +518,18 @@ class Guidance:
         assert self.sight is not None
         K, W = self.paths.shape[1], self.window
         m = np.arange(len(runs))
-        around = np.clip(self.index[runs, None] + np.arange(-W, W + 1)[None, :], 0, K - 1)
-        d = so3.matvec(Rs, cones.r)
+        # (np.minimum and np.maximum for np.clip: the same values, without its checks' cost)
+        around = np.minimum(np.maximum(self.index[runs, None] + self._around, 0), K - 1)
+        # (one run's in floats: the stack's bits)
+        d = so3.matvec(Rs[0], cones.r)[None] if len(Rs) == 1 else so3.matvec(Rs, cones.r)
         V, rims = _cone_rows(cones, runs)
-        gap = np.min(np.arccos(np.clip(np.einsum('nck,nk->nc', V, d), -1.0, 1.0)) - rims,
-                     axis=-1, initial=np.inf)
-        cos_lookahead = np.cos(np.clip(LOOKAHEAD_PER_GAP * gap, LOOKAHEAD_MIN, self.lookahead))
+        gap = np.min(np.arccos(np.minimum(np.maximum(np.einsum('nck,nk->nc', V, d), -1.0), 1.0))
+                     - rims, axis=-1, initial=np.inf)
+        cos_lookahead = np.cos(np.minimum(np.maximum(LOOKAHEAD_PER_GAP * gap, LOOKAHEAD_MIN),
+                                          self.lookahead))
         near = around[m, np.argmax(np.einsum('nwk,nk->nw', self.sensor[runs[:, None], around],
                                              d), axis=1)]             # the nearest path point
-        ahead = np.minimum(near[:, None] + np.arange(W)[None, :], K - 1)
+        ahead = np.minimum(near[:, None] + self._ahead, K - 1)
         within = 0.5 * (np.einsum('nkij,nij->nk', self.paths[runs[:, None], ahead], Rs)
                         - 1.0) >= cos_lookahead[:, None]
         within[:, 0] = True
@@ -606,5 +611,7 @@ def _cone_rows(cones: ConeSet, runs: IntArray) -> Tuple[FloatArray, FloatArray]:
     V = cones.V.reshape(-1, C, 3) if C else np.zeros((1, 0, 3))
     rims = np.asarray(cones.theta_b).reshape(V.shape[0], C)
     if V.shape[0] == 1:
+        if len(runs) == 1:                  # (one run: the set itself)
+            return V, rims
         return np.repeat(V, len(runs), axis=0), np.repeat(rims, len(runs), axis=0)
     return V[runs], rims[runs]
