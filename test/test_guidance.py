@@ -69,9 +69,7 @@ def test_the_ways_judged_by_bounds_are_judged_as_the_whole_clearance_judges_them
         axes = rng.normal(size=(n, C, 3))
         axes /= np.linalg.norm(axes, axis=-1)[..., None]
         keep = rng.uniform(0.02, 1.2, (n, C))
-        X = np.concatenate([ends, np.array([np.concatenate(
-            [guidance._rim(v, k + guidance.RIM_SLACK, guidance.RIM_POINTS) for v, k in zip(V, K)])
-            for V, K in zip(axes, keep)]).reshape(n, -1, 3)], axis=1)
+        X = guidance._graph_nodes(ends, axes, keep)
         first, second = np.triu_indices(X.shape[1])
         need = keep[:, None] - 1e-9
         angles = np.arccos(np.clip(guidance._cosines(X, axes), -1.0, 1.0))

@@ -134,9 +134,7 @@ def _visible_ways(d0: FloatArray, d1: FloatArray, axes: FloatArray, rims: FloatA
     ends = np.stack([d0, d1], axis=1)                                          # (n, 2, 3)
     gap = np.arccos(np.clip(_cosines(ends, axes), -1.0, 1.0)).min(axis=-2) - rims   # (n, C)
     keep = rims + np.clip(np.minimum(clearance, 0.5 * gap), 0.0, None)        # widened radii
-    X = np.concatenate([ends, np.array([np.concatenate(
-        [_rim(v, k + RIM_SLACK, RIM_POINTS) for v, k in zip(V, K)]) for V, K in zip(axes, keep)]
-        ).reshape(len(ends), -1, 3)], axis=1)                                    # (n, N, 3)
+    X = _graph_nodes(ends, axes, keep)
     n, N = X.shape[:2]
     angles = np.arccos(np.clip(_cosines(X, axes), -1.0, 1.0))         # (n, N, C): to each axis
     need = keep[:, None] - 1e-9                                            # (n, 1, C)
@@ -157,6 +155,16 @@ def _visible_ways(d0: FloatArray, d1: FloatArray, axes: FloatArray, rims: FloatA
             i = before[i]
         ways.append([x[0]] + way[::-1])
     return ways
+
+
+def _graph_nodes(ends: FloatArray, axes: FloatArray, keep: FloatArray) -> FloatArray:
+    """The visibility graphs' nodes (n, N, 3): each run's start and goal (ends (n, 2, 3)), then
+    RIM_POINTS points on each cone's rim (axes (n, C, 3)), RIM_SLACK outside its widened radius
+    keep (n, C).
+    """
+    return np.concatenate([ends, np.array([np.concatenate(
+        [_rim(v, k + RIM_SLACK, RIM_POINTS) for v, k in zip(V, K)]) for V, K in zip(axes, keep)]
+        ).reshape(len(ends), -1, 3)], axis=1)
 
 
 def _clear_ways(X: FloatArray, axes: FloatArray, angles: FloatArray, need: FloatArray,
