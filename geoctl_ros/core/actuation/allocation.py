@@ -88,6 +88,7 @@ class Allocator:
         self._p_moment_rows: List[List[float]] = self._p_moment.tolist()   # (one moment's)
         self._d_floats: List[float] = self._d.tolist()
         self._B_made = np.ascontiguousarray(self.B[2:])   # rows F_z, M_x, M_y, M_z
+        self._B_made_rows: List[List[float]] = self._B_made.tolist()
         if np.any(self._d <= 1e-9):
             raise AirframeError('collective thrust would need rotor(s) %s to push the other way'
                                 % [self.alive[i] + 1 for i in np.nonzero(self._d <= 1e-9)[0]])
@@ -176,6 +177,7 @@ class Allocator:
         else:
             thrusts = np.zeros(f_alive.shape[:-1] + (self.count,))
             thrusts[..., self.alive] = f_alive
-        made = matvec(self._B_made, f_alive)      # the collective thrust and the moment
+        made = (np.array(matvec_floats(self._B_made_rows, f_alive.tolist())) if f_alive.ndim == 1
+                else matvec(self._B_made, f_alive))      # the collective thrust and the moment
         return Allocation(thrusts=thrusts, moment=made[..., 1:], collective=made[..., 0],
                           moment_lost=moment - made[..., 1:], saturated=saturated, valid=valid)

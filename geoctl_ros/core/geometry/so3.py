@@ -86,26 +86,25 @@ ONE, ONE_M = (1, 3), (1, 3, 3)
 
 
 def matvec_floats(M: Sequence[Sequence[float]], v: Sequence[float]) -> list[float]:
-    """M v for rows of 3 and a 3-vector as lists of floats (sums left to right, as a stack's)."""
-    x0, x1, x2 = v
-    return [r[0] * x0 + r[1] * x1 + r[2] * x2 for r in M]
+    """M v for M by rows and v as lists of floats (each sum left to right, as a stack's)."""
+    if len(v) == 3:
+        x0, x1, x2 = v
+        return [r[0] * x0 + r[1] * x1 + r[2] * x2 for r in M]
+    if len(v) == 6:             # (the regressor's rows, the rotors')
+        x0, x1, x2, x3, x4, x5 = v
+        return [r[0] * x0 + r[1] * x1 + r[2] * x2 + r[3] * x3 + r[4] * x4 + r[5] * x5
+                for r in M]
+    out = []
+    for r in M:
+        acc = r[0] * v[0] if len(v) else 0.0
+        for k in range(1, len(v)):
+            acc = acc + r[k] * v[k]
+        out.append(acc)
+    return out
 
 
 def _float_matvec(M: FloatArray, v: FloatArray) -> FloatArray:
-    x = v.tolist()
-    if len(x) == 3:
-        return np.array(matvec_floats(M.tolist(), x))
-    if len(x) == 6:             # (the regressor's rows: the sums as the loop below makes them)
-        x0, x1, x2, x3, x4, x5 = x
-        return np.array([r[0] * x0 + r[1] * x1 + r[2] * x2 + r[3] * x3 + r[4] * x4 + r[5] * x5
-                         for r in M.tolist()])
-    out = []
-    for r in M.tolist():
-        acc = r[0] * x[0] if x else 0.0
-        for k in range(1, len(x)):
-            acc = acc + r[k] * x[k]
-        out.append(acc)
-    return np.array(out, dtype=float)
+    return np.array(matvec_floats(M.tolist(), v.tolist()), dtype=float)
 
 
 def _in_order(products: FloatArray, axis: int) -> FloatArray:
@@ -158,6 +157,8 @@ def matvec(M: FloatArray, v: FloatArray) -> FloatArray:
 def vecmat(v: FloatArray, M: FloatArray) -> FloatArray:
     """v^T M (= M^T v) for a vector and a matrix, or for each of a stack of them."""
     if v.ndim == 1 and M.ndim <= 2:
+        if not len(v):              # (no rows: no sum)
+            return np.zeros(M.shape[1:])
         return _in_order(v[:, None] * M if M.ndim == 2 else v * M, 0)
     if v.shape == ONE and (M.ndim == 2 and M.size <= SMALL or M.shape == ONE_M):
         return _float_matvec((M[0] if M.ndim == 3 else M).T, v[0])[None]
