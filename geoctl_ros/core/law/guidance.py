@@ -79,14 +79,17 @@ def arc_clearance(a: FloatArray, b: FloatArray, axes: FloatArray) -> FloatArray:
     return cast(FloatArray, np.where(inside, mid, ends))
 
 
-def _rim(axis: FloatArray, radius: float, count: int) -> FloatArray:
-    """count points at angle radius round the unit axis."""
-    e1 = np.cross(axis, np.eye(3)[int(np.argmin(np.abs(axis)))])
+_RIM_PHI = np.linspace(0.0, 2.0 * math.pi, RIM_POINTS, endpoint=False)
+_RIM_COS, _RIM_SIN = np.cos(_RIM_PHI)[:, None], np.sin(_RIM_PHI)[:, None]   # (made once)
+
+
+def _rim(axis: FloatArray, radius: float) -> FloatArray:
+    """RIM_POINTS points at angle radius round the unit axis."""
+    e1 = so3.cross(axis, np.eye(3)[int(np.argmin(np.abs(axis)))])
     e1 /= math.sqrt(so3.dot(e1, e1))
-    e2 = np.cross(axis, e1)
-    phi = np.linspace(0.0, 2.0 * math.pi, count, endpoint=False)
+    e2 = so3.cross(axis, e1)
     return cast(FloatArray, math.cos(radius) * axis + math.sin(radius)
-                * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2))
+                * (_RIM_COS * e1 + _RIM_SIN * e2))
 
 
 def sensor_path(d0: FloatArray, d1: FloatArray, axes: FloatArray, rims: FloatArray,
@@ -163,7 +166,7 @@ def _graph_nodes(ends: FloatArray, axes: FloatArray, keep: FloatArray) -> FloatA
     keep (n, C).
     """
     return np.concatenate([ends, np.array([np.concatenate(
-        [_rim(v, k + RIM_SLACK, RIM_POINTS) for v, k in zip(V, K)]) for V, K in zip(axes, keep)]
+        [_rim(v, k + RIM_SLACK) for v, k in zip(V, K)]) for V, K in zip(axes, keep)]
         ).reshape(len(ends), -1, 3)], axis=1)
 
 
@@ -298,11 +301,11 @@ def attitude_path(R0: FloatArray, R_goal: FloatArray, r: FloatArray,
         k = max(1, int(math.ceil(angle / PATH_STEP)))
         if angle < 1e-12:
             continue
-        axis = np.cross(a, b)
+        axis = so3.cross(a, b)
         if not so3.dot(axis, axis) > 0.0:    # the same or opposite to the bit: by any great
             if angle < 0.5 * math.pi:        # circle through them (before: a NaN axis)
                 continue
-            axis = np.cross(a, np.eye(3)[int(np.argmin(np.abs(a)))])
+            axis = so3.cross(a, np.eye(3)[int(np.argmin(np.abs(a)))])
         axis /= math.sqrt(so3.dot(axis, axis))
         turned = so3.exp(axis[None, :] * (angle * np.arange(1, k + 1) / k)[:, None])
         points += list(so3.matvec(turned, a))
