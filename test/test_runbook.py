@@ -56,9 +56,9 @@ HOLD_S = 2.0
 # point round the cone from there (the shipped manoeuvre, or its mirror image), in ENU yaw
 LABS = {
     'enu': ({'pose_world_frame': 'enu', 'body_frame': 'flu'},
-            'level: about (0, 0, 0, 1); turned left: z positive', 0.0, 90.0),
+            ('z rises (positive)', '+9.8'), 0.0, 90.0),
     'ned': ({'pose_world_frame': 'ned', 'body_frame': 'frd'},
-            'level: about (0, 0, 0, 1); turned left: z negative', 90.0, 0.0),
+            ('z falls (negative)', '-9.8'), 90.0, 0.0),
 }
 INTO_THE_CONE = ('setpoint', '--yaw-deg', '45')      # the sensor on the cone's axis
 
@@ -88,14 +88,16 @@ def runbook_command(start, lab):
 
 
 def table_row(shows):
-    """Step 3's settings for what the pose shows: {name: value}, parsed from the runbook."""
+    """Step 3's settings for what the pose shows turned left and what the IMU reads level:
+    {name: value}, parsed from the runbook.
+    """
     for line in open(RUNBOOK).read().splitlines():
         cells = [c.strip() for c in line.strip('|').split('|')]
-        if len(cells) == 2 and cells[0] == shows:
-            if cells[1].startswith('nothing'):
+        if len(cells) == 3 and tuple(cells[:2]) == shows:
+            if cells[2].startswith('nothing'):
                 return {}
-            return {k: yaml.safe_load(v) for k, v in re.findall(r'`(\w+): ([^`]+)`', cells[1])}
-    raise AssertionError('no row %r in step 3 of docs/first-flight.md' % shows)
+            return {k: yaml.safe_load(v) for k, v in re.findall(r'`(\w+): ([^`]+)`', cells[2])}
+    raise AssertionError('no row %r in step 3 of docs/first-flight.md' % (shows,))
 
 
 def quaternion_of_yaw(yaw_deg):
