@@ -11,9 +11,10 @@ with the real ``ros2`` command on the package as colcon installs it:
 
 - steps 2-3: the lab's parameter file is the shipped one with step 3's row for the lab's
   conventions; ``calibrate`` writes a marker yaw within 1 deg of the truth;
-- steps 5 and 8: ``ros2 launch geoctl_ros testbed.launch.xml`` on the lab's file and the
+- steps 5 and 9: ``ros2 launch geoctl_ros testbed.launch.xml`` on the lab's file and the
   calibration (without ``esc:=true`` and the bridge: no I2C bus, no ground station here), and
-  ``record`` on the drivers' topics;
+  the flight's ``record`` (``flight1``) on the drivers' topics (step 9's clamped arming, and its
+  bag, are not flown here);
 - step 10: ``ros2 service call /controller/arm``: the arming holds (under 2 deg); a set point
   into the cone is refused with its reason; one round the cone is flown (the goal reached, the
   cone kept); ``ros2 run geoctl_ros stop`` disarms;
@@ -200,7 +201,9 @@ def test_the_runbook_flies_a_first_flight(installed, tmp_path, world):
         launch = [a for a in launch if not a.startswith(('esc', 'mavlink'))]
         procs.append(Command(launch, env, lab, lab / 'launch.log'))
         chain = procs[-1]
-        recorder = Command(runbook_command('ros2 run geoctl_ros record', lab), env, lab,
+        # (the flight's bag: the clamped arming's, step 8's clamp1, is not flown here)
+        recorder = Command(runbook_command('ros2 run geoctl_ros record --ros-args -p '
+                                           'record.path:=flight1', lab), env, lab,
                            lab / 'record.log')
         procs.append(recorder)
         mon.wait_for(mon.controller_can_judge_its_sensors, 40.0, 'the launched controller')
