@@ -88,8 +88,7 @@ def _rim(axis: FloatArray, radius: float) -> FloatArray:
     e1 = so3.cross(axis, np.eye(3)[int(np.argmin(np.abs(axis)))])
     e1 /= math.sqrt(so3.dot(e1, e1))
     e2 = so3.cross(axis, e1)
-    return cast(FloatArray, math.cos(radius) * axis + math.sin(radius)
-                * (_RIM_COS * e1 + _RIM_SIN * e2))
+    return math.cos(radius) * axis + math.sin(radius) * (_RIM_COS * e1 + _RIM_SIN * e2)
 
 
 def sensor_path(d0: FloatArray, d1: FloatArray, axes: FloatArray, rims: FloatArray,
